@@ -1,0 +1,176 @@
+//! Scenes: what is under the probe, which physics layers are active, and how noisy the front end
+//! is. "Model no more than a scene needs": each scene reports the layers it uses.
+
+use crate::complex::C64;
+use crate::frontend::{FrontEnd, Mains};
+use crate::phantoms::Phantom;
+use crate::pzt::Pzt;
+use crate::tissue::{Contact, Kelvin, SensorMech, Tissue};
+
+/// A physics layer (or optional effect within one) that a scene switches on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Layer {
+    /// Kelvin model of the probe (always present).
+    Kelvin,
+    /// Tissue contact (Hertz radius + appendix formulas); absent in free air.
+    Contact,
+    /// PZT static capacitance and force factor.
+    Pzt,
+    /// Dielectric leakage of the PZT.
+    DielectricLoss,
+    /// Converters, amplifiers and filters of the analog front end.
+    FrontEnd,
+    /// White current noise.
+    Noise,
+    /// Mains interference.
+    Mains,
+}
+
+impl Layer {
+    /// Short lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Layer::Kelvin => "kelvin",
+            Layer::Contact => "contact",
+            Layer::Pzt => "pzt",
+            Layer::DielectricLoss => "dielectric-loss",
+            Layer::FrontEnd => "front-end",
+            Layer::Noise => "noise",
+            Layer::Mains => "mains",
+        }
+    }
+}
+
+/// Named front-end noise levels (white current noise density at the TIA input).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum NoiseScene {
+    /// No random noise (quantisation only).
+    Quiet,
+    /// The `paper` scene: a front end like the prototype's (small current, no filtering).
+    Paper,
+    /// The `bench` scene: the paper scene's current noise density 20 dB lower.
+    Bench,
+    /// A custom density in A/sqrt(Hz).
+    Density(f64),
+}
+
+/// Current noise density of the `paper` scene in A/sqrt(Hz). Fixed once, for every method; see
+/// `docs/physics.md` for how it was set (the paper method is reliable only below ~500 kPa).
+pub const PAPER_NOISE_A_RTHZ: f64 = 1.0e-9;
+/// Current noise density of the `bench` scene: 20 dB below the paper scene.
+pub const BENCH_NOISE_A_RTHZ: f64 = PAPER_NOISE_A_RTHZ / 10.0;
+
+impl NoiseScene {
+    /// Density in A/sqrt(Hz).
+    pub fn density_a_rthz(self) -> f64 {
+        match self {
+            NoiseScene::Quiet => 0.0,
+            NoiseScene::Paper => PAPER_NOISE_A_RTHZ,
+            NoiseScene::Bench => BENCH_NOISE_A_RTHZ,
+            NoiseScene::Density(d) => d,
+        }
+    }
+}
+
+/// Everything the simulator needs to build a probe.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Scene {
+    /// Probe mechanics and the fitted contact constants.
+    pub mech: SensorMech,
+    /// PZT plate.
+    pub pzt: Pzt,
+    /// Analog front end.
+    pub front_end: FrontEnd,
+    /// Preload and tip geometry.
+    pub contact: Contact,
+    /// Tissue under the tip, or `None` in free air.
+    pub tissue: Option<Tissue>,
+}
+
+impl Scene {
+    /// The probe in free air, quiet front end.
+    pub fn free_air() -> Self {
+        Self {
+            mech: SensorMech::default(),
+            pzt: Pzt::default(),
+            front_end: FrontEnd::default(),
+            contact: Contact::default(),
+            tissue: None,
+        }
+    }
+    /// Pressed at 30 mN onto `tissue`.
+    pub fn on_tissue(tissue: Tissue) -> Self {
+        Self {
+            tissue: Some(tissue),
+            ..Self::free_air()
+        }
+    }
+    /// Pressed at 30 mN onto tissue of `modulus_kpa` (nu = 0.49, rho = 1000).
+    pub fn on_modulus_kpa(modulus_kpa: f64) -> Self {
+        Self::on_tissue(Tissue::with_modulus_kpa(modulus_kpa))
+    }
+    /// Pressed at 30 mN onto a phantom.
+    pub fn on_phantom(p: &Phantom) -> Self {
+        Self::on_tissue(p.tissue())
+    }
+    /// With a named noise level.
+    pub fn with_noise(mut self, noise: NoiseScene) -> Self {
+        self.front_end.current_noise_a_rthz = noise.density_a_rthz();
+        self
+    }
+    /// With mains interference.
+    pub fn with_mains(mut self, mains: Mains) -> Self {
+        self.front_end.mains = Some(mains);
+        self
+    }
+    /// With the preload in N.
+    pub fn with_preload_n(mut self, preload_n: f64) -> Self {
+        self.contact.preload_n = preload_n;
+        self
+    }
+
+    /// The one-degree-of-freedom mechanics of this scene.
+    pub fn kelvin(&self) -> Kelvin {
+        match &self.tissue {
+            Some(t) => self.mech.loaded(t, &self.contact),
+            None => self.mech.free(),
+        }
+    }
+    /// True resonance (undamped natural frequency of the loaded mode) in Hz.
+    pub fn resonance_hz(&self) -> f64 {
+        self.kelvin().natural_frequency_hz()
+    }
+    /// Quality factor of the loaded mode.
+    pub fn q(&self) -> f64 {
+        self.kelvin().q()
+    }
+    /// Closed-form PZT admittance (S) at `freq_hz`.
+    pub fn admittance(&self, freq_hz: f64) -> C64 {
+        self.pzt.admittance(&self.kelvin(), freq_hz)
+    }
+
+    /// The layers this scene uses, in order; returns the count written into `out`.
+    pub fn layers(&self, out: &mut [Layer; 7]) -> usize {
+        let mut n = 0;
+        let mut push = |l: Layer| {
+            out[n] = l;
+            n += 1;
+        };
+        push(Layer::Kelvin);
+        if self.tissue.is_some() {
+            push(Layer::Contact);
+        }
+        push(Layer::Pzt);
+        if self.pzt.leakage_s > 0.0 {
+            push(Layer::DielectricLoss);
+        }
+        push(Layer::FrontEnd);
+        if self.front_end.current_noise_a_rthz > 0.0 {
+            push(Layer::Noise);
+        }
+        if self.front_end.mains.is_some() {
+            push(Layer::Mains);
+        }
+        n
+    }
+}

@@ -1,0 +1,243 @@
+//! Layer 1: the Kelvin model of paper 003 (eq. 1–3) with the appendix contact formulas.
+//!
+//! The probe is one mode: modal mass `m`, stiffness `k1`, damping `c1`. Pressed onto tissue, the
+//! tissue adds a Kelvin element — stiffness `k_m`, damping `c_m`, co-moving mass `m_m` — from the
+//! appendix:
+//!
+//! * `k_m = 2 E a / (1 - nu^2)` (Hertz/Boussinesq contact stiffness, contact radius `a`),
+//! * `c_m = kappa * rho * v * S / (1 - nu)`, `v = sqrt(E / (2 (1 + nu) rho))`, `S = pi a^2`,
+//! * `m_m = gamma * rho * S^(3/2) / (1 - nu)`,
+//!
+//! with the contact radius from Hertz contact of the spherical tip under the preload,
+//! `a = (3 F R / (4 E*))^(1/3)`, `E* = E / (1 - nu^2)`, saturating at the probe radius.
+//!
+//! The tissue's elastic restoring force and its co-moving mass reach the mode through the probe's
+//! series coupling compliance `k_s` (the bond and local plate stiffness between the mode and the
+//! tip). Eliminating the contact node in the Rayleigh sense (node displacement `s x`,
+//! `s = k_s / (k_s + k_m)`) keeps eq. 1 a one-degree-of-freedom equation with
+//! `k = k1 + s k_m` and `m = m + s^2 m_m`. The tissue's dissipation is driven by the tip's own
+//! velocity and is added directly, `c = c1 + c_m`. Without `k_s` the Hertz stiffness (growing as
+//! `E^(2/3)`) would drive the resonance far above the saturating experimental curve of the
+//! paper; with it the loaded resonance tends to `sqrt((k1 + k_s) / m)` for rigid tissue. The free
+//! constants are fitted in `docs/physics.md`.
+
+use core::f64::consts::PI;
+
+/// Tissue under the tip (small-strain, linear viscoelastic).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tissue {
+    /// Small-strain Young's modulus in Pa.
+    pub modulus_pa: f64,
+    /// Poisson ratio (soft tissue and silicone: 0.49).
+    pub poisson: f64,
+    /// Density in kg/m^3.
+    pub density_kg_m3: f64,
+    /// Extra viscoelastic loss tangent `eta` of the tissue (0 for the plain Kelvin model): adds
+    /// a damping `eta * k_m / omega_0` at the contact, so `tan(delta) = eta` at resonance.
+    pub loss_tangent: f64,
+}
+
+impl Tissue {
+    /// Tissue of the given small-strain modulus (kPa) with `nu = 0.49`, `rho = 1000 kg/m^3`.
+    pub fn with_modulus_kpa(modulus_kpa: f64) -> Self {
+        Self {
+            modulus_pa: modulus_kpa * 1e3,
+            poisson: 0.49,
+            density_kg_m3: 1000.0,
+            loss_tangent: 0.0,
+        }
+    }
+}
+
+/// How the probe is pressed onto the tissue.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Contact {
+    /// Preload (contact force) in N; the paper uses 30 mN.
+    pub preload_n: f64,
+    /// Radius of the spherical tip in m (0.5 mm).
+    pub tip_radius_m: f64,
+    /// Radius of the probe shaft in m (0.5 mm): the contact radius saturates there.
+    pub probe_radius_m: f64,
+}
+
+impl Default for Contact {
+    fn default() -> Self {
+        Self {
+            preload_n: 0.030,
+            tip_radius_m: 0.5e-3,
+            probe_radius_m: 0.5e-3,
+        }
+    }
+}
+
+/// The probe's own mechanics and the fitted contact constants.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SensorMech {
+    /// Modal mass `m` in kg.
+    pub mass_kg: f64,
+    /// Free resonance in Hz (sets `k1 = m (2 pi f)^2`).
+    pub free_resonance_hz: f64,
+    /// Quality factor of the free (unloaded) probe (sets `c1`).
+    pub free_q: f64,
+    /// Series coupling stiffness `k_s` between the mode and the tip, N/m.
+    pub coupling_stiffness_n_m: f64,
+    /// Co-moving tissue mass coefficient `gamma` (appendix: `m_m = gamma rho S^1.5 / (1 - nu)`).
+    pub mass_coefficient: f64,
+    /// Tissue damping coefficient `kappa` (appendix: `c_m = kappa rho v S / (1 - nu)`).
+    pub damping_coefficient: f64,
+}
+
+impl Default for SensorMech {
+    /// The constants fitted to paper 003 (see `docs/physics.md`).
+    fn default() -> Self {
+        Self {
+            mass_kg: 510e-6,
+            free_resonance_hz: 232.3,
+            free_q: 40.0,
+            coupling_stiffness_n_m: 350.0,
+            mass_coefficient: 720.0,
+            damping_coefficient: 11.5,
+        }
+    }
+}
+
+impl SensorMech {
+    /// Probe stiffness `k1` in N/m.
+    pub fn k1(&self) -> f64 {
+        let w = 2.0 * PI * self.free_resonance_hz;
+        self.mass_kg * w * w
+    }
+    /// Probe damping `c1` in N s/m.
+    pub fn c1(&self) -> f64 {
+        libm::sqrt(self.k1() * self.mass_kg) / self.free_q
+    }
+    /// The unloaded probe as a Kelvin oscillator.
+    pub fn free(&self) -> Kelvin {
+        Kelvin {
+            mass_kg: self.mass_kg,
+            stiffness_n_m: self.k1(),
+            damping_n_s_m: self.c1(),
+        }
+    }
+
+    /// The probe pressed onto `tissue` with `contact`.
+    pub fn loaded(&self, tissue: &Tissue, contact: &Contact) -> Kelvin {
+        let el = TissueElements::new(tissue, contact, self);
+        let s = self.coupling_stiffness_n_m / (self.coupling_stiffness_n_m + el.stiffness_n_m);
+        let free = self.free();
+        Kelvin {
+            mass_kg: free.mass_kg + s * s * el.mass_kg,
+            stiffness_n_m: free.stiffness_n_m + s * el.stiffness_n_m,
+            damping_n_s_m: free.damping_n_s_m + el.damping_n_s_m,
+        }
+    }
+}
+
+/// Hertz contact radius in m of the spherical tip on `tissue`, saturating at the probe radius.
+pub fn contact_radius_m(tissue: &Tissue, contact: &Contact) -> f64 {
+    let e_star = tissue.modulus_pa / (1.0 - tissue.poisson * tissue.poisson);
+    if !(e_star > 0.0) {
+        return contact.probe_radius_m;
+    }
+    let a = libm::cbrt(3.0 * contact.preload_n * contact.tip_radius_m / (4.0 * e_star));
+    a.min(contact.probe_radius_m)
+}
+
+/// The tissue's Kelvin elements at the contact (before the series coupling).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TissueElements {
+    /// Contact radius `a` in m.
+    pub contact_radius_m: f64,
+    /// `k_m` in N/m.
+    pub stiffness_n_m: f64,
+    /// `c_m` in N s/m.
+    pub damping_n_s_m: f64,
+    /// `m_m` in kg.
+    pub mass_kg: f64,
+}
+
+impl TissueElements {
+    /// Appendix formulas of paper 003 for `tissue` under `contact`.
+    pub fn new(tissue: &Tissue, contact: &Contact, mech: &SensorMech) -> Self {
+        let nu = tissue.poisson;
+        let rho = tissue.density_kg_m3;
+        let e = tissue.modulus_pa.max(0.0);
+        let a = contact_radius_m(tissue, contact);
+        let area = PI * a * a;
+        let k_m = 2.0 * e * a / (1.0 - nu * nu);
+        let v = libm::sqrt(e / (2.0 * (1.0 + nu) * rho));
+        let mut c_m = mech.damping_coefficient * rho * v * area / (1.0 - nu);
+        if tissue.loss_tangent > 0.0 {
+            let w0 = 2.0 * PI * mech.free_resonance_hz;
+            c_m += tissue.loss_tangent * k_m / w0;
+        }
+        let m_m = mech.mass_coefficient * rho * libm::pow(area, 1.5) / (1.0 - nu);
+        Self {
+            contact_radius_m: a,
+            stiffness_n_m: k_m,
+            damping_n_s_m: c_m,
+            mass_kg: m_m,
+        }
+    }
+}
+
+/// A one-degree-of-freedom Kelvin oscillator `m x'' + c x' + k x = F` (paper 003 eq. 1).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Kelvin {
+    /// Mass in kg.
+    pub mass_kg: f64,
+    /// Stiffness in N/m.
+    pub stiffness_n_m: f64,
+    /// Damping in N s/m.
+    pub damping_n_s_m: f64,
+}
+
+impl Kelvin {
+    /// Undamped natural frequency `sqrt(k/m) / 2 pi` in Hz (eq. 2): also the frequency of the
+    /// conductance maximum of the motional branch.
+    pub fn natural_frequency_hz(&self) -> f64 {
+        libm::sqrt(self.stiffness_n_m / self.mass_kg) / (2.0 * PI)
+    }
+    /// Quality factor `sqrt(k m) / c`.
+    pub fn q(&self) -> f64 {
+        libm::sqrt(self.stiffness_n_m * self.mass_kg) / self.damping_n_s_m
+    }
+    /// Amplitude decay time constant `2 m / c` in s (= Q / (pi f0)).
+    pub fn time_constant_s(&self) -> f64 {
+        2.0 * self.mass_kg / self.damping_n_s_m
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hertz_radius_closed_form() {
+        // E = 1 MPa, nu = 0.49: E* = 1.3165 MPa; a = (3*0.03*0.5e-3/(4*E*))^(1/3) = 0.2045 mm.
+        let t = Tissue::with_modulus_kpa(1000.0);
+        let a = contact_radius_m(&t, &Contact::default());
+        let e_star = 1e6 / (1.0 - 0.49 * 0.49);
+        let expect = (3.0f64 * 0.03 * 0.5e-3 / (4.0 * e_star)).powf(1.0 / 3.0);
+        assert!((a - expect).abs() < 1e-12);
+        assert!((a - 0.2045e-3).abs() < 0.001e-3);
+        // Soft tissue saturates at the probe radius.
+        let soft = Tissue::with_modulus_kpa(8.0);
+        assert_eq!(contact_radius_m(&soft, &Contact::default()), 0.5e-3);
+    }
+
+    #[test]
+    fn free_probe_is_232_hz() {
+        let f = SensorMech::default().free();
+        assert!((f.natural_frequency_hz() - 232.3).abs() < 1e-9);
+        assert!((f.q() - 40.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn rigid_limit() {
+        let m = SensorMech::default();
+        let k = m.loaded(&Tissue::with_modulus_kpa(1e9), &Contact::default());
+        let lim = libm::sqrt((m.k1() + m.coupling_stiffness_n_m) / m.mass_kg) / (2.0 * PI);
+        assert!((k.natural_frequency_hz() - lim).abs() < 0.05);
+    }
+}

@@ -1,0 +1,56 @@
+//! Resonance estimators: one per file, one result type.
+//!
+//! Every estimator takes the measured points and returns either an [`Estimate`] with an honest
+//! standard uncertainty or a [`Failure`] code. The checks every sweep shares (clipping, missing
+//! drive, no current) live here in [`screen`].
+
+pub mod conductance;
+pub mod paper;
+
+use crate::status::Failure;
+use crate::sweep::SweepPoint;
+use crate::units::Hz;
+
+/// A resonance estimate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Estimate {
+    /// Resonance frequency.
+    pub resonance: Hz,
+    /// Its standard uncertainty.
+    pub sigma: Hz,
+    /// Quality factor, where the method measures it.
+    pub q: Option<f32>,
+    /// Points the estimate used.
+    pub points_used: u16,
+}
+
+/// Largest fraction of current samples allowed at a converter rail.
+pub const MAX_CLIP_FRACTION: f32 = 1e-3;
+
+/// Checks every sweep must pass before any estimator looks at it.
+pub fn screen(points: &[SweepPoint]) -> Result<(), Failure> {
+    if points.len() < 3 {
+        return Err(Failure::NoResonance);
+    }
+    if points.iter().any(|p| p.clip_fraction > MAX_CLIP_FRACTION) {
+        return Err(Failure::Clipped);
+    }
+    Ok(())
+}
+
+/// Index of the largest value of `key` over `points` (first on ties); `None` on empty input or
+/// when any key is not finite.
+pub(crate) fn argmax(points: &[SweepPoint], key: impl Fn(&SweepPoint) -> f32) -> Option<usize> {
+    let mut best: Option<(usize, f32)> = None;
+    for (i, p) in points.iter().enumerate() {
+        let v = key(p);
+        if !v.is_finite() {
+            return None;
+        }
+        if best.is_none_or(|(_, b)| v > b) {
+            best = Some((i, v));
+        }
+    }
+    best.map(|(i, _)| i)
+}

@@ -1,0 +1,32 @@
+//! # pzt-probe: firmware core of the resonant PZT hardness probe
+//!
+//! The portable part of the firmware: `no_std`, allocation-free, bounded in memory and free of
+//! panics on any input. It holds the driver traits the hardware (or `hal-sim`) implements, the
+//! sample-rate DSP the interrupt runs, the resonance estimators, the calibration and the
+//! measurement state machine. The RTIC application (`src/bin/probe.rs`) and all MCU code sit
+//! behind `cfg(target_os = "none")`.
+//!
+//! Data flow of one reading: [`measure::SweepMeasurement`] → [`engine::PointPlan`] →
+//! [`engine::SampleEngine`] (DDS → DAC, ADC → exact sine-fit sums) → [`sweep::point_from_raw`]
+//! (admittance per point) → estimator ([`estimate`]) → [`calibration::PowerLaw::invert`] →
+//! [`measure::Reading`].
+#![cfg_attr(not(test), no_std)]
+#![deny(missing_docs)]
+
+pub mod board;
+pub mod calibration;
+pub mod dsp;
+pub mod engine;
+pub mod estimate;
+pub mod hal;
+pub mod linalg;
+pub mod measure;
+pub mod runner;
+pub mod status;
+pub mod sweep;
+pub mod units;
+
+pub use calibration::PowerLaw;
+pub use measure::{Method, Reading, SweepMeasurement};
+pub use status::{Failure, Status};
+pub use units::{AdcCode, DacCode, Hz, KPa, Newtons, Seconds, Volts};

@@ -1,0 +1,137 @@
+//! Small least-squares helpers shared by the demodulator, the estimators and the calibration
+//! fit: a 3×3 inverse and a weighted three-parameter linear least-squares accumulator.
+
+/// Inverse of a 3×3 matrix, or `None` if it is singular to working precision.
+pub fn inverse3(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
+    let c00 = m[1][1] * m[2][2] - m[1][2] * m[2][1];
+    let c01 = m[1][2] * m[2][0] - m[1][0] * m[2][2];
+    let c02 = m[1][0] * m[2][1] - m[1][1] * m[2][0];
+    let det = m[0][0] * c00 + m[0][1] * c01 + m[0][2] * c02;
+    let scale = m[0][0].abs() * m[1][1].abs() * m[2][2].abs();
+    if !det.is_finite() || det == 0.0 || det.abs() <= scale * 1e-13 {
+        return None;
+    }
+    let inv_det = 1.0 / det;
+    Some([
+        [
+            c00 * inv_det,
+            (m[0][2] * m[2][1] - m[0][1] * m[2][2]) * inv_det,
+            (m[0][1] * m[1][2] - m[0][2] * m[1][1]) * inv_det,
+        ],
+        [
+            c01 * inv_det,
+            (m[0][0] * m[2][2] - m[0][2] * m[2][0]) * inv_det,
+            (m[0][2] * m[1][0] - m[0][0] * m[1][2]) * inv_det,
+        ],
+        [
+            c02 * inv_det,
+            (m[0][1] * m[2][0] - m[0][0] * m[2][1]) * inv_det,
+            (m[0][0] * m[1][1] - m[0][1] * m[1][0]) * inv_det,
+        ],
+    ])
+}
+
+/// Weighted linear least squares `y ≈ p · x` with three basis functions.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Lsq3 {
+    ata: [[f64; 3]; 3],
+    atb: [f64; 3],
+    btb: f64,
+    n: u32,
+}
+
+/// Result of [`Lsq3::solve`].
+#[derive(Clone, Copy, Debug)]
+pub struct Fit3 {
+    /// Parameters.
+    pub p: [f64; 3],
+    /// Covariance of the parameters for the given weights (`(AᵀWA)⁻¹`), unscaled.
+    pub cov: [[f64; 3]; 3],
+    /// Weighted residual sum of squares (χ² when weights are `1/σ²`).
+    pub chi2: f64,
+    /// Number of observations.
+    pub n: u32,
+}
+
+impl Fit3 {
+    /// χ² per degree of freedom (1 when there are no degrees of freedom).
+    pub fn reduced_chi2(&self) -> f64 {
+        if self.n > 3 {
+            self.chi2 / (self.n - 3) as f64
+        } else {
+            1.0
+        }
+    }
+}
+
+impl Lsq3 {
+    /// Add observation `y` of basis values `x` with weight `w` (`1/σ²`). Non-finite input is
+    /// ignored.
+    pub fn add(&mut self, x: [f64; 3], y: f64, w: f64) {
+        if !(w > 0.0) || !w.is_finite() || !y.is_finite() || x.iter().any(|v| !v.is_finite()) {
+            return;
+        }
+        for i in 0..3 {
+            for j in 0..3 {
+                self.ata[i][j] += w * x[i] * x[j];
+            }
+            self.atb[i] += w * x[i] * y;
+        }
+        self.btb += w * y * y;
+        self.n += 1;
+    }
+
+    /// Solve, or `None` when underdetermined or singular.
+    pub fn solve(&self) -> Option<Fit3> {
+        if self.n < 3 {
+            return None;
+        }
+        let cov = inverse3(&self.ata)?;
+        let mut p = [0.0; 3];
+        for (i, pi) in p.iter_mut().enumerate() {
+            *pi = cov[i][0] * self.atb[0] + cov[i][1] * self.atb[1] + cov[i][2] * self.atb[2];
+        }
+        let explained = p[0] * self.atb[0] + p[1] * self.atb[1] + p[2] * self.atb[2];
+        Some(Fit3 {
+            p,
+            cov,
+            chi2: (self.btb - explained).max(0.0),
+            n: self.n,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn inverse_times_matrix_is_identity() {
+        let m = [[4.0, 1.0, 2.0], [1.0, 3.0, 0.5], [2.0, 0.5, 5.0]];
+        let inv = inverse3(&m).unwrap();
+        for i in 0..3 {
+            for j in 0..3 {
+                let mut s = 0.0;
+                for k in 0..3 {
+                    s += m[i][k] * inv[k][j];
+                }
+                assert!((s - if i == j { 1.0 } else { 0.0 }).abs() < 1e-12);
+            }
+        }
+        assert!(inverse3(&[[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 0.0, 1.0]]).is_none());
+    }
+
+    #[test]
+    fn quadratic_fit_recovers_coefficients() {
+        let mut l = Lsq3::default();
+        for i in 0..10 {
+            let x = i as f64 * 0.3 - 1.0;
+            l.add([1.0, x, x * x], 2.0 - 0.5 * x + 3.0 * x * x, 1.0);
+        }
+        let f = l.solve().unwrap();
+        assert!((f.p[0] - 2.0).abs() < 1e-10);
+        assert!((f.p[1] + 0.5).abs() < 1e-10);
+        assert!((f.p[2] - 3.0).abs() < 1e-10);
+        assert!(f.chi2 < 1e-18);
+    }
+}

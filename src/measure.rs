@@ -1,0 +1,258 @@
+//! The measurement: a method, its validated settings, the points it asks the sample engine for,
+//! and the typed [`Reading`] it ends in.
+//!
+//! The same state machine runs in the firmware's measurement task and on the host (through
+//! [`crate::runner`]): it hands out one [`PointPlan`] at a time, takes back each finished
+//! [`PointRaw`], and at the end estimates the resonance and maps it through the calibration.
+
+use crate::calibration::PowerLaw;
+use crate::engine::{PointPlan, PointRaw};
+use crate::estimate::{self, Estimate};
+use crate::hal::FrontEndScale;
+use crate::status::{Failure, Status};
+use crate::sweep::{
+    point_from_raw, PointError, SettingsError, Sweep, SweepPoint, SweepSettings, MAX_POINTS,
+};
+use crate::units::{Hz, KPa, Seconds, Volts};
+use heapless::Vec;
+
+/// Resonance estimation method.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Method {
+    /// Paper 003: stepped sweep 200–300 Hz in 1 Hz steps, `|Z|` minimum.
+    Paper,
+    /// Stepped sweep, conductance maximum with a weighted `1/G` fit.
+    SweepG,
+}
+
+impl Method {
+    /// Every method.
+    pub const ALL: [Method; 2] = [Method::Paper, Method::SweepG];
+
+    /// Stable name.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Method::Paper => "paper",
+            Method::SweepG => "sweep-g",
+        }
+    }
+
+    /// Parse a [`name`](Self::name).
+    pub fn from_name(s: &str) -> Option<Method> {
+        Self::ALL.into_iter().find(|m| m.name() == s)
+    }
+
+    /// The method's default sweep.
+    ///
+    /// * paper: the paper's band 200–300 Hz in 1 Hz steps; every point settles 50 ms and
+    ///   integrates 50 ms (the prototype's dwell is not published; 100 ms a point is typical
+    ///   of a LabVIEW stepped sweep).
+    /// * sweep-G: 170–290 Hz (covers 100–3000 kPa with the half-power width to spare) in 2 Hz
+    ///   steps, 30 ms settle, 40 ms integration.
+    pub const fn default_sweep(self) -> SweepSettings {
+        match self {
+            Method::Paper => SweepSettings {
+                start: Hz(200.0),
+                stop: Hz(300.0),
+                step: Hz(1.0),
+                settle: Seconds(0.05),
+                integrate: Seconds(0.05),
+                drive: Volts(5.0),
+            },
+            Method::SweepG => SweepSettings {
+                start: Hz(170.0),
+                stop: Hz(290.0),
+                step: Hz(2.0),
+                settle: Seconds(0.05),
+                integrate: Seconds(0.04),
+                drive: Volts(5.0),
+            },
+        }
+    }
+
+    /// Run this method's estimator on measured points.
+    pub fn estimate(self, points: &[SweepPoint]) -> Result<Estimate, Failure> {
+        match self {
+            Method::Paper => estimate::paper::estimate(points),
+            Method::SweepG => estimate::conductance::estimate(points),
+        }
+    }
+}
+
+/// The outcome of one reading: a number with its uncertainty, or a failure code.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Reading {
+    /// `Ok` or the failure code.
+    pub status: Status,
+    /// Method used.
+    pub method: Method,
+    /// Resonance, when one was estimated (also for out-of-range readings).
+    pub resonance: Option<Hz>,
+    /// Standard uncertainty of the resonance.
+    pub resonance_sigma: Option<Hz>,
+    /// Elastic modulus; present only when `status` is `Ok`.
+    pub modulus: Option<KPa>,
+    /// Standard uncertainty of the modulus.
+    pub modulus_sigma: Option<KPa>,
+    /// Quality factor, where the method measures it.
+    pub q: Option<f32>,
+    /// Probe time the reading took (drive on to last sample).
+    pub probe_time: Seconds,
+    /// Points measured.
+    pub points: u16,
+}
+
+impl Reading {
+    /// A reading that failed before any estimate.
+    pub fn failed(method: Method, failure: Failure, probe_time: Seconds, points: u16) -> Self {
+        Self {
+            status: Status::Failed(failure),
+            method,
+            resonance: None,
+            resonance_sigma: None,
+            modulus: None,
+            modulus_sigma: None,
+            q: None,
+            probe_time,
+            points,
+        }
+    }
+
+    /// Map an estimate through `cal` into a reading.
+    pub fn from_estimate(
+        method: Method,
+        est: Result<Estimate, Failure>,
+        cal: &PowerLaw,
+        probe_time: Seconds,
+        points: u16,
+    ) -> Self {
+        let est = match est {
+            Ok(e) => e,
+            Err(f) => return Self::failed(method, f, probe_time, points),
+        };
+        let mut r = Self {
+            status: Status::Ok,
+            method,
+            resonance: Some(est.resonance),
+            resonance_sigma: Some(est.sigma),
+            modulus: None,
+            modulus_sigma: None,
+            q: est.q,
+            probe_time,
+            points,
+        };
+        match cal.invert(est.resonance, est.sigma) {
+            Ok(m) => {
+                r.modulus = Some(m.value);
+                r.modulus_sigma = Some(m.sigma);
+            }
+            Err(f) => r.status = Status::Failed(f),
+        }
+        r
+    }
+}
+
+/// A stepped-sweep measurement in progress.
+#[derive(Clone, Debug)]
+pub struct SweepMeasurement {
+    method: Method,
+    sweep: Sweep,
+    scale: FrontEndScale,
+    next: usize,
+    points: Vec<SweepPoint, MAX_POINTS>,
+    start_sample: u64,
+    end_sample: u64,
+    failure: Option<Failure>,
+}
+
+impl SweepMeasurement {
+    /// Validate `settings` for `method` on a board of `scale`; `now_sample` is the engine's
+    /// sample count when the reading starts.
+    pub fn new(
+        method: Method,
+        settings: &SweepSettings,
+        scale: &FrontEndScale,
+        now_sample: u64,
+    ) -> Result<Self, SettingsError> {
+        let sweep = settings.validate(scale)?;
+        Ok(Self {
+            method,
+            sweep,
+            scale: *scale,
+            next: 0,
+            points: Vec::new(),
+            start_sample: now_sample,
+            end_sample: now_sample,
+            failure: None,
+        })
+    }
+
+    /// The validated sweep.
+    pub fn sweep(&self) -> &Sweep {
+        &self.sweep
+    }
+
+    /// The next point to ask the engine for, or `None` when the sweep is complete.
+    pub fn next_plan(&mut self) -> Option<PointPlan> {
+        if self.failure.is_some() || self.next >= self.sweep.len() {
+            return None;
+        }
+        let plan = self.sweep.plan(self.next, self.next as u16 + 1);
+        self.next += 1;
+        Some(plan)
+    }
+
+    /// Take a finished point; returns it in physical units (for the log).
+    pub fn accept(&mut self, raw: &PointRaw) -> Option<SweepPoint> {
+        self.end_sample = raw.end_sample;
+        match point_from_raw(raw, &self.scale) {
+            Ok(p) => {
+                // Capacity equals the largest valid sweep, so this push cannot fail.
+                let _ = self.points.push(p);
+                Some(p)
+            }
+            Err(PointError::NoDrive) => {
+                self.failure = Some(Failure::DriveFault);
+                None
+            }
+            Err(PointError::Degenerate) => {
+                self.failure = Some(Failure::BadSettings);
+                None
+            }
+        }
+    }
+
+    /// True when every point is in (or the sweep was abandoned).
+    pub fn is_complete(&self) -> bool {
+        self.failure.is_some() || self.points.len() >= self.sweep.len()
+    }
+
+    /// Points measured so far.
+    pub fn points(&self) -> &[SweepPoint] {
+        &self.points
+    }
+
+    /// Probe time so far.
+    pub fn probe_time(&self) -> Seconds {
+        Seconds(
+            (self.end_sample.saturating_sub(self.start_sample)) as f32 / self.scale.sample_rate.0,
+        )
+    }
+
+    /// Estimate and calibrate.
+    pub fn finish(&self, cal: &PowerLaw) -> Reading {
+        let n = self.points.len() as u16;
+        if let Some(f) = self.failure {
+            return Reading::failed(self.method, f, self.probe_time(), n);
+        }
+        Reading::from_estimate(
+            self.method,
+            self.method.estimate(&self.points),
+            cal,
+            self.probe_time(),
+            n,
+        )
+    }
+}

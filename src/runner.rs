@@ -1,0 +1,67 @@
+//! A blocking driver of a measurement over any [`SampleStream`]: what the firmware's interrupt
+//! and measurement task do together, in one loop, for the host (tests, `probe-bench`) and for
+//! single-threaded images.
+
+use crate::calibration::PowerLaw;
+use crate::engine::SampleEngine;
+use crate::hal::{AdcFrame, SampleStream, StreamError};
+use crate::measure::{Reading, SweepMeasurement};
+use crate::sweep::SweepPoint;
+use crate::units::DacCode;
+
+/// Samples per batch (one DMA half-buffer on the STM32: 5 ms at 10 kHz).
+pub const BATCH: usize = 50;
+
+/// Why a run stopped early.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RunError {
+    /// The stream reported an error.
+    Stream(StreamError),
+    /// A point did not complete within its sample budget.
+    Stalled,
+}
+
+/// Run `m` to completion on `stream`, calling `on_point` for every measured point, and return
+/// the calibrated reading.
+pub fn run_sweep<S: SampleStream>(
+    stream: &mut S,
+    engine: &mut SampleEngine,
+    m: &mut SweepMeasurement,
+    cal: &PowerLaw,
+    mut on_point: impl FnMut(&SweepPoint),
+) -> Result<Reading, RunError> {
+    let mut dac = [DacCode::MID; BATCH];
+    let mut adc = [AdcFrame::default(); BATCH];
+    let fs = stream.scale().sample_rate.0 as f64;
+    let latency = stream.latency_batches();
+    let mut budget: u64 = 0;
+    let mut used: u64 = 0;
+    while !m.is_complete() {
+        if !engine.busy() {
+            match m.next_plan() {
+                Some(plan) => {
+                    engine.load(plan);
+                    let f = crate::dsp::dds::frequency_hz(plan.ftw, fs).max(1.0);
+                    let period = fs / f;
+                    budget = plan.settle_samples as u64
+                        + ((plan.cycles as f64 + 2.0) * period) as u64
+                        + (BATCH * (latency + 2)) as u64;
+                    used = 0;
+                }
+                None => break,
+            }
+        }
+        engine.generate(&mut dac);
+        stream.exchange(&dac, &mut adc).map_err(RunError::Stream)?;
+        used += BATCH as u64;
+        if let Some(raw) = engine.demodulate(&adc) {
+            if let Some(p) = m.accept(&raw) {
+                on_point(&p);
+            }
+        } else if used > budget {
+            return Err(RunError::Stalled);
+        }
+    }
+    engine.stop();
+    Ok(m.finish(cal))
+}

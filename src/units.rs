@@ -1,0 +1,107 @@
+//! Physical units of the public interface and newtypes for raw converter codes.
+//!
+//! Every quantity that crosses a public API carries its unit in its type: frequencies in [`Hz`],
+//! durations in [`Seconds`], drive levels in [`Volts`], moduli in [`KPa`], forces in [`Newtons`].
+//! Raw converter values are [`DacCode`] and [`AdcCode`], never bare integers.
+
+macro_rules! unit {
+    ($(#[$doc:meta])* $name:ident, $sym:literal) => {
+        $(#[$doc])*
+        #[derive(Clone, Copy, Debug, Default, PartialEq, PartialOrd)]
+        #[repr(transparent)]
+        pub struct $name(pub f32);
+
+        impl $name {
+            /// The bare value in this unit.
+            #[inline]
+            pub const fn get(self) -> f32 {
+                self.0
+            }
+            /// Unit symbol.
+            pub const SYMBOL: &'static str = $sym;
+        }
+
+        impl core::fmt::Display for $name {
+            fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+                if let Some(p) = f.precision() {
+                    write!(f, "{:.*} {}", p, self.0, $sym)
+                } else {
+                    write!(f, "{} {}", self.0, $sym)
+                }
+            }
+        }
+
+        #[cfg(feature = "defmt")]
+        impl defmt::Format for $name {
+            fn format(&self, f: defmt::Formatter) {
+                defmt::write!(f, "{=f32}", self.0)
+            }
+        }
+    };
+}
+
+unit!(
+    /// Frequency in hertz.
+    Hz,
+    "Hz"
+);
+unit!(
+    /// Time in seconds.
+    Seconds,
+    "s"
+);
+unit!(
+    /// Voltage in volts.
+    Volts,
+    "V"
+);
+unit!(
+    /// Current in amperes.
+    Amps,
+    "A"
+);
+unit!(
+    /// Elastic modulus in kilopascals.
+    KPa,
+    "kPa"
+);
+unit!(
+    /// Force in newtons.
+    Newtons,
+    "N"
+);
+
+/// A 12-bit DAC code (0..=4095, mid-scale 2048 is zero drive).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(transparent)]
+pub struct DacCode(pub u16);
+
+/// A 12-bit ADC code (0..=4095, mid-scale 2048 is zero signal).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(transparent)]
+pub struct AdcCode(pub u16);
+
+/// Largest 12-bit code.
+pub const MAX_CODE: u16 = 4095;
+/// Mid-scale code (zero signal).
+pub const MID_CODE: u16 = 2048;
+
+impl DacCode {
+    /// Mid-scale: drive off.
+    pub const MID: DacCode = DacCode(MID_CODE);
+}
+
+impl AdcCode {
+    /// True at either rail (the converter clipped).
+    #[inline]
+    pub const fn is_rail(self) -> bool {
+        self.0 == 0 || self.0 >= MAX_CODE
+    }
+    /// Signed offset from mid-scale.
+    #[inline]
+    pub const fn centered(self) -> i32 {
+        self.0 as i32 - MID_CODE as i32
+    }
+}
