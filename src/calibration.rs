@@ -48,6 +48,9 @@ pub struct PowerLaw {
     pub c: f64,
     /// Covariance of `(a, b, c)` (zero when unknown, as for the published curves).
     pub cov: [[f64; 3]; 3],
+    /// Standard deviation (Hz) of the curve's own misfit to reference data: how far a real
+    /// unit's resonance strays from the power law between reference points.
+    pub model_sigma_hz: f64,
     /// Lowest modulus the calibration vouches for, kPa.
     pub min_kpa: f64,
     /// Highest modulus the calibration vouches for, kPa.
@@ -62,8 +65,12 @@ pub struct PowerLaw {
 pub struct Modulus {
     /// Modulus.
     pub value: KPa,
-    /// Standard uncertainty.
+    /// Combined standard uncertainty: the reading's own (repeatability) and the calibration's
+    /// (parameter covariance and curve misfit), in quadrature.
     pub sigma: KPa,
+    /// The repeatability part alone: the resonance uncertainty through the curve's slope. It is
+    /// what the scatter of repeated readings shows; the calibration part is common to them.
+    pub sigma_repeat: KPa,
 }
 
 /// Why a calibration fit failed.
@@ -78,20 +85,50 @@ pub enum FitError {
     NotSaturating,
 }
 
+/// Standard deviation of a published curve's misfit from its R² and the moduli it was fitted
+/// on: `sqrt((1 − R²) · Var(f(E_i)))`.
+fn misfit_from_r2(a: f64, b: f64, c: f64, r2: f64, moduli: &[f64]) -> f64 {
+    let n = moduli.len() as f64;
+    let f = |e: f64| a + b * libm::pow(e, c);
+    let mean = moduli.iter().map(|&e| f(e)).sum::<f64>() / n;
+    let var = moduli
+        .iter()
+        .map(|&e| (f(e) - mean) * (f(e) - mean))
+        .sum::<f64>()
+        / n;
+    libm::sqrt((1.0 - r2) * var)
+}
+
 fn span(min: f64, max: f64) -> (f64, f64) {
     (min * (1.0 - SPAN_MARGIN), max * (1.0 + SPAN_MARGIN))
+}
+
+/// Number of distinct moduli in reference data (counting stops at 64).
+fn distinct_moduli(data: &[(f64, f64, f64)]) -> usize {
+    let mut seen = [0.0f64; 64];
+    let mut n = 0;
+    for &(e, _, _) in data {
+        if n < seen.len() && !seen[..n].contains(&e) {
+            seen[n] = e;
+            n += 1;
+        }
+    }
+    n
 }
 
 impl PowerLaw {
     /// Paper 003 eq. 5 (experiment): `f = 266.6 − 2305 E^−0.7243`, calibrated on samples A–E
     /// (157.5–2465 kPa).
+    /// Its misfit is derived from the published R² = 99.91 % over A–E.
     pub fn paper_experiment() -> Self {
         let (min_kpa, max_kpa) = span(157.5, 2465.0);
+        let (a, b, c) = (266.6, -2305.0, -0.7243);
         Self {
-            a: 266.6,
-            b: -2305.0,
-            c: -0.7243,
+            a,
+            b,
+            c,
             cov: [[0.0; 3]; 3],
+            model_sigma_hz: misfit_from_r2(a, b, c, 0.9991, &[157.5, 279.0, 414.0, 1146.0, 2465.0]),
             min_kpa,
             max_kpa,
             source: Source::PaperExperiment,
@@ -99,13 +136,20 @@ impl PowerLaw {
     }
 
     /// Paper 003 eq. 4 (simulation): `f = 254.3 − 3435 E^−0.8432` over 100–3000 kPa.
+    /// Its misfit is derived from the published R² = 99.89 % over the 14 FEM samples.
     pub fn paper_simulation() -> Self {
         let (min_kpa, max_kpa) = span(100.0, 3000.0);
+        let (a, b, c) = (254.3, -3435.0, -0.8432);
+        let samples = [
+            100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0, 900.0, 1000.0, 1500.0, 2000.0,
+            2500.0, 3000.0,
+        ];
         Self {
-            a: 254.3,
-            b: -3435.0,
-            c: -0.8432,
+            a,
+            b,
+            c,
             cov: [[0.0; 3]; 3],
+            model_sigma_hz: misfit_from_r2(a, b, c, 0.9989, &samples),
             min_kpa,
             max_kpa,
             source: Source::PaperSimulation,
@@ -157,7 +201,8 @@ impl PowerLaw {
             -e / (self.c * self.b),
             -e * libm::log(u) / (self.c * self.c),
         ];
-        let mut var = de_df * de_df * sf * sf;
+        let var_repeat = de_df * de_df * sf * sf;
+        let mut var = var_repeat + de_df * de_df * self.model_sigma_hz * self.model_sigma_hz;
         for i in 0..3 {
             for j in 0..3 {
                 var += g[i] * self.cov[i][j] * g[j];
@@ -166,6 +211,7 @@ impl PowerLaw {
         Ok(Modulus {
             value: KPa(e as f32),
             sigma: KPa(libm::sqrt(var.max(0.0)) as f32),
+            sigma_repeat: KPa(libm::sqrt(var_repeat) as f32),
         })
     }
 
@@ -186,20 +232,7 @@ impl PowerLaw {
             emin = emin.min(e);
             emax = emax.max(e);
         }
-        let mut distinct = 0;
-        let mut seen = [0.0f64; 3];
-        for &(e, _, _) in data {
-            if !seen[..distinct].contains(&e) {
-                if distinct < 3 {
-                    seen[distinct] = e;
-                }
-                distinct += 1;
-                if distinct >= 3 {
-                    break;
-                }
-            }
-        }
-        if distinct < 3 {
+        if distinct_moduli(data) < 3 {
             return Err(FitError::TooFewPoints);
         }
         // chi2 of the best (a, b) for exponent c.
@@ -289,12 +322,26 @@ impl PowerLaw {
                 *v *= scale;
             }
         }
+        // Curve misfit: the mean square residual, corrected for the three parameters fitted to
+        // `distinct` reference moduli (only those carry independent misfit).
+        let mut ss = 0.0;
+        for &(e, f, _) in data {
+            let r = f - (a + b * libm::pow(e, c));
+            ss += r * r;
+        }
+        let groups = distinct_moduli(data) as f64;
+        let misfit2 = if groups > 3.0 {
+            ss / data.len() as f64 * groups / (groups - 3.0)
+        } else {
+            ss / data.len() as f64
+        };
         let (min_kpa, max_kpa) = span(emin, emax);
         Ok(PowerLaw {
             a,
             b,
             c,
             cov,
+            model_sigma_hz: libm::sqrt(misfit2),
             min_kpa,
             max_kpa,
             source: Source::Fitted,
@@ -315,6 +362,12 @@ mod tests {
         assert!((p.slope(300.0) - 0.09).abs() < 0.005);
         assert!((p.slope(1000.0) - 0.011).abs() < 0.001);
         assert!((p.slope(2500.0) - 0.0023).abs() < 0.0003);
+        // Misfit from R² = 99.91 % over A–E (f spans 207.6..258.5 Hz): about 0.55 Hz.
+        assert!(
+            (p.model_sigma_hz - 0.55).abs() < 0.03,
+            "{}",
+            p.model_sigma_hz
+        );
         // Paper: 206.3 Hz and 223.5 Hz are 151.8 and 246.3 kPa by f_e. The published rounded
         // constants give 153.0 and 243.2 kPa: within 1.5 % of the paper's figures.
         let m = p.invert(Hz(206.3), Hz(0.0)).unwrap();
@@ -330,9 +383,11 @@ mod tests {
             let f = p.frequency(e);
             let m = p.invert(Hz(f as f32), Hz(0.1)).unwrap();
             assert!((m.value.0 as f64 / e - 1.0).abs() < 1e-4);
-            // sigma_E = sigma_f / slope
+            // repeatability: sigma_E = sigma_f / slope; combined adds the curve misfit.
             let expect = 0.1 / p.slope(e);
-            assert!((m.sigma.0 as f64 / expect - 1.0).abs() < 1e-3);
+            assert!((m.sigma_repeat.0 as f64 / expect - 1.0).abs() < 1e-3);
+            let combined = (0.1f64.powi(2) + p.model_sigma_hz.powi(2)).sqrt() / p.slope(e);
+            assert!((m.sigma.0 as f64 / combined - 1.0).abs() < 1e-3);
         }
     }
 

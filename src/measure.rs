@@ -49,7 +49,7 @@ impl Method {
     ///   integrates 50 ms (the prototype's dwell is not published; 100 ms a point is typical
     ///   of a LabVIEW stepped sweep).
     /// * sweep-G: 170–290 Hz (covers 100–3000 kPa with the half-power width to spare) in 2 Hz
-    ///   steps, 30 ms settle, 40 ms integration.
+    ///   steps, 50 ms settle (3.5 time constants at Q = 10), 40 ms integration.
     pub const fn default_sweep(self) -> SweepSettings {
         match self {
             Method::Paper => SweepSettings {
@@ -94,8 +94,10 @@ pub struct Reading {
     pub resonance_sigma: Option<Hz>,
     /// Elastic modulus; present only when `status` is `Ok`.
     pub modulus: Option<KPa>,
-    /// Standard uncertainty of the modulus.
+    /// Combined standard uncertainty of the modulus (repeatability and calibration).
     pub modulus_sigma: Option<KPa>,
+    /// Repeatability part of the modulus uncertainty (what repeated readings scatter by).
+    pub modulus_sigma_repeat: Option<KPa>,
     /// Quality factor, where the method measures it.
     pub q: Option<f32>,
     /// Probe time the reading took (drive on to last sample).
@@ -114,6 +116,7 @@ impl Reading {
             resonance_sigma: None,
             modulus: None,
             modulus_sigma: None,
+            modulus_sigma_repeat: None,
             q: None,
             probe_time,
             points,
@@ -139,6 +142,7 @@ impl Reading {
             resonance_sigma: Some(est.sigma),
             modulus: None,
             modulus_sigma: None,
+            modulus_sigma_repeat: None,
             q: est.q,
             probe_time,
             points,
@@ -147,6 +151,7 @@ impl Reading {
             Ok(m) => {
                 r.modulus = Some(m.value);
                 r.modulus_sigma = Some(m.sigma);
+                r.modulus_sigma_repeat = Some(m.sigma_repeat);
             }
             Err(f) => r.status = Status::Failed(f),
         }

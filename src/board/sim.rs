@@ -61,3 +61,82 @@ impl SampleStream for SimBoard {
         scale_of(self.probe.front_end())
     }
 }
+
+use crate::calibration::{FitError, PowerLaw};
+use crate::engine::SampleEngine;
+use crate::measure::{Method, Reading, SweepMeasurement};
+use crate::runner::{run_sweep, RunError};
+use crate::sweep::{SettingsError, SweepPoint, SweepSettings};
+use hal_sim::{NoiseScene, Phantom, Scene};
+
+/// Why a simulated reading could not run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SimError {
+    /// The settings were rejected.
+    Settings(SettingsError),
+    /// The run stopped early.
+    Run(RunError),
+    /// The calibration fit failed.
+    Fit(FitError),
+}
+
+/// One reading of `scene` (noise stream `seed`) with `method` and `settings`, mapped through
+/// `cal`; `on_point` sees every measured point.
+pub fn read(
+    scene: &Scene,
+    seed: u64,
+    method: Method,
+    settings: &SweepSettings,
+    cal: &PowerLaw,
+    on_point: impl FnMut(&SweepPoint),
+) -> Result<Reading, SimError> {
+    let mut board = SimBoard::new(SimProbe::new(*scene, seed));
+    let mut engine = SampleEngine::new();
+    let scale = board.scale();
+    let mut m = SweepMeasurement::new(method, settings, &scale, engine.samples())
+        .map_err(SimError::Settings)?;
+    run_sweep(&mut board, &mut engine, &mut m, cal, on_point).map_err(SimError::Run)
+}
+
+/// The reference phantoms a unit is calibrated on (paper 003 samples A–E).
+pub const CALIBRATION_PHANTOMS: [Phantom; 5] = [
+    hal_sim::phantoms::A,
+    hal_sim::phantoms::B,
+    hal_sim::phantoms::C,
+    hal_sim::phantoms::D,
+    hal_sim::phantoms::E,
+];
+
+/// Most repeats per phantom [`calibrate`] takes.
+pub const MAX_REPEATS: usize = 25;
+
+/// Calibrate the simulated unit as the paper calibrated its prototype: `repeats` readings of
+/// each of the phantoms A–E with `method` and `settings` under `noise`, noise seeds
+/// `seed0, seed0 + 1, ...`, and a weighted least-squares fit of `f = a + b E^c` to every
+/// resonance (weights from each reading's own uncertainty). Readings without a resonance are
+/// left out.
+pub fn calibrate(
+    method: Method,
+    settings: &SweepSettings,
+    noise: NoiseScene,
+    repeats: usize,
+    seed0: u64,
+) -> Result<PowerLaw, SimError> {
+    let repeats = repeats.clamp(1, MAX_REPEATS);
+    let mut data = [(0.0f64, 0.0f64, 0.0f64); 5 * MAX_REPEATS];
+    let mut n = 0;
+    // Any curve will do for the reference readings: only their resonance is used.
+    let cal = PowerLaw::paper_experiment();
+    for (pi, p) in CALIBRATION_PHANTOMS.iter().enumerate() {
+        let scene = Scene::on_phantom(p).with_noise(noise);
+        for r in 0..repeats {
+            let seed = seed0 + (pi * MAX_REPEATS + r) as u64;
+            let reading = read(&scene, seed, method, settings, &cal, |_| {})?;
+            if let (Some(f), Some(s)) = (reading.resonance, reading.resonance_sigma) {
+                data[n] = (p.modulus_kpa, f.0 as f64, (s.0 as f64).max(1e-4));
+                n += 1;
+            }
+        }
+    }
+    PowerLaw::fit(&data[..n]).map_err(SimError::Fit)
+}

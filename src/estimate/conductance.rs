@@ -7,7 +7,7 @@
 //! `(A, B, C)`. A weighted least-squares fit over the half-power points gives
 //! `w0 = (C/B)^(1/4)`, `Q = w0 sqrt(B G_peak)` and, by the delta method, the standard
 //! uncertainty of `w0` from the per-point uncertainties (inflated by the reduced χ² when the
-//! data scatter more than they claim).
+//! residuals grossly exceed them).
 //!
 //! Fails with `out_of_band` when the largest conductance is at a band edge, `no_resonance` when
 //! no peak stands 5 σ out of the floor, `low_snr` when the fit's relative uncertainty is too large.
@@ -17,6 +17,9 @@ use crate::linalg::Lsq3;
 use crate::status::Failure;
 use crate::sweep::SweepPoint;
 use crate::units::Hz;
+
+/// Reduced χ² above which the fit is a gross misfit and its uncertainty is scaled by it.
+pub const GROSS_CHI2: f64 = 16.0;
 
 /// Largest relative standard uncertainty of the resonance (σ_f / linewidth) accepted.
 pub const MAX_RELATIVE_SIGMA: f64 = 0.25;
@@ -75,7 +78,12 @@ pub fn estimate(points: &[SweepPoint]) -> Result<Estimate, Failure> {
     if !(f0 > f_lo) || !(f0 < f_hi) {
         return Err(Failure::NoResonance);
     }
-    let scale = fit.reduced_chi2().max(1.0);
+    // The per-point uncertainties are measured, so the propagated sigma is the statistical
+    // uncertainty. Residuals far beyond them (a gross misfit: interference, a knock, a
+    // non-resonant curve) scale it up. Modest excess from settling transients is a repeatable
+    // bias that the calibration absorbs; inflating by it would overstate the scatter.
+    let chi2 = fit.reduced_chi2();
+    let scale = if chi2 > GROSS_CHI2 { chi2 } else { 1.0 };
     let (db, dc) = (-x0 / (4.0 * b), x0 / (4.0 * c));
     let var_x0 =
         scale * (db * db * fit.cov[1][1] + 2.0 * db * dc * fit.cov[1][2] + dc * dc * fit.cov[2][2]);

@@ -1,0 +1,7 @@
+//! Library side of `probe-bench`: scene and option parsing, calibration files, reading reports
+//! and plots. The binary (`main.rs`) is the command line on top.
+
+pub mod calfile;
+pub mod plot;
+pub mod report;
+pub mod scene;
