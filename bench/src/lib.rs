@@ -2,6 +2,7 @@
 //! and plots. The binary (`main.rs`) is the command line on top.
 
 pub mod calfile;
+pub mod cmd;
 pub mod plot;
 pub mod report;
 pub mod scene;

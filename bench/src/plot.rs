@@ -4,8 +4,53 @@ use anyhow::{anyhow, Result};
 use plotters::prelude::*;
 use pzt_probe::sweep::SweepPoint;
 use std::path::Path;
+use std::sync::Once;
 
-/// Conductance and |Y| of a sweep against frequency, with the estimated resonance marked.
+/// Register the embedded DejaVu Sans as the `sans-serif` family, so PNG text renders the same on
+/// every machine (no system fonts needed). Idempotent.
+pub fn init_fonts() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        let font = dejavu::sans::regular();
+        for style in [
+            FontStyle::Normal,
+            FontStyle::Bold,
+            FontStyle::Italic,
+            FontStyle::Oblique,
+        ] {
+            // A failure leaves the family unregistered; text then fails to render with a clear
+            // error from the plotting call.
+            let _ = plotters::style::register_font("sans-serif", style, font);
+        }
+    });
+}
+
+/// Draw onto an SVG or a PNG file chosen by the extension of `path` (`.png` → PNG).
+pub fn with_backend(
+    path: &Path,
+    size: (u32, u32),
+    draw: impl FnOnce(&DrawingArea<SVGBackend, plotters::coord::Shift>) -> Result<()>,
+    draw_png: impl FnOnce(&DrawingArea<BitMapBackend, plotters::coord::Shift>) -> Result<()>,
+) -> Result<()> {
+    init_fonts();
+    let png = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"));
+    if png {
+        let root = BitMapBackend::new(path, size).into_drawing_area();
+        draw_png(&root)?;
+        root.present()
+            .map_err(|e| anyhow!("{}: {e}", path.display()))
+    } else {
+        let root = SVGBackend::new(path, size).into_drawing_area();
+        draw(&root)?;
+        root.present()
+            .map_err(|e| anyhow!("{}: {e}", path.display()))
+    }
+}
+
+/// Conductance and |Y| of a sweep against frequency, with the estimated resonance marked
+/// (SVG, or PNG when `path` ends in `.png`).
 pub fn sweep_svg(
     path: &Path,
     title: &str,
@@ -15,6 +60,23 @@ pub fn sweep_svg(
     if points.is_empty() {
         return Err(anyhow!("no points to plot"));
     }
+    with_backend(
+        path,
+        (900, 560),
+        |root| draw_sweep(root, title, points, resonance_hz),
+        |root| draw_sweep(root, title, points, resonance_hz),
+    )
+}
+
+fn draw_sweep<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    title: &str,
+    points: &[SweepPoint],
+    resonance_hz: Option<f32>,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
     let f0 = points.first().map(|p| p.freq.0 as f64).unwrap_or(0.0);
     let f1 = points.last().map(|p| p.freq.0 as f64).unwrap_or(1.0);
     let ymax = points
@@ -26,9 +88,8 @@ pub fn sweep_svg(
         .iter()
         .map(|p| p.g_s as f64 * 1e9)
         .fold(0.0, f64::min);
-    let root = SVGBackend::new(path, (900, 560)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
-    let mut chart = ChartBuilder::on(&root)
+    let mut chart = ChartBuilder::on(root)
         .caption(title, ("sans-serif", 20))
         .margin(12)
         .x_label_area_size(45)
@@ -82,6 +143,5 @@ pub fn sweep_svg(
         .border_style(BLACK)
         .draw()
         .map_err(|e| anyhow!("{e}"))?;
-    root.present().map_err(|e| anyhow!("{e}"))?;
     Ok(())
 }

@@ -1,0 +1,163 @@
+//! `probe-bench measure`: one or more readings on the simulated probe.
+
+use super::calibrate::calibrate_unit;
+use super::{progress, MethodArgs};
+use crate::calfile::{self, CalFile};
+use crate::scene::{layer_names, noise_name, parse_noise, Target};
+use crate::{plot, report};
+use anyhow::{bail, Result};
+use clap::Args;
+use pzt_probe::board::sim as simboard;
+use pzt_probe::sweep::SweepPoint;
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub struct MeasureArgs {
+    /// Phantom to press on: A–E (paper 003), ecoflex-00-10, ecoflex-00-30, dragon-skin-20.
+    #[arg(long)]
+    pub phantom: Option<String>,
+    /// Tissue of this small-strain Young's modulus, kPa.
+    #[arg(long)]
+    pub modulus_kpa: Option<f64>,
+    /// No tissue: the probe in free air.
+    #[arg(long)]
+    pub free_air: bool,
+    /// Contact preload, N.
+    #[arg(long, default_value_t = 0.030)]
+    pub preload_n: f64,
+    /// Seed of the simulated noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Readings to take (seeds seed, seed+1, ...); more than one prints their statistics.
+    #[arg(long, default_value_t = 1)]
+    pub repeat: u32,
+    #[command(flatten)]
+    pub m: MethodArgs,
+    /// Calibration: `unit` (fit the simulated unit on A–E × 20 with the same method, settings
+    /// and noise first), `paper-experiment` (eq. 5), `paper-simulation` (eq. 4), or a file
+    /// written by `probe-bench calibrate`.
+    #[arg(long, default_value = "unit")]
+    pub calibration: String,
+    /// Print one JSON object per reading instead of the bench log.
+    #[arg(long)]
+    pub json: bool,
+    /// Write an SVG plot of the (first) admittance sweep with the estimate marked.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+}
+
+/// Run the subcommand.
+pub fn run(a: MeasureArgs) -> Result<()> {
+    let method = a.m.method()?;
+    let settings = a.m.settings(method);
+    let noise = parse_noise(&a.m.noise)?;
+    let target = Target::from_options(a.phantom.as_deref(), a.modulus_kpa, a.free_air)?;
+    if !(a.preload_n.is_finite() && a.preload_n > 0.0 && a.preload_n <= 1.0) {
+        bail!("preload {} N is out of range (0 to 1 N)", a.preload_n);
+    }
+    if a.repeat == 0 || a.repeat > 10_000 {
+        bail!("--repeat must be 1 to 10000");
+    }
+    // Validate the settings before any work (the firmware does the same).
+    let scene = target.scene().with_noise(noise).with_preload_n(a.preload_n);
+    let scale = simboard::scale_of(&scene.front_end);
+    settings
+        .validate(&scale)
+        .map_err(|e| anyhow::anyhow!("bad sweep settings: {e}"))?;
+    let cal = match a.calibration.as_str() {
+        "unit" => calibrate_unit(method, &settings, noise, 20, 1000)?,
+        name => match calfile::builtin(name) {
+            Some(p) => p,
+            None => CalFile::load(std::path::Path::new(name))?,
+        },
+    };
+    if !a.json {
+        println!(
+            "probe-bench measure: simulated probe on {}",
+            target.describe()
+        );
+        println!(
+            "  preload {:.0} mN, noise {}, layers: {}",
+            a.preload_n * 1e3,
+            noise_name(noise),
+            layer_names(&scene)
+        );
+        println!(
+            "  simulator ground truth: resonance {:.3} Hz, Q {:.2}",
+            scene.resonance_hz(),
+            scene.q()
+        );
+        println!(
+            "  calibration {}: {}",
+            if a.calibration == "unit" {
+                "unit (fitted on A–E × 20)"
+            } else {
+                &a.calibration
+            },
+            calfile::describe(&cal)
+        );
+        println!(
+            "  sweep {}–{} Hz step {} Hz, settle {} ms, integrate {} ms, drive {} V, method {}",
+            settings.start.0,
+            settings.stop.0,
+            settings.step.0,
+            settings.settle.0 * 1e3,
+            settings.integrate.0 * 1e3,
+            settings.drive.0,
+            method.name()
+        );
+    }
+    let pb = (a.repeat > 1 && !a.json).then(|| progress(a.repeat as u64, "measuring"));
+    let mut moduli = Vec::new();
+    let mut first_points: Vec<SweepPoint> = Vec::new();
+    let mut first_resonance = None;
+    for k in 0..a.repeat {
+        let mut pts = Vec::new();
+        let reading = simboard::read(&scene, a.seed + k as u64, method, &settings, &cal, |p| {
+            if k == 0 {
+                pts.push(*p)
+            }
+        })
+        .map_err(|e| anyhow::anyhow!("reading failed: {e:?}"))?;
+        if k == 0 {
+            first_points = pts;
+            first_resonance = reading.resonance.map(|f| f.0);
+        }
+        if a.json {
+            println!("{}", report::reading_json(&reading));
+        } else if a.repeat == 1 {
+            println!("{}", report::reading_line(&reading));
+        }
+        if let Some(e) = reading.modulus {
+            moduli.push(e.0 as f64);
+        }
+        if let Some(pb) = &pb {
+            pb.inc(1);
+        }
+    }
+    if let Some(pb) = pb {
+        pb.finish_and_clear();
+    }
+    if a.repeat > 1 && !a.json {
+        let n = moduli.len();
+        println!("  {n} of {} readings ok", a.repeat);
+        if n >= 2 {
+            let mean = moduli.iter().sum::<f64>() / n as f64;
+            let sd =
+                (moduli.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n as f64 - 1.0)).sqrt();
+            print!("  modulus mean {mean:.2} kPa, sd {sd:.3} kPa");
+            if let Some(t) = target.modulus_kpa() {
+                print!(", error of the mean {:+.2} %", 100.0 * (mean - t) / t);
+            }
+            println!();
+        }
+    }
+    if let Some(path) = &a.plot {
+        let title = format!("{} — {}", target.describe(), method.name());
+        plot::sweep_svg(path, &title, &first_points, first_resonance)?;
+        if !a.json {
+            println!("  plot: {}", path.display());
+        }
+    }
+    Ok(())
+}

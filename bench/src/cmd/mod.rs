@@ -1,0 +1,76 @@
+//! The subcommands of `probe-bench`, one file each, and what they share.
+
+pub mod calibrate;
+pub mod measure;
+pub mod physics;
+
+use anyhow::{Context, Result};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use pzt_probe::sweep::SweepSettings;
+use pzt_probe::{Hz, Method, Seconds, Volts};
+
+#[derive(Args, Clone)]
+pub struct MethodArgs {
+    /// Resonance method: `paper` (|Z| minimum, 200–300 Hz in 1 Hz steps) or `sweep-g`
+    /// (conductance maximum).
+    #[arg(long, default_value = "sweep-g")]
+    pub method: String,
+    /// Sweep start frequency, Hz (default: the method's).
+    #[arg(long)]
+    pub start_hz: Option<f32>,
+    /// Sweep stop frequency, Hz.
+    #[arg(long)]
+    pub stop_hz: Option<f32>,
+    /// Sweep step, Hz.
+    #[arg(long)]
+    pub step_hz: Option<f32>,
+    /// Settling time after each frequency step, s.
+    #[arg(long)]
+    pub settle_s: Option<f32>,
+    /// Integration time per point, s (rounded up to whole drive cycles).
+    #[arg(long)]
+    pub integrate_s: Option<f32>,
+    /// Drive amplitude at the PZT, V (peak).
+    #[arg(long)]
+    pub drive_v: Option<f32>,
+    /// Front-end noise: `quiet`, `paper`, `bench`, or a current-noise density in A/sqrt(Hz).
+    #[arg(long, default_value = "bench")]
+    pub noise: String,
+}
+
+impl MethodArgs {
+    pub fn method(&self) -> Result<Method> {
+        Method::from_name(&self.method).with_context(|| {
+            let names: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
+            format!(
+                "unknown method `{}` (known: {})",
+                self.method,
+                names.join(", ")
+            )
+        })
+    }
+    pub fn settings(&self, method: Method) -> SweepSettings {
+        let d = method.default_sweep();
+        SweepSettings {
+            start: self.start_hz.map(Hz).unwrap_or(d.start),
+            stop: self.stop_hz.map(Hz).unwrap_or(d.stop),
+            step: self.step_hz.map(Hz).unwrap_or(d.step),
+            settle: self.settle_s.map(Seconds).unwrap_or(d.settle),
+            integrate: self.integrate_s.map(Seconds).unwrap_or(d.integrate),
+            drive: self.drive_v.map(Volts).unwrap_or(d.drive),
+        }
+    }
+}
+
+/// A progress bar for `n` steps.
+pub fn progress(n: u64, what: &str) -> ProgressBar {
+    let pb = ProgressBar::new(n);
+    pb.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} {elapsed}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    pb.set_message(what.to_owned());
+    pb
+}
