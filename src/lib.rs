@@ -15,6 +15,7 @@
 
 pub mod board;
 pub mod calibration;
+pub mod command;
 pub mod dsp;
 pub mod engine;
 pub mod estimate;
@@ -23,6 +24,7 @@ pub mod linalg;
 pub mod measure;
 pub mod runner;
 pub mod status;
+pub mod store;
 pub mod sweep;
 pub mod units;
 

@@ -21,6 +21,7 @@
 #![deny(missing_docs)]
 
 pub mod complex;
+pub mod flash;
 pub mod frontend;
 pub mod linalg;
 pub mod phantoms;

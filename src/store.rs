@@ -1,0 +1,543 @@
+//! The calibration store: the unit's calibration curve and its air reference, kept in NOR flash
+//! with integrity, over the `embedded-storage` [`NorFlash`] traits.
+//!
+//! # Layout and protocol
+//!
+//! Two slots, each a whole number of erase sectors, hold one [`Record`] each. A record is
+//! [`RECORD_LEN`] bytes, little endian:
+//!
+//! | offset | size | field |
+//! |---|---|---|
+//! | 0 | 4 | magic `"PZTC"` |
+//! | 4 | 2 | format version ([`FORMAT_VERSION`]) |
+//! | 6 | 2 | record length ([`RECORD_LEN`]) |
+//! | 8 | 4 | sequence number |
+//! | 12 | 1 | flags (bit 0: air reference present) |
+//! | 13 | 1 | calibration source (0 paper-simulation, 1 paper-experiment, 2 fitted) |
+//! | 14 | 2 | zero |
+//! | 16 | 24 | `a`, `b`, `c` (f64) |
+//! | 40 | 72 | covariance of `(a, b, c)`, row major (f64) |
+//! | 112 | 16 | `min_kpa`, `max_kpa` (f64) |
+//! | 128 | 8 | `model_sigma_hz` (f64) |
+//! | 136 | 8 | air reference: free resonance Hz, free Q (f32) |
+//! | 144 | 12 | zero |
+//! | 156 | 4 | CRC-32 (IEEE) of bytes 0..156 |
+//!
+//! [`Store::save`] writes the slot that does **not** hold the newest valid record (erase, program,
+//! read back and compare), with the sequence number one above the newest. The newest valid record
+//! is therefore never touched: a reset or power loss at any point of a save leaves it readable,
+//! and [`Store::load`] returns either it or, once the save completed, the new one. The CRC is the
+//! last field programmed, so a partly programmed record fails its check.
+//!
+//! [`Store::load`] picks the valid record with the highest sequence number (compared with
+//! wrap-around). When neither slot holds a valid record (empty, corrupt or unreadable) it falls
+//! back to the paper's published calibration ([`PowerLaw::paper_experiment`]) with no air
+//! reference, and says so in [`Loaded::source`] so the caller can log a warning and raise a
+//! status flag. Nothing here panics, whatever the flash contains.
+
+use crate::calibration::{PowerLaw, Source};
+use crate::units::Hz;
+use embedded_storage::nor_flash::NorFlash;
+
+/// Bytes of one record (a multiple of every common program word: 1, 2, 4, 8, 16, 32).
+pub const RECORD_LEN: usize = 160;
+/// Format version written into every record.
+pub const FORMAT_VERSION: u16 = 1;
+const MAGIC: [u8; 4] = *b"PZTC";
+const CRC_AT: usize = RECORD_LEN - 4;
+const FLAG_AIR: u8 = 1;
+
+/// The probe's free (unloaded, in air) resonance: what "no contact" looks like.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct AirReference {
+    /// Resonance in air.
+    pub free_resonance: Hz,
+    /// Quality factor in air.
+    pub free_q: f32,
+}
+
+impl AirReference {
+    /// True when both values are finite and positive.
+    pub fn is_valid(&self) -> bool {
+        self.free_resonance.0.is_finite()
+            && self.free_resonance.0 > 0.0
+            && self.free_q.is_finite()
+            && self.free_q > 0.0
+    }
+}
+
+/// What the store keeps: the calibration curve and, once measured, the air reference.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Record {
+    /// Calibration curve of this unit.
+    pub calibration: PowerLaw,
+    /// Air reference, once measured.
+    pub air: Option<AirReference>,
+}
+
+impl Record {
+    /// The fallback: the paper's experimental calibration, no air reference.
+    pub fn fallback() -> Self {
+        Self {
+            calibration: PowerLaw::paper_experiment(),
+            air: None,
+        }
+    }
+
+    /// True when the record may be stored and used (valid curve, finite covariance, valid air
+    /// reference if present).
+    pub fn is_valid(&self) -> bool {
+        self.calibration.is_valid()
+            && self.calibration.cov.iter().flatten().all(|v| v.is_finite())
+            && self.calibration.model_sigma_hz.is_finite()
+            && self.calibration.model_sigma_hz >= 0.0
+            && self.air.is_none_or(|a| a.is_valid())
+    }
+}
+
+/// State of one slot as found by a scan.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SlotState {
+    /// A valid record with this sequence number.
+    Valid(u32),
+    /// Erased: never written, or erased and not yet programmed.
+    Empty,
+    /// Something is there but it is not a valid record (torn write, bit flip, foreign data).
+    Corrupt,
+    /// The flash reported an error reading the slot.
+    Unreadable,
+}
+
+/// Where a loaded record came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LoadSource {
+    /// From flash: slot index, its sequence number, and the state of the other slot.
+    Stored {
+        /// Slot the record was read from (0 or 1).
+        slot: u8,
+        /// Its sequence number.
+        seq: u32,
+        /// State of the other slot.
+        other: SlotState,
+    },
+    /// No valid record: the paper's calibration is in use. The states of both slots say why.
+    Fallback {
+        /// State of slot 0 and slot 1.
+        slots: [SlotState; 2],
+    },
+}
+
+/// The result of [`Store::load`]: always a usable record, and where it came from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Loaded {
+    /// The record to use.
+    pub record: Record,
+    /// Where it came from.
+    pub source: LoadSource,
+}
+
+impl Loaded {
+    /// True when the paper's calibration is in use because no valid record exists.
+    pub fn is_fallback(&self) -> bool {
+        matches!(self.source, LoadSource::Fallback { .. })
+    }
+
+    /// True when a slot was found corrupt or unreadable (worth a warning even when a valid
+    /// record was loaded from the other slot).
+    pub fn damage_seen(&self) -> bool {
+        let bad = |s: SlotState| matches!(s, SlotState::Corrupt | SlotState::Unreadable);
+        match self.source {
+            LoadSource::Stored { other, .. } => bad(other),
+            LoadSource::Fallback { slots } => bad(slots[0]) || bad(slots[1]),
+        }
+    }
+}
+
+/// A completed save.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Saved {
+    /// Slot written.
+    pub slot: u8,
+    /// Sequence number written.
+    pub seq: u32,
+}
+
+/// Why the store could not be set up or a save failed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StoreError {
+    /// The slots do not fit the flash, or its program/read size does not divide [`RECORD_LEN`],
+    /// or the base is not sector aligned.
+    Geometry,
+    /// The record is not valid (see [`Record::is_valid`]); nothing was written.
+    InvalidRecord,
+    /// The flash failed to erase the target slot.
+    Erase,
+    /// The flash failed to program the record.
+    Program,
+    /// The read-back differs from what was programmed (or could not be read).
+    Verify,
+}
+
+/// The two-slot record store over a NOR flash.
+#[derive(Debug)]
+pub struct Store<F> {
+    flash: F,
+    slots: [u32; 2],
+    slot_len: u32,
+}
+
+impl<F: NorFlash> Store<F> {
+    /// A store whose two slots start at `base` (offset within `flash`), each the smallest whole
+    /// number of erase sectors that holds a record.
+    pub fn new(flash: F, base: u32) -> Result<Self, StoreError> {
+        let erase = F::ERASE_SIZE.max(1);
+        let sectors = RECORD_LEN.div_ceil(erase);
+        let slot_len = sectors.checked_mul(erase).ok_or(StoreError::Geometry)?;
+        let end = (base as usize)
+            .checked_add(slot_len.checked_mul(2).ok_or(StoreError::Geometry)?)
+            .ok_or(StoreError::Geometry)?;
+        let aligned = |n: usize| n != 0 && RECORD_LEN.is_multiple_of(n);
+        if !(base as usize).is_multiple_of(erase)
+            || end > flash.capacity()
+            || !aligned(F::WRITE_SIZE)
+            || !aligned(F::READ_SIZE)
+            || u32::try_from(end).is_err()
+        {
+            return Err(StoreError::Geometry);
+        }
+        let slot_len = slot_len as u32;
+        Ok(Self {
+            flash,
+            slots: [base, base + slot_len],
+            slot_len,
+        })
+    }
+
+    /// Bytes of flash the store occupies (both slots).
+    pub fn footprint(&self) -> u32 {
+        2 * self.slot_len
+    }
+
+    /// The flash, e.g. for fault injection in tests.
+    pub fn flash_mut(&mut self) -> &mut F {
+        &mut self.flash
+    }
+
+    /// Give the flash back.
+    pub fn into_inner(self) -> F {
+        self.flash
+    }
+
+    fn scan(&mut self, slot: usize) -> (SlotState, Option<Record>) {
+        let mut buf = [0u8; RECORD_LEN];
+        let Some(&at) = self.slots.get(slot) else {
+            return (SlotState::Unreadable, None);
+        };
+        if self.flash.read(at, &mut buf).is_err() {
+            return (SlotState::Unreadable, None);
+        }
+        if buf.iter().all(|&b| b == 0xFF) {
+            return (SlotState::Empty, None);
+        }
+        match decode(&buf) {
+            Some((seq, r)) => (SlotState::Valid(seq), Some(r)),
+            None => (SlotState::Corrupt, None),
+        }
+    }
+
+    fn newest(states: &[SlotState; 2]) -> Option<(usize, u32)> {
+        match (states[0], states[1]) {
+            (SlotState::Valid(a), SlotState::Valid(b)) => {
+                if newer(b, a) {
+                    Some((1, b))
+                } else {
+                    Some((0, a))
+                }
+            }
+            (SlotState::Valid(a), _) => Some((0, a)),
+            (_, SlotState::Valid(b)) => Some((1, b)),
+            _ => None,
+        }
+    }
+
+    /// Read the newest valid record, or fall back to the paper's calibration.
+    pub fn load(&mut self) -> Loaded {
+        let (s0, r0) = self.scan(0);
+        let (s1, r1) = self.scan(1);
+        let states = [s0, s1];
+        match Self::newest(&states) {
+            Some((0, seq)) => Loaded {
+                record: r0.unwrap_or_else(Record::fallback),
+                source: LoadSource::Stored {
+                    slot: 0,
+                    seq,
+                    other: s1,
+                },
+            },
+            Some((_, seq)) => Loaded {
+                record: r1.unwrap_or_else(Record::fallback),
+                source: LoadSource::Stored {
+                    slot: 1,
+                    seq,
+                    other: s0,
+                },
+            },
+            None => Loaded {
+                record: Record::fallback(),
+                source: LoadSource::Fallback { slots: states },
+            },
+        }
+    }
+
+    /// Store `record` as the new newest record, in the slot not holding the current newest.
+    pub fn save(&mut self, record: &Record) -> Result<Saved, StoreError> {
+        if !record.is_valid() {
+            return Err(StoreError::InvalidRecord);
+        }
+        let states = [self.scan(0).0, self.scan(1).0];
+        let (slot, seq) = match Self::newest(&states) {
+            Some((newest, seq)) => (1 - newest, seq.wrapping_add(1)),
+            None => (0, 1),
+        };
+        let at = self.slots[slot & 1];
+        let buf = encode(record, seq);
+        self.flash
+            .erase(at, at + self.slot_len)
+            .map_err(|_| StoreError::Erase)?;
+        self.flash
+            .write(at, &buf)
+            .map_err(|_| StoreError::Program)?;
+        let mut back = [0u8; RECORD_LEN];
+        self.flash
+            .read(at, &mut back)
+            .map_err(|_| StoreError::Verify)?;
+        if back != buf {
+            return Err(StoreError::Verify);
+        }
+        Ok(Saved {
+            slot: slot as u8,
+            seq,
+        })
+    }
+}
+
+/// True when sequence number `a` is newer than `b` (serial-number arithmetic).
+fn newer(a: u32, b: u32) -> bool {
+    (a.wrapping_sub(b) as i32) > 0
+}
+
+const CRC_TABLE: [u32; 256] = {
+    let mut t = [0u32; 256];
+    let mut i = 0;
+    while i < 256 {
+        let mut c = i as u32;
+        let mut k = 0;
+        while k < 8 {
+            c = if c & 1 != 0 {
+                0xEDB8_8320 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
+            k += 1;
+        }
+        t[i] = c;
+        i += 1;
+    }
+    t
+};
+
+/// CRC-32 (IEEE 802.3, reflected, init and final XOR `0xFFFF_FFFF`): `crc32(b"123456789")` is
+/// `0xCBF4_3926`.
+pub fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = 0xFFFF_FFFFu32;
+    for &b in bytes {
+        c = CRC_TABLE[((c ^ b as u32) & 0xFF) as usize] ^ (c >> 8);
+    }
+    !c
+}
+
+struct Writer {
+    buf: [u8; RECORD_LEN],
+    at: usize,
+}
+
+impl Writer {
+    fn put(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            if let Some(d) = self.buf.get_mut(self.at) {
+                *d = b;
+            }
+            self.at += 1;
+        }
+    }
+}
+
+struct Reader<'a> {
+    buf: &'a [u8; RECORD_LEN],
+    at: usize,
+}
+
+impl Reader<'_> {
+    fn take<const N: usize>(&mut self) -> [u8; N] {
+        let mut out = [0u8; N];
+        for o in out.iter_mut() {
+            *o = self.buf.get(self.at).copied().unwrap_or(0);
+            self.at += 1;
+        }
+        out
+    }
+    fn f64(&mut self) -> f64 {
+        f64::from_le_bytes(self.take())
+    }
+    fn f32(&mut self) -> f32 {
+        f32::from_le_bytes(self.take())
+    }
+}
+
+fn source_code(s: Source) -> u8 {
+    match s {
+        Source::PaperSimulation => 0,
+        Source::PaperExperiment => 1,
+        Source::Fitted => 2,
+    }
+}
+
+fn source_of(b: u8) -> Option<Source> {
+    match b {
+        0 => Some(Source::PaperSimulation),
+        1 => Some(Source::PaperExperiment),
+        2 => Some(Source::Fitted),
+        _ => None,
+    }
+}
+
+/// Serialise `record` with sequence number `seq` (layout in the module documentation).
+pub fn encode(record: &Record, seq: u32) -> [u8; RECORD_LEN] {
+    let mut w = Writer {
+        buf: [0u8; RECORD_LEN],
+        at: 0,
+    };
+    let c = &record.calibration;
+    w.put(&MAGIC);
+    w.put(&FORMAT_VERSION.to_le_bytes());
+    w.put(&(RECORD_LEN as u16).to_le_bytes());
+    w.put(&seq.to_le_bytes());
+    w.put(&[
+        if record.air.is_some() { FLAG_AIR } else { 0 },
+        source_code(c.source),
+        0,
+        0,
+    ]);
+    for v in [c.a, c.b, c.c] {
+        w.put(&v.to_le_bytes());
+    }
+    for v in c.cov.iter().flatten() {
+        w.put(&v.to_le_bytes());
+    }
+    w.put(&c.min_kpa.to_le_bytes());
+    w.put(&c.max_kpa.to_le_bytes());
+    w.put(&c.model_sigma_hz.to_le_bytes());
+    let (f, q) = record
+        .air
+        .map_or((0.0, 0.0), |a| (a.free_resonance.0, a.free_q));
+    w.put(&f.to_le_bytes());
+    w.put(&q.to_le_bytes());
+    let crc = crc32(w.buf.get(..CRC_AT).unwrap_or(&[]));
+    w.at = CRC_AT;
+    w.put(&crc.to_le_bytes());
+    w.buf
+}
+
+/// Parse and check a record: magic, version, length, CRC and content validity. Returns the
+/// sequence number and the record.
+pub fn decode(buf: &[u8; RECORD_LEN]) -> Option<(u32, Record)> {
+    let mut r = Reader { buf, at: 0 };
+    if r.take::<4>() != MAGIC
+        || u16::from_le_bytes(r.take()) != FORMAT_VERSION
+        || u16::from_le_bytes(r.take()) as usize != RECORD_LEN
+    {
+        return None;
+    }
+    let stored_crc = u32::from_le_bytes([
+        buf[CRC_AT],
+        buf[CRC_AT + 1],
+        buf[CRC_AT + 2],
+        buf[CRC_AT + 3],
+    ]);
+    if crc32(buf.get(..CRC_AT)?) != stored_crc {
+        return None;
+    }
+    let seq = u32::from_le_bytes(r.take());
+    let [flags, source, _, _] = r.take::<4>();
+    let source = source_of(source)?;
+    let (a, b, c) = (r.f64(), r.f64(), r.f64());
+    let mut cov = [[0.0f64; 3]; 3];
+    for v in cov.iter_mut().flatten() {
+        *v = r.f64();
+    }
+    let (min_kpa, max_kpa) = (r.f64(), r.f64());
+    let model_sigma_hz = r.f64();
+    let (f, q) = (r.f32(), r.f32());
+    let air = (flags & FLAG_AIR != 0).then_some(AirReference {
+        free_resonance: Hz(f),
+        free_q: q,
+    });
+    let record = Record {
+        calibration: PowerLaw {
+            a,
+            b,
+            c,
+            cov,
+            model_sigma_hz,
+            min_kpa,
+            max_kpa,
+            source,
+        },
+        air,
+    };
+    record.is_valid().then_some((seq, record))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crc_check_value() {
+        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+        assert_eq!(crc32(b""), 0);
+    }
+
+    #[test]
+    fn round_trip() {
+        let mut cal = PowerLaw::paper_simulation();
+        cal.cov[1][2] = 0.25;
+        cal.source = Source::Fitted;
+        let rec = Record {
+            calibration: cal,
+            air: Some(AirReference {
+                free_resonance: Hz(232.3),
+                free_q: 41.5,
+            }),
+        };
+        let buf = encode(&rec, 7);
+        assert_eq!(decode(&buf), Some((7, rec)));
+        let no_air = Record::fallback();
+        assert_eq!(decode(&encode(&no_air, u32::MAX)), Some((u32::MAX, no_air)));
+    }
+
+    #[test]
+    fn serial_numbers_wrap() {
+        assert!(newer(1, 0));
+        assert!(newer(0, u32::MAX));
+        assert!(!newer(u32::MAX, 0));
+        assert!(!newer(5, 5));
+    }
+}
