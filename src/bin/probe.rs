@@ -1,1 +1,863 @@
+//! The probe's firmware: the RTIC 2 application.
+//!
+//! One image, two boards: `--features stm32` for the STM32G474RE (NUCLEO-G474RE) and
+//! `--features qemu` for QEMU's mps2-an386 with the simulated probe; both built for
+//! `thumbv7em-none-eabihf` with `--no-default-features` (see `docs/firmware.md`). On the host
+//! this file compiles to an empty `main` so workspace builds and tests stay simple.
+//!
+//! # Tasks
+//!
+//! | task | priority | what |
+//! |---|---|---|
+//! | `sample` (hardware) | 3 | per batch: demodulate the ADC half, refill the DAC half ([`SampleEngine`]) |
+//! | `uart_rx` (hardware, STM32) | 2 | host bytes from LPUART1 (ST-LINK virtual COM port) into a channel |
+//! | `measure` | 1 | owns settings, calibration and the flash store; runs readings point by point |
+//! | `command` | 1 | bytes → lines → [`pzt_probe::command::parse`] → requests to `measure` (QEMU: `command_script`, a fixed script through the same parser) |
+//! | `report` | 1 | the only place that logs: one defmt line per event, formats below |
+//!
+//! Data flow: `command` → (request channel) → `measure` → (plan channel, capacity 2: the double
+//! buffer of the interrupt's settings) → `sample` → (point channel) → `measure` → (report channel)
+//! → `report`. Settings are validated twice before anything reaches the interrupt: by the
+//! command parser against the board's converter scale and again by
+//! [`SweepMeasurement::new`]; the interrupt only ever sees [`PointPlan`]s of a validated sweep.
+//! The running reading keeps the settings it started with; a new `sweep` or `method` applies
+//! from the next reading.
+//!
+//! # Log lines (parsed by `probe-bench log` and `tests/qemu.rs`; keep them stable)
+//!
+//! Every line is one defmt message; floats are `{=f32}` (missing values are `NaN`), names
+//! `{=str}`:
+//!
+//! ```text
+//! boot board=<qemu|stm32> fs_hz=<f32> batch=<u32>
+//! store loaded slot=<u8> seq=<u32> other=<str>            (info)
+//! store fallback slot0=<str> slot1=<str> calibration=paper-experiment   (warn)
+//! store saved slot=<u8> seq=<u32>                          (info)
+//! store error=<str>                                        (error)
+//! settings method=<str> start_hz=<f32> stop_hz=<f32> step_hz=<f32> settle_s=<f32> integrate_s=<f32> drive_v=<f32>
+//! point tag=<u16> f_hz=<f32> g_s=<f32> b_s=<f32> sigma_s=<f32>
+//! reading status=<str> f_hz=<f32> f_sigma_hz=<f32> e_kpa=<f32> e_sigma_kpa=<f32> q=<f32> probe_time_s=<f32> points=<u16> method=<str>
+//! air f_hz=<f32> q=<f32>
+//! reference e_kpa=<f32> f_hz=<f32> f_sigma_hz=<f32> n=<u16>
+//! calibration source=<str> a=<f32> b=<f32> c=<f32> min_kpa=<f32> max_kpa=<f32>
+//! rejected error=<str>                                     (warn)
+//! stalled tag=<u16>                                        (error)
+//! overrun late=<u32> ring=<u32> dropped=<u32>              (error; whenever a counter grew)
+//! counters batches=<u32> late=<u32> ring=<u32> dropped=<u32> isr_mean=<u32> isr_max=<u32> unit=<str>
+//! status method=<str> calibration=<str> fallback=<bool> air=<bool> references=<u16>
+//! exit ok=<bool>                                           (QEMU script end)
+//! ```
+//!
+//! `status` of a reading is `ok` or a failure code of [`pzt_probe::Failure::code`]. `isr_mean`
+//! and `isr_max` are the sample interrupt's work per batch (plan intake, demodulation, DAC
+//! refill, point hand-off) in `unit`: instructions under QEMU, core cycles on the STM32.
+#![cfg_attr(target_os = "none", no_std, no_main)]
+
+#[cfg(not(target_os = "none"))]
 fn main() {}
+
+#[cfg(all(target_os = "none", not(any(feature = "stm32", feature = "qemu"))))]
+compile_error!("the firmware image needs feature `stm32` or `qemu` (with --no-default-features)");
+
+#[cfg(all(target_os = "none", feature = "qemu"))]
+use pzt_probe::board::qemu as board;
+#[cfg(all(target_os = "none", feature = "stm32"))]
+use pzt_probe::board::stm32g474 as board;
+
+#[cfg(all(target_os = "none", feature = "stm32"))]
+use {defmt_rtt as _, panic_probe as _};
+
+#[cfg(all(target_os = "none", feature = "qemu"))]
+use defmt_semihosting as _;
+
+#[cfg(all(target_os = "none", feature = "qemu"))]
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    defmt::error!("panic {}", defmt::Display2Format(info));
+    board::exit(false)
+}
+
+#[cfg(all(target_os = "none", feature = "qemu"))]
+#[defmt::panic_handler]
+fn defmt_panic() -> ! {
+    board::exit(false)
+}
+
+#[cfg(all(target_os = "none", feature = "qemu"))]
+#[cortex_m_rt::exception]
+unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    board::exit(false)
+}
+
+#[cfg(target_os = "none")]
+mod shared {
+    //! Types and counters shared by the tasks.
+
+    use core::sync::atomic::{AtomicU32, Ordering};
+    use pzt_probe::command::CommandError;
+    use pzt_probe::engine::PointPlan;
+    use pzt_probe::store::{Loaded, SlotState, StoreError};
+    use pzt_probe::sweep::{SweepPoint, SweepSettings};
+    use pzt_probe::{Method, PowerLaw, Reading};
+
+    /// Batches serviced by the sample interrupt.
+    pub static BATCHES: AtomicU32 = AtomicU32::new(0);
+    /// Batches whose interrupt overran its period (the next one was already pending).
+    pub static LATE: AtomicU32 = AtomicU32::new(0);
+    /// Engine ring overruns (a DAC batch forgotten before it was demodulated).
+    pub static RING: AtomicU32 = AtomicU32::new(0);
+    /// Finished points the interrupt could not hand on (channel full).
+    pub static DROPPED: AtomicU32 = AtomicU32::new(0);
+    /// Mean and largest interrupt work per batch (board unit).
+    pub static ISR_MEAN: AtomicU32 = AtomicU32::new(0);
+    /// See [`ISR_MEAN`].
+    pub static ISR_MAX: AtomicU32 = AtomicU32::new(0);
+
+    /// A snapshot of the overrun counters.
+    #[derive(Clone, Copy, PartialEq, Eq, Default)]
+    pub struct Overruns {
+        pub late: u32,
+        pub ring: u32,
+        pub dropped: u32,
+    }
+
+    impl Overruns {
+        pub fn now() -> Self {
+            Self {
+                late: LATE.load(Ordering::Relaxed),
+                ring: RING.load(Ordering::Relaxed),
+                dropped: DROPPED.load(Ordering::Relaxed),
+            }
+        }
+        pub fn any(&self) -> bool {
+            self.late + self.ring + self.dropped > 0
+        }
+    }
+
+    /// What the measurement task asks of the interrupt.
+    #[derive(Clone, Copy)]
+    pub enum EngineCmd {
+        Load(PointPlan),
+        Stop,
+    }
+
+    /// Everything the report task logs.
+    #[derive(Clone, Copy)]
+    pub enum Report {
+        Loaded(Loaded),
+        Saved {
+            slot: u8,
+            seq: u32,
+        },
+        StoreFailed(StoreError),
+        Settings(Method, SweepSettings),
+        Point {
+            tag: u16,
+            point: SweepPoint,
+        },
+        Reading(Reading),
+        Air {
+            f_hz: f32,
+            q: f32,
+        },
+        Reference {
+            e_kpa: f32,
+            f_hz: f32,
+            f_sigma_hz: f32,
+            n: u16,
+        },
+        Calibration(PowerLaw),
+        Rejected(CommandError),
+        Refused(&'static str),
+        Stalled {
+            tag: u16,
+        },
+        Counters,
+        Status {
+            method: Method,
+            cal: PowerLaw,
+            fallback: bool,
+            air: bool,
+            references: u16,
+        },
+        #[cfg_attr(not(feature = "qemu"), allow(dead_code))]
+        Exit(bool),
+    }
+
+    pub fn slot_name(s: SlotState) -> &'static str {
+        match s {
+            SlotState::Valid(_) => "valid",
+            SlotState::Empty => "empty",
+            SlotState::Corrupt => "corrupt",
+            SlotState::Unreadable => "unreadable",
+        }
+    }
+
+    pub fn store_error_name(e: StoreError) -> &'static str {
+        match e {
+            StoreError::Geometry => "geometry",
+            StoreError::InvalidRecord => "invalid_record",
+            StoreError::Erase => "erase",
+            StoreError::Program => "program",
+            StoreError::Verify => "verify",
+        }
+    }
+}
+
+#[cfg(target_os = "none")]
+#[rtic::app(device = crate::board::device, peripherals = false, dispatchers = [SPI3])]
+mod app {
+    use crate::board;
+    use crate::shared::*;
+    use core::sync::atomic::Ordering;
+    use pzt_probe::command::{parse, Command, LineBuffer};
+    use pzt_probe::dsp::dds::frequency_hz;
+    use pzt_probe::engine::{PointRaw, SampleEngine};
+    use pzt_probe::hal::FrontEndScale;
+    use pzt_probe::runner::BATCH;
+    use pzt_probe::store::{AirReference, LoadSource, Store};
+    use pzt_probe::sweep::SweepSettings;
+    use pzt_probe::{Failure, Method, PowerLaw, Reading, Seconds, SweepMeasurement};
+    use rtic_monotonics::systick::prelude::*;
+    use rtic_sync::channel::{Receiver, Sender};
+    use rtic_sync::make_channel;
+
+    systick_monotonic!(Mono, 1_000);
+
+    const PLAN_CAP: usize = 2;
+    const POINT_CAP: usize = 4;
+    const REQUEST_CAP: usize = 4;
+    const REPORT_CAP: usize = 16;
+    const DONE_CAP: usize = 1;
+    /// Received bytes buffered between the UART interrupt and the command task (STM32).
+    const RX_CAP: usize = 64;
+    /// Reference readings kept for a calibration fit.
+    const MAX_REFERENCES: usize = 32;
+    /// The measurement task feeds the watchdog at least this often while it is alive (ms).
+    const FEED_MS: u32 = 100;
+
+    /// The QEMU image has no host link: it runs this script through the same line parser.
+    #[cfg(feature = "qemu")]
+    const SCRIPT: &[u8] = b"method sweep-g\nsweep 200 260 2 0.02 0.03 5\nmeasure\nstore\nstatus\n";
+
+    #[shared]
+    struct Shared {}
+
+    #[local]
+    struct Local {
+        stream: board::Stream,
+        engine: SampleEngine,
+        plan_rx: Receiver<'static, EngineCmd, PLAN_CAP>,
+        point_tx: Sender<'static, PointRaw, POINT_CAP>,
+        isr_sum: u64,
+        isr_n: u32,
+        watchdog: board::Watchdog,
+        store: Store<board::StoreFlash>,
+        scale: FrontEndScale,
+        uart: board::Uart,
+        rx_tx: Sender<'static, u8, RX_CAP>,
+    }
+
+    #[init]
+    fn init(mut cx: init::Context) -> (Shared, Local) {
+        let parts = board::init(&mut cx.core);
+        Mono::start(cx.core.SYST, board::SYSCLK_HZ);
+        // SysTick below the sample interrupt so the timer queue never delays a batch.
+        // SAFETY: priorities are set before any task runs.
+        unsafe {
+            cx.core.SCB.set_priority(
+                cortex_m::peripheral::scb::SystemHandler::SysTick,
+                logical_to_hw(2),
+            );
+        }
+
+        let (plan_tx, plan_rx) = make_channel!(EngineCmd, PLAN_CAP);
+        let (point_tx, point_rx) = make_channel!(PointRaw, POINT_CAP);
+        let (request_tx, request_rx) = make_channel!(Command, REQUEST_CAP);
+        let (report_tx, report_rx) = make_channel!(Report, REPORT_CAP);
+        let (done_tx, done_rx) = make_channel!(bool, DONE_CAP);
+
+        let mut stream = parts.stream;
+        let scale = stream.scale();
+        let mut engine = SampleEngine::new();
+        stream.start(&mut engine);
+        defmt::info!(
+            "boot board={=str} fs_hz={=f32} batch={=u32}",
+            board::NAME,
+            scale.sample_rate.0,
+            BATCH as u32
+        );
+
+        let store = match Store::new(parts.flash, board::STORE_BASE) {
+            Ok(s) => s,
+            Err(_) => defmt::panic!("store geometry"),
+        };
+
+        measure::spawn(request_rx, plan_tx, point_rx, report_tx.clone(), done_tx).ok();
+        report::spawn(report_rx).ok();
+
+        let (rx_tx, rx_rx) = make_channel!(u8, RX_CAP);
+        command::spawn(request_tx, report_tx, done_rx, rx_rx).ok();
+
+        (
+            Shared {},
+            Local {
+                stream,
+                engine,
+                plan_rx,
+                point_tx,
+                isr_sum: 0,
+                isr_n: 0,
+                watchdog: parts.watchdog,
+                store,
+                scale,
+                uart: parts.uart,
+                rx_tx,
+            },
+        )
+    }
+
+    /// Hardware priority value of RTIC logical priority `p`.
+    fn logical_to_hw(p: u8) -> u8 {
+        let bits = crate::board::device::NVIC_PRIO_BITS;
+        ((1u8 << bits) - p) << (8 - bits)
+    }
+
+    /// Runs when no task has work: sleep until the next interrupt.
+    #[idle]
+    fn idle(_: idle::Context) -> ! {
+        loop {
+            cortex_m::asm::wfi();
+        }
+    }
+
+    /// The sample interrupt: one batch ([`BATCH`] samples, 5 ms at 10 kHz) per call.
+    ///
+    /// Bound to the ADC DMA half/full-transfer interrupt `DMA1_CH1` on the STM32; on QEMU the
+    /// same vector is the batch timer, whose driver first emulates the DMA of the period. It
+    /// takes any queued plan (`Load`/`Stop`) from the plan channel, demodulates the ADC
+    /// half-buffer just captured ([`SampleEngine::demodulate`]), refills the DAC half-buffer
+    /// just played ([`SampleEngine::generate`], which applies the plan phase-continuously) and
+    /// hands a finished point to the measurement task with a non-blocking send. It never logs,
+    /// allocates or waits.
+    ///
+    /// **Budget.** 2 % of the core per batch: 17 000 cycles at 170 MHz for 50 samples
+    /// (340 per sample); measured figures are in `docs/firmware.md` and in the `counters`
+    /// log line (`isr_mean`, `isr_max`). The hard limit is the batch period itself: the
+    /// refilled DAC half plays one batch after the one now playing.
+    ///
+    /// **Overrun.** Detected, counted and reported by the report task, never silent: if the
+    /// next batch interrupt is already pending when this one ends, the batch was late (`LATE`;
+    /// on the STM32 the DMA may then have played a stale half); if the engine's ring forgot a
+    /// batch (`RING`); if the point channel was full (`DROPPED`). The measurement task also
+    /// times every point out, so a lost point ends the reading as `stalled` rather than hanging.
+    #[task(binds = DMA1_CH1, priority = 3, local = [stream, engine, plan_rx, point_tx, isr_sum, isr_n])]
+    fn sample(cx: sample::Context) {
+        let stream = cx.local.stream;
+        let engine = cx.local.engine;
+        let (adc, dac) = stream.capture();
+        let t0 = board::stamp();
+        while let Ok(cmd) = cx.local.plan_rx.try_recv() {
+            match cmd {
+                EngineCmd::Load(plan) => engine.load(plan),
+                EngineCmd::Stop => engine.stop(),
+            }
+        }
+        let point = engine.demodulate(adc);
+        engine.generate(dac);
+        if let Some(p) = point {
+            if cx.local.point_tx.try_send(p).is_err() {
+                DROPPED.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        let work = board::elapsed(t0);
+        *cx.local.isr_sum += work as u64;
+        *cx.local.isr_n += 1;
+        ISR_MEAN.store(
+            (*cx.local.isr_sum / *cx.local.isr_n as u64) as u32,
+            Ordering::Relaxed,
+        );
+        ISR_MAX.fetch_max(work, Ordering::Relaxed);
+        RING.store(engine.overruns(), Ordering::Relaxed);
+        BATCHES.fetch_add(1, Ordering::Relaxed);
+        if stream.late() {
+            LATE.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// Host bytes from the UART into the command task's channel.
+    #[task(binds = LPUART1, priority = 2, local = [uart, rx_tx])]
+    fn uart_rx(cx: uart_rx::Context) {
+        while let Some(b) = cx.local.uart.read_byte() {
+            // A full channel drops the byte; the line then fails to parse and is reported.
+            let _ = cx.local.rx_tx.try_send(b);
+        }
+    }
+
+    /// The active settings: what the next reading uses.
+    struct Active {
+        method: Method,
+        sweep: SweepSettings,
+    }
+
+    /// What one reading needs from the measurement task's context.
+    struct Rig<'a> {
+        plans: &'a mut Sender<'static, EngineCmd, PLAN_CAP>,
+        points: &'a mut Receiver<'static, PointRaw, POINT_CAP>,
+        reports: &'a mut Sender<'static, Report, REPORT_CAP>,
+        watchdog: &'a mut board::Watchdog,
+        scale: FrontEndScale,
+    }
+
+    impl Rig<'_> {
+        async fn report(&mut self, r: Report) {
+            // The report task only ends with the image; a closed channel is not an error here.
+            let _ = self.reports.send(r).await;
+        }
+
+        /// One reading with `method` and `sweep`, point by point through the interrupt.
+        async fn reading(
+            &mut self,
+            method: Method,
+            sweep: &SweepSettings,
+            cal: &PowerLaw,
+        ) -> Reading {
+            let start = BATCHES.load(Ordering::Relaxed) as u64 * BATCH as u64;
+            let mut m = match SweepMeasurement::new(method, sweep, &self.scale, start) {
+                Ok(m) => m,
+                Err(_) => return Reading::failed(method, Failure::BadSettings, Seconds(0.0), 0),
+            };
+            let fs = self.scale.sample_rate.0;
+            let batch_s = BATCH as f32 / fs;
+            while let Some(plan) = m.next_plan() {
+                if self.plans.send(EngineCmd::Load(plan)).await.is_err() {
+                    break;
+                }
+                // Budget: settling, the window, a cycle to find the boundary, the two-batch
+                // pipeline and margin.
+                let f = frequency_hz(plan.ftw, fs as f64).max(1.0) as f32;
+                let window_s = plan.settle_samples as f32 / fs + (plan.cycles as f32 + 2.0) / f;
+                let budget_ms = ((window_s + 6.0 * batch_s) * 1000.0) as u32 + FEED_MS;
+                let got = loop {
+                    match Mono::timeout_after(budget_ms.millis(), self.points.recv()).await {
+                        Ok(Ok(raw)) if raw.plan == plan => break Some(raw),
+                        Ok(Ok(_stale)) => continue,
+                        _ => break None,
+                    }
+                };
+                self.watchdog.feed();
+                match got {
+                    Some(raw) => {
+                        if let Some(p) = m.accept(&raw) {
+                            self.report(Report::Point {
+                                tag: plan.tag,
+                                point: p,
+                            })
+                            .await;
+                        }
+                    }
+                    None => {
+                        let _ = self.plans.send(EngineCmd::Stop).await;
+                        self.report(Report::Stalled { tag: plan.tag }).await;
+                        return Reading::failed(
+                            method,
+                            Failure::DriveFault,
+                            m.probe_time(),
+                            m.points().len() as u16,
+                        );
+                    }
+                }
+            }
+            let _ = self.plans.send(EngineCmd::Stop).await;
+            m.finish(cal)
+        }
+    }
+
+    /// The measurement task: owns the settings, the calibration record, the reference readings
+    /// and the flash store; serves one request at a time and feeds the watchdog while alive.
+    #[task(priority = 1, local = [watchdog, store, scale])]
+    async fn measure(
+        cx: measure::Context,
+        mut requests: Receiver<'static, Command, REQUEST_CAP>,
+        mut plans: Sender<'static, EngineCmd, PLAN_CAP>,
+        mut points: Receiver<'static, PointRaw, POINT_CAP>,
+        mut reports: Sender<'static, Report, REPORT_CAP>,
+        mut done: Sender<'static, bool, DONE_CAP>,
+    ) {
+        let store = cx.local.store;
+        let loaded = store.load();
+        let mut record = loaded.record;
+        let mut fallback = loaded.is_fallback();
+        let _ = reports.send(Report::Loaded(loaded)).await;
+        let mut active = Active {
+            method: Method::SweepG,
+            sweep: Method::SweepG.default_sweep(),
+        };
+        let mut refs: heapless::Vec<(f64, f64, f64), MAX_REFERENCES> = heapless::Vec::new();
+        let mut rig = Rig {
+            plans: &mut plans,
+            points: &mut points,
+            reports: &mut reports,
+            watchdog: cx.local.watchdog,
+            scale: *cx.local.scale,
+        };
+        loop {
+            let req = match Mono::timeout_after(FEED_MS.millis(), requests.recv()).await {
+                Ok(Ok(r)) => r,
+                Ok(Err(_)) => {
+                    // No command source any more: stay alive for the watchdog, serve nothing.
+                    loop {
+                        rig.watchdog.feed();
+                        Mono::delay(FEED_MS.millis()).await;
+                    }
+                }
+                Err(_) => {
+                    rig.watchdog.feed();
+                    continue;
+                }
+            };
+            rig.watchdog.feed();
+            let ok = match req {
+                Command::Measure => {
+                    let r = rig
+                        .reading(active.method, &active.sweep, &record.calibration)
+                        .await;
+                    rig.report(Report::Reading(r)).await;
+                    rig.report(Report::Counters).await;
+                    r.status.is_ok()
+                }
+                Command::Method(m) => {
+                    active = Active {
+                        method: m,
+                        sweep: m.default_sweep(),
+                    };
+                    rig.report(Report::Settings(active.method, active.sweep))
+                        .await;
+                    true
+                }
+                Command::Sweep(s) => {
+                    active.sweep = s;
+                    rig.report(Report::Settings(active.method, active.sweep))
+                        .await;
+                    true
+                }
+                Command::SweepDefault => {
+                    active.sweep = active.method.default_sweep();
+                    rig.report(Report::Settings(active.method, active.sweep))
+                        .await;
+                    true
+                }
+                Command::Air => {
+                    // The conductance method measures Q; the calibration does not matter here.
+                    let r = rig
+                        .reading(Method::SweepG, &active.sweep, &record.calibration)
+                        .await;
+                    rig.report(Report::Reading(r)).await;
+                    match (r.resonance, r.q) {
+                        (Some(f), Some(q)) => {
+                            let air = AirReference {
+                                free_resonance: f,
+                                free_q: q,
+                            };
+                            if air.is_valid() {
+                                record.air = Some(air);
+                                rig.report(Report::Air { f_hz: f.0, q }).await;
+                                true
+                            } else {
+                                rig.report(Report::Refused("air reference not valid")).await;
+                                false
+                            }
+                        }
+                        _ => {
+                            rig.report(Report::Refused("no resonance in air")).await;
+                            false
+                        }
+                    }
+                }
+                Command::CalibrateAdd(e) => {
+                    let r = rig
+                        .reading(active.method, &active.sweep, &record.calibration)
+                        .await;
+                    rig.report(Report::Reading(r)).await;
+                    match (r.resonance, r.resonance_sigma) {
+                        (Some(f), Some(s))
+                            if refs
+                                .push((e.0 as f64, f.0 as f64, (s.0 as f64).max(1e-4)))
+                                .is_ok() =>
+                        {
+                            rig.report(Report::Reference {
+                                e_kpa: e.0,
+                                f_hz: f.0,
+                                f_sigma_hz: s.0,
+                                n: refs.len() as u16,
+                            })
+                            .await;
+                            true
+                        }
+                        (Some(_), Some(_)) => {
+                            rig.report(Report::Refused("reference list full")).await;
+                            false
+                        }
+                        _ => {
+                            rig.report(Report::Refused("no resonance")).await;
+                            false
+                        }
+                    }
+                }
+                Command::CalibrateFit => match PowerLaw::fit(&refs) {
+                    Ok(cal) => {
+                        record.calibration = cal;
+                        fallback = false;
+                        rig.report(Report::Calibration(cal)).await;
+                        true
+                    }
+                    Err(_) => {
+                        rig.report(Report::Refused("calibration fit failed")).await;
+                        false
+                    }
+                },
+                Command::CalibrateClear => {
+                    refs.clear();
+                    true
+                }
+                Command::CalibratePaper => {
+                    record.calibration = PowerLaw::paper_experiment();
+                    rig.report(Report::Calibration(record.calibration)).await;
+                    true
+                }
+                Command::Store => match store.save(&record) {
+                    Ok(s) => {
+                        fallback = false;
+                        rig.report(Report::Saved {
+                            slot: s.slot,
+                            seq: s.seq,
+                        })
+                        .await;
+                        true
+                    }
+                    Err(e) => {
+                        rig.report(Report::StoreFailed(e)).await;
+                        false
+                    }
+                },
+                Command::Status => {
+                    rig.report(Report::Status {
+                        method: active.method,
+                        cal: record.calibration,
+                        fallback,
+                        air: record.air.is_some(),
+                        references: refs.len() as u16,
+                    })
+                    .await;
+                    rig.report(Report::Counters).await;
+                    true
+                }
+            };
+            // Only the QEMU script waits for this; elsewhere the slot just stays full.
+            let _ = done.try_send(ok);
+        }
+    }
+
+    /// Turn lines into requests. Parse errors are reported and the line is dropped.
+    async fn serve_line(
+        line: &[u8],
+        scale: &FrontEndScale,
+        requests: &mut Sender<'static, Command, REQUEST_CAP>,
+        reports: &mut Sender<'static, Report, REPORT_CAP>,
+    ) -> bool {
+        match parse(line, scale) {
+            Ok(c) => requests.send(c).await.is_ok(),
+            Err(e) => {
+                let _ = reports.send(Report::Rejected(e)).await;
+                false
+            }
+        }
+    }
+
+    /// The command task: host bytes → lines → requests, one request at a time.
+    ///
+    /// On QEMU there is no host on the line: the task feeds the fixed [`SCRIPT`] through the
+    /// same line buffer and parser, waits for each request to finish, then ends the run with
+    /// success iff every request succeeded and no overrun happened.
+    #[task(priority = 1)]
+    async fn command(
+        _cx: command::Context,
+        mut requests: Sender<'static, Command, REQUEST_CAP>,
+        mut reports: Sender<'static, Report, REPORT_CAP>,
+        mut done: Receiver<'static, bool, DONE_CAP>,
+        rx: Receiver<'static, u8, RX_CAP>,
+    ) {
+        let scale = board::scale();
+        let mut lines = LineBuffer::new();
+        #[cfg(feature = "qemu")]
+        {
+            let mut ok = true;
+            for &b in SCRIPT {
+                let line = match lines.push(b) {
+                    Some(Ok(l)) => l,
+                    Some(Err(e)) => {
+                        let _ = reports.send(Report::Rejected(e)).await;
+                        ok = false;
+                        continue;
+                    }
+                    None => continue,
+                };
+                if serve_line(line, &scale, &mut requests, &mut reports).await {
+                    ok &= done.recv().await.unwrap_or(false);
+                } else {
+                    ok = false;
+                }
+            }
+            ok &= !Overruns::now().any();
+            let _ = reports.send(Report::Exit(ok)).await;
+            drop(rx);
+        }
+        #[cfg(not(feature = "qemu"))]
+        let mut rx = rx;
+        #[cfg(not(feature = "qemu"))]
+        while let Ok(b) = rx.recv().await {
+            // A stale completion from an earlier request is of no interest here.
+            let _ = done.try_recv();
+            match lines.push(b) {
+                Some(Ok(l)) => {
+                    serve_line(l, &scale, &mut requests, &mut reports).await;
+                }
+                Some(Err(e)) => {
+                    let _ = reports.send(Report::Rejected(e)).await;
+                }
+                None => {}
+            }
+        }
+    }
+
+    fn nan_or(v: Option<f32>) -> f32 {
+        v.unwrap_or(f32::NAN)
+    }
+
+    /// The report task: the only task that logs. Formats are listed in the crate docs.
+    #[task(priority = 1)]
+    async fn report(_cx: report::Context, mut rx: Receiver<'static, Report, REPORT_CAP>) {
+        let mut seen = Overruns::default();
+        while let Ok(r) = rx.recv().await {
+            match r {
+                Report::Loaded(l) => match l.source {
+                    LoadSource::Stored { slot, seq, other } => defmt::info!(
+                        "store loaded slot={=u8} seq={=u32} other={=str}",
+                        slot,
+                        seq,
+                        slot_name(other)
+                    ),
+                    LoadSource::Fallback { slots } => defmt::warn!(
+                        "store fallback slot0={=str} slot1={=str} calibration=paper-experiment",
+                        slot_name(slots[0]),
+                        slot_name(slots[1])
+                    ),
+                },
+                Report::Saved { slot, seq } => {
+                    defmt::info!("store saved slot={=u8} seq={=u32}", slot, seq)
+                }
+                Report::StoreFailed(e) => defmt::error!("store error={=str}", store_error_name(e)),
+                Report::Settings(m, s) => defmt::info!(
+                    "settings method={=str} start_hz={=f32} stop_hz={=f32} step_hz={=f32} settle_s={=f32} integrate_s={=f32} drive_v={=f32}",
+                    m.name(),
+                    s.start.0,
+                    s.stop.0,
+                    s.step.0,
+                    s.settle.0,
+                    s.integrate.0,
+                    s.drive.0
+                ),
+                Report::Point { tag, point } => defmt::info!(
+                    "point tag={=u16} f_hz={=f32} g_s={=f32} b_s={=f32} sigma_s={=f32}",
+                    tag,
+                    point.freq.0,
+                    point.g_s,
+                    point.b_s,
+                    point.sigma_s
+                ),
+                Report::Reading(r) => defmt::info!(
+                    "reading status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str}",
+                    r.status.code(),
+                    nan_or(r.resonance.map(|v| v.0)),
+                    nan_or(r.resonance_sigma.map(|v| v.0)),
+                    nan_or(r.modulus.map(|v| v.0)),
+                    nan_or(r.modulus_sigma.map(|v| v.0)),
+                    nan_or(r.q),
+                    r.probe_time.0,
+                    r.points,
+                    r.method.name()
+                ),
+                Report::Air { f_hz, q } => defmt::info!("air f_hz={=f32} q={=f32}", f_hz, q),
+                Report::Reference {
+                    e_kpa,
+                    f_hz,
+                    f_sigma_hz,
+                    n,
+                } => defmt::info!(
+                    "reference e_kpa={=f32} f_hz={=f32} f_sigma_hz={=f32} n={=u16}",
+                    e_kpa,
+                    f_hz,
+                    f_sigma_hz,
+                    n
+                ),
+                Report::Calibration(c) => defmt::info!(
+                    "calibration source={=str} a={=f32} b={=f32} c={=f32} min_kpa={=f32} max_kpa={=f32}",
+                    c.source.name(),
+                    c.a as f32,
+                    c.b as f32,
+                    c.c as f32,
+                    c.min_kpa as f32,
+                    c.max_kpa as f32
+                ),
+                Report::Rejected(e) => defmt::warn!("rejected error={=str}", e.message()),
+                Report::Refused(why) => defmt::warn!("rejected error={=str}", why),
+                Report::Stalled { tag } => defmt::error!("stalled tag={=u16}", tag),
+                Report::Counters => defmt::info!(
+                    "counters batches={=u32} late={=u32} ring={=u32} dropped={=u32} isr_mean={=u32} isr_max={=u32} unit={=str}",
+                    BATCHES.load(Ordering::Relaxed),
+                    LATE.load(Ordering::Relaxed),
+                    RING.load(Ordering::Relaxed),
+                    DROPPED.load(Ordering::Relaxed),
+                    ISR_MEAN.load(Ordering::Relaxed),
+                    ISR_MAX.load(Ordering::Relaxed),
+                    board::ELAPSED_UNIT
+                ),
+                Report::Status {
+                    method,
+                    cal,
+                    fallback,
+                    air,
+                    references,
+                } => defmt::info!(
+                    "status method={=str} calibration={=str} fallback={=bool} air={=bool} references={=u16}",
+                    method.name(),
+                    cal.source.name(),
+                    fallback,
+                    air,
+                    references
+                ),
+                Report::Exit(ok) => {
+                    report_overruns(&mut seen);
+                    defmt::info!("exit ok={=bool}", ok);
+                    #[cfg(feature = "qemu")]
+                    board::exit(ok);
+                }
+            }
+            report_overruns(&mut seen);
+        }
+    }
+
+    /// Log the overrun counters whenever one of them grew since the last call.
+    fn report_overruns(seen: &mut Overruns) {
+        let now = Overruns::now();
+        if now != *seen {
+            defmt::error!(
+                "overrun late={=u32} ring={=u32} dropped={=u32}",
+                now.late,
+                now.ring,
+                now.dropped
+            );
+            *seen = now;
+        }
+    }
+}

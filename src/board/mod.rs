@@ -2,3 +2,8 @@
 
 #[cfg(feature = "sim")]
 pub mod sim;
+
+#[cfg(all(target_os = "none", feature = "qemu"))]
+pub mod qemu;
+#[cfg(all(target_os = "none", feature = "stm32"))]
+pub mod stm32g474;

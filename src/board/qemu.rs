@@ -1,0 +1,322 @@
+//! The QEMU board: the firmware image on QEMU's `mps2-an386` machine (ARM AN386: Cortex-M4 with
+//! FPU, CMSDK peripherals, 25 MHz system clock), with the simulated probe (`hal-sim`, compiled
+//! `no_std`) behind the same stream interface as the STM32's DAC/ADC DMA driver.
+//!
+//! * **Sample cadence.** CMSDK APB timer 0 (IRQ 8) fires once per batch period
+//!   ([`BATCH`] samples at the simulated front end's sample rate: 5 ms at 10 kHz), standing in for
+//!   the STM32's ADC DMA half/full-transfer interrupt (and bound under its name, `DMA1_CH1`). [`Stream::capture`] then does what the two
+//!   DMA channels did during that period — play the DAC half-buffer through [`SimProbe`] and fill
+//!   the ADC half-buffer — and hands both halves to the interrupt, exactly as the STM32 driver
+//!   does: the ADC half just captured and the DAC half just played (to be refilled; it plays two
+//!   batches later).
+//! * **Instruction clock.** CMSDK timer 1 runs free at 25 MHz. Under `-icount shift=0` QEMU
+//!   executes exactly one instruction per nanosecond of virtual time, so one timer tick is
+//!   [`INSTRUCTIONS_PER_TICK`] instructions: [`stamp`]/[`elapsed`] count instructions with a
+//!   resolution of 40.
+//! * **Output and exit.** defmt frames go out over semihosting (`defmt-semihosting`); [`exit`]
+//!   ends QEMU through semihosting with success or failure.
+//! * **Flash.** A [`SimFlash`] in RAM (two 2 KiB sectors) stands in for the STM32's last two
+//!   flash pages, so the calibration store runs the same code; it starts erased at every boot.
+//!
+//! Run with `-machine mps2-an386 -cpu cortex-m4 -icount shift=0,sleep=off
+//! -semihosting-config enable=on,target=native` (see `scripts/qemu-run`).
+
+use crate::engine::SampleEngine;
+use crate::hal::{AdcFrame, FrontEndScale};
+use crate::runner::BATCH;
+use crate::units::{AdcCode, DacCode};
+use core::ptr::{read_volatile, write_volatile};
+use hal_sim::flash::SimFlash;
+use hal_sim::{AdcPair, SimProbe};
+
+/// What RTIC needs of a device crate, for the interrupt lines this image uses.
+///
+/// AN386 has 32 external interrupt lines (UARTs 0–5, 12; GPIO 6–7, 16–31; timers 8–10; SPI 11;
+/// ...). The image binds two of them, and names them after the STM32G474 vectors they stand in
+/// for, so one RTIC application (same `binds`, same dispatcher) serves both boards:
+///
+/// * line 8, CMSDK timer 0, is `DMA1_CH1`: the batch cadence, in place of the STM32's ADC DMA
+///   half/full-transfer interrupt;
+/// * line 0, CMSDK UART0 receive, is `LPUART1`: host bytes, like the STM32's ST-LINK virtual COM
+///   port (QEMU's first serial port);
+/// * line 11 (the AN386 SPI controller, unused here) is `SPI3`: the software-task dispatcher,
+///   the same unused vector the STM32 image dispatches on.
+pub mod device {
+    /// Priority bits RTIC assumes (QEMU implements all eight; the upper three are used, as on
+    /// the STM32G4's four-bit NVIC with one bit to spare).
+    pub const NVIC_PRIO_BITS: u8 = 3;
+
+    /// Interrupt lines of the image.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    #[allow(non_camel_case_types, clippy::upper_case_acronyms)]
+    #[repr(u16)]
+    pub enum Interrupt {
+        /// CMSDK UART0 receive.
+        LPUART1 = 0,
+        /// CMSDK timer 0: the sample cadence (one batch per period).
+        DMA1_CH1 = 8,
+        /// Line 11: the software-task dispatcher.
+        SPI3 = 11,
+    }
+
+    pub use self::Interrupt as interrupt;
+
+    // SAFETY: the numbers are valid external interrupt lines of the AN386 NVIC (0..32).
+    unsafe impl cortex_m::interrupt::InterruptNumber for Interrupt {
+        fn number(self) -> u16 {
+            self as u16
+        }
+    }
+
+    /// One entry of the external interrupt vector table.
+    #[derive(Clone, Copy)]
+    #[repr(transparent)]
+    pub struct Vector(unsafe extern "C" fn());
+
+    extern "C" {
+        fn LPUART1();
+        fn DMA1_CH1();
+        fn SPI3();
+        fn DefaultHandler();
+    }
+
+    /// The external interrupt vectors (placed after the core exceptions by cortex-m-rt);
+    /// unused lines go to cortex-m-rt's default handler.
+    #[link_section = ".vector_table.interrupts"]
+    #[no_mangle]
+    pub static __INTERRUPTS: [Vector; 32] = {
+        let mut v = [Vector(DefaultHandler); 32];
+        v[0] = Vector(LPUART1);
+        v[8] = Vector(DMA1_CH1);
+        v[11] = Vector(SPI3);
+        v
+    };
+}
+
+/// Board name in the boot log line.
+pub const NAME: &str = "qemu";
+
+/// The probe the QEMU image measures: phantom B of paper 003 (279 kPa) at the bench noise
+/// level, noise seed 1.
+pub fn scene() -> hal_sim::Scene {
+    hal_sim::Scene::on_phantom(&hal_sim::phantoms::B).with_noise(hal_sim::NoiseScene::Bench)
+}
+
+/// Converter scale of the simulated front end (`hal_sim::FrontEnd::default()`).
+pub fn scale() -> FrontEndScale {
+    crate::board::sim::scale_of(&scene().front_end)
+}
+
+/// The board's parts, as the application takes them over.
+pub struct Parts {
+    /// The sample stream (not yet started).
+    pub stream: Stream,
+    /// The watchdog stand-in.
+    pub watchdog: Watchdog,
+    /// The store's flash.
+    pub flash: StoreFlash,
+    /// Host link.
+    pub uart: Uart,
+}
+
+/// Set the board up: the simulated probe on [`scene`]. Call once, from `init`.
+pub fn init(_core: &mut cortex_m::Peripherals) -> Parts {
+    Parts {
+        stream: Stream::new(SimProbe::new(scene(), 1)),
+        watchdog: Watchdog,
+        flash: StoreFlash::new(),
+        uart: Uart::new(),
+    }
+}
+
+/// Core clock of the machine (SysTick and the CMSDK timers), Hz.
+pub const SYSCLK_HZ: u32 = 25_000_000;
+/// Instructions per tick of the 25 MHz timers under `-icount shift=0` (1 instruction per ns).
+pub const INSTRUCTIONS_PER_TICK: u32 = 1_000_000_000 / SYSCLK_HZ;
+
+const TIMER0_BASE: usize = 0x4000_0000;
+const TIMER1_BASE: usize = 0x4000_1000;
+const CTRL: usize = 0x0;
+const VALUE: usize = 0x4;
+const RELOAD: usize = 0x8;
+const INTCLEAR: usize = 0xC;
+const CTRL_ENABLE: u32 = 1 << 0;
+const CTRL_IRQ_ENABLE: u32 = 1 << 3;
+
+fn reg(base: usize, off: usize) -> *mut u32 {
+    (base + off) as *mut u32
+}
+
+/// Start the free-running instruction clock (timer 1, no interrupt).
+fn start_stamp_clock() {
+    // SAFETY: CMSDK timer 1 registers of mps2-an386; the image owns the timer.
+    unsafe {
+        write_volatile(reg(TIMER1_BASE, CTRL), 0);
+        write_volatile(reg(TIMER1_BASE, RELOAD), u32::MAX);
+        write_volatile(reg(TIMER1_BASE, VALUE), u32::MAX);
+        write_volatile(reg(TIMER1_BASE, CTRL), CTRL_ENABLE);
+    }
+}
+
+/// A reading of the instruction clock.
+#[inline(always)]
+pub fn stamp() -> u32 {
+    // SAFETY: read-only access to CMSDK timer 1's counter.
+    unsafe { read_volatile(reg(TIMER1_BASE, VALUE)) }
+}
+
+/// Instructions executed since `start` (a [`stamp`]); valid for spans under 171 s.
+#[inline(always)]
+pub fn elapsed(start: u32) -> u32 {
+    // The timer counts down.
+    start
+        .wrapping_sub(stamp())
+        .saturating_mul(INSTRUCTIONS_PER_TICK)
+}
+
+/// Unit of [`elapsed`].
+pub const ELAPSED_UNIT: &str = "instructions";
+
+/// The simulated sample stream: a double-buffered DAC/ADC exchange with the simulated probe.
+pub struct Stream {
+    probe: SimProbe,
+    dac: [[DacCode; BATCH]; 2],
+    adc: [[AdcFrame; BATCH]; 2],
+    half: usize,
+    scale: FrontEndScale,
+}
+
+impl Stream {
+    /// A stream over `probe`, idle until [`start`](Self::start).
+    pub fn new(probe: SimProbe) -> Self {
+        let scale = crate::board::sim::scale_of(probe.front_end());
+        Self {
+            probe,
+            dac: [[DacCode::MID; BATCH]; 2],
+            adc: [[AdcFrame::default(); BATCH]; 2],
+            half: 0,
+            scale,
+        }
+    }
+
+    /// Converter scale of the simulated front end.
+    pub fn scale(&self) -> FrontEndScale {
+        self.scale
+    }
+
+    /// Prefill both DAC halves from `engine` (as the STM32 driver does before starting its
+    /// DMA), start the instruction clock and the batch timer.
+    pub fn start(&mut self, engine: &mut SampleEngine) {
+        for half in self.dac.iter_mut() {
+            engine.generate(half);
+        }
+        start_stamp_clock();
+        let period = (SYSCLK_HZ as f32 * BATCH as f32 / self.scale.sample_rate.0) as u32;
+        // SAFETY: CMSDK timer 0 registers; the image owns the timer.
+        unsafe {
+            write_volatile(reg(TIMER0_BASE, CTRL), 0);
+            write_volatile(reg(TIMER0_BASE, RELOAD), period.saturating_sub(1));
+            write_volatile(reg(TIMER0_BASE, VALUE), period.saturating_sub(1));
+            write_volatile(reg(TIMER0_BASE, INTCLEAR), 1);
+            write_volatile(reg(TIMER0_BASE, CTRL), CTRL_ENABLE | CTRL_IRQ_ENABLE);
+        }
+    }
+
+    /// Acknowledge the batch interrupt and emulate the DMA of the period that just ended: the
+    /// DAC half of this period plays through the probe, the ADC half fills. Returns the ADC half
+    /// just captured and the DAC half just played (to refill).
+    pub fn capture(&mut self) -> (&[AdcFrame], &mut [DacCode]) {
+        // SAFETY: write-one-to-clear of timer 0's interrupt.
+        unsafe { write_volatile(reg(TIMER0_BASE, INTCLEAR), 1) };
+        let h = self.half & 1;
+        self.half ^= 1;
+        let mut codes = [0u16; BATCH];
+        for (c, d) in codes.iter_mut().zip(self.dac[h].iter()) {
+            *c = d.0;
+        }
+        let mut pairs = [AdcPair::default(); BATCH];
+        self.probe.exchange(&codes, &mut pairs);
+        for (a, p) in self.adc[h].iter_mut().zip(pairs.iter()) {
+            *a = AdcFrame {
+                current: AdcCode(p.current),
+                monitor: AdcCode(p.monitor),
+            };
+        }
+        (&self.adc[h], &mut self.dac[h])
+    }
+
+    /// True when the next batch interrupt is already pending: the handler overran its period.
+    pub fn late(&self) -> bool {
+        cortex_m::peripheral::NVIC::is_pending(device::Interrupt::DMA1_CH1)
+    }
+}
+
+const UART0_BASE: usize = 0x4000_4000;
+const UART_DATA: usize = 0x0;
+const UART_STATE: usize = 0x4;
+const UART_CTRL: usize = 0x8;
+const UART_INTCLEAR: usize = 0xC;
+const UART_BAUDDIV: usize = 0x10;
+const UART_STATE_RX_FULL: u32 = 1 << 1;
+const UART_CTRL_TX_EN: u32 = 1 << 0;
+const UART_CTRL_RX_EN: u32 = 1 << 1;
+const UART_CTRL_RX_IRQ_EN: u32 = 1 << 3;
+const UART_INT_RX: u32 = 1 << 1;
+
+/// CMSDK UART0 (QEMU's first serial port), receive side, interrupt driven.
+pub struct Uart(());
+
+impl Uart {
+    fn new() -> Self {
+        // SAFETY: CMSDK UART0 registers; the image owns the UART.
+        unsafe {
+            write_volatile(reg(UART0_BASE, UART_BAUDDIV), SYSCLK_HZ / 115_200);
+            write_volatile(
+                reg(UART0_BASE, UART_CTRL),
+                UART_CTRL_TX_EN | UART_CTRL_RX_EN | UART_CTRL_RX_IRQ_EN,
+            );
+        }
+        Self(())
+    }
+
+    /// The next received byte, if any (acknowledges the receive interrupt).
+    pub fn read_byte(&mut self) -> Option<u8> {
+        // SAFETY: CMSDK UART0 registers; reading DATA pops the received byte.
+        unsafe {
+            write_volatile(reg(UART0_BASE, UART_INTCLEAR), UART_INT_RX);
+            if read_volatile(reg(UART0_BASE, UART_STATE)) & UART_STATE_RX_FULL != 0 {
+                Some(read_volatile(reg(UART0_BASE, UART_DATA)) as u8)
+            } else {
+                None
+            }
+        }
+    }
+}
+
+/// The watchdog stand-in (QEMU's AN386 has no independent watchdog modelled for this image):
+/// feeding does nothing.
+pub struct Watchdog;
+
+impl Watchdog {
+    /// Feed (no-op on QEMU).
+    pub fn feed(&mut self) {}
+}
+
+/// The flash of the calibration store: 4 KiB of simulated NOR, erased at boot.
+pub type StoreFlash = SimFlash<4096, 2048, 8>;
+/// Offset of the store's first slot in [`StoreFlash`].
+pub const STORE_BASE: u32 = 0;
+
+/// End the emulation with success or failure (semihosting `SYS_EXIT`).
+pub fn exit(success: bool) -> ! {
+    use cortex_m_semihosting::debug;
+    debug::exit(if success {
+        debug::EXIT_SUCCESS
+    } else {
+        debug::EXIT_FAILURE
+    });
+    // Not reached under QEMU; without a debugger the core just sleeps.
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
