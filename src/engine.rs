@@ -24,8 +24,12 @@ pub struct PointPlan {
     pub amplitude_codes: u16,
     /// Samples to wait after the switch before integration may start.
     pub settle_samples: u32,
-    /// Whole drive cycles to integrate (0: drive only, never complete).
+    /// Whole drive cycles to integrate per window (0: drive only, never complete).
     pub cycles: u32,
+    /// Consecutive integration windows (0 and 1 both mean one). Window `k + 1` starts at the
+    /// cycle boundary where window `k` ends, with no gap: a ring-down is demodulated this way.
+    /// Each window must be longer than one batch so that at most one completes per batch.
+    pub windows: u16,
     /// Caller's tag, echoed in the result (must differ from the previous plan's).
     pub tag: u16,
 }
@@ -39,6 +43,8 @@ pub struct PointRaw {
     pub sums: LockInSums,
     /// Engine sample count at the end of the window.
     pub end_sample: u64,
+    /// Index of the window within the plan (0 for the first).
+    pub window: u16,
 }
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -80,6 +86,7 @@ pub struct SampleEngine {
     demod_tag: Option<u16>,
     stage: Stage,
     sums: LockInSums,
+    window: u16,
     samples: u64,
     overruns: u32,
 }
@@ -131,6 +138,7 @@ impl SampleEngine {
                 current_rail_hits: 0,
                 monitor_rail_hits: 0,
             },
+            window: 0,
             samples: 0,
             overruns: 0,
         }
@@ -159,7 +167,8 @@ impl SampleEngine {
     /// True while a loaded point is still being measured.
     pub fn busy(&self) -> bool {
         self.pending.is_some()
-            || (self.plan.is_some_and(|p| p.cycles > 0) && self.stage != Stage::Done)
+            || (self.plan.is_some_and(|p| p.cycles > 0)
+                && (self.stage != Stage::Done || self.demod_tag != self.plan.map(|p| p.tag)))
     }
 
     /// Fill the next DAC batch.
@@ -209,6 +218,7 @@ impl SampleEngine {
         if tag != self.demod_tag {
             self.demod_tag = tag;
             self.sums = LockInSums::default();
+            self.window = 0;
             self.stage = match info.plan {
                 Some(p) if p.cycles > 0 => Stage::Settling(p.settle_samples),
                 _ => Stage::Idle,
@@ -252,7 +262,13 @@ impl SampleEngine {
                                 plan,
                                 sums: self.sums,
                                 end_sample: self.samples,
+                                window: self.window,
                             });
+                            if self.window.saturating_add(1) < plan.windows {
+                                self.window += 1;
+                                self.sums = LockInSums::default();
+                                self.stage = Stage::Integrating(plan.cycles);
+                            }
                         }
                     }
                     Stage::Integrating(k) => self.stage = Stage::Integrating(k - 1),
@@ -281,6 +297,7 @@ mod tests {
             amplitude_codes: 1000,
             settle_samples: 123,
             cycles: 10,
+            windows: 1,
             tag: 1,
         });
         let mut dac = [DacCode::MID; 50];
@@ -311,6 +328,46 @@ mod tests {
         );
         // settle (123) + wait for boundary (< 43) + window
         assert!(p.end_sample as f64 <= 123.0 + 43.0 + n + 1.0);
+        assert!(!e.busy());
+    }
+
+    /// Consecutive windows follow each other without a gap.
+    #[test]
+    fn consecutive_windows() {
+        let mut e = SampleEngine::new();
+        let ftw = tuning_word(241.0, 10_000.0);
+        e.load(PointPlan {
+            ftw,
+            amplitude_codes: 800,
+            settle_samples: 10,
+            cycles: 2,
+            windows: 6,
+            tag: 3,
+        });
+        let mut dac = [DacCode::MID; 50];
+        let mut adc = [AdcFrame::default(); 50];
+        let mut got = std::vec::Vec::new();
+        for _ in 0..40 {
+            e.generate(&mut dac);
+            for (a, d) in adc.iter_mut().zip(dac.iter()) {
+                *a = AdcFrame {
+                    current: AdcCode(d.0),
+                    monitor: AdcCode(d.0),
+                };
+            }
+            if let Some(p) = e.demodulate(&adc) {
+                got.push(p);
+            }
+        }
+        assert_eq!(got.len(), 6);
+        for (k, w) in got.windows(2).enumerate() {
+            assert_eq!(w[0].window as usize, k);
+            // The next window ends exactly its own length after the previous one.
+            assert_eq!(
+                w[1].end_sample - w[0].end_sample,
+                w[1].sums.reference.n as u64
+            );
+        }
         assert!(!e.busy());
     }
 }

@@ -12,6 +12,9 @@
 //! [`measure::Reading`].
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
+// `!(x > 0.0)` is deliberate throughout: unlike `x <= 0.0` it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 
 pub mod board;
 pub mod calibration;

@@ -102,6 +102,7 @@ impl Lsq3 {
 }
 
 #[cfg(test)]
+#[allow(clippy::needless_range_loop)]
 mod tests {
     use super::*;
 
@@ -133,5 +134,150 @@ mod tests {
         assert!((f.p[1] + 0.5).abs() < 1e-10);
         assert!((f.p[2] - 3.0).abs() < 1e-10);
         assert!(f.chi2 < 1e-18);
+    }
+}
+
+/// Weighted straight-line fit `y ≈ a + b x`.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Line {
+    sw: f64,
+    sx: f64,
+    sy: f64,
+    sxx: f64,
+    sxy: f64,
+    syy: f64,
+    n: u32,
+}
+
+/// Result of [`Line::solve`].
+#[derive(Clone, Copy, Debug)]
+pub struct LineFit {
+    /// Intercept.
+    pub a: f64,
+    /// Slope.
+    pub b: f64,
+    /// Variance of the slope for the given weights.
+    pub var_b: f64,
+    /// Weighted residual sum of squares.
+    pub chi2: f64,
+    /// Observations.
+    pub n: u32,
+}
+
+impl Line {
+    /// Add `(x, y)` with weight `w` (`1/σ²`); non-finite input is ignored.
+    pub fn add(&mut self, x: f64, y: f64, w: f64) {
+        if !(w > 0.0) || !w.is_finite() || !x.is_finite() || !y.is_finite() {
+            return;
+        }
+        self.sw += w;
+        self.sx += w * x;
+        self.sy += w * y;
+        self.sxx += w * x * x;
+        self.sxy += w * x * y;
+        self.syy += w * y * y;
+        self.n += 1;
+    }
+
+    /// Solve, or `None` with fewer than two distinct abscissae.
+    pub fn solve(&self) -> Option<LineFit> {
+        if self.n < 2 {
+            return None;
+        }
+        // Centre x for conditioning.
+        let xm = self.sx / self.sw;
+        let ym = self.sy / self.sw;
+        let sxx = self.sxx - self.sw * xm * xm;
+        let sxy = self.sxy - self.sw * xm * ym;
+        let syy = self.syy - self.sw * ym * ym;
+        if !(sxx > 0.0) {
+            return None;
+        }
+        let b = sxy / sxx;
+        let a = ym - b * xm;
+        Some(LineFit {
+            a,
+            b,
+            var_b: 1.0 / sxx,
+            chi2: (syy - b * sxy).max(0.0),
+            n: self.n,
+        })
+    }
+}
+
+/// Inverse of a symmetric positive-definite matrix by Cholesky factorisation; `None` if `m` is
+/// not positive definite.
+#[allow(clippy::needless_range_loop)] // triangular index arithmetic reads best as indices
+pub fn spd_inverse<const N: usize>(m: &[[f64; N]; N]) -> Option<[[f64; N]; N]> {
+    let mut l = [[0.0; N]; N];
+    for i in 0..N {
+        for j in 0..=i {
+            let mut s = m[i][j];
+            for k in 0..j {
+                s -= l[i][k] * l[j][k];
+            }
+            if i == j {
+                if !(s > 0.0) || !s.is_finite() {
+                    return None;
+                }
+                l[i][i] = libm::sqrt(s);
+            } else {
+                l[i][j] = s / l[j][j];
+            }
+        }
+    }
+    // inverse = L^-T L^-1: invert L column by column.
+    let mut linv = [[0.0; N]; N];
+    for i in 0..N {
+        linv[i][i] = 1.0 / l[i][i];
+        for j in 0..i {
+            let mut s = 0.0;
+            for k in j..i {
+                s -= l[i][k] * linv[k][j];
+            }
+            linv[i][j] = s / l[i][i];
+        }
+    }
+    let mut inv = [[0.0; N]; N];
+    for i in 0..N {
+        for j in 0..=i {
+            let mut s = 0.0;
+            for k in i..N {
+                s += linv[k][i] * linv[k][j];
+            }
+            inv[i][j] = s;
+            inv[j][i] = s;
+        }
+    }
+    Some(inv)
+}
+
+#[cfg(test)]
+mod more_tests {
+    use super::*;
+
+    #[test]
+    fn line_fit_exact() {
+        let mut l = Line::default();
+        for i in 0..5 {
+            l.add(i as f64, 3.0 - 2.0 * i as f64, 2.0);
+        }
+        let f = l.solve().unwrap();
+        assert!((f.a - 3.0).abs() < 1e-12 && (f.b + 2.0).abs() < 1e-12);
+        // var_b = 1 / (w Σ (x - x̄)^2) = 1 / (2 * 10)
+        assert!((f.var_b - 0.05).abs() < 1e-12);
+    }
+
+    #[test]
+    fn spd_inverse_matches_inverse3() {
+        let m = [[4.0, 1.0, 2.0], [1.0, 3.0, 0.5], [2.0, 0.5, 5.0]];
+        let a = spd_inverse(&m).unwrap();
+        let b = inverse3(&m).unwrap();
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!((a[i][j] - b[i][j]).abs() < 1e-12);
+            }
+        }
+        assert!(spd_inverse(&[[1.0, 2.0], [2.0, 1.0]]).is_none());
     }
 }

@@ -7,6 +7,8 @@
 
 use crate::calibration::PowerLaw;
 use crate::engine::{PointPlan, PointRaw};
+use crate::estimate::ringdown::{Ringdown, RingdownSettings};
+use crate::estimate::staged::{Refine, Staged, StagedSettings};
 use crate::estimate::{self, Estimate};
 use crate::hal::FrontEndScale;
 use crate::status::{Failure, Status};
@@ -24,17 +26,86 @@ pub enum Method {
     Paper,
     /// Stepped sweep, conductance maximum with a weighted `1/G` fit.
     SweepG,
+    /// Coarse sweep, then refine points around the peak settled from the estimated Q.
+    Adaptive,
+    /// A few points, Butterworth–Van Dyke fit of the complex admittance.
+    Fit,
+    /// Phase tracking onto the resonance after a coarse fit.
+    Track,
+    /// Burst, hold the drive, fit the free decay.
+    Ringdown,
+}
+
+/// Settings of a method: stepped sweeps, two-stage procedures or ring-down.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Settings {
+    /// paper, sweep-g.
+    Sweep(SweepSettings),
+    /// adaptive, fit, track.
+    Staged(StagedSettings),
+    /// ringdown.
+    Ringdown(RingdownSettings),
+}
+
+impl From<&SweepSettings> for Settings {
+    fn from(s: &SweepSettings) -> Self {
+        Settings::Sweep(*s)
+    }
+}
+impl From<&StagedSettings> for Settings {
+    fn from(s: &StagedSettings) -> Self {
+        Settings::Staged(*s)
+    }
+}
+impl From<&RingdownSettings> for Settings {
+    fn from(s: &RingdownSettings) -> Self {
+        Settings::Ringdown(*s)
+    }
+}
+impl From<&Settings> for Settings {
+    fn from(s: &Settings) -> Self {
+        *s
+    }
 }
 
 impl Method {
     /// Every method.
-    pub const ALL: [Method; 2] = [Method::Paper, Method::SweepG];
+    pub const ALL: [Method; 6] = [
+        Method::Paper,
+        Method::SweepG,
+        Method::Adaptive,
+        Method::Fit,
+        Method::Track,
+        Method::Ringdown,
+    ];
 
     /// Stable name.
     pub const fn name(self) -> &'static str {
         match self {
             Method::Paper => "paper",
             Method::SweepG => "sweep-g",
+            Method::Adaptive => "adaptive",
+            Method::Fit => "fit",
+            Method::Track => "track",
+            Method::Ringdown => "ringdown",
+        }
+    }
+
+    /// True for the methods that work on a given set of stepped-sweep points (and so on
+    /// captured frequency-domain data); the others steer the drive while they measure.
+    pub const fn works_on_points(self) -> bool {
+        matches!(self, Method::Paper | Method::SweepG | Method::Fit)
+    }
+
+    /// The method's default settings.
+    pub const fn default_settings(self) -> Settings {
+        match self {
+            Method::Paper | Method::SweepG => Settings::Sweep(self.default_sweep()),
+            Method::Adaptive => Settings::Staged(StagedSettings::default_for(Refine::Conductance)),
+            Method::Fit => Settings::Staged(StagedSettings::default_for(Refine::Bvd)),
+            Method::Track => Settings::Staged(StagedSettings::default_for(Refine::Track)),
+            Method::Ringdown => Settings::Ringdown(RingdownSettings::DEFAULT),
         }
     }
 
@@ -60,7 +131,7 @@ impl Method {
                 integrate: Seconds(0.05),
                 drive: Volts(5.0),
             },
-            Method::SweepG => SweepSettings {
+            _ => SweepSettings {
                 start: Hz(170.0),
                 stop: Hz(290.0),
                 step: Hz(2.0),
@@ -71,11 +142,18 @@ impl Method {
         }
     }
 
-    /// Run this method's estimator on measured points.
+    /// Run this method's estimator on stepped-sweep points (the methods that
+    /// [`work on points`](Self::works_on_points); the others give `bad_settings`).
     pub fn estimate(self, points: &[SweepPoint]) -> Result<Estimate, Failure> {
         match self {
             Method::Paper => estimate::paper::estimate(points),
             Method::SweepG => estimate::conductance::estimate(points),
+            Method::Fit => {
+                let i = estimate::argmax(points, |p| p.g_s).ok_or(Failure::NoResonance)?;
+                let f = points[i].freq.0 as f64;
+                estimate::fit::estimate(points, f, 10.0)
+            }
+            _ => Err(Failure::BadSettings),
         }
     }
 }
@@ -239,6 +317,11 @@ impl SweepMeasurement {
         &self.points
     }
 
+    /// Engine sample count at the last point.
+    pub fn end_sample(&self) -> u64 {
+        self.end_sample
+    }
+
     /// Probe time so far.
     pub fn probe_time(&self) -> Seconds {
         Seconds(
@@ -259,5 +342,144 @@ impl SweepMeasurement {
             self.probe_time(),
             n,
         )
+    }
+}
+
+/// Anything that asks the sample engine for points and ends in a reading.
+pub trait Measurement {
+    /// The next point to ask for, or `None` (done, or waiting for the point in flight).
+    fn next_plan(&mut self) -> Option<PointPlan>;
+    /// Take a finished point; returns it in physical units when it is an admittance point.
+    fn accept(&mut self, raw: &PointRaw) -> Option<SweepPoint>;
+    /// True when no more points are needed.
+    fn is_complete(&self) -> bool;
+    /// Estimate and calibrate.
+    fn finish(&self, cal: &PowerLaw) -> Reading;
+}
+
+impl Measurement for SweepMeasurement {
+    fn next_plan(&mut self) -> Option<PointPlan> {
+        SweepMeasurement::next_plan(self)
+    }
+    fn accept(&mut self, raw: &PointRaw) -> Option<SweepPoint> {
+        SweepMeasurement::accept(self, raw)
+    }
+    fn is_complete(&self) -> bool {
+        SweepMeasurement::is_complete(self)
+    }
+    fn finish(&self, cal: &PowerLaw) -> Reading {
+        SweepMeasurement::finish(self, cal)
+    }
+}
+
+// One procedure lives at a time (statically in the firmware, no allocator): the size spread
+// between variants costs nothing.
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Debug)]
+enum Inner {
+    Sweep(SweepMeasurement),
+    Staged(Staged),
+    Ringdown(Ringdown),
+}
+
+/// A reading by any method: the method's own procedure behind one interface.
+#[derive(Clone, Debug)]
+pub struct Procedure {
+    method: Method,
+    inner: Inner,
+    scale: FrontEndScale,
+    start_sample: u64,
+    end_sample: u64,
+    windows: u16,
+}
+
+impl Procedure {
+    /// Validate `settings` for `method` on a board of `scale`; `now_sample` is the engine's
+    /// sample count when the reading starts.
+    pub fn new(
+        method: Method,
+        settings: &Settings,
+        scale: &FrontEndScale,
+        now_sample: u64,
+    ) -> Result<Self, SettingsError> {
+        let inner = match (method, settings) {
+            (Method::Paper | Method::SweepG, Settings::Sweep(s)) => {
+                Inner::Sweep(SweepMeasurement::new(method, s, scale, now_sample)?)
+            }
+            (Method::Adaptive, Settings::Staged(s)) => {
+                Inner::Staged(s.validate(Refine::Conductance, scale)?)
+            }
+            (Method::Fit, Settings::Staged(s)) => Inner::Staged(s.validate(Refine::Bvd, scale)?),
+            (Method::Track, Settings::Staged(s)) => {
+                Inner::Staged(s.validate(Refine::Track, scale)?)
+            }
+            (Method::Ringdown, Settings::Ringdown(s)) => Inner::Ringdown(s.validate(scale)?),
+            _ => return Err(SettingsError::WrongMethod),
+        };
+        Ok(Self {
+            method,
+            inner,
+            scale: *scale,
+            start_sample: now_sample,
+            end_sample: now_sample,
+            windows: 0,
+        })
+    }
+
+    /// The method.
+    pub fn method(&self) -> Method {
+        self.method
+    }
+
+    fn probe_time(&self) -> Seconds {
+        Seconds(self.end_sample.saturating_sub(self.start_sample) as f32 / self.scale.sample_rate.0)
+    }
+}
+
+impl Measurement for Procedure {
+    fn next_plan(&mut self) -> Option<PointPlan> {
+        match &mut self.inner {
+            Inner::Sweep(m) => m.next_plan(),
+            Inner::Staged(m) => m.next_plan(&self.scale),
+            Inner::Ringdown(m) => m.next_plan(),
+        }
+    }
+
+    fn accept(&mut self, raw: &PointRaw) -> Option<SweepPoint> {
+        self.end_sample = raw.end_sample;
+        self.windows = self.windows.saturating_add(1);
+        match &mut self.inner {
+            Inner::Sweep(m) => m.accept(raw),
+            Inner::Staged(m) => m.accept(raw, &self.scale),
+            Inner::Ringdown(m) => {
+                m.accept(raw);
+                None
+            }
+        }
+    }
+
+    fn is_complete(&self) -> bool {
+        match &self.inner {
+            Inner::Sweep(m) => m.is_complete(),
+            Inner::Staged(m) => m.is_complete(),
+            Inner::Ringdown(m) => m.is_complete(),
+        }
+    }
+
+    fn finish(&self, cal: &PowerLaw) -> Reading {
+        let t = self.probe_time();
+        match &self.inner {
+            Inner::Sweep(m) => {
+                let mut r = m.finish(cal);
+                r.probe_time = t;
+                r
+            }
+            Inner::Staged(m) => {
+                Reading::from_estimate(self.method, m.estimate(), cal, t, m.len() as u16)
+            }
+            Inner::Ringdown(m) => {
+                Reading::from_estimate(self.method, m.estimate(), cal, t, self.windows)
+            }
+        }
     }
 }

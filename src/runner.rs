@@ -5,7 +5,7 @@
 use crate::calibration::PowerLaw;
 use crate::engine::SampleEngine;
 use crate::hal::{AdcFrame, SampleStream, StreamError};
-use crate::measure::{Reading, SweepMeasurement};
+use crate::measure::{Measurement, Reading};
 use crate::sweep::SweepPoint;
 use crate::units::DacCode;
 
@@ -21,12 +21,12 @@ pub enum RunError {
     Stalled,
 }
 
-/// Run `m` to completion on `stream`, calling `on_point` for every measured point, and return
-/// the calibrated reading.
-pub fn run_sweep<S: SampleStream>(
+/// Run `m` to completion on `stream`, calling `on_point` for every measured admittance point,
+/// and return the calibrated reading.
+pub fn run_sweep<S: SampleStream, M: Measurement>(
     stream: &mut S,
     engine: &mut SampleEngine,
-    m: &mut SweepMeasurement,
+    m: &mut M,
     cal: &PowerLaw,
     mut on_point: impl FnMut(&SweepPoint),
 ) -> Result<Reading, RunError> {
@@ -44,7 +44,7 @@ pub fn run_sweep<S: SampleStream>(
                     let f = crate::dsp::dds::frequency_hz(plan.ftw, fs).max(1.0);
                     let period = fs / f;
                     budget = plan.settle_samples as u64
-                        + ((plan.cycles as f64 + 2.0) * period) as u64
+                        + ((plan.cycles as f64 * plan.windows.max(1) as f64 + 2.0) * period) as u64
                         + (BATCH * (latency + 2)) as u64;
                     used = 0;
                 }
@@ -57,6 +57,10 @@ pub fn run_sweep<S: SampleStream>(
         if let Some(raw) = engine.demodulate(&adc) {
             if let Some(p) = m.accept(&raw) {
                 on_point(&p);
+            }
+            if raw.window + 1 < raw.plan.windows {
+                // More windows of the same plan follow without a new plan.
+                continue;
             }
         } else if used > budget {
             return Err(RunError::Stalled);

@@ -55,6 +55,10 @@ pub enum SettingsError {
     DriveOutOfRange,
     /// Settling or integration longer than 10 s per point.
     TooLong,
+    /// A method knob (stages, window cycles, point counts, spans) is outside its range.
+    KnobOutOfRange,
+    /// The settings given are for another method.
+    WrongMethod,
 }
 
 impl SettingsError {
@@ -74,6 +78,8 @@ impl SettingsError {
             SettingsError::SettleNegative => "settling time must not be negative",
             SettingsError::DriveOutOfRange => "drive amplitude out of the DAC range",
             SettingsError::TooLong => "settle or integration longer than 10 s per point",
+            SettingsError::KnobOutOfRange => "a method setting is outside its range",
+            SettingsError::WrongMethod => "these settings belong to another method",
         }
     }
 }
@@ -97,9 +103,8 @@ pub fn amplitude_codes(drive: Volts, scale: &FrontEndScale) -> Result<u16, Setti
     Ok((codes + 0.5) as u16)
 }
 
-/// Validate a single-frequency dwell (used by every method): returns the tuning word and the
-/// sample counts.
-pub(crate) fn check_frequency(f: f32, scale: &FrontEndScale) -> Result<u32, SettingsError> {
+/// Validate one drive frequency (used by every method); returns its tuning word.
+pub fn check_frequency(f: f32, scale: &FrontEndScale) -> Result<u32, SettingsError> {
     if !f.is_finite() {
         return Err(SettingsError::NotFinite);
     }
@@ -112,7 +117,8 @@ pub(crate) fn check_frequency(f: f32, scale: &FrontEndScale) -> Result<u32, Sett
     Ok(tuning_word(f as f64, scale.sample_rate.0 as f64))
 }
 
-pub(crate) fn check_durations(
+/// Validate a settling and an integration time against the lowest frequency they apply to.
+pub fn check_durations(
     settle: Seconds,
     integrate: Seconds,
     lowest: f32,
@@ -209,6 +215,7 @@ impl Sweep {
             amplitude_codes: self.amplitude_codes,
             settle_samples: settle,
             cycles,
+            windows: 1,
             tag,
         }
     }

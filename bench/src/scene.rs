@@ -13,7 +13,7 @@ pub fn parse_noise(s: &str) -> Result<NoiseScene> {
             let d: f64 = other.parse().with_context(|| {
                 format!("noise `{other}`: expected quiet, paper, bench or a density in A/sqrt(Hz)")
             })?;
-            if !(d.is_finite() && d >= 0.0 && d < 1e-3) {
+            if !(0.0..1e-3).contains(&d) {
                 bail!("noise density {other} A/sqrt(Hz) is out of range (0 to 1e-3)");
             }
             NoiseScene::Density(d)

@@ -19,6 +19,9 @@
 //! The fitted constants and the reasoning behind them are in `docs/physics.md`.
 #![cfg_attr(not(feature = "std"), no_std)]
 #![deny(missing_docs)]
+// `!(x > 0.0)` is deliberate throughout: unlike `x <= 0.0` it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 
 pub mod complex;
 pub mod flash;

@@ -64,9 +64,9 @@ impl SampleStream for SimBoard {
 
 use crate::calibration::{FitError, PowerLaw};
 use crate::engine::SampleEngine;
-use crate::measure::{Method, Reading, SweepMeasurement};
+use crate::measure::{Method, Procedure, Reading, Settings};
 use crate::runner::{run_sweep, RunError};
-use crate::sweep::{SettingsError, SweepPoint, SweepSettings};
+use crate::sweep::{SettingsError, SweepPoint};
 use hal_sim::{NoiseScene, Phantom, Scene};
 
 /// Why a simulated reading could not run.
@@ -86,15 +86,16 @@ pub fn read(
     scene: &Scene,
     seed: u64,
     method: Method,
-    settings: &SweepSettings,
+    settings: impl Into<Settings>,
     cal: &PowerLaw,
     on_point: impl FnMut(&SweepPoint),
 ) -> Result<Reading, SimError> {
     let mut board = SimBoard::new(SimProbe::new(*scene, seed));
     let mut engine = SampleEngine::new();
     let scale = board.scale();
-    let mut m = SweepMeasurement::new(method, settings, &scale, engine.samples())
-        .map_err(SimError::Settings)?;
+    let settings: Settings = settings.into();
+    let mut m =
+        Procedure::new(method, &settings, &scale, engine.samples()).map_err(SimError::Settings)?;
     run_sweep(&mut board, &mut engine, &mut m, cal, on_point).map_err(SimError::Run)
 }
 
@@ -117,12 +118,13 @@ pub const MAX_REPEATS: usize = 25;
 /// left out.
 pub fn calibrate(
     method: Method,
-    settings: &SweepSettings,
+    settings: impl Into<Settings>,
     noise: NoiseScene,
     repeats: usize,
     seed0: u64,
 ) -> Result<PowerLaw, SimError> {
     let repeats = repeats.clamp(1, MAX_REPEATS);
+    let settings: Settings = settings.into();
     let mut data = [(0.0f64, 0.0f64, 0.0f64); 5 * MAX_REPEATS];
     let mut n = 0;
     // Any curve will do for the reference readings: only their resonance is used.

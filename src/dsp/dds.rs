@@ -68,7 +68,7 @@ pub fn cos_q15(phase: u32) -> i32 {
 /// Frequency tuning word for `freq_hz` at `sample_rate_hz` (0 for invalid input).
 pub fn tuning_word(freq_hz: f64, sample_rate_hz: f64) -> u32 {
     let w = freq_hz / sample_rate_hz * 4_294_967_296.0;
-    if w.is_finite() && w >= 0.0 && w < 4_294_967_295.0 {
+    if (0.0..4_294_967_295.0).contains(&w) {
         (w + 0.5) as u32
     } else {
         0

@@ -5,7 +5,10 @@
 //! drive, no current) live here in [`screen`].
 
 pub mod conductance;
+pub mod fit;
 pub mod paper;
+pub mod ringdown;
+pub mod staged;
 
 use crate::status::Failure;
 use crate::sweep::SweepPoint;
@@ -41,7 +44,7 @@ pub fn screen(points: &[SweepPoint]) -> Result<(), Failure> {
 
 /// Index of the largest value of `key` over `points` (first on ties); `None` on empty input or
 /// when any key is not finite.
-pub(crate) fn argmax(points: &[SweepPoint], key: impl Fn(&SweepPoint) -> f32) -> Option<usize> {
+pub fn argmax(points: &[SweepPoint], key: impl Fn(&SweepPoint) -> f32) -> Option<usize> {
     let mut best: Option<(usize, f32)> = None;
     for (i, p) in points.iter().enumerate() {
         let v = key(p);

@@ -19,7 +19,10 @@ pub fn estimate(points: &[SweepPoint]) -> Result<Estimate, Failure> {
     screen(points)?;
     let n = points.len();
     let (f_a, y_a) = (points[0].freq.0 as f64, points[0].magnitude_s() as f64);
-    let (f_b, y_b) = (points[n - 1].freq.0 as f64, points[n - 1].magnitude_s() as f64);
+    let (f_b, y_b) = (
+        points[n - 1].freq.0 as f64,
+        points[n - 1].magnitude_s() as f64,
+    );
     let span = f_b - f_a;
     if !(span > 0.0) || !y_a.is_finite() || !y_b.is_finite() {
         return Err(Failure::NoResonance);

@@ -1,0 +1,346 @@
+//! **ringdown**: drive a short burst near the resonance, hold the drive, and read the free decay.
+//!
+//! While the drive is held (DAC at mid-scale, PZT voltage zero) the static capacitance carries
+//! no current: what flows is the motional current `alpha q'`, a damped sinusoid at the damped
+//! frequency `f_d` with amplitude decay rate `s` (1/s). The sample engine demodulates it in
+//! consecutive windows of whole reference cycles against the burst frequency `f_ref`; the window
+//! phasors `z_k` then obey `z_k ∝ exp((−s + j 2π (f_d − f_ref)) t_k)`, so weighted straight-line
+//! fits of `ln|z_k|` and of the unwrapped `arg z_k` against the window times give `s` and `f_d`
+//! with their standard uncertainties (weights `|z_k|² / var(z_k)` from each window's own sine-fit
+//! residual). The undamped resonance — the conductance maximum of the other methods — is
+//! `f0 = sqrt(f_d² + (s / 2π)²)`, and `Q = π f0 / s`.
+//!
+//! A first stage bursts at the seed frequency; later stages burst at the previous stage's
+//! estimate (a burst near resonance rings up more and rings down with less frequency offset).
+//! Fails with `no_resonance` when fewer than three windows stand 5 σ above the noise, with
+//! `out_of_band` when the estimate falls outside the settings' band, `low_snr` when its
+//! uncertainty exceeds a quarter of the linewidth.
+
+use super::Estimate;
+use crate::dsp::dds::{frequency_hz, tuning_word};
+use crate::dsp::lockin::solve;
+use crate::engine::{PointPlan, PointRaw};
+use crate::hal::FrontEndScale;
+use crate::linalg::Line;
+use crate::status::Failure;
+use crate::sweep::{amplitude_codes, check_durations, check_frequency, SettingsError};
+use crate::units::{Hz, Seconds, Volts};
+use core::f64::consts::PI;
+
+/// Most windows one ring-down keeps.
+pub const MAX_WINDOWS: usize = 64;
+
+/// Ring-down settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RingdownSettings {
+    /// Lowest resonance accepted.
+    pub band_start: Hz,
+    /// Highest resonance accepted.
+    pub band_stop: Hz,
+    /// Burst frequency of the first stage (a previous reading, or the band centre).
+    pub seed: Hz,
+    /// Burst length.
+    pub burst: Seconds,
+    /// Ring-down observation length.
+    pub ring: Seconds,
+    /// Stages (1–4): each later stage bursts at the previous estimate.
+    pub stages: u8,
+    /// Drive cycles per demodulation window (1–8; a window must outlast one 5 ms batch).
+    pub window_cycles: u8,
+    /// Burst amplitude at the PZT.
+    pub drive: Volts,
+}
+
+impl RingdownSettings {
+    /// Two stages of 40 ms burst + 40 ms ring over 170–290 Hz, seeded at 230 Hz.
+    pub const DEFAULT: Self = Self {
+        band_start: Hz(170.0),
+        band_stop: Hz(290.0),
+        seed: Hz(230.0),
+        burst: Seconds(0.04),
+        ring: Seconds(0.04),
+        stages: 2,
+        window_cycles: 2,
+        drive: Volts(5.0),
+    };
+}
+
+impl Default for RingdownSettings {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// Samples the filters need to forget the drive after it is held (3 ms: > 15 time constants of
+/// the 1 kHz two-pole filters).
+const HOLD_SETTLE_S: f32 = 0.003;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Window {
+    t: f64,
+    re: f64,
+    im: f64,
+    var: f64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Phase {
+    Burst,
+    Ring,
+    Done,
+}
+
+/// A ring-down measurement in progress.
+#[derive(Clone, Debug)]
+pub struct Ringdown {
+    s: RingdownSettings,
+    fs: f64,
+    amplitude: u16,
+    stage: u8,
+    phase: Phase,
+    pending: bool,
+    f_ref: f64,
+    ftw: u32,
+    windows: heapless::Vec<Window, MAX_WINDOWS>,
+    n_windows: u16,
+    tag: u16,
+    last: Option<Result<Estimate, Failure>>,
+}
+
+impl RingdownSettings {
+    /// Validate for a board.
+    pub fn validate(&self, scale: &FrontEndScale) -> Result<Ringdown, SettingsError> {
+        check_frequency(self.band_start.0, scale)?;
+        check_frequency(self.band_stop.0, scale)?;
+        let ftw = check_frequency(self.seed.0, scale)?;
+        if !(self.band_stop.0 > self.band_start.0) {
+            return Err(SettingsError::EmptyBand);
+        }
+        check_durations(self.burst, self.ring, self.band_start.0)?;
+        if !(self.burst.0 > 0.0) {
+            return Err(SettingsError::IntegrationShorterThanCycle);
+        }
+        if !(1..=4).contains(&self.stages) || !(1..=8).contains(&self.window_cycles) {
+            return Err(SettingsError::KnobOutOfRange);
+        }
+        let fs = scale.sample_rate.0 as f64;
+        // A window must be longer than a batch (50 samples) at the highest frequency.
+        if (self.window_cycles as f64) * fs / (self.band_stop.0 as f64) < 60.0 {
+            return Err(SettingsError::IntegrationShorterThanCycle);
+        }
+        let amplitude = amplitude_codes(self.drive, scale)?;
+        Ok(Ringdown {
+            s: *self,
+            fs,
+            amplitude,
+            stage: 0,
+            phase: Phase::Burst,
+            pending: false,
+            f_ref: frequency_hz(ftw, fs),
+            ftw,
+            windows: heapless::Vec::new(),
+            n_windows: 0,
+            tag: 0,
+            last: None,
+        })
+    }
+}
+
+impl Ringdown {
+    /// The next plan, or `None` when done.
+    pub fn next_plan(&mut self) -> Option<PointPlan> {
+        if self.pending || self.phase == Phase::Done {
+            return None;
+        }
+        self.tag = self.tag.wrapping_add(1);
+        self.pending = true;
+        let plan = match self.phase {
+            Phase::Burst => PointPlan {
+                ftw: self.ftw,
+                amplitude_codes: self.amplitude,
+                settle_samples: (self.s.burst.0 as f64 * self.fs) as u32,
+                cycles: 1,
+                windows: 1,
+                tag: self.tag,
+            },
+            _ => {
+                let per = self.s.window_cycles as f64 / self.f_ref;
+                let n = libm::ceil(self.s.ring.0 as f64 / per).clamp(1.0, MAX_WINDOWS as f64);
+                self.n_windows = n as u16;
+                self.windows.clear();
+                PointPlan {
+                    ftw: self.ftw,
+                    amplitude_codes: 0,
+                    settle_samples: (HOLD_SETTLE_S as f64 * self.fs) as u32,
+                    cycles: self.s.window_cycles as u32,
+                    windows: self.n_windows,
+                    tag: self.tag,
+                }
+            }
+        };
+        Some(plan)
+    }
+
+    /// Take a finished window.
+    pub fn accept(&mut self, raw: &PointRaw) {
+        if raw.plan.tag != self.tag {
+            return;
+        }
+        match self.phase {
+            Phase::Burst => {
+                self.phase = Phase::Ring;
+                self.pending = false;
+            }
+            Phase::Ring => {
+                if let Some(p) = solve(&raw.sums.current, &raw.sums.reference) {
+                    let n = raw.sums.reference.n as f64;
+                    let _ = self.windows.push(Window {
+                        t: (raw.end_sample as f64 - 0.5 * n) / self.fs,
+                        re: p.value.re,
+                        im: p.value.im,
+                        var: p.variance,
+                    });
+                }
+                if raw.window + 1 >= self.n_windows {
+                    let est = fit(&self.windows, self.f_ref);
+                    self.stage += 1;
+                    let next = est.ok().map(|e| e.resonance.0);
+                    self.last = Some(est);
+                    match next {
+                        Some(f) if self.stage < self.s.stages => {
+                            self.ftw = tuning_word(f as f64, self.fs);
+                            self.f_ref = frequency_hz(self.ftw, self.fs);
+                            self.phase = Phase::Burst;
+                        }
+                        _ => self.phase = Phase::Done,
+                    }
+                    self.pending = false;
+                }
+            }
+            Phase::Done => {}
+        }
+    }
+
+    /// True when finished.
+    pub fn is_complete(&self) -> bool {
+        self.phase == Phase::Done
+    }
+
+    /// The estimate of the last stage.
+    pub fn estimate(&self) -> Result<Estimate, Failure> {
+        let e = self.last.unwrap_or(Err(Failure::NoResonance))?;
+        let f = e.resonance.0;
+        if f < self.s.band_start.0 || f > self.s.band_stop.0 {
+            return Err(Failure::OutOfBand);
+        }
+        Ok(e)
+    }
+}
+
+/// Noise variance per phasor component, common to all windows (they have equal lengths): the
+/// mean residual variance of the last third of the windows, where the decayed signal no longer
+/// leaks into the sine-fit residual (early windows see a decaying, frequency-offset signal that a
+/// constant sine does not fit exactly, which would overstate their noise).
+fn noise_variance(w: &[Window]) -> f64 {
+    let n = w.len();
+    let tail = &w[n - (n / 3).max(1)..];
+    tail.iter().map(|x| x.var).sum::<f64>() / tail.len() as f64
+}
+
+fn fit(w: &[Window], f_ref: f64) -> Result<Estimate, Failure> {
+    if w.is_empty() {
+        return Err(Failure::NoResonance);
+    }
+    let noise = noise_variance(w);
+    // Keep windows whose amplitude stands 5 sigma above the noise.
+    let mut mag = Line::default();
+    let mut ph = Line::default();
+    let mut prev_arg: Option<f64> = None;
+    let mut unwrap = 0.0;
+    let t0 = w.first().map_or(0.0, |x| x.t);
+    let mut used = 0u16;
+    for x in w {
+        let a2 = x.re * x.re + x.im * x.im;
+        if !(noise > 0.0) || !(a2 > 25.0 * noise) {
+            break;
+        }
+        let arg = libm::atan2(x.im, x.re);
+        if let Some(p) = prev_arg {
+            let mut d = arg + unwrap - p;
+            while d > PI {
+                unwrap -= 2.0 * PI;
+                d -= 2.0 * PI;
+            }
+            while d < -PI {
+                unwrap += 2.0 * PI;
+                d += 2.0 * PI;
+            }
+        }
+        let a = arg + unwrap;
+        prev_arg = Some(a);
+        let wgt = a2 / noise;
+        mag.add(x.t - t0, 0.5 * libm::log(a2), wgt);
+        ph.add(x.t - t0, a, wgt);
+        used += 1;
+    }
+    if used < 3 {
+        return Err(Failure::NoResonance);
+    }
+    let m = mag.solve().ok_or(Failure::NoResonance)?;
+    let p = ph.solve().ok_or(Failure::NoResonance)?;
+    let decay = -m.b;
+    if !(decay > 0.0) {
+        return Err(Failure::NoResonance);
+    }
+    let fd = f_ref + p.b / (2.0 * PI);
+    let sd = decay / (2.0 * PI);
+    let f0 = libm::sqrt(fd * fd + sd * sd);
+    let var_fd = p.var_b / (4.0 * PI * PI);
+    let var_sd = m.var_b / (4.0 * PI * PI);
+    let var_f0 = (fd / f0) * (fd / f0) * var_fd + (sd / f0) * (sd / f0) * var_sd;
+    let sigma = libm::sqrt(var_f0);
+    let q = PI * f0 / decay;
+    if !sigma.is_finite() || !f0.is_finite() || sigma > 0.25 * f0 / q {
+        return Err(Failure::LowSnr);
+    }
+    Ok(Estimate {
+        resonance: Hz(f0 as f32),
+        sigma: Hz(sigma as f32),
+        q: Some(q as f32),
+        points_used: used,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Synthetic window phasors of a known damped sinusoid.
+    #[test]
+    fn fit_recovers_frequency_and_decay() {
+        let (f0, q, f_ref) = (241.3f64, 10.4f64, 236.0f64);
+        let s = PI * f0 / q;
+        let fd = libm::sqrt(f0 * f0 - (s / (2.0 * PI)) * (s / (2.0 * PI)));
+        let mut w = heapless::Vec::<Window, 64>::new();
+        for k in 0..20 {
+            let t = 0.003 + k as f64 * 2.0 / f_ref;
+            let a = 1000.0 * libm::exp(-s * t);
+            let ph = 0.3 + 2.0 * PI * (fd - f_ref) * t;
+            w.push(Window {
+                t,
+                re: a * libm::cos(ph),
+                im: a * libm::sin(ph),
+                var: 1e-6,
+            })
+            .unwrap();
+        }
+        let e = fit(&w, f_ref).unwrap();
+        assert!(
+            (e.resonance.0 as f64 - f0).abs() < 1e-3,
+            "{}",
+            e.resonance.0
+        );
+        assert!((e.q.unwrap() as f64 / q - 1.0).abs() < 1e-4);
+    }
+}
