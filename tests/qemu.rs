@@ -30,7 +30,8 @@ fn build_image() -> PathBuf {
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .args([
             "build",
-            "--release",
+            "--profile",
+            "fw",
             "--target",
             "thumbv7em-none-eabihf",
             "--no-default-features",
@@ -49,7 +50,7 @@ fn build_image() -> PathBuf {
         .status()
         .expect("run cargo build of the QEMU image");
     assert!(status.success(), "building the QEMU image failed");
-    target_dir.join("thumbv7em-none-eabihf/release/probe")
+    target_dir.join("thumbv7em-none-eabihf/fw/probe")
 }
 
 /// Run the image; returns QEMU's success and the decoded log lines.

@@ -129,6 +129,7 @@ mod shared {
                 dropped: DROPPED.load(Ordering::Relaxed),
             }
         }
+        #[cfg_attr(not(feature = "qemu"), allow(dead_code))]
         pub fn any(&self) -> bool {
             self.late + self.ring + self.dropped > 0
         }
@@ -386,7 +387,7 @@ mod app {
     }
 
     /// Host bytes from the UART into the command task's channel.
-    #[task(binds = LPUART1, priority = 2, local = [uart, rx_tx])]
+    #[task(binds = LPUART, priority = 2, local = [uart, rx_tx])]
     fn uart_rx(cx: uart_rx::Context) {
         while let Some(b) = cx.local.uart.read_byte() {
             // A full channel drops the byte; the line then fails to parse and is reported.

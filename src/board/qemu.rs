@@ -37,7 +37,7 @@ use hal_sim::{AdcPair, SimProbe};
 ///
 /// * line 8, CMSDK timer 0, is `DMA1_CH1`: the batch cadence, in place of the STM32's ADC DMA
 ///   half/full-transfer interrupt;
-/// * line 0, CMSDK UART0 receive, is `LPUART1`: host bytes, like the STM32's ST-LINK virtual COM
+/// * line 0, CMSDK UART0 receive, is `LPUART` (the STM32 LPUART1 vector): host bytes, like the STM32's ST-LINK virtual COM
 ///   port (QEMU's first serial port);
 /// * line 11 (the AN386 SPI controller, unused here) is `SPI3`: the software-task dispatcher,
 ///   the same unused vector the STM32 image dispatches on.
@@ -52,7 +52,7 @@ pub mod device {
     #[repr(u16)]
     pub enum Interrupt {
         /// CMSDK UART0 receive.
-        LPUART1 = 0,
+        LPUART = 0,
         /// CMSDK timer 0: the sample cadence (one batch per period).
         DMA1_CH1 = 8,
         /// Line 11: the software-task dispatcher.
@@ -74,7 +74,7 @@ pub mod device {
     pub struct Vector(unsafe extern "C" fn());
 
     extern "C" {
-        fn LPUART1();
+        fn LPUART();
         fn DMA1_CH1();
         fn SPI3();
         fn DefaultHandler();
@@ -86,7 +86,7 @@ pub mod device {
     #[no_mangle]
     pub static __INTERRUPTS: [Vector; 32] = {
         let mut v = [Vector(DefaultHandler); 32];
-        v[0] = Vector(LPUART1);
+        v[0] = Vector(LPUART);
         v[8] = Vector(DMA1_CH1);
         v[11] = Vector(SPI3);
         v
