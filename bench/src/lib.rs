@@ -2,7 +2,9 @@
 //! and plots. The binary (`main.rs`) is the command line on top.
 
 pub mod calfile;
+pub mod capture;
 pub mod cmd;
+pub mod gen;
 pub mod plot;
 pub mod report;
 pub mod scene;

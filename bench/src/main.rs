@@ -29,6 +29,15 @@ enum Cmd {
     Physics(cmd::physics::PhysicsArgs),
     /// List the phantoms of the source papers.
     Phantoms,
+    /// Analyse a bench capture (impedance analyser or DAQ CSV) with the firmware's estimator and
+    /// calibration.
+    Analyze(cmd::analyze::AnalyzeArgs),
+    /// Scan a simulated phantom with a lump on a grid (press at 30 mN, read, lift, move) and map
+    /// its stiffness with the lump found marked.
+    Scan(cmd::scan::ScanArgs),
+    /// Rewrite the golden captures of tests/data (for maintainers).
+    #[command(hide = true)]
+    GenerateCaptures(cmd::generate::GenerateArgs),
 }
 
 fn main() -> ExitCode {
@@ -41,6 +50,9 @@ fn main() -> ExitCode {
             cmd::physics::list_phantoms();
             Ok(())
         }
+        Cmd::Analyze(a) => cmd::analyze::run(a),
+        Cmd::GenerateCaptures(a) => cmd::generate::run(a),
+        Cmd::Scan(a) => cmd::scan::run(a),
     };
     match r {
         Ok(()) => ExitCode::SUCCESS,

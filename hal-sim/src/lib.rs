@@ -27,6 +27,7 @@ pub mod complex;
 pub mod flash;
 pub mod frontend;
 pub mod linalg;
+pub mod lump;
 pub mod phantoms;
 pub mod plant;
 pub mod probe;

@@ -1,8 +1,11 @@
 //! The subcommands of `probe-bench`, one file each, and what they share.
 
+pub mod analyze;
 pub mod calibrate;
+pub mod generate;
 pub mod measure;
 pub mod physics;
+pub mod scan;
 
 use anyhow::{Context, Result};
 use clap::Args;

@@ -1,0 +1,233 @@
+//! `probe-bench analyze`: a capture from the bench (impedance analyser or DAQ), through the
+//! firmware's own estimator and calibration.
+#![allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > y)` also rejects NaN, deliberately
+
+use crate::calfile::{self, CalFile};
+use crate::capture::{self, Capture, CaptureError, DemodOptions, Layout, SweepShape};
+use crate::{plot, report};
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use pzt_probe::measure::Reading;
+use pzt_probe::{Failure, Method, PowerLaw, Seconds, Status};
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+
+#[derive(Args)]
+pub struct AnalyzeArgs {
+    /// Capture (CSV, header row required, `#` comments). Layouts: `freq_hz,z_mag_ohm,z_phase_deg`
+    /// (Hz, ohm, degrees), `freq_hz,y_re_s,y_im_s` (Hz, siemens) or
+    /// `t_s,drive_hz,v_drive_v,i_sense_a` (s, Hz, volts, amperes; stepped or continuous sweep).
+    pub file: PathBuf,
+    /// Resonance method: any estimator that works on measured frequency points (`sweep-g`:
+    /// conductance maximum; `paper`: |Z| minimum). Methods that steer the drive live are refused.
+    #[arg(long, default_value = "sweep-g")]
+    pub method: String,
+    /// Calibration from resonance (Hz) to modulus (kPa): `paper-experiment` (paper 003 eq. 5),
+    /// `paper-simulation` (eq. 4), or a JSON file written by `probe-bench calibrate`.
+    #[arg(long, default_value = "paper-experiment")]
+    pub calibration: String,
+    /// Print one JSON object instead of the report.
+    #[arg(long)]
+    pub json: bool,
+    /// Plot the admittance with the estimate marked (.svg or .png).
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// Time-domain stepped sweeps: settling time discarded at the start of each step, s
+    /// (default: the first half of each step).
+    #[arg(long)]
+    pub settle_s: Option<f64>,
+    /// Time-domain continuous sweeps: whole drive cycles per demodulation window.
+    #[arg(long, default_value_t = capture::DEFAULT_CYCLES_PER_WINDOW)]
+    pub cycles_per_window: usize,
+}
+
+/// The method called `name`, if it can analyse recorded frequency points
+/// ([`Method::works_on_points`]); methods that steer the drive while they measure (they choose
+/// their next frequency from the last answer, track a phase or watch a ring-down) are refused.
+pub fn offline_method(name: &str) -> Result<Method> {
+    let offline: Vec<&str> = Method::ALL
+        .iter()
+        .filter(|m| m.works_on_points())
+        .map(|m| m.name())
+        .collect();
+    let Some(m) = Method::from_name(name) else {
+        bail!(
+            "unknown method `{name}` (methods that analyse a capture: {})",
+            offline.join(", ")
+        );
+    };
+    if !m.works_on_points() {
+        bail!(
+            "method `{name}` steers the drive while it measures and cannot analyse a recorded capture (use one of: {})",
+            offline.join(", ")
+        );
+    }
+    Ok(m)
+}
+
+/// Fewest points `method` needs (every estimator screens for three).
+pub fn min_points(_method: Method) -> usize {
+    3
+}
+
+/// A capture and the reading the firmware's estimator and calibration make of it.
+#[derive(Clone, Debug)]
+pub struct Analysis {
+    /// The capture as points.
+    pub capture: Capture,
+    /// The reading.
+    pub reading: Reading,
+}
+
+/// Analyse capture text with `method` and `cal`.
+pub fn analyze(
+    text: &str,
+    method: Method,
+    cal: &PowerLaw,
+    opts: &DemodOptions,
+) -> Result<Analysis, CaptureError> {
+    let capture = capture::parse(text, min_points(method), opts)?;
+    let pts = &capture.points;
+    let mut est = method.estimate(pts);
+    // Belt and braces: an estimate outside the measured band is never a reading.
+    if let (Ok(e), Some(first), Some(last)) = (&est, pts.first(), pts.last()) {
+        let f = e.resonance.0;
+        if !(f > first.freq.0 && f < last.freq.0) {
+            est = Err(Failure::OutOfBand);
+        }
+    }
+    let probe_time = match (capture.sample_rate_hz, capture.layout) {
+        (Some(fs), Layout::TimeDomain) => Seconds(capture.rows as f32 / fs as f32),
+        _ => Seconds(0.0),
+    };
+    let n = pts.len().min(u16::MAX as usize) as u16;
+    let reading = Reading::from_estimate(method, est, cal, probe_time, n);
+    Ok(Analysis { capture, reading })
+}
+
+/// The calibration called `name`: built in or a file.
+pub fn calibration(name: &str) -> Result<PowerLaw> {
+    match calfile::builtin(name) {
+        Some(p) => Ok(p),
+        None => CalFile::load(Path::new(name)),
+    }
+}
+
+/// The JSON object of an analysis: the reading's fields plus the capture's.
+pub fn analysis_json(a: &Analysis, file: &str) -> Value {
+    let mut v = report::reading_json(&a.reading);
+    let c = &a.capture;
+    let band = match (c.points.first(), c.points.last()) {
+        (Some(f), Some(l)) => json!([f.freq.0, l.freq.0]),
+        _ => Value::Null,
+    };
+    if let Some(o) = v.as_object_mut() {
+        o.insert("file".into(), json!(file));
+        o.insert("layout".into(), json!(c.layout.name()));
+        o.insert("band_hz".into(), band);
+        o.insert("rows".into(), json!(c.rows));
+        o.insert(
+            "noise_sigma_s".into(),
+            c.noise_sigma_s.map_or(Value::Null, |s| json!(s)),
+        );
+        o.insert(
+            "sample_rate_hz".into(),
+            c.sample_rate_hz.map_or(Value::Null, |s| json!(s)),
+        );
+        o.insert(
+            "sweep".into(),
+            match c.shape {
+                Some(SweepShape::Stepped) => json!("stepped"),
+                Some(SweepShape::Continuous) => json!("continuous"),
+                None => Value::Null,
+            },
+        );
+        if c.layout != Layout::TimeDomain {
+            o.insert("probe_time_ms".into(), Value::Null);
+        }
+    }
+    v
+}
+
+/// Run the subcommand.
+pub fn run(a: AnalyzeArgs) -> Result<()> {
+    let method = offline_method(&a.method)?;
+    let cal = calibration(&a.calibration)?;
+    if a.cycles_per_window == 0 || a.cycles_per_window > 1000 {
+        bail!("--cycles-per-window must be 1 to 1000");
+    }
+    if let Some(s) = a.settle_s {
+        if !(s.is_finite() && s >= 0.0) {
+            bail!("--settle-s must be 0 s or more");
+        }
+    }
+    let opts = DemodOptions {
+        settle_s: a.settle_s,
+        cycles_per_window: a.cycles_per_window,
+    };
+    let text = std::fs::read_to_string(&a.file)
+        .with_context(|| format!("cannot read {}", a.file.display()))?;
+    let an = analyze(&text, method, &cal, &opts)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", a.file.display()))?;
+    let c = &an.capture;
+    if a.json {
+        println!("{}", analysis_json(&an, &a.file.display().to_string()));
+    } else {
+        println!(
+            "probe-bench analyze: {} ({} capture, {} rows → {} points)",
+            a.file.display(),
+            c.layout.name(),
+            c.rows,
+            c.points.len()
+        );
+        if let (Some(f), Some(l)) = (c.points.first(), c.points.last()) {
+            println!("  band {:.3}–{:.3} Hz", f.freq.0, l.freq.0);
+        }
+        if let Some(s) = c.noise_sigma_s {
+            println!(
+                "  noise per component (estimated from local cubic fits): {:.3e} S",
+                s
+            );
+        }
+        if let (Some(fs), Some(shape)) = (c.sample_rate_hz, c.shape) {
+            println!(
+                "  sample rate {fs:.2} Hz, {} sweep{}",
+                match shape {
+                    SweepShape::Stepped => "stepped",
+                    SweepShape::Continuous => "continuous",
+                },
+                if c.skipped_steps > 0 {
+                    format!(", {} short steps skipped", c.skipped_steps)
+                } else {
+                    String::new()
+                }
+            );
+        }
+        println!(
+            "  method {}, calibration {}: {}",
+            method.name(),
+            a.calibration,
+            calfile::describe(&cal)
+        );
+        println!("{}", report::reading_line(&an.reading));
+    }
+    if let Some(path) = &a.plot {
+        let title = format!(
+            "{} — {} ({})",
+            a.file
+                .file_name()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            method.name(),
+            match an.reading.status {
+                Status::Ok => "ok".to_owned(),
+                Status::Failed(f) => f.code().to_owned(),
+            }
+        );
+        plot::sweep_svg(path, &title, &c.points, an.reading.resonance.map(|f| f.0))?;
+        if !a.json {
+            println!("  plot: {}", path.display());
+        }
+    }
+    Ok(())
+}

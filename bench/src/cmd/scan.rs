@@ -1,0 +1,703 @@
+//! `probe-bench scan`: scan a simulated phantom with a lump on a grid — press at the preload,
+//! read, lift, move — and map its stiffness, marking where the lump was found.
+//!
+//! Each grid point is one full reading of the simulated probe (`board::sim::read`: the
+//! firmware's sweep, estimator and calibration, the probe starting from rest as after a lift),
+//! pressed onto the phantom's apparent modulus at that point (`hal_sim::lump`). The lump is
+//! located on the resonance map: the background is the 10th percentile of the resonances, the lump is the
+//! connected region around the highest reading that stands above half-way between background
+//! and peak; its centre is the centroid of that region weighted by the rise above background and
+//! its size the diameter of a disc of the region's area.
+#![allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > y)` also rejects NaN, deliberately
+
+use super::progress;
+use crate::calfile;
+use crate::plot::with_backend;
+use crate::scene::parse_noise;
+use anyhow::{anyhow, bail, Result};
+use clap::{Args, ValueEnum};
+use hal_sim::lump::{self, Inclusion, LumpPhantom};
+use hal_sim::Scene;
+use plotters::prelude::*;
+use pzt_probe::board::sim as simboard;
+use pzt_probe::measure::Reading;
+use pzt_probe::sweep::SweepSettings;
+use pzt_probe::{Method, PowerLaw, Status};
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+
+/// The phantoms that can be scanned.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ScanScene {
+    /// Paper 003: silicone disc 30 mm x 15 mm, a 19 mm coin 1 mm under the surface.
+    Coin,
+    /// Paper 002: a 6 mm steel ball 1 mm under the surface of Dragon Skin 20, at --ball-d-mm
+    /// along the path.
+    Ball,
+}
+
+#[derive(Args)]
+pub struct ScanArgs {
+    /// Phantom to scan.
+    #[arg(long, value_enum, default_value = "coin")]
+    pub scene: ScanScene,
+    /// Coin scene: where the coin's centre is, x and y in mm from the disc's centre.
+    #[arg(long, num_args = 2, value_names = ["X_MM", "Y_MM"], default_values_t = [1.5, -1.0])]
+    pub coin_at_mm: Vec<f64>,
+    /// Ball scene: the ball's position along the probe path, mm (paper 002: 0–20 mm).
+    #[arg(long, default_value_t = 5.0)]
+    pub ball_d_mm: f64,
+    /// Grid step, mm (default: 2 mm for the coin, 1 mm for the ball).
+    #[arg(long)]
+    pub step_mm: Option<f64>,
+    /// Contact preload at every grid point, N.
+    #[arg(long, default_value_t = 0.030)]
+    pub preload_n: f64,
+    /// Resonance method (one that sweeps: `sweep-g`, `paper`, ...).
+    #[arg(long, default_value = "sweep-g")]
+    pub method: String,
+    /// Front-end noise: `quiet`, `paper`, `bench`, or a current-noise density in A/sqrt(Hz).
+    #[arg(long, default_value = "bench")]
+    pub noise: String,
+    /// Calibration from resonance (Hz) to modulus (kPa): `paper-experiment` (eq. 5),
+    /// `paper-simulation` (eq. 4) or a calibration file.
+    #[arg(long, default_value = "paper-experiment")]
+    pub calibration: String,
+    /// Seed of the simulated noise (grid point k uses seed + k).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Stiffness map to write (.svg or .png).
+    #[arg(long, default_value = "scan.svg")]
+    pub plot: PathBuf,
+    /// Print one JSON object (every grid point and the lump found) instead of the report.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// What to scan and how.
+#[derive(Clone, Debug)]
+pub struct ScanSpec {
+    /// The phantom.
+    pub phantom: LumpPhantom,
+    /// Grid columns, mm.
+    pub xs_mm: Vec<f64>,
+    /// Grid rows, mm.
+    pub ys_mm: Vec<f64>,
+    /// Grid step, mm.
+    pub step_mm: f64,
+    /// Grid points closer than this to the phantom's outline are skipped, mm.
+    pub edge_margin_mm: f64,
+    /// Probe, front end, noise and preload.
+    pub base: Scene,
+    /// Method.
+    pub method: Method,
+    /// Sweep.
+    pub settings: SweepSettings,
+    /// Calibration.
+    pub cal: PowerLaw,
+    /// Noise seed of the first grid point.
+    pub seed: u64,
+}
+
+/// The grid from `lo` to `hi` (inclusive) in steps of `step`.
+fn axis(lo: f64, hi: f64, step: f64) -> Vec<f64> {
+    let n = ((hi - lo) / step + 1e-9).floor() as usize + 1;
+    (0..n).map(|k| lo + k as f64 * step).collect()
+}
+
+impl ScanSpec {
+    /// The default scan of paper 003's coin sample with the coin at `(x, y)` mm: the disc on a
+    /// grid of `step_mm`, 1.5 mm clear of its rim.
+    pub fn coin(x_mm: f64, y_mm: f64, step_mm: f64, base: Scene) -> Self {
+        let half = (14.0 / step_mm).floor() * step_mm;
+        Self {
+            phantom: lump::paper003_coin(x_mm, y_mm),
+            xs_mm: axis(-half, half, step_mm),
+            ys_mm: axis(-half, half, step_mm),
+            step_mm,
+            edge_margin_mm: 1.5,
+            base,
+            method: Method::SweepG,
+            settings: Method::SweepG.default_sweep(),
+            cal: PowerLaw::paper_experiment(),
+            seed: 0,
+        }
+    }
+    /// The default scan of paper 002's ball at `d_mm` along the path: a strip 4 mm past either
+    /// end of the 0–20 mm path and ±6 mm across it.
+    pub fn ball(d_mm: f64, step_mm: f64, base: Scene) -> Self {
+        let across = (6.0 / step_mm).floor() * step_mm;
+        Self {
+            phantom: lump::paper002_ball(d_mm),
+            xs_mm: axis(-4.0, 24.0, step_mm),
+            ys_mm: axis(-across, across, step_mm),
+            step_mm,
+            edge_margin_mm: 0.0,
+            base,
+            method: Method::SweepG,
+            settings: Method::SweepG.default_sweep(),
+            cal: PowerLaw::paper_experiment(),
+            seed: 0,
+        }
+    }
+    /// Grid points on the phantom, row by row.
+    pub fn grid(&self) -> Vec<(usize, usize)> {
+        let mut g = Vec::new();
+        for (j, &y) in self.ys_mm.iter().enumerate() {
+            for (i, &x) in self.xs_mm.iter().enumerate() {
+                if self
+                    .phantom
+                    .contains(x * 1e-3, y * 1e-3, self.edge_margin_mm * 1e-3)
+                {
+                    g.push((i, j));
+                }
+            }
+        }
+        g
+    }
+}
+
+/// One grid point.
+#[derive(Clone, Copy, Debug)]
+pub struct ScanPoint {
+    /// Column index.
+    pub i: usize,
+    /// Row index.
+    pub j: usize,
+    /// Position, mm.
+    pub x_mm: f64,
+    /// Position, mm.
+    pub y_mm: f64,
+    /// The model's apparent modulus there, kPa (ground truth of the simulation).
+    pub apparent_kpa: f64,
+    /// The reading.
+    pub reading: Reading,
+}
+
+/// Where the lump was found.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LumpEstimate {
+    /// Centre, mm.
+    pub x_mm: f64,
+    /// Centre, mm.
+    pub y_mm: f64,
+    /// Diameter of a disc of the lump region's area, mm.
+    pub diameter_mm: f64,
+    /// Background: the 10th percentile of the scan's resonances, Hz.
+    pub background_hz: f64,
+    /// Highest resonance, Hz.
+    pub peak_hz: f64,
+    /// Half-way level that bounds the region, Hz.
+    pub threshold_hz: f64,
+    /// Grid points in the region.
+    pub cells: usize,
+}
+
+/// A finished scan.
+#[derive(Clone, Debug)]
+pub struct ScanResult {
+    /// Every grid point read.
+    pub points: Vec<ScanPoint>,
+    /// The lump, if one stands out.
+    pub lump: Option<LumpEstimate>,
+}
+
+/// Least rise of the peak over the background to call it a lump, Hz.
+pub const MIN_CONTRAST_HZ: f64 = 1.0;
+
+/// Run the scan; `tick` is called after every grid point.
+pub fn scan(spec: &ScanSpec, mut tick: impl FnMut()) -> Result<ScanResult> {
+    let mut points = Vec::new();
+    for (k, (i, j)) in spec.grid().into_iter().enumerate() {
+        let (x, y) = (spec.xs_mm[i], spec.ys_mm[j]);
+        let scene = spec.phantom.scene_at(&spec.base, x * 1e-3, y * 1e-3);
+        let reading = simboard::read(
+            &scene,
+            spec.seed.wrapping_add(k as u64),
+            spec.method,
+            &spec.settings,
+            &spec.cal,
+            |_| {},
+        )
+        .map_err(|e| anyhow!("reading at ({x}, {y}) mm failed: {e:?}"))?;
+        let apparent_kpa = spec
+            .phantom
+            .apparent(x * 1e-3, y * 1e-3, &spec.base.contact)
+            .modulus_pa
+            / 1e3;
+        points.push(ScanPoint {
+            i,
+            j,
+            x_mm: x,
+            y_mm: y,
+            apparent_kpa,
+            reading,
+        });
+        tick();
+    }
+    let lump = locate(&points, spec.xs_mm.len(), spec.ys_mm.len(), spec.step_mm);
+    Ok(ScanResult { points, lump })
+}
+
+/// Find the lump on a scanned grid of `nx` × `ny` (see the module docs).
+pub fn locate(points: &[ScanPoint], nx: usize, ny: usize, step_mm: f64) -> Option<LumpEstimate> {
+    let mut grid: Vec<Option<(f64, usize)>> = vec![None; nx * ny];
+    let mut vals = Vec::new();
+    for (k, p) in points.iter().enumerate() {
+        if let Some(f) = p.reading.resonance {
+            let f = f.0 as f64;
+            if f.is_finite() && p.i < nx && p.j < ny {
+                grid[p.j * nx + p.i] = Some((f, k));
+                vals.push(f);
+            }
+        }
+    }
+    if vals.len() < 3 {
+        return None;
+    }
+    vals.sort_by(f64::total_cmp);
+    // A lump may cover most of the map (paper 003's coin fills much of its disc): the
+    // background is the lowest tenth of the readings, not their median.
+    let background = vals[vals.len() / 10];
+    let peak = vals[vals.len() - 1];
+    if !(peak - background >= MIN_CONTRAST_HZ) {
+        return None;
+    }
+    let threshold = 0.5 * (background + peak);
+    let start = grid
+        .iter()
+        .position(|c| c.is_some_and(|(f, _)| f == peak))?;
+    // Flood fill over 4-neighbours above the threshold.
+    let mut seen = vec![false; nx * ny];
+    let mut stack = vec![start];
+    seen[start] = true;
+    let (mut w, mut wx, mut wy, mut cells) = (0.0, 0.0, 0.0, 0usize);
+    while let Some(c) = stack.pop() {
+        let Some((f, k)) = grid[c] else { continue };
+        let rise = f - background;
+        w += rise;
+        wx += rise * points[k].x_mm;
+        wy += rise * points[k].y_mm;
+        cells += 1;
+        let (i, j) = (c % nx, c / nx);
+        let mut push = |ii: usize, jj: usize| {
+            let n = jj * nx + ii;
+            if !seen[n] && grid[n].is_some_and(|(f, _)| f >= threshold) {
+                seen[n] = true;
+                stack.push(n);
+            }
+        };
+        if i > 0 {
+            push(i - 1, j);
+        }
+        if i + 1 < nx {
+            push(i + 1, j);
+        }
+        if j > 0 {
+            push(i, j - 1);
+        }
+        if j + 1 < ny {
+            push(i, j + 1);
+        }
+    }
+    if !(w > 0.0) {
+        return None;
+    }
+    Some(LumpEstimate {
+        x_mm: wx / w,
+        y_mm: wy / w,
+        diameter_mm: 2.0 * (cells as f64 * step_mm * step_mm / std::f64::consts::PI).sqrt(),
+        background_hz: background,
+        peak_hz: peak,
+        threshold_hz: threshold,
+        cells,
+    })
+}
+
+/// Mean and count of the resonances read where `keep(distance from the inclusion's centre, mm)`.
+pub fn mean_resonance(
+    points: &[ScanPoint],
+    inclusion: &Inclusion,
+    keep: impl Fn(f64) -> bool,
+) -> Option<(f64, usize)> {
+    let (cx, cy) = inclusion.centre_m();
+    let v: Vec<f64> = points
+        .iter()
+        .filter(|p| keep((p.x_mm - cx * 1e3).hypot(p.y_mm - cy * 1e3)))
+        .filter_map(|p| p.reading.resonance.map(|f| f.0 as f64))
+        .collect();
+    (!v.is_empty()).then(|| (v.iter().sum::<f64>() / v.len() as f64, v.len()))
+}
+
+/// Distance from the inclusion's centre (mm) within which a point counts as "over" the lump:
+/// 1 mm inside its outline.
+pub fn over_radius_mm(inc: &Inclusion) -> f64 {
+    (inc.radius_m() * 1e3 - 1.0).max(0.5)
+}
+
+/// Distance beyond which a point counts as "away" from the lump: 3 mm outside its outline.
+pub fn away_radius_mm(inc: &Inclusion) -> f64 {
+    inc.radius_m() * 1e3 + 3.0
+}
+
+/// Run the subcommand.
+pub fn run(a: ScanArgs) -> Result<()> {
+    let method = Method::from_name(&a.method)
+        .filter(|m| matches!(m.default_settings(), pzt_probe::measure::Settings::Sweep(_)))
+        .ok_or_else(|| {
+            anyhow!(
+                "scan needs a stepped-sweep method (sweep-g or paper), not `{}`",
+                a.method
+            )
+        })?;
+    if !(a.preload_n.is_finite() && a.preload_n > 0.0 && a.preload_n <= 1.0) {
+        bail!("preload {} N is out of range (0 to 1 N)", a.preload_n);
+    }
+    let noise = parse_noise(&a.noise)?;
+    let base = Scene::free_air()
+        .with_noise(noise)
+        .with_preload_n(a.preload_n);
+    let cal = match calfile::builtin(&a.calibration) {
+        Some(p) => p,
+        None => calfile::CalFile::load(Path::new(&a.calibration))?,
+    };
+    let mut spec = match a.scene {
+        ScanScene::Coin => {
+            let step = a.step_mm.unwrap_or(2.0);
+            check_step(step)?;
+            let (x, y) = (a.coin_at_mm[0], a.coin_at_mm[1]);
+            if !(x.is_finite() && y.is_finite() && x.hypot(y) <= 5.5) {
+                bail!("the 19 mm coin must lie inside the 30 mm disc: its centre within 5.5 mm of the disc's");
+            }
+            ScanSpec::coin(x, y, step, base)
+        }
+        ScanScene::Ball => {
+            let step = a.step_mm.unwrap_or(1.0);
+            check_step(step)?;
+            if !(a.ball_d_mm.is_finite() && (0.0..=20.0).contains(&a.ball_d_mm)) {
+                bail!("--ball-d-mm must be 0 to 20 mm (paper 002's path)");
+            }
+            ScanSpec::ball(a.ball_d_mm, step, base)
+        }
+    };
+    spec.method = method;
+    spec.settings = method.default_sweep();
+    spec.cal = cal;
+    spec.seed = a.seed;
+    let n = spec.grid().len();
+    let pb = (!a.json).then(|| progress(n as u64, "scanning"));
+    let res = scan(&spec, || {
+        if let Some(pb) = &pb {
+            pb.inc(1)
+        }
+    })?;
+    if let Some(pb) = pb {
+        pb.finish_and_clear();
+    }
+    let inc = spec.phantom.inclusion;
+    let (tx, ty) = inc.centre_m();
+    let over = mean_resonance(&res.points, &inc, |d| d <= over_radius_mm(&inc));
+    let away = mean_resonance(&res.points, &inc, |d| d >= away_radius_mm(&inc));
+    let ok = res
+        .points
+        .iter()
+        .filter(|p| p.reading.status == Status::Ok)
+        .count();
+    write_map(&a.plot, &spec, &res)?;
+    if a.json {
+        let pts: Vec<Value> = res
+            .points
+            .iter()
+            .map(|p| {
+                json!({
+                    "x_mm": p.x_mm, "y_mm": p.y_mm,
+                    "apparent_kpa": p.apparent_kpa,
+                    "status": p.reading.status.code(),
+                    "resonance_hz": p.reading.resonance.map(|f| f.0),
+                    "resonance_sigma_hz": p.reading.resonance_sigma.map(|f| f.0),
+                    "modulus_kpa": p.reading.modulus.map(|e| e.0),
+                })
+            })
+            .collect();
+        let lump = res.lump.map(|l| {
+            json!({"x_mm": l.x_mm, "y_mm": l.y_mm, "diameter_mm": l.diameter_mm,
+                   "background_hz": l.background_hz, "peak_hz": l.peak_hz, "cells": l.cells})
+        });
+        println!(
+            "{}",
+            json!({
+                "scene": spec.phantom.name,
+                "method": method.name(),
+                "step_mm": spec.step_mm,
+                "true_centre_mm": [tx * 1e3, ty * 1e3],
+                "true_diameter_mm": 2e3 * inc.radius_m(),
+                "over_mean_hz": over.map(|o| o.0),
+                "away_mean_hz": away.map(|o| o.0),
+                "lump": lump,
+                "points": pts,
+            })
+        );
+        return Ok(());
+    }
+    println!("probe-bench scan: {}", spec.phantom.source);
+    println!(
+        "  grid {} points, step {} mm, preload {:.0} mN, noise {}, method {}; {} readings ok",
+        n,
+        spec.step_mm,
+        a.preload_n * 1e3,
+        a.noise,
+        method.name(),
+        ok
+    );
+    if let Some((f, k)) = over {
+        println!(
+            "  over the lump (within {:.1} mm of its centre): mean {f:.2} Hz over {k} points",
+            over_radius_mm(&inc)
+        );
+    }
+    if let Some((f, k)) = away {
+        println!(
+            "  away from it (beyond {:.1} mm): mean {f:.2} Hz over {k} points",
+            away_radius_mm(&inc)
+        );
+    }
+    match res.lump {
+        Some(l) => println!(
+            "  lump found at ({:.2}, {:.2}) mm, {:.1} mm across (true: ({:.2}, {:.2}) mm, {:.1} mm); background {:.2} Hz, peak {:.2} Hz",
+            l.x_mm,
+            l.y_mm,
+            l.diameter_mm,
+            tx * 1e3,
+            ty * 1e3,
+            2e3 * inc.radius_m(),
+            l.background_hz,
+            l.peak_hz
+        ),
+        None => println!("  no lump stands out of the map"),
+    }
+    println!("  map: {}", a.plot.display());
+    Ok(())
+}
+
+fn check_step(step: f64) -> Result<()> {
+    if !(step.is_finite() && (0.25..=10.0).contains(&step)) {
+        bail!("--step-mm must be 0.25 to 10 mm");
+    }
+    Ok(())
+}
+
+/// Viridis-like colour of `t` in `[0, 1]`.
+fn colour(t: f64) -> RGBColor {
+    const STOPS: [(u8, u8, u8); 5] = [
+        (68, 1, 84),
+        (59, 82, 139),
+        (33, 145, 140),
+        (94, 201, 98),
+        (253, 231, 37),
+    ];
+    let t = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let x = t * (STOPS.len() - 1) as f64;
+    let k = (x.floor() as usize).min(STOPS.len() - 2);
+    let u = x - k as f64;
+    let lerp = |a: u8, b: u8| (a as f64 + u * (b as f64 - a as f64)).round() as u8;
+    let (a, b) = (STOPS[k], STOPS[k + 1]);
+    RGBColor(lerp(a.0, b.0), lerp(a.1, b.1), lerp(a.2, b.2))
+}
+
+/// Write the stiffness map (resonance per grid point, colour bar in Hz and kPa by the scan's
+/// calibration, phantom outline, true inclusion outline, the lump found).
+pub fn write_map(path: &Path, spec: &ScanSpec, res: &ScanResult) -> Result<()> {
+    with_backend(
+        path,
+        (980, 820),
+        |root| draw_map(root, spec, res),
+        |root| draw_map(root, spec, res),
+    )
+}
+
+fn circle(cx: f64, cy: f64, r: f64) -> Vec<(f64, f64)> {
+    (0..=180)
+        .map(|k| {
+            let t = 2.0 * std::f64::consts::PI * k as f64 / 180.0;
+            (cx + r * t.cos(), cy + r * t.sin())
+        })
+        .collect()
+}
+
+fn draw_map<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    spec: &ScanSpec,
+    res: &ScanResult,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("{e}");
+    root.fill(&WHITE).map_err(e)?;
+    let fs: Vec<f64> = res
+        .points
+        .iter()
+        .filter_map(|p| p.reading.resonance.map(|f| f.0 as f64))
+        .collect();
+    let (fmin, fmax) = fs
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &f| {
+            (a.min(f), b.max(f))
+        });
+    let (fmin, fmax) = if fmin.is_finite() && fmax > fmin {
+        (fmin, fmax)
+    } else {
+        (200.0, 230.0)
+    };
+    let s = spec.step_mm;
+    let (x0, x1) = (
+        spec.xs_mm.first().copied().unwrap_or(0.0) - s,
+        spec.xs_mm.last().copied().unwrap_or(1.0) + s,
+    );
+    let (y0, y1) = (
+        spec.ys_mm.first().copied().unwrap_or(0.0) - s,
+        spec.ys_mm.last().copied().unwrap_or(1.0) + s,
+    );
+    let (map_area, bar_area) = root.split_horizontally(830);
+    let inc = spec.phantom.inclusion;
+    let (tx, ty) = inc.centre_m();
+    let (tx, ty, tr) = (tx * 1e3, ty * 1e3, inc.radius_m() * 1e3);
+    let title = match &res.lump {
+        Some(l) => format!(
+            "{} scan, {} — lump at ({:.1}, {:.1}) mm, {:.1} mm across (true ({:.1}, {:.1}), {:.0} mm)",
+            spec.phantom.name,
+            spec.method.name(),
+            l.x_mm,
+            l.y_mm,
+            l.diameter_mm,
+            tx,
+            ty,
+            2.0 * tr
+        ),
+        None => format!("{} scan, {} — no lump found", spec.phantom.name, spec.method.name()),
+    };
+    // Equal scales on both axes: fit the data span into the plot area.
+    let (w_px, h_px) = (830.0 - 80.0, 820.0 - 110.0);
+    let (xs, ys) = (x1 - x0, y1 - y0);
+    let scale = (w_px / xs).min(h_px / ys);
+    let (pad_x, pad_y) = (0.5 * (w_px / scale - xs), 0.5 * (h_px / scale - ys));
+    let mut chart = ChartBuilder::on(&map_area)
+        .caption(title, ("sans-serif", 17))
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(50)
+        .build_cartesian_2d(x0 - pad_x..x1 + pad_x, y0 - pad_y..y1 + pad_y)
+        .map_err(e)?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc("x (mm)")
+        .y_desc("y (mm)")
+        .draw()
+        .map_err(e)?;
+    chart
+        .draw_series(res.points.iter().map(|p| {
+            let c = match p.reading.resonance {
+                Some(f) => colour((f.0 as f64 - fmin) / (fmax - fmin)).filled(),
+                None => RGBColor(200, 200, 200).filled(),
+            };
+            Rectangle::new(
+                [
+                    (p.x_mm - 0.5 * s, p.y_mm - 0.5 * s),
+                    (p.x_mm + 0.5 * s, p.y_mm + 0.5 * s),
+                ],
+                c,
+            )
+        }))
+        .map_err(e)?;
+    // Readings without a valid modulus (out of range, failed) are crossed.
+    chart
+        .draw_series(
+            res.points
+                .iter()
+                .filter(|p| p.reading.status != Status::Ok)
+                .map(|p| Cross::new((p.x_mm, p.y_mm), 3, BLACK.stroke_width(1))),
+        )
+        .map_err(e)?;
+    if let Some(r) = spec.phantom.outline_radius_m {
+        chart
+            .draw_series(LineSeries::new(
+                circle(0.0, 0.0, r * 1e3),
+                BLACK.stroke_width(2),
+            ))
+            .map_err(e)?
+            .label("phantom outline")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2)));
+    }
+    chart
+        .draw_series(LineSeries::new(circle(tx, ty, tr), WHITE.stroke_width(1)))
+        .map_err(e)?
+        .label("true inclusion outline")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RGBColor(150, 150, 150)));
+    if let Some(l) = &res.lump {
+        chart
+            .draw_series(LineSeries::new(
+                circle(l.x_mm, l.y_mm, 0.5 * l.diameter_mm),
+                RED.stroke_width(3),
+            ))
+            .map_err(e)?
+            .label("lump found (half-height region, equal-area disc)")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(3)));
+        chart
+            .draw_series(std::iter::once(Cross::new(
+                (l.x_mm, l.y_mm),
+                8,
+                RED.stroke_width(3),
+            )))
+            .map_err(e)?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(e)?;
+    // Colour bar: resonance in Hz, with the calibrated modulus beside it.
+    let mut bar = ChartBuilder::on(&bar_area)
+        .margin_top(40)
+        .margin_bottom(50)
+        .margin_right(10)
+        .y_label_area_size(0)
+        .right_y_label_area_size(60)
+        .build_cartesian_2d(0.0..1.0, fmin..fmax)
+        .map_err(e)?;
+    bar.configure_mesh()
+        .disable_mesh()
+        .disable_x_axis()
+        .y_desc("resonance (Hz)")
+        .draw()
+        .map_err(e)?;
+    let n = 100;
+    bar.draw_series((0..n).map(|k| {
+        let a = fmin + (fmax - fmin) * k as f64 / n as f64;
+        let b = fmin + (fmax - fmin) * (k + 1) as f64 / n as f64;
+        Rectangle::new(
+            [(0.0, a), (1.0, b)],
+            colour(k as f64 / (n - 1) as f64).filled(),
+        )
+    }))
+    .map_err(e)?;
+    // Modulus at the bar's ends by the scan's calibration.
+    let span = fmax - fmin;
+    for (f, anchor) in [(fmin, fmin + 0.04 * span), (fmax, fmax - 0.005 * span)] {
+        if let Ok(m) = spec.cal.invert(pzt_probe::Hz(f as f32), pzt_probe::Hz(0.0)) {
+            bar.draw_series(std::iter::once(Text::new(
+                format!("{:.0} kPa", m.value.0),
+                (0.05, anchor),
+                ("sans-serif", 13).into_font().color(&WHITE),
+            )))
+            .map_err(e)?;
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,557 @@
+//! `probe-bench analyze`: golden captures against their known resonance, captures that must not
+//! read ok, the time-domain demodulator, and one malformed file per error kind.
+
+use hal_sim::{phantoms, Scene};
+use probe_bench::capture::{self, CaptureError, DemodOptions, Layout, SweepShape};
+use probe_bench::cmd::analyze::{analysis_json, analyze, offline_method, Analysis};
+use probe_bench::gen;
+use pzt_probe::{Failure, Method, PowerLaw, Status};
+use std::path::PathBuf;
+
+fn data(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../tests/data")
+        .join(name)
+}
+
+fn read(name: &str) -> String {
+    std::fs::read_to_string(data(name)).unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
+fn run(name: &str, method: Method) -> Analysis {
+    analyze(
+        &read(name),
+        method,
+        &PowerLaw::paper_experiment(),
+        &DemodOptions::default(),
+    )
+    .unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
+/// Inverse of paper 003 eq. 5, written out independently of `PowerLaw::invert`.
+fn f_e_inverse(f: f64) -> f64 {
+    ((266.6 - f) / 2305.0).powf(1.0 / -0.7243)
+}
+
+/// The sweep-G estimate of each golden capture lies within 4 of its own standard uncertainties
+/// of the scene's true resonance (the undamped natural frequency of the loaded mode, where the
+/// BVD conductance peaks), and that uncertainty is small.
+#[test]
+fn golden_captures_read_their_true_resonance() {
+    let cases: [(&str, Scene, Layout, f64); 5] = [
+        (
+            "sim_sweep_g_phantom_b.csv",
+            Scene::on_phantom(&phantoms::B),
+            Layout::Admittance,
+            0.05,
+        ),
+        (
+            "sim_paper_phantom_c_z.csv",
+            Scene::on_phantom(&phantoms::C),
+            Layout::Impedance,
+            0.05,
+        ),
+        (
+            "bvd_300kpa_y.csv",
+            Scene::on_modulus_kpa(300.0),
+            Layout::Admittance,
+            0.05,
+        ),
+        (
+            "bvd_1000kpa_z.csv",
+            Scene::on_modulus_kpa(1000.0),
+            Layout::Impedance,
+            0.05,
+        ),
+        (
+            "sim_time_stepped_phantom_b.csv",
+            gen::daq_scene(&phantoms::B),
+            Layout::TimeDomain,
+            0.1,
+        ),
+    ];
+    for (name, scene, layout, max_sigma) in cases {
+        let a = run(name, Method::SweepG);
+        assert_eq!(a.capture.layout, layout, "{name}");
+        let r = a.reading;
+        assert_eq!(r.status, Status::Ok, "{name}");
+        let f = r.resonance.unwrap().0 as f64;
+        let s = r.resonance_sigma.unwrap().0 as f64;
+        let truth = scene.resonance_hz();
+        assert!(s > 0.0 && s < max_sigma, "{name}: sigma {s}");
+        assert!(
+            (f - truth).abs() <= 4.0 * s + 1e-3,
+            "{name}: {f} ± {s} Hz against true {truth} Hz"
+        );
+        // Q from the fit against the model's Q (loose: settling bias of the time-domain steps).
+        let q = r.q.unwrap() as f64;
+        assert!(
+            (q / scene.q() - 1.0).abs() < 0.1,
+            "{name}: Q {q} vs {}",
+            scene.q()
+        );
+        // The modulus is paper eq. 5 inverted at the estimate.
+        let e = r.modulus.unwrap().0 as f64;
+        let e_ref = f_e_inverse(f);
+        assert!((e / e_ref - 1.0).abs() < 1e-3, "{name}: {e} vs {e_ref} kPa");
+        assert!(r.modulus_sigma.unwrap().0 > 0.0);
+    }
+}
+
+/// Independent reference of the paper method: the maximum of `|Y|` above the straight line
+/// through the band's end points, found on a 1 mHz grid of the closed form.
+fn paper_dip_reference(scene: &Scene, f0: f64, f1: f64) -> f64 {
+    let y0 = scene.admittance(f0).norm();
+    let y1 = scene.admittance(f1).norm();
+    let n = ((f1 - f0) * 1000.0) as usize;
+    let mut best = (f0, f64::NEG_INFINITY);
+    for k in 0..=n {
+        let f = f0 + k as f64 * 1e-3;
+        let d = scene.admittance(f).norm() - (y0 + (f - f0) / (f1 - f0) * (y1 - y0));
+        if d > best.1 {
+            best = (f, d);
+        }
+    }
+    best.0
+}
+
+#[test]
+fn paper_method_finds_the_closed_form_impedance_dip() {
+    for (name, scene, f0, f1, tol) in [
+        (
+            "bvd_300kpa_y.csv",
+            Scene::on_modulus_kpa(300.0),
+            180.0,
+            280.0,
+            0.3,
+        ),
+        (
+            "bvd_1000kpa_z.csv",
+            Scene::on_modulus_kpa(1000.0),
+            200.0,
+            300.0,
+            0.3,
+        ),
+    ] {
+        let r = run(name, Method::Paper).reading;
+        assert_eq!(r.status, Status::Ok, "{name}");
+        let f = r.resonance.unwrap().0 as f64;
+        let s = r.resonance_sigma.unwrap().0 as f64;
+        let reference = paper_dip_reference(&scene, f0, f1);
+        eprintln!("{name}: paper {f:.4} ± {s:.4} Hz, closed-form dip {reference:.4} Hz");
+        assert!(
+            (f - reference).abs() <= 3.0 * s + tol,
+            "{name}: {f} ± {s} against the dip at {reference}"
+        );
+        // The dip is not the resonance: C0 pulls it below (the reason for sweep-G).
+        assert!(reference < scene.resonance_hz() - 5.0);
+    }
+}
+
+#[test]
+fn estimated_noise_matches_the_noise_added() {
+    // bvd_300kpa_y.csv carries white noise of 0.5 nS per component.
+    let a = run("bvd_300kpa_y.csv", Method::SweepG);
+    let s = a.capture.noise_sigma_s.unwrap();
+    assert!((s / 0.5e-9 - 1.0).abs() < 0.15, "estimated {s:e} S");
+    assert!(a
+        .capture
+        .points
+        .iter()
+        .all(|p| p.sigma_s as f64 == s as f32 as f64));
+}
+
+#[test]
+fn out_of_band_capture_is_not_ok() {
+    for m in [Method::SweepG, Method::Paper] {
+        let a = run("bvd_1000kpa_below_band_y.csv", m);
+        assert_eq!(
+            a.reading.status,
+            Status::Failed(Failure::OutOfBand),
+            "{m:?}"
+        );
+        assert!(a.reading.modulus.is_none());
+        // The estimators themselves say so (not only the bench's band guard).
+        assert_eq!(m.estimate(&a.capture.points), Err(Failure::OutOfBand));
+        let j = analysis_json(&a, "x");
+        assert_eq!(j["status"], "out_of_band");
+        assert!(j["modulus_kpa"].is_null());
+    }
+    // And with the resonance below the band.
+    let scene = Scene::on_modulus_kpa(300.0);
+    let pts = gen::closed_form(&scene, 236.0, 290.0, 1.0, 0.0, 0);
+    let text = capture::write_admittance_csv(&[], &pts);
+    for m in [Method::SweepG, Method::Paper] {
+        let a = analyze(
+            &text,
+            m,
+            &PowerLaw::paper_experiment(),
+            &DemodOptions::default(),
+        )
+        .unwrap();
+        assert_ne!(a.reading.status, Status::Ok, "{m:?}");
+        assert!(a.reading.modulus.is_none());
+    }
+}
+
+#[test]
+fn capture_without_resonance_is_not_ok() {
+    for m in [Method::SweepG, Method::Paper] {
+        let a = run("bvd_capacitor_only_y.csv", m);
+        assert_eq!(
+            a.reading.status,
+            Status::Failed(Failure::NoResonance),
+            "{m:?}"
+        );
+        assert!(a.reading.modulus.is_none() && a.reading.resonance.is_none());
+        assert_eq!(m.estimate(&a.capture.points), Err(Failure::NoResonance));
+    }
+}
+
+#[test]
+fn json_has_the_documented_fields() {
+    let a = run("sim_sweep_g_phantom_b.csv", Method::SweepG);
+    let j = analysis_json(&a, "sim_sweep_g_phantom_b.csv");
+    for k in [
+        "status",
+        "resonance_hz",
+        "resonance_sigma_hz",
+        "modulus_kpa",
+        "modulus_sigma_kpa",
+        "q_factor",
+        "method",
+        "points",
+        "layout",
+        "band_hz",
+    ] {
+        assert!(j.get(k).is_some(), "missing {k}");
+    }
+    assert_eq!(j["status"], "ok");
+    assert_eq!(j["method"], "sweep-g");
+    assert_eq!(j["points"], 61);
+    assert_eq!(j["layout"], "admittance");
+    let f = j["resonance_hz"].as_f64().unwrap();
+    assert!((f - Scene::on_phantom(&phantoms::B).resonance_hz()).abs() < 0.1);
+}
+
+/// The demodulator divides the current phasor by the phasor of the *recorded* drive: a drive
+/// with an arbitrary amplitude, phase and offset, and a slowly drifting amplitude, still gives
+/// the admittance that links them.
+#[test]
+fn demodulation_uses_the_recorded_drive() {
+    let fs = 5000.0;
+    let (g, b) = (1.3e-7, 2.9e-7);
+    let mut text = String::from("t_s,drive_hz,v_drive_v,i_sense_a\n");
+    let freqs = [200.0, 210.0, 220.0, 230.0];
+    let per = 500; // 0.1 s a step
+    for (si, f) in freqs.iter().enumerate() {
+        for k in 0..per {
+            let t = (si * per + k) as f64 / fs;
+            let w = 2.0 * std::f64::consts::PI * f;
+            // V = A e^{j phi}; v(t) = Re(V e^{jwt}) + offset.
+            let (amp, phi) = (3.7 * (1.0 + 0.001 * si as f64), 0.4 + si as f64);
+            let v = amp * (w * t + phi).cos() + 0.25;
+            // I = Y V.
+            let i = amp * (g * (w * t + phi).cos() - b * (w * t + phi).sin());
+            text += &format!("{t:.6},{f},{v:.9},{i:.9e}\n");
+        }
+    }
+    let c = capture::parse(&text, 3, &DemodOptions::default()).unwrap();
+    assert_eq!(c.shape, Some(SweepShape::Stepped));
+    assert_eq!(c.points.len(), 4);
+    assert!((c.sample_rate_hz.unwrap() - fs).abs() < 1e-6);
+    for (p, f) in c.points.iter().zip(freqs) {
+        assert!((p.freq.0 as f64 - f).abs() < 1e-9);
+        assert!((p.g_s as f64 / g - 1.0).abs() < 1e-5, "G {}", p.g_s);
+        assert!((p.b_s as f64 / b - 1.0).abs() < 1e-5, "B {}", p.b_s);
+        assert!((p.sigma_s as f64) < 1e-12);
+    }
+}
+
+/// A continuous (chirped) DAQ recording of the simulated probe: windows of whole cycles, phase
+/// integrated from the recorded frequency. Up and down chirps lag in opposite directions; each
+/// is within 0.6 Hz of the truth and their mean within 0.15 Hz.
+#[test]
+fn continuous_sweep_reads_the_resonance() {
+    let scene = gen::daq_scene(&phantoms::B);
+    let truth = scene.resonance_hz();
+    let mut fr = Vec::new();
+    for (f0, f1) in [(196.0, 260.0), (260.0, 196.0)] {
+        let text = gen::time_capture(
+            &scene,
+            11,
+            &gen::Drive::Chirp {
+                f0,
+                f1,
+                duration_s: 4.0,
+                lead_s: 0.1,
+            },
+            5.0,
+            &[],
+        );
+        let a = analyze(
+            &text,
+            Method::SweepG,
+            &PowerLaw::paper_experiment(),
+            &DemodOptions::default(),
+        )
+        .unwrap();
+        assert_eq!(a.capture.shape, Some(SweepShape::Continuous));
+        // Windows must come out in increasing frequency for the estimators: a down chirp reads
+        // as a capture whose frequency decreases.
+        let f = match a.reading.status {
+            Status::Ok => a.reading.resonance.unwrap().0 as f64,
+            s => panic!("{f0}->{f1}: {s:?}"),
+        };
+        eprintln!("chirp {f0}->{f1}: {f:.4} Hz, truth {truth:.4} Hz");
+        assert!((f - truth).abs() < 0.6, "{f0}->{f1}: {f} vs {truth}");
+        fr.push(f);
+    }
+    let mean = 0.5 * (fr[0] + fr[1]);
+    assert!((mean - truth).abs() < 0.15, "mean {mean} vs {truth}");
+}
+
+fn err(name: &str) -> CaptureError {
+    capture::parse(
+        &read(&format!("malformed/{name}")),
+        3,
+        &DemodOptions::default(),
+    )
+    .expect_err(name)
+}
+
+#[test]
+fn malformed_no_header() {
+    assert_eq!(err("no_header.csv"), CaptureError::NoHeader { line: 3 });
+}
+
+#[test]
+fn malformed_missing_column() {
+    assert_eq!(
+        err("missing_column.csv"),
+        CaptureError::MissingColumn {
+            line: 2,
+            column: "z_phase_deg",
+            layout: Layout::Impedance
+        }
+    );
+}
+
+#[test]
+fn malformed_unknown_column() {
+    assert_eq!(
+        err("unknown_column.csv"),
+        CaptureError::UnknownColumn {
+            line: 1,
+            column: "temp_c".into()
+        }
+    );
+}
+
+#[test]
+fn malformed_duplicate_column() {
+    assert_eq!(
+        err("duplicate_column.csv"),
+        CaptureError::DuplicateColumn {
+            line: 1,
+            column: "y_re_s".into()
+        }
+    );
+}
+
+#[test]
+fn malformed_cell_count() {
+    assert_eq!(
+        err("cell_count.csv"),
+        CaptureError::CellCount {
+            line: 4,
+            expected: 3,
+            found: 2
+        }
+    );
+}
+
+#[test]
+fn malformed_not_numeric() {
+    assert_eq!(
+        err("not_numeric.csv"),
+        CaptureError::NotNumeric {
+            line: 5,
+            column: "y_im_s".into(),
+            cell: "abc".into()
+        }
+    );
+}
+
+#[test]
+fn malformed_not_finite() {
+    assert_eq!(
+        err("not_finite.csv"),
+        CaptureError::NotFinite {
+            line: 3,
+            column: "z_mag_ohm".into()
+        }
+    );
+    // NaN spelled as analysers do.
+    let e = capture::parse(
+        "freq_hz,y_re_s,y_im_s\n200,1e-7,NaN\n",
+        3,
+        &DemodOptions::default(),
+    )
+    .unwrap_err();
+    assert_eq!(e.kind(), "not_finite");
+    assert_eq!(e.line(), 2);
+}
+
+#[test]
+fn malformed_not_positive() {
+    assert_eq!(
+        err("not_positive.csv"),
+        CaptureError::NotPositive {
+            line: 3,
+            column: "z_mag_ohm"
+        }
+    );
+}
+
+#[test]
+fn malformed_frequency_not_increasing() {
+    assert_eq!(
+        err("not_increasing_freq.csv"),
+        CaptureError::NotIncreasing {
+            line: 7,
+            column: "freq_hz",
+            value: 203.0,
+            previous: 204.0
+        }
+    );
+}
+
+#[test]
+fn malformed_time_not_increasing() {
+    assert_eq!(
+        err("not_increasing_time.csv"),
+        CaptureError::NotIncreasing {
+            line: 8,
+            column: "t_s",
+            value: 0.005,
+            previous: 0.005
+        }
+    );
+}
+
+#[test]
+fn malformed_too_few_points() {
+    assert_eq!(
+        err("too_few_points.csv"),
+        CaptureError::TooFewPoints {
+            line: 7,
+            found: 5,
+            needed: 7
+        }
+    );
+}
+
+#[test]
+fn malformed_non_uniform_sampling() {
+    let e = err("non_uniform.csv");
+    assert_eq!(e.kind(), "non_uniform_sampling");
+    assert_eq!(e.line(), 10);
+}
+
+#[test]
+fn malformed_too_coarse() {
+    let e = err("too_coarse.csv");
+    assert_eq!(e.kind(), "too_coarse");
+    assert_eq!(e.line(), 12);
+}
+
+#[test]
+fn malformed_no_drive() {
+    assert_eq!(err("no_drive.csv"), CaptureError::NoDrive { line: 103 });
+}
+
+#[test]
+fn every_error_message_names_its_line() {
+    for f in std::fs::read_dir(data("malformed")).unwrap() {
+        let name = f.unwrap().file_name().into_string().unwrap();
+        let e = err(&name);
+        let msg = e.to_string();
+        assert!(msg.starts_with(&format!("line {}: ", e.line())), "{msg}");
+        assert!(!msg.contains('\n'), "{msg}");
+    }
+}
+
+#[test]
+fn methods_for_captures() {
+    for m in Method::ALL {
+        let r = offline_method(m.name());
+        assert_eq!(r.is_ok(), m.works_on_points(), "{}", m.name());
+        if let Err(e) = r {
+            assert!(e.to_string().contains("steers the drive"), "{e}");
+        }
+    }
+    assert!(offline_method("sweep-g").is_ok());
+    assert!(offline_method("paper").is_ok());
+    let e = offline_method("nonsense").unwrap_err().to_string();
+    assert!(e.contains("unknown method") && e.contains("sweep-g"), "{e}");
+}
+
+fn bin() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_probe-bench"))
+}
+
+#[test]
+fn cli_json_plot_and_errors() {
+    let dir = std::env::temp_dir().join(format!("probe-bench-analyze-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let svg = dir.join("a.svg");
+    let png = dir.join("a.png");
+    let out = bin()
+        .args(["analyze", "--json", "--plot"])
+        .arg(&svg)
+        .arg(data("bvd_300kpa_y.csv"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(j["status"], "ok");
+    assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
+    let out = bin()
+        .args(["analyze", "--method", "paper", "--plot"])
+        .arg(&png)
+        .arg(data("sim_time_stepped_phantom_b.csv"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(&std::fs::read(&png).unwrap()[1..4], b"PNG");
+    // A malformed file: non-zero exit, one line naming the line.
+    let out = bin()
+        .arg("analyze")
+        .arg(data("malformed/cell_count.csv"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(e.trim_end().lines().count(), 1, "{e}");
+    assert!(e.contains("line 4"), "{e}");
+    // A failed reading is still a successful analysis (exit 0), with the failure code.
+    let out = bin()
+        .args(["analyze", "--json"])
+        .arg(data("bvd_capacitor_only_y.csv"))
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(j["status"], "no_resonance");
+    assert!(j["modulus_kpa"].is_null());
+    let _ = std::fs::remove_dir_all(&dir);
+}
