@@ -4,6 +4,7 @@
 pub mod calfile;
 pub mod capture;
 pub mod cmd;
+pub mod defmt_log;
 pub mod gen;
 pub mod plot;
 pub mod report;

@@ -35,6 +35,9 @@ enum Cmd {
     /// Scan a simulated phantom with a lump on a grid (press at 30 mN, read, lift, move) and map
     /// its stiffness with the lump found marked.
     Scan(cmd::scan::ScanArgs),
+    /// Read the firmware's decoded defmt log: the readings as a table, the sweeps and the
+    /// reading history as a plot.
+    Log(cmd::log::LogArgs),
     /// Rewrite the golden captures of tests/data (for maintainers).
     #[command(hide = true)]
     GenerateCaptures(cmd::generate::GenerateArgs),
@@ -53,6 +56,7 @@ fn main() -> ExitCode {
         Cmd::Analyze(a) => cmd::analyze::run(a),
         Cmd::GenerateCaptures(a) => cmd::generate::run(a),
         Cmd::Scan(a) => cmd::scan::run(a),
+        Cmd::Log(a) => cmd::log::run(a),
     };
     match r {
         Ok(()) => ExitCode::SUCCESS,

@@ -3,6 +3,7 @@
 pub mod analyze;
 pub mod calibrate;
 pub mod generate;
+pub mod log;
 pub mod measure;
 pub mod physics;
 pub mod scan;

@@ -1,0 +1,370 @@
+//! `probe-bench log`: the readings and sweeps in a decoded defmt log of the firmware.
+
+use crate::defmt_log::{self, Level, LoggedReading, Session};
+use crate::plot::with_backend;
+use anyhow::{anyhow, bail, Context, Result};
+use clap::Args;
+use plotters::prelude::*;
+use serde_json::{json, Value};
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+#[derive(Args)]
+pub struct LogArgs {
+    /// Decoded defmt log (from `probe-rs run`, `defmt-print`, `scripts/qemu-run` or a saved
+    /// file); `-` or nothing reads stdin.
+    pub file: Option<PathBuf>,
+    /// Plot the logged admittance sweeps (conductance in nS against Hz) and the reading history
+    /// (resonance in Hz with its standard uncertainty) to .svg or .png.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// Print one JSON object (readings, sweeps, events) instead of the table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn fmt_opt(v: Option<f32>, digits: usize) -> String {
+    match v {
+        Some(x) => format!("{x:.digits$}"),
+        None => "—".into(),
+    }
+}
+
+fn when(r: &LoggedReading) -> String {
+    match r.time_s {
+        Some(t) => format!("{t:.3} s"),
+        None => format!("line {}", r.line),
+    }
+}
+
+/// The readings as a table (one line each).
+pub fn table(s: &Session) -> Vec<String> {
+    let mut out = vec![format!(
+        "{:>3}  {:<12} {:<13} {:>20} {:>18} {:>6} {:>6}  {}",
+        "#", "time", "status", "resonance (Hz)", "modulus (kPa)", "Q", "points", "method"
+    )];
+    for (k, r) in s.readings.iter().enumerate() {
+        let f = match (r.f_hz, r.f_sigma_hz) {
+            (Some(f), Some(sf)) => format!("{f:.3} ± {sf:.3}"),
+            (Some(f), None) => format!("{f:.3}"),
+            _ => "—".into(),
+        };
+        let e = match (r.e_kpa, r.e_sigma_kpa) {
+            (Some(e), Some(se)) => format!("{e:.1} ± {se:.1}"),
+            (Some(e), None) => format!("{e:.1}"),
+            _ => "—".into(),
+        };
+        out.push(format!(
+            "{:>3}  {:<12} {:<13} {:>20} {:>18} {:>6} {:>6}  {}",
+            k + 1,
+            when(r),
+            r.status,
+            f,
+            e,
+            fmt_opt(r.q, 2),
+            r.points,
+            r.method
+        ));
+    }
+    out
+}
+
+fn session_json(s: &Session) -> Value {
+    let readings: Vec<Value> = s
+        .readings
+        .iter()
+        .map(|r| {
+            json!({
+                "line": r.line, "time_s": r.time_s, "status": r.status,
+                "resonance_hz": r.f_hz, "resonance_sigma_hz": r.f_sigma_hz,
+                "modulus_kpa": r.e_kpa, "modulus_sigma_kpa": r.e_sigma_kpa,
+                "q_factor": r.q, "probe_time_s": r.probe_time_s,
+                "points": r.points, "method": r.method, "sweep": r.sweep,
+            })
+        })
+        .collect();
+    let sweeps: Vec<Value> = s
+        .sweeps
+        .iter()
+        .map(|w| {
+            json!({
+                "first_line": w.first_line,
+                "method": w.settings.as_ref().map(|x| x.method.clone()),
+                "reading": w.reading,
+                "points": w.points.iter().map(|p| json!({
+                    "tag": p.tag, "f_hz": p.f_hz, "g_s": p.g_s, "b_s": p.b_s, "sigma_s": p.sigma_s
+                })).collect::<Vec<_>>(),
+            })
+        })
+        .collect();
+    let events: Vec<Value> = s
+        .events
+        .iter()
+        .map(|e| json!({"line": e.line, "time_s": e.time_s, "text": e.text}))
+        .collect();
+    json!({
+        "messages": s.messages,
+        "readings": readings,
+        "sweeps": sweeps,
+        "events": events,
+        "unparsed": s.errors.iter().map(|e| e.to_string()).collect::<Vec<_>>(),
+    })
+}
+
+/// Run the subcommand.
+pub fn run(a: LogArgs) -> Result<()> {
+    let (name, text) = match a.file.as_deref() {
+        None => ("stdin".to_owned(), read_stdin()?),
+        Some(p) if p == Path::new("-") => ("stdin".to_owned(), read_stdin()?),
+        Some(p) => (
+            p.display().to_string(),
+            std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?,
+        ),
+    };
+    let s = defmt_log::parse_log(&text);
+    if s.messages == 0 {
+        match s.errors.first() {
+            Some(e) => bail!("{name}: no firmware message could be read ({e})"),
+            None => bail!("{name}: no firmware log messages found"),
+        }
+    }
+    for e in &s.errors {
+        eprintln!("probe-bench log: {name}: skipped {e}");
+    }
+    if a.json {
+        println!("{}", session_json(&s));
+    } else {
+        println!(
+            "probe-bench log: {name} — {} messages, {} readings, {} sweeps ({} other lines)",
+            s.messages,
+            s.readings.len(),
+            s.sweeps.len(),
+            s.other_lines
+        );
+        for l in table(&s) {
+            println!("  {l}");
+        }
+        if !s.events.is_empty() {
+            println!("  events:");
+            for e in &s.events {
+                let lvl = match e.level {
+                    Some(Level::Error) => "ERROR",
+                    Some(Level::Warn) => "WARN ",
+                    Some(Level::Info) => "INFO ",
+                    Some(Level::Debug) => "DEBUG",
+                    Some(Level::Trace) => "TRACE",
+                    None => "     ",
+                };
+                println!("    line {:>5}  {lvl}  {}", e.line, e.text);
+            }
+        }
+    }
+    if let Some(path) = &a.plot {
+        if s.sweeps.is_empty() && s.readings.is_empty() {
+            bail!("{name}: nothing to plot (no sweeps or readings in the log)");
+        }
+        write_plot(path, &name, &s)?;
+        if !a.json {
+            println!("  plot: {}", path.display());
+        }
+    }
+    Ok(())
+}
+
+fn read_stdin() -> Result<String> {
+    let mut s = String::new();
+    std::io::stdin()
+        .read_to_string(&mut s)
+        .context("cannot read stdin")?;
+    Ok(s)
+}
+
+/// Sweeps (top) and reading history (bottom) to .svg or .png.
+pub fn write_plot(path: &Path, title: &str, s: &Session) -> Result<()> {
+    with_backend(
+        path,
+        (960, 900),
+        |root| draw(root, title, s),
+        |root| draw(root, title, s),
+    )
+}
+
+const PALETTE: [RGBColor; 6] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+];
+
+fn draw<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    title: &str,
+    s: &Session,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("{e}");
+    root.fill(&WHITE).map_err(e)?;
+    let root = root
+        .titled(&format!("defmt log: {title}"), ("sans-serif", 20))
+        .map_err(e)?;
+    let (top, bottom) = root.split_vertically(480);
+    // Sweeps.
+    let pts = s.sweeps.iter().flat_map(|w| w.points.iter());
+    let (mut f0, mut f1, mut g0, mut g1) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64, 0.0f64);
+    for p in pts {
+        if p.f_hz.is_finite() && p.g_s.is_finite() {
+            f0 = f0.min(p.f_hz as f64);
+            f1 = f1.max(p.f_hz as f64);
+            g0 = g0.min(p.g_s as f64 * 1e9);
+            g1 = g1.max(p.g_s as f64 * 1e9);
+        }
+    }
+    if !(f1 > f0) {
+        (f0, f1) = (0.0, 1.0);
+    }
+    let g1 = if g1 > g0 { g1 * 1.05 } else { g0 + 1.0 };
+    let mut chart = ChartBuilder::on(&top)
+        .caption("logged sweeps: conductance", ("sans-serif", 16))
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(f0..f1, g0..g1)
+        .map_err(e)?;
+    chart
+        .configure_mesh()
+        .x_desc("drive frequency (Hz)")
+        .y_desc("G = Re(Y) (nS)")
+        .draw()
+        .map_err(e)?;
+    for (k, w) in s.sweeps.iter().enumerate() {
+        let c = PALETTE[k % PALETTE.len()];
+        let line: Vec<(f64, f64)> = w
+            .points
+            .iter()
+            .filter(|p| p.f_hz.is_finite() && p.g_s.is_finite())
+            .map(|p| (p.f_hz as f64, p.g_s as f64 * 1e9))
+            .collect();
+        let label = match w.reading.and_then(|r| s.readings.get(r)) {
+            Some(r) => format!(
+                "reading {}: {} {}",
+                w.reading.unwrap_or(0) + 1,
+                r.status,
+                r.f_hz.map(|f| format!("{f:.2} Hz")).unwrap_or_default()
+            ),
+            None => format!("sweep at line {} (no reading)", w.first_line),
+        };
+        chart
+            .draw_series(LineSeries::new(line.clone(), c.stroke_width(2)))
+            .map_err(e)?
+            .label(label)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+        chart
+            .draw_series(
+                line.iter()
+                    .map(|&(x, y)| Circle::new((x, y), 2, c.filled())),
+            )
+            .map_err(e)?;
+        if let Some(f) = w
+            .reading
+            .and_then(|r| s.readings.get(r))
+            .and_then(|r| r.f_hz)
+        {
+            let f = f as f64;
+            if f > f0 && f < f1 {
+                chart
+                    .draw_series(LineSeries::new(vec![(f, g0), (f, g1)], c.mix(0.6)))
+                    .map_err(e)?;
+            }
+        }
+    }
+    if !s.sweeps.is_empty() {
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()
+            .map_err(e)?;
+    }
+    // History.
+    let rs: Vec<(f64, &LoggedReading)> = s
+        .readings
+        .iter()
+        .enumerate()
+        .map(|(k, r)| (r.time_s.unwrap_or((k + 1) as f64), r))
+        .collect();
+    let timed = s.readings.iter().all(|r| r.time_s.is_some());
+    let (x0, x1) = rs
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (x, _)| {
+            (a.min(*x), b.max(*x))
+        });
+    let (x0, x1) = if x1 > x0 {
+        let pad = 0.05 * (x1 - x0);
+        (x0 - pad, x1 + pad)
+    } else if x0.is_finite() {
+        (x0 - 1.0, x0 + 1.0)
+    } else {
+        (0.0, 1.0)
+    };
+    let fr: Vec<f64> = rs
+        .iter()
+        .filter_map(|(_, r)| r.f_hz.map(|f| f as f64))
+        .collect();
+    let (y0, y1) = fr
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &f| {
+            (a.min(f), b.max(f))
+        });
+    let (y0, y1) = if y1 > y0 {
+        let pad = 0.15 * (y1 - y0);
+        (y0 - pad, y1 + pad)
+    } else if y0.is_finite() {
+        (y0 - 1.0, y0 + 1.0)
+    } else {
+        (200.0, 260.0)
+    };
+    let mut hist = ChartBuilder::on(&bottom)
+        .caption(
+            "reading history: resonance ± standard uncertainty (ok: blue, failed: red)",
+            ("sans-serif", 16),
+        )
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(x0..x1, y0..y1)
+        .map_err(e)?;
+    hist.configure_mesh()
+        .x_desc(if timed { "time (s)" } else { "reading" })
+        .y_desc("resonance (Hz)")
+        .draw()
+        .map_err(e)?;
+    for (x, r) in &rs {
+        let Some(f) = r.f_hz else { continue };
+        let f = f as f64;
+        let ok = r.status == "ok";
+        let c = if ok { BLUE } else { RED };
+        let sf = r.f_sigma_hz.unwrap_or(0.0) as f64;
+        // Error bar: the ±σ segment with caps a hundredth of the axis wide.
+        let cap = 0.01 * (x1 - x0);
+        for seg in [
+            vec![(*x, f - sf), (*x, f + sf)],
+            vec![(*x - cap, f - sf), (*x + cap, f - sf)],
+            vec![(*x - cap, f + sf), (*x + cap, f + sf)],
+        ] {
+            hist.draw_series(std::iter::once(PathElement::new(seg, c.stroke_width(2))))
+                .map_err(e)?;
+        }
+        if ok {
+            hist.draw_series(std::iter::once(Circle::new((*x, f), 4, c.filled())))
+                .map_err(e)?;
+        } else {
+            hist.draw_series(std::iter::once(Cross::new((*x, f), 5, c.stroke_width(2))))
+                .map_err(e)?;
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,646 @@
+//! The firmware's decoded defmt log: messages parsed against the firmware's own format strings,
+//! and the readings and sweeps they describe.
+//!
+//! The firmware logs one defmt message per event with structured values (`key={=f32}` …); the
+//! formats are listed in the crate docs of `src/bin/probe.rs` and repeated here in
+//! [`TEMPLATES`] (a test checks the two sets are identical, so a change on one side fails the
+//! build's tests). The decoder (`defmt-print`, `probe-rs run`, or `scripts/qemu-run`) prints
+//! each message as text in a configurable frame, e.g. `INFO  point tag=3 f_hz=204.0 …`,
+//! `0.001234 [INFO ] point … (src/bin/probe.rs:771 )`. A line is recognised by the start of one
+//! of the templates (`point tag=`); what comes before it is the frame, from which a timestamp
+//! (the first number, s; `<time>` when the firmware has none) and the level are taken; a
+//! trailing `(file:line)` is dropped. Values are read as the decoder prints them: floats as
+//! Rust's `{:?}` (`1.25e-7`, `NaN`), booleans `true`/`false`, strings verbatim.
+//!
+//! Sweeps and readings: every `point` line between two `reading` lines belongs to the reading
+//! that closes them (whatever procedure produced them); the `settings` line last seen before
+//! the sweep is kept with it. `boot` and `stalled` abandon a sweep in progress.
+#![allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > y)` also rejects NaN, deliberately
+
+use std::fmt;
+
+/// The firmware's log formats (defmt format strings), one per message kind.
+pub const TEMPLATES: &[&str] = &[
+    "boot board={=str} fs_hz={=f32} batch={=u32}",
+    "store loaded slot={=u8} seq={=u32} other={=str}",
+    "store fallback slot0={=str} slot1={=str} calibration=paper-experiment",
+    "store saved slot={=u8} seq={=u32}",
+    "store error={=str}",
+    "settings method={=str} start_hz={=f32} stop_hz={=f32} step_hz={=f32} settle_s={=f32} integrate_s={=f32} drive_v={=f32}",
+    "point tag={=u16} f_hz={=f32} g_s={=f32} b_s={=f32} sigma_s={=f32}",
+    "reading status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str}",
+    "air f_hz={=f32} q={=f32}",
+    "reference e_kpa={=f32} f_hz={=f32} f_sigma_hz={=f32} n={=u16}",
+    "calibration source={=str} a={=f32} b={=f32} c={=f32} min_kpa={=f32} max_kpa={=f32}",
+    "rejected error={=str}",
+    "stalled tag={=u16}",
+    "overrun late={=u32} ring={=u32} dropped={=u32}",
+    "counters batches={=u32} late={=u32} ring={=u32} dropped={=u32} isr_mean={=u32} isr_max={=u32} unit={=str}",
+    "status method={=str} calibration={=str} fallback={=bool} air={=bool} references={=u16}",
+    "exit ok={=bool}",
+];
+
+/// Type of a logged value (the defmt type hint).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Ty {
+    /// `{=f32}`.
+    F32,
+    /// `{=u8}`, `{=u16}`, `{=u32}`.
+    Uint,
+    /// `{=bool}`.
+    Bool,
+    /// `{=str}`.
+    Str,
+}
+
+/// A piece of a template.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Piece {
+    /// Literal text.
+    Literal(String),
+    /// A value: its key (the word before `=`) and type.
+    Field(String, Ty),
+}
+
+/// Split a defmt format string into literals and typed fields; `None` for a type hint this
+/// parser does not know.
+pub fn compile(template: &str) -> Option<Vec<Piece>> {
+    let mut out = Vec::new();
+    let mut rest = template;
+    while let Some(open) = rest.find("{=") {
+        let close = open + rest[open..].find('}')?;
+        let lit = &rest[..open];
+        let key = lit
+            .strip_suffix('=')?
+            .rsplit(' ')
+            .next()
+            .unwrap_or_default()
+            .to_owned();
+        let ty = match &rest[open + 2..close] {
+            "f32" => Ty::F32,
+            "u8" | "u16" | "u32" => Ty::Uint,
+            "bool" => Ty::Bool,
+            "str" => Ty::Str,
+            _ => return None,
+        };
+        if !lit.is_empty() {
+            out.push(Piece::Literal(lit.to_owned()));
+        }
+        out.push(Piece::Field(key, ty));
+        rest = &rest[close + 1..];
+    }
+    if !rest.is_empty() {
+        out.push(Piece::Literal(rest.to_owned()));
+    }
+    Some(out)
+}
+
+/// A logged value.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Value {
+    /// A float (`NaN` stands for a missing value).
+    F32(f32),
+    /// An unsigned integer.
+    Uint(u32),
+    /// A boolean.
+    Bool(bool),
+    /// A string.
+    Str(String),
+}
+
+impl Value {
+    /// As the decoder prints it.
+    pub fn render(&self) -> String {
+        match self {
+            Value::F32(x) => format!("{x:?}"),
+            Value::Uint(x) => x.to_string(),
+            Value::Bool(b) => b.to_string(),
+            Value::Str(s) => s.clone(),
+        }
+    }
+}
+
+/// Format a message as the firmware logs it (through its format string) and the decoder prints
+/// it; `None` when the values do not fit the template.
+pub fn render(template: &str, values: &[Value]) -> Option<String> {
+    let mut s = String::new();
+    let mut v = values.iter();
+    for p in compile(template)? {
+        match p {
+            Piece::Literal(l) => s += &l,
+            Piece::Field(_, ty) => {
+                let x = v.next()?;
+                let fits = matches!(
+                    (ty, x),
+                    (Ty::F32, Value::F32(_))
+                        | (Ty::Uint, Value::Uint(_))
+                        | (Ty::Bool, Value::Bool(_))
+                        | (Ty::Str, Value::Str(_))
+                );
+                if !fits {
+                    return None;
+                }
+                s += &x.render();
+            }
+        }
+    }
+    v.next().is_none().then_some(s)
+}
+
+/// Log level.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Level {
+    /// TRACE.
+    Trace,
+    /// DEBUG.
+    Debug,
+    /// INFO.
+    Info,
+    /// WARN.
+    Warn,
+    /// ERROR.
+    Error,
+}
+
+/// One recognised message.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Message {
+    /// 1-based line in the input.
+    pub line: usize,
+    /// Timestamp printed by the decoder, s (when the firmware has one).
+    pub time_s: Option<f64>,
+    /// Level, when printed.
+    pub level: Option<Level>,
+    /// The message kind: the template's words before its first key (`point`, `store loaded`,
+    /// `store` for `store error=`, ...).
+    pub kind: String,
+    /// Index into [`TEMPLATES`].
+    pub template: usize,
+    /// Values by key, in template order.
+    pub fields: Vec<(String, Value)>,
+}
+
+impl Message {
+    /// The value of `key`.
+    pub fn get(&self, key: &str) -> Option<&Value> {
+        self.fields.iter().find(|(k, _)| k == key).map(|(_, v)| v)
+    }
+    /// A float value (`NaN` → `None`).
+    pub fn f32(&self, key: &str) -> Option<f32> {
+        match self.get(key) {
+            Some(Value::F32(x)) if x.is_finite() => Some(*x),
+            _ => None,
+        }
+    }
+    /// An unsigned value.
+    pub fn uint(&self, key: &str) -> Option<u32> {
+        match self.get(key) {
+            Some(Value::Uint(x)) => Some(*x),
+            _ => None,
+        }
+    }
+    /// A string value.
+    pub fn str(&self, key: &str) -> Option<&str> {
+        match self.get(key) {
+            Some(Value::Str(s)) => Some(s),
+            _ => None,
+        }
+    }
+}
+
+/// A line that starts like a known message but does not parse.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LogError {
+    /// 1-based line.
+    pub line: usize,
+    /// What is wrong.
+    pub what: String,
+}
+
+impl fmt::Display for LogError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "line {}: {}", self.line, self.what)
+    }
+}
+
+struct Compiled {
+    pieces: Vec<Piece>,
+    prefix: String,
+    kind: String,
+}
+
+fn compiled() -> Vec<Compiled> {
+    TEMPLATES
+        .iter()
+        .filter_map(|t| {
+            let pieces = compile(t)?;
+            let prefix = match pieces.first() {
+                Some(Piece::Literal(l)) => l.clone(),
+                _ => return None,
+            };
+            let kind = prefix
+                .rsplit_once(' ')
+                .map(|(k, _)| k.to_owned())
+                .unwrap_or_else(|| prefix.clone());
+            Some(Compiled {
+                pieces,
+                prefix,
+                kind,
+            })
+        })
+        .collect()
+}
+
+fn strip_ansi(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    let mut chars = s.chars().peekable();
+    while let Some(c) = chars.next() {
+        if c == '\u{1b}' {
+            if chars.peek() == Some(&'[') {
+                chars.next();
+                for d in chars.by_ref() {
+                    if d.is_ascii_alphabetic() {
+                        break;
+                    }
+                }
+            }
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// Drop a trailing `(file:line)` location the decoder may append.
+fn strip_location(s: &str) -> &str {
+    let t = s.trim_end();
+    if let Some(open) = t.rfind(" (") {
+        let inner = t[open + 2..].trim_end();
+        if let Some(inner) = inner.strip_suffix(')') {
+            let inner = inner.trim();
+            if let Some((_, n)) = inner.rsplit_once(':') {
+                if !n.is_empty() && n.chars().all(|c| c.is_ascii_digit()) {
+                    return t[..open].trim_end();
+                }
+            }
+        }
+    }
+    t
+}
+
+fn parse_time(tok: &str) -> Option<f64> {
+    let t = tok.trim_matches(|c| c == '[' || c == ']' || c == '(' || c == ')');
+    if let Ok(x) = t.parse::<f64>() {
+        return x.is_finite().then_some(x);
+    }
+    // hh:mm:ss(.fff)
+    let parts: Vec<&str> = t.split(':').collect();
+    if parts.len() == 3 {
+        let h: f64 = parts[0].parse().ok()?;
+        let m: f64 = parts[1].parse().ok()?;
+        let s: f64 = parts[2].parse().ok()?;
+        return Some(h * 3600.0 + m * 60.0 + s);
+    }
+    None
+}
+
+fn parse_level(tok: &str) -> Option<Level> {
+    let t = tok.trim_matches(|c: char| c == '[' || c == ']' || c == '<' || c == '>' || c == ' ');
+    Some(match t.to_ascii_uppercase().as_str() {
+        "TRACE" => Level::Trace,
+        "DEBUG" => Level::Debug,
+        "INFO" => Level::Info,
+        "WARN" | "WARNING" => Level::Warn,
+        "ERROR" => Level::Error,
+        _ => return None,
+    })
+}
+
+fn parse_value(ty: Ty, s: &str) -> Option<Value> {
+    Some(match ty {
+        Ty::F32 => Value::F32(s.parse().ok()?),
+        Ty::Uint => Value::Uint(s.parse().ok()?),
+        Ty::Bool => Value::Bool(s.parse().ok()?),
+        Ty::Str => Value::Str(s.to_owned()),
+    })
+}
+
+/// Parse one decoded line: `Ok(None)` when it is no firmware message (blank, location line,
+/// other output), `Err` when it starts like one but does not parse.
+pub fn parse_line(line_no: usize, raw: &str) -> Result<Option<Message>, LogError> {
+    parse_with(&compiled(), line_no, raw)
+}
+
+fn parse_with(
+    templates: &[Compiled],
+    line_no: usize,
+    raw: &str,
+) -> Result<Option<Message>, LogError> {
+    let line = strip_ansi(raw);
+    let line = line.trim_end();
+    // The template whose prefix appears earliest at a word start (longest on ties).
+    let mut best: Option<(usize, usize)> = None;
+    for (k, t) in templates.iter().enumerate() {
+        let mut from = 0;
+        while let Some(off) = line[from..].find(&t.prefix) {
+            let at = from + off;
+            let word_start = at == 0 || line[..at].ends_with([' ', '\t', ']', '|']);
+            if word_start {
+                let better = match best {
+                    None => true,
+                    Some((bk, bat)) => {
+                        at < bat || (at == bat && t.prefix.len() > templates[bk].prefix.len())
+                    }
+                };
+                if better {
+                    best = Some((k, at));
+                }
+                break;
+            }
+            from = at + 1;
+        }
+    }
+    let Some((k, at)) = best else {
+        return Ok(None);
+    };
+    let t = &templates[k];
+    let frame = &line[..at];
+    let mut time_s = None;
+    let mut level = None;
+    for tok in frame.split_whitespace() {
+        if level.is_none() {
+            if let Some(l) = parse_level(tok) {
+                level = Some(l);
+                continue;
+            }
+        }
+        if time_s.is_none() {
+            time_s = parse_time(tok);
+        }
+    }
+    let err = |what: String| LogError {
+        line: line_no,
+        what,
+    };
+    let body = &line[at..];
+    let mut pos = 0;
+    let mut fields = Vec::new();
+    let n = t.pieces.len();
+    for (i, p) in t.pieces.iter().enumerate() {
+        match p {
+            Piece::Literal(l) => {
+                if !body[pos..].starts_with(l.as_str()) {
+                    return Err(err(format!("`{}` does not match `{l}`", &body[pos..])));
+                }
+                pos += l.len();
+            }
+            Piece::Field(key, ty) => {
+                let text = match t.pieces.get(i + 1) {
+                    Some(Piece::Literal(next)) => {
+                        let Some(end) = body[pos..].find(next.as_str()) else {
+                            return Err(err(format!("`{}` lacks `{}`", t.kind, next.trim())));
+                        };
+                        let v = &body[pos..pos + end];
+                        pos += end;
+                        v
+                    }
+                    _ if i + 1 == n => {
+                        let rest = strip_location(&body[pos..]);
+                        pos = body.len();
+                        if *ty == Ty::Str && key == "error" {
+                            rest.trim()
+                        } else {
+                            rest.split_whitespace().next().unwrap_or("")
+                        }
+                    }
+                    _ => return Err(err("two adjacent fields in a template".into())),
+                };
+                let v = parse_value(*ty, text.trim())
+                    .ok_or_else(|| err(format!("`{key}={}`: not a {ty:?} value", text.trim())))?;
+                fields.push((key.clone(), v));
+            }
+        }
+    }
+    Ok(Some(Message {
+        line: line_no,
+        time_s,
+        level,
+        kind: t.kind.clone(),
+        template: k,
+        fields,
+    }))
+}
+
+/// One point of a logged sweep.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LoggedPoint {
+    /// Point tag (1-based order in the reading).
+    pub tag: u32,
+    /// Frequency, Hz.
+    pub f_hz: f32,
+    /// Conductance, S.
+    pub g_s: f32,
+    /// Susceptance, S.
+    pub b_s: f32,
+    /// Standard uncertainty of each component, S.
+    pub sigma_s: f32,
+}
+
+/// Sweep settings in force.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LoggedSettings {
+    /// Line of the `settings` message.
+    pub line: usize,
+    /// Method.
+    pub method: String,
+    /// Start, Hz.
+    pub start_hz: Option<f32>,
+    /// Stop, Hz.
+    pub stop_hz: Option<f32>,
+    /// Step, Hz.
+    pub step_hz: Option<f32>,
+    /// Drive, V.
+    pub drive_v: Option<f32>,
+}
+
+/// The points one measurement logged.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LoggedSweep {
+    /// Line of its first point.
+    pub first_line: usize,
+    /// Settings in force when it started.
+    pub settings: Option<LoggedSettings>,
+    /// Points, in log order.
+    pub points: Vec<LoggedPoint>,
+    /// Index of the reading that closed it (`None`: abandoned or the log ended).
+    pub reading: Option<usize>,
+}
+
+/// A logged reading.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LoggedReading {
+    /// Line.
+    pub line: usize,
+    /// Timestamp, s.
+    pub time_s: Option<f64>,
+    /// `ok` or the failure code.
+    pub status: String,
+    /// Resonance, Hz.
+    pub f_hz: Option<f32>,
+    /// Its standard uncertainty, Hz.
+    pub f_sigma_hz: Option<f32>,
+    /// Modulus, kPa.
+    pub e_kpa: Option<f32>,
+    /// Its standard uncertainty, kPa.
+    pub e_sigma_kpa: Option<f32>,
+    /// Quality factor.
+    pub q: Option<f32>,
+    /// Probe time, s.
+    pub probe_time_s: Option<f32>,
+    /// Points.
+    pub points: u32,
+    /// Method.
+    pub method: String,
+    /// Index of its sweep, when points were logged.
+    pub sweep: Option<usize>,
+}
+
+/// A notable event (warnings and errors of the firmware).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LoggedEvent {
+    /// Line.
+    pub line: usize,
+    /// Timestamp, s.
+    pub time_s: Option<f64>,
+    /// Level.
+    pub level: Option<Level>,
+    /// The message as logged (kind and values).
+    pub text: String,
+}
+
+/// Everything reconstructed from a log.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Session {
+    /// Readings in order.
+    pub readings: Vec<LoggedReading>,
+    /// Sweeps in order.
+    pub sweeps: Vec<LoggedSweep>,
+    /// Warnings and errors, and boots.
+    pub events: Vec<LoggedEvent>,
+    /// Messages recognised.
+    pub messages: usize,
+    /// Lines that were no firmware message.
+    pub other_lines: usize,
+    /// Lines that looked like a message but did not parse.
+    pub errors: Vec<LogError>,
+}
+
+/// Parse a whole decoded log.
+pub fn parse_log(text: &str) -> Session {
+    let templates = compiled();
+    let mut s = Session::default();
+    let mut settings: Option<LoggedSettings> = None;
+    let mut open: Option<LoggedSweep> = None;
+    for (k, raw) in text.lines().enumerate() {
+        let line = k + 1;
+        let m = match parse_with(&templates, line, raw) {
+            Ok(Some(m)) => m,
+            Ok(None) => {
+                if !raw.trim().is_empty() {
+                    s.other_lines += 1;
+                }
+                continue;
+            }
+            Err(e) => {
+                s.errors.push(e);
+                continue;
+            }
+        };
+        s.messages += 1;
+        let text_of = |m: &Message| {
+            let mut t = m.kind.clone();
+            for (k, v) in &m.fields {
+                t += &format!(" {k}={}", v.render());
+            }
+            t
+        };
+        match m.kind.as_str() {
+            "settings" => {
+                settings = Some(LoggedSettings {
+                    line,
+                    method: m.str("method").unwrap_or_default().to_owned(),
+                    start_hz: m.f32("start_hz"),
+                    stop_hz: m.f32("stop_hz"),
+                    step_hz: m.f32("step_hz"),
+                    drive_v: m.f32("drive_v"),
+                });
+            }
+            "point" => {
+                let p = LoggedPoint {
+                    tag: m.uint("tag").unwrap_or(0),
+                    f_hz: m.f32("f_hz").unwrap_or(f32::NAN),
+                    g_s: m.f32("g_s").unwrap_or(f32::NAN),
+                    b_s: m.f32("b_s").unwrap_or(f32::NAN),
+                    sigma_s: m.f32("sigma_s").unwrap_or(f32::NAN),
+                };
+                open.get_or_insert_with(|| LoggedSweep {
+                    first_line: line,
+                    settings: settings.clone(),
+                    points: Vec::new(),
+                    reading: None,
+                })
+                .points
+                .push(p);
+            }
+            "reading" => {
+                let idx = s.readings.len();
+                let sweep = open.take().map(|mut sw| {
+                    sw.reading = Some(idx);
+                    s.sweeps.push(sw);
+                    s.sweeps.len() - 1
+                });
+                s.readings.push(LoggedReading {
+                    line,
+                    time_s: m.time_s,
+                    status: m.str("status").unwrap_or_default().to_owned(),
+                    f_hz: m.f32("f_hz"),
+                    f_sigma_hz: m.f32("f_sigma_hz"),
+                    e_kpa: m.f32("e_kpa"),
+                    e_sigma_kpa: m.f32("e_sigma_kpa"),
+                    q: m.f32("q"),
+                    probe_time_s: m.f32("probe_time_s"),
+                    points: m.uint("points").unwrap_or(0),
+                    method: m.str("method").unwrap_or_default().to_owned(),
+                    sweep,
+                });
+            }
+            "boot" | "stalled" => {
+                if let Some(sw) = open.take() {
+                    s.sweeps.push(sw);
+                }
+                s.events.push(LoggedEvent {
+                    line,
+                    time_s: m.time_s,
+                    level: m.level,
+                    text: text_of(&m),
+                });
+            }
+            _ => {
+                let notable = matches!(m.level, Some(Level::Warn | Level::Error))
+                    || matches!(m.kind.as_str(), "rejected" | "overrun" | "stalled");
+                if notable {
+                    s.events.push(LoggedEvent {
+                        line,
+                        time_s: m.time_s,
+                        level: m.level,
+                        text: text_of(&m),
+                    });
+                }
+            }
+        }
+    }
+    if let Some(sw) = open.take() {
+        s.sweeps.push(sw);
+    }
+    s
+}

@@ -1,0 +1,327 @@
+//! `probe-bench log`: the parser's templates are the firmware's format strings, lines formatted
+//! through them parse back to the same values, and a real decoded QEMU log reconstructs the
+//! reading the firmware made.
+
+use probe_bench::defmt_log::{self, compile, parse_line, render, Piece, Ty, Value, TEMPLATES};
+use pzt_probe::sweep::SweepPoint;
+use pzt_probe::{Hz, Method, PowerLaw};
+use std::collections::BTreeSet;
+use std::path::PathBuf;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// Every format string passed to `defmt::{trace,debug,info,warn,error}!` in the firmware.
+fn firmware_formats() -> BTreeSet<String> {
+    let src = std::fs::read_to_string(root().join("src/bin/probe.rs")).expect("src/bin/probe.rs");
+    let mut out = BTreeSet::new();
+    for mac in ["trace!(", "debug!(", "info!(", "warn!(", "error!("] {
+        let pat = format!("defmt::{mac}");
+        let mut rest = src.as_str();
+        while let Some(i) = rest.find(&pat) {
+            rest = &rest[i + pat.len()..];
+            let t = rest.trim_start();
+            if let Some(body) = t.strip_prefix('"') {
+                if let Some(end) = body.find('"') {
+                    out.insert(body[..end].to_owned());
+                }
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn templates_are_the_firmwares_format_strings() {
+    let fw = firmware_formats();
+    // Structured messages only: the panic handler's `{}` is free text.
+    let structured: BTreeSet<String> = fw.into_iter().filter(|f| !f.contains("{}")).collect();
+    let ours: BTreeSet<String> = TEMPLATES.iter().map(|s| s.to_string()).collect();
+    let missing: Vec<_> = structured.difference(&ours).collect();
+    let stale: Vec<_> = ours.difference(&structured).collect();
+    assert!(
+        missing.is_empty() && stale.is_empty(),
+        "firmware formats unknown to the parser: {missing:?}; parser templates the firmware no longer logs: {stale:?}"
+    );
+    for t in TEMPLATES {
+        assert!(compile(t).is_some(), "{t}");
+    }
+}
+
+/// Sample values for a template: distinct per field, with awkward floats.
+fn sample(template: &str, salt: u32) -> Vec<Value> {
+    let floats = [
+        227.9683f32,
+        1.9323245e-8,
+        -3.5e-7,
+        0.040545568,
+        f32::NAN,
+        1e10,
+        0.0,
+    ];
+    let mut k = salt as usize;
+    compile(template)
+        .unwrap()
+        .into_iter()
+        .filter_map(|p| match p {
+            Piece::Field(key, ty) => {
+                k += 1;
+                Some(match ty {
+                    Ty::F32 => Value::F32(floats[k % floats.len()] * (1.0 + salt as f32)),
+                    Ty::Uint => Value::Uint(k as u32 * 7 + salt),
+                    Ty::Bool => Value::Bool(k % 2 == 0),
+                    Ty::Str if key == "error" => {
+                        Value::Str("stop frequency must be above start frequency".into())
+                    }
+                    Ty::Str => Value::Str(format!("{key}-{salt}")),
+                })
+            }
+            Piece::Literal(_) => None,
+        })
+        .collect()
+}
+
+fn same(a: &Value, b: &Value) -> bool {
+    match (a, b) {
+        (Value::F32(x), Value::F32(y)) => x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()),
+        _ => a == b,
+    }
+}
+
+#[test]
+fn firmware_lines_round_trip_through_the_parser() {
+    // Frames of the decoders: scripts/qemu-run (`{L} {s}`), defmt-print with time and location,
+    // probe-rs style, colour codes.
+    let frames: [(&str, &str, Option<f64>); 5] = [
+        ("INFO  ", "", None),
+        (
+            "0.001234 [INFO ] ",
+            " (src/bin/probe.rs:771 )",
+            Some(0.001234),
+        ),
+        ("<time> [WARN ] ", " (src/bin/probe.rs:12)", None),
+        ("12.500000 ERROR ", "", Some(12.5)),
+        ("\u{1b}[32mINFO \u{1b}[0m ", "", None),
+    ];
+    for (salt, t) in TEMPLATES.iter().enumerate() {
+        let values = sample(t, salt as u32);
+        let msg = render(t, &values).expect("values fit");
+        for (pre, post, time) in frames {
+            let line = format!("{pre}{msg}{post}");
+            let m = parse_line(7, &line)
+                .unwrap_or_else(|e| panic!("{line}: {e}"))
+                .unwrap_or_else(|| panic!("not recognised: {line}"));
+            assert_eq!(TEMPLATES[m.template], *t, "{line}");
+            assert_eq!(m.line, 7);
+            assert_eq!(m.time_s, time, "{line}");
+            assert_eq!(m.fields.len(), values.len());
+            for ((_, got), want) in m.fields.iter().zip(&values) {
+                assert!(same(got, want), "{line}: {got:?} vs {want:?}");
+            }
+        }
+    }
+    // Not messages: location lines, other output.
+    assert_eq!(
+        parse_line(1, "└─ probe::app::report @ src/bin/probe.rs:771").unwrap(),
+        None
+    );
+    assert_eq!(parse_line(1, "(HOST) INFO  flashing done").unwrap(), None);
+    // A recognised message with a broken value is an error naming its line.
+    let e = parse_line(9, "INFO  point tag=x f_hz=1.0 g_s=1.0 b_s=1.0 sigma_s=1.0").unwrap_err();
+    assert_eq!(e.line, 9);
+    assert!(e.to_string().contains("tag=x"), "{e}");
+}
+
+#[test]
+fn qemu_log_reconstructs_the_firmwares_reading() {
+    let text = std::fs::read_to_string(root().join("tests/data/log/qemu_sweep_g.log")).unwrap();
+    let located =
+        std::fs::read_to_string(root().join("tests/data/log/qemu_sweep_g_located.log")).unwrap();
+    let s = defmt_log::parse_log(&text);
+    assert_eq!(s, {
+        let mut l = defmt_log::parse_log(&located);
+        // Same run, different frames: identical but for the header comment line's text.
+        l.other_lines = s.other_lines;
+        l
+    });
+    assert!(s.errors.is_empty(), "{:?}", s.errors);
+    assert_eq!(s.readings.len(), 1);
+    assert_eq!(s.sweeps.len(), 1);
+    let r = &s.readings[0];
+    let w = &s.sweeps[0];
+    assert_eq!(r.status, "ok");
+    assert_eq!(r.method, "sweep-g");
+    assert_eq!(w.reading, Some(0));
+    assert_eq!(r.points as usize, w.points.len());
+    assert!(w
+        .points
+        .iter()
+        .enumerate()
+        .all(|(k, p)| p.tag as usize == k + 1));
+    // The settings in force were the second `settings` line (200–260 Hz).
+    let set = w.settings.as_ref().unwrap();
+    assert_eq!((set.start_hz, set.stop_hz), (Some(200.0), Some(260.0)));
+    // The firmware's estimator on the logged points gives the logged resonance again.
+    let pts: Vec<SweepPoint> = w
+        .points
+        .iter()
+        .map(|p| SweepPoint {
+            freq: Hz(p.f_hz),
+            g_s: p.g_s,
+            b_s: p.b_s,
+            sigma_s: p.sigma_s,
+            current_a: 0.0,
+            drive_v: 5.0,
+            clip_fraction: 0.0,
+            residual_a: 0.0,
+        })
+        .collect();
+    let est = Method::SweepG.estimate(&pts).unwrap();
+    let f = r.f_hz.unwrap();
+    assert!(
+        (est.resonance.0 - f).abs() < 1e-3,
+        "{} vs {f}",
+        est.resonance.0
+    );
+    assert!((est.sigma.0 / r.f_sigma_hz.unwrap() - 1.0).abs() < 1e-3);
+    // And paper eq. 5 maps it to the logged modulus.
+    let m = PowerLaw::paper_experiment().invert(Hz(f), Hz(0.0)).unwrap();
+    assert!((m.value.0 / r.e_kpa.unwrap() - 1.0).abs() < 1e-4);
+}
+
+#[test]
+fn readings_sweeps_and_events_of_a_longer_log() {
+    let pt = |t: f64, tag: u32, f: f32, g: f32| {
+        let v = [
+            Value::Uint(tag),
+            Value::F32(f),
+            Value::F32(g),
+            Value::F32(3e-7),
+            Value::F32(1e-10),
+        ];
+        format!("{t:.6} [INFO ] {}", render(TEMPLATES[6], &v).unwrap())
+    };
+    let reading = |t: f64, status: &str, f: f32, n: u32| {
+        let v = [
+            Value::Str(status.into()),
+            Value::F32(f),
+            Value::F32(if f.is_nan() { f32::NAN } else { 0.05 }),
+            Value::F32(if status == "ok" { 280.0 } else { f32::NAN }),
+            Value::F32(if status == "ok" { 5.0 } else { f32::NAN }),
+            Value::F32(10.0),
+            Value::F32(1.2),
+            Value::Uint(n),
+            Value::Str("sweep-g".into()),
+        ];
+        format!("{t:.6} [INFO ] {}", render(TEMPLATES[7], &v).unwrap())
+    };
+    let mut lines = vec![
+        "0.000010 [INFO ] boot board=stm32 fs_hz=10000.0 batch=50".to_owned(),
+        "└─ probe::app::init @ src/bin/probe.rs:285".to_owned(),
+    ];
+    for k in 0..3 {
+        lines.push(pt(1.0, k + 1, 220.0 + k as f32, 1e-7));
+    }
+    lines.push(reading(1.5, "ok", 227.5, 3));
+    lines.push(
+        "2.000000 [WARN ] rejected error=stop frequency must be above start frequency".into(),
+    );
+    lines.push(pt(3.0, 1, 220.0, 1e-7));
+    lines.push("3.100000 [ERROR] stalled tag=2".into());
+    lines.push(reading(4.0, "no_contact", f32::NAN, 0));
+    lines.push(pt(5.0, 1, 180.0, 2e-8));
+    lines.push(pt(5.1, 2, 182.0, 2e-8));
+    lines.push(reading(5.5, "out_of_band", 170.0, 2));
+    let s = defmt_log::parse_log(&lines.join("\n"));
+    assert!(s.errors.is_empty());
+    assert_eq!(s.readings.len(), 3);
+    assert_eq!(
+        s.readings
+            .iter()
+            .map(|r| r.status.as_str())
+            .collect::<Vec<_>>(),
+        ["ok", "no_contact", "out_of_band"]
+    );
+    assert_eq!(s.readings[0].time_s, Some(1.5));
+    assert_eq!(s.readings[0].e_kpa, Some(280.0));
+    assert_eq!(s.readings[1].f_hz, None);
+    assert_eq!(s.readings[1].e_kpa, None);
+    assert_eq!(s.readings[1].sweep, None);
+    // Sweeps: 3 points (reading 1), 1 abandoned by the stall, 2 points (reading 3).
+    assert_eq!(s.sweeps.len(), 3);
+    assert_eq!(s.sweeps[0].points.len(), 3);
+    assert_eq!(s.sweeps[0].reading, Some(0));
+    assert_eq!(s.sweeps[1].reading, None);
+    assert_eq!(s.sweeps[2].reading, Some(2));
+    assert_eq!(s.readings[2].sweep, Some(2));
+    // Events: boot, rejected (its message with spaces), stalled.
+    let ev: Vec<&str> = s.events.iter().map(|e| e.text.as_str()).collect();
+    assert_eq!(ev.len(), 3, "{ev:?}");
+    assert!(ev[1].ends_with("error=stop frequency must be above start frequency"));
+    assert_eq!(s.other_lines, 1);
+}
+
+fn bin() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_probe-bench"))
+}
+
+#[test]
+fn cli_table_stdin_plot_and_errors() {
+    use std::io::Write;
+    let log = root().join("tests/data/log/qemu_sweep_g.log");
+    let dir = std::env::temp_dir().join(format!("probe-bench-log-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let svg = dir.join("log.svg");
+    let out = bin()
+        .arg("log")
+        .arg(&log)
+        .arg("--plot")
+        .arg(&svg)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains("227.968 ± 0.041") && stdout.contains("282.9 ± 5.5"),
+        "{stdout}"
+    );
+    assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
+    // stdin, JSON.
+    let mut child = bin()
+        .args(["log", "-", "--json"])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(&std::fs::read(&log).unwrap())
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(j["readings"][0]["status"], "ok");
+    assert_eq!(j["sweeps"][0]["points"].as_array().unwrap().len(), 31);
+    // Not a firmware log: one line, non-zero exit.
+    let out = bin()
+        .arg("log")
+        .arg(root().join("tests/data/bvd_300kpa_y.csv"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert_eq!(
+        String::from_utf8_lossy(&out.stderr)
+            .trim_end()
+            .lines()
+            .count(),
+        1
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
