@@ -103,6 +103,17 @@ fn span(min: f64, max: f64) -> (f64, f64) {
     (min * (1.0 - SPAN_MARGIN), max * (1.0 + SPAN_MARGIN))
 }
 
+/// 1.4826 × the median absolute residual of `data` about `law` (first 256 readings).
+fn robust_scale(data: &[(f64, f64, f64)], law: &PowerLaw) -> f64 {
+    let mut abs = [0.0f64; 256];
+    let m = data.len().min(abs.len());
+    for (a, x) in abs.iter_mut().zip(data.iter()) {
+        *a = libm::fabs(x.1 - law.frequency(x.0));
+    }
+    abs[..m].sort_unstable_by(|x, y| x.total_cmp(y));
+    1.4826 * abs[m / 2]
+}
+
 /// Number of distinct moduli in reference data (counting stops at 64).
 fn distinct_moduli(data: &[(f64, f64, f64)]) -> usize {
     let mut seen = [0.0f64; 64];
@@ -213,6 +224,57 @@ impl PowerLaw {
             sigma: KPa(libm::sqrt(var.max(0.0)) as f32),
             sigma_repeat: KPa(libm::sqrt(var_repeat) as f32),
         })
+    }
+
+    /// [`fit`](Self::fit) that discards gross outliers first. Repeatedly, the reading with the
+    /// largest residual is compared with a fit of all the others (leave-one-out); if it lies more
+    /// than five robust standard deviations of the others' residuals (1.4826 × their median
+    /// absolute residual; and at least 0.05 Hz and five of its own standard uncertainties) away,
+    /// it is dropped. At most a third of the readings are dropped. A
+    /// reference reading gone wrong (a bogus peak, a knock) must not bend the whole curve.
+    /// `data` is reordered: the kept readings come first.
+    pub fn fit_robust(data: &mut [(f64, f64, f64)]) -> Result<PowerLaw, FitError> {
+        let mut kept = data.len();
+        let max_drop = kept / 3;
+        let mut fit = Self::fit(data)?;
+        while data.len() - kept < max_drop {
+            // The three largest residuals of the current fit are the candidates.
+            let mut cand = [usize::MAX; 3];
+            for _ in 0..3 {
+                let mut best = (usize::MAX, -1.0);
+                for (i, d) in data[..kept].iter().enumerate() {
+                    let r = libm::fabs(d.1 - fit.frequency(d.0));
+                    if !cand.contains(&i) && r > best.1 {
+                        best = (i, r);
+                    }
+                }
+                if let Some(slot) = cand.iter_mut().find(|c| **c == usize::MAX) {
+                    *slot = best.0;
+                }
+            }
+            // Leave each candidate out in turn; keep the most outlying one.
+            let mut pick: Option<(usize, f64, PowerLaw)> = None;
+            for &c in cand.iter().filter(|c| **c < kept) {
+                data.swap(c, kept - 1);
+                if let Ok(loo) = Self::fit(&data[..kept - 1]) {
+                    let d = data[kept - 1];
+                    let r = libm::fabs(d.1 - loo.frequency(d.0));
+                    let scale = robust_scale(&data[..kept - 1], &loo);
+                    let z = r / (5.0 * scale).max(0.05).max(5.0 * d.2);
+                    if z > 1.0 && pick.as_ref().is_none_or(|p| z > p.1) {
+                        pick = Some((c, z, loo));
+                    }
+                }
+                data.swap(c, kept - 1);
+            }
+            let Some((c, _, loo)) = pick else {
+                break;
+            };
+            data.swap(c, kept - 1);
+            kept -= 1;
+            fit = loo;
+        }
+        Ok(fit)
     }
 
     /// Weighted least-squares fit of `(a, b, c)` to reference readings `(E kPa, f Hz, σ_f Hz)`.
@@ -414,6 +476,23 @@ mod tests {
         assert!((fit.b / truth.b - 1.0).abs() < 1e-4);
         assert!((fit.c - truth.c).abs() < 1e-5);
         assert_eq!(fit.source, Source::Fitted);
+        // One bogus reference reading (a wrong peak) is discarded by the robust fit.
+        let mut noisy = [(0.0, 0.0, 0.0); 9];
+        for (k, d) in noisy.iter_mut().enumerate() {
+            let e = [
+                157.5, 279.0, 414.0, 1146.0, 2465.0, 200.0, 600.0, 900.0, 1800.0,
+            ][k];
+            *d = (e, truth.frequency(e), 0.05);
+        }
+        noisy[0].1 += 12.0;
+        let plain = PowerLaw::fit(&noisy).unwrap();
+        let robust = PowerLaw::fit_robust(&mut noisy).unwrap();
+        assert!(
+            (plain.a - truth.a).abs() > 0.5,
+            "plain fit should be bent: {}",
+            plain.a
+        );
+        assert!((robust.a - truth.a).abs() < 1e-3, "{}", robust.a);
         assert!(PowerLaw::fit(&data[..3]).is_err());
         let bad = [(1.0, f64::NAN, 0.1); 5];
         assert_eq!(PowerLaw::fit(&bad), Err(FitError::BadInput));

@@ -29,6 +29,9 @@ enum Cmd {
     Physics(cmd::physics::PhysicsArgs),
     /// List the phantoms of the source papers.
     Phantoms,
+    /// Speed against accuracy of every method and knob setting on the simulated probe, charted
+    /// against the Cramér–Rao bound (writes docs/speed-accuracy.*).
+    Pareto(cmd::pareto::ParetoArgs),
     /// Analyse a bench capture (impedance analyser or DAQ CSV) with the firmware's estimator and
     /// calibration.
     Analyze(cmd::analyze::AnalyzeArgs),
@@ -49,6 +52,7 @@ fn main() -> ExitCode {
         Cmd::Measure(a) => cmd::measure::run(a),
         Cmd::Calibrate(a) => cmd::calibrate::run(a),
         Cmd::Physics(a) => cmd::physics::run(a),
+        Cmd::Pareto(a) => cmd::pareto::run(a),
         Cmd::Phantoms => {
             cmd::physics::list_phantoms();
             Ok(())

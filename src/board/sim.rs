@@ -140,5 +140,5 @@ pub fn calibrate(
             }
         }
     }
-    PowerLaw::fit(&data[..n]).map_err(SimError::Fit)
+    PowerLaw::fit_robust(&mut data[..n]).map_err(SimError::Fit)
 }

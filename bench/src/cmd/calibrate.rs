@@ -8,7 +8,7 @@ use clap::Args;
 use hal_sim::{NoiseScene, Scene};
 use pzt_probe::board::sim::{self as simboard, CALIBRATION_PHANTOMS};
 use pzt_probe::calibration::PowerLaw;
-use pzt_probe::sweep::SweepSettings;
+use pzt_probe::measure::{Procedure, Settings};
 use pzt_probe::Method;
 use std::path::PathBuf;
 
@@ -30,7 +30,7 @@ pub struct CalibrateArgs {
 /// Calibrate the simulated unit on A–E with `method` and `settings` under `noise`.
 pub fn calibrate_unit(
     method: Method,
-    settings: &SweepSettings,
+    settings: &Settings,
     noise: NoiseScene,
     repeats: usize,
     seed: u64,
@@ -56,7 +56,7 @@ pub fn calibrate_unit(
         }
     }
     pb.finish_and_clear();
-    PowerLaw::fit(&data).map_err(|e| anyhow::anyhow!("calibration fit failed: {e:?}"))
+    PowerLaw::fit_robust(&mut data).map_err(|e| anyhow::anyhow!("calibration fit failed: {e:?}"))
 }
 
 /// Run the subcommand.
@@ -64,9 +64,13 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
     let method = a.m.method()?;
     let settings = a.m.settings(method);
     let noise = parse_noise(&a.m.noise)?;
-    settings
-        .validate(&simboard::scale_of(&hal_sim::FrontEnd::default()))
-        .map_err(|e| anyhow::anyhow!("bad sweep settings: {e}"))?;
+    Procedure::new(
+        method,
+        &settings,
+        &simboard::scale_of(&hal_sim::FrontEnd::default()),
+        0,
+    )
+    .map_err(|e| anyhow::anyhow!("bad settings: {e}"))?;
     if a.repeats == 0 || a.repeats > simboard::MAX_REPEATS {
         bail!("--repeats must be 1 to {}", simboard::MAX_REPEATS);
     }

@@ -8,6 +8,7 @@ use crate::{plot, report};
 use anyhow::{bail, Result};
 use clap::Args;
 use pzt_probe::board::sim as simboard;
+use pzt_probe::measure::{Procedure, Settings};
 use pzt_probe::sweep::SweepPoint;
 use std::path::PathBuf;
 
@@ -61,9 +62,8 @@ pub fn run(a: MeasureArgs) -> Result<()> {
     // Validate the settings before any work (the firmware does the same).
     let scene = target.scene().with_noise(noise).with_preload_n(a.preload_n);
     let scale = simboard::scale_of(&scene.front_end);
-    settings
-        .validate(&scale)
-        .map_err(|e| anyhow::anyhow!("bad sweep settings: {e}"))?;
+    Procedure::new(method, &settings, &scale, 0)
+        .map_err(|e| anyhow::anyhow!("bad settings: {e}"))?;
     let cal = match a.calibration.as_str() {
         "unit" => calibrate_unit(method, &settings, noise, 20, 1000)?,
         name => match calfile::builtin(name) {
@@ -97,14 +97,9 @@ pub fn run(a: MeasureArgs) -> Result<()> {
             calfile::describe(&cal)
         );
         println!(
-            "  sweep {}–{} Hz step {} Hz, settle {} ms, integrate {} ms, drive {} V, method {}",
-            settings.start.0,
-            settings.stop.0,
-            settings.step.0,
-            settings.settle.0 * 1e3,
-            settings.integrate.0 * 1e3,
-            settings.drive.0,
-            method.name()
+            "  method {}: {}",
+            method.name(),
+            describe_settings(&settings)
         );
     }
     let pb = (a.repeat > 1 && !a.json).then(|| progress(a.repeat as u64, "measuring"));
@@ -160,4 +155,42 @@ pub fn run(a: MeasureArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// One line describing a method's settings.
+pub fn describe_settings(s: &Settings) -> String {
+    match s {
+        Settings::Sweep(s) => format!(
+            "sweep {}–{} Hz step {} Hz, settle {} ms, integrate {} ms, drive {} V",
+            s.start.0,
+            s.stop.0,
+            s.step.0,
+            s.settle.0 * 1e3,
+            s.integrate.0 * 1e3,
+            s.drive.0
+        ),
+        Settings::Staged(s) => format!(
+            "band {}–{} Hz, {} coarse points (settle {} ms), {} refine points/steps (span {} linewidths, settle {} tau), integrate {} ms, drive {} V",
+            s.band_start.0,
+            s.band_stop.0,
+            s.coarse_points,
+            s.coarse_settle.0 * 1e3,
+            s.refine_points,
+            s.refine_span,
+            s.settle_tau,
+            s.integrate.0 * 1e3,
+            s.drive.0
+        ),
+        Settings::Ringdown(s) => format!(
+            "band {}–{} Hz, seed {} Hz, {} stage(s) of {} ms burst + {} ms ring, {}-cycle windows, drive {} V",
+            s.band_start.0,
+            s.band_stop.0,
+            s.seed.0,
+            s.stages,
+            s.burst.0 * 1e3,
+            s.ring.0 * 1e3,
+            s.window_cycles,
+            s.drive.0
+        ),
+    }
 }

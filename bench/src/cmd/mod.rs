@@ -5,19 +5,23 @@ pub mod calibrate;
 pub mod generate;
 pub mod log;
 pub mod measure;
+pub mod pareto;
 pub mod physics;
 pub mod scan;
 
 use anyhow::{Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
+use pzt_probe::measure::Settings;
 use pzt_probe::sweep::SweepSettings;
 use pzt_probe::{Hz, Method, Seconds, Volts};
 
 #[derive(Args, Clone)]
 pub struct MethodArgs {
-    /// Resonance method: `paper` (|Z| minimum, 200–300 Hz in 1 Hz steps) or `sweep-g`
-    /// (conductance maximum).
+    /// Resonance method: `paper` (|Z| minimum, 200–300 Hz in 1 Hz steps), `sweep-g`
+    /// (conductance maximum), `adaptive`, `fit`, `track` or `ringdown` (see docs/methods.md).
+    /// For the two-stage methods `--start-hz/--stop-hz` set the band, `--settle-s` the coarse
+    /// settling and `--integrate-s` the integration per point; for ringdown the band.
     #[arg(long, default_value = "sweep-g")]
     pub method: String,
     /// Sweep start frequency, Hz (default: the method's).
@@ -54,7 +58,8 @@ impl MethodArgs {
             )
         })
     }
-    pub fn settings(&self, method: Method) -> SweepSettings {
+    /// The stepped-sweep settings: the method's default sweep with the options given applied.
+    pub fn sweep_settings(&self, method: Method) -> SweepSettings {
         let d = method.default_sweep();
         SweepSettings {
             start: self.start_hz.map(Hz).unwrap_or(d.start),
@@ -63,6 +68,28 @@ impl MethodArgs {
             settle: self.settle_s.map(Seconds).unwrap_or(d.settle),
             integrate: self.integrate_s.map(Seconds).unwrap_or(d.integrate),
             drive: self.drive_v.map(Volts).unwrap_or(d.drive),
+        }
+    }
+
+    /// The settings of `method`: its defaults with the options given applied.
+    pub fn settings(&self, method: Method) -> Settings {
+        match method.default_settings() {
+            Settings::Sweep(_) => Settings::Sweep(self.sweep_settings(method)),
+            Settings::Staged(mut s) => {
+                s.band_start = self.start_hz.map(Hz).unwrap_or(s.band_start);
+                s.band_stop = self.stop_hz.map(Hz).unwrap_or(s.band_stop);
+                s.coarse_settle = self.settle_s.map(Seconds).unwrap_or(s.coarse_settle);
+                s.integrate = self.integrate_s.map(Seconds).unwrap_or(s.integrate);
+                s.drive = self.drive_v.map(Volts).unwrap_or(s.drive);
+                Settings::Staged(s)
+            }
+            Settings::Ringdown(mut s) => {
+                s.band_start = self.start_hz.map(Hz).unwrap_or(s.band_start);
+                s.band_stop = self.stop_hz.map(Hz).unwrap_or(s.band_stop);
+                s.seed = Hz(0.5 * (s.band_start.0 + s.band_stop.0));
+                s.drive = self.drive_v.map(Volts).unwrap_or(s.drive);
+                Settings::Ringdown(s)
+            }
         }
     }
 }

@@ -1,0 +1,405 @@
+//! `probe-bench pareto`: the speed–accuracy chart of every method against the Cramér–Rao bound.
+
+use super::progress;
+use crate::pareto::{calibrate, configs, crb_pct, evaluate, tau_ms, Cell, Config};
+use crate::plot::with_backend;
+use anyhow::{anyhow, Result};
+use clap::Args;
+use hal_sim::NoiseScene;
+use plotters::prelude::*;
+use pzt_probe::calibration::PowerLaw;
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::sync::Mutex;
+
+/// Moduli of the study, kPa.
+pub const MODULI: [f64; 5] = [150.0, 300.0, 500.0, 1000.0, 2500.0];
+
+#[derive(Args)]
+pub struct ParetoArgs {
+    /// Readings per (method, knobs, modulus, noise).
+    #[arg(long, default_value_t = 20)]
+    pub seeds: usize,
+    /// Calibration readings per phantom A–E (under each noise scene; the paper took 20).
+    #[arg(long, default_value_t = 20)]
+    pub cal_repeats: usize,
+    /// Folder for speed-accuracy.{csv,md,svg,png} and speed-accuracy-paper.{svg,png}.
+    #[arg(long, default_value = "docs")]
+    pub out_dir: PathBuf,
+}
+
+struct Row {
+    c: usize,
+    noise: NoiseScene,
+    e: f64,
+    cell: Cell,
+    crb: f64,
+}
+
+fn noise_label(n: NoiseScene) -> &'static str {
+    match n {
+        NoiseScene::Paper => "paper",
+        NoiseScene::Bench => "bench",
+        _ => "other",
+    }
+}
+
+/// Run the subcommand.
+pub fn run(a: ParetoArgs) -> Result<()> {
+    let cfgs = configs();
+    let noises = [NoiseScene::Bench, NoiseScene::Paper];
+    let total = cfgs.len() * noises.len() * (1 + MODULI.len());
+    let pb = progress(total as u64, "pareto");
+    let rows = Mutex::new(Vec::new());
+    let cals: Mutex<Vec<Option<PowerLaw>>> = Mutex::new(vec![None; cfgs.len()]);
+    let next = Mutex::new(0usize);
+    std::thread::scope(|s| {
+        for _ in 0..std::thread::available_parallelism().map_or(2, |n| n.get()) {
+            s.spawn(|| loop {
+                let i = {
+                    let mut n = next.lock().unwrap();
+                    let i = *n;
+                    *n += 1;
+                    i
+                };
+                let Some(c) = cfgs.get(i) else { break };
+                for noise in noises {
+                    let cal = calibrate(c, a.cal_repeats, noise);
+                    pb.inc(1);
+                    if let Some(cal) = cal {
+                        for (k, e) in MODULI.iter().enumerate() {
+                            let seed0 = 10_000 * (k as u64 + 1);
+                            let cell = evaluate(c, &cal, *e, noise, a.seeds, seed0);
+                            let crb = crb_pct(&cal, *e, noise, 5.0, cell.time_ms * 1e-3);
+                            rows.lock().unwrap().push(Row {
+                                c: i,
+                                noise,
+                                e: *e,
+                                cell,
+                                crb,
+                            });
+                            pb.inc(1);
+                        }
+                        if noise == NoiseScene::Bench {
+                            cals.lock().unwrap()[i] = Some(cal);
+                        }
+                    } else {
+                        pb.inc(MODULI.len() as u64);
+                    }
+                }
+            });
+        }
+    });
+    pb.finish_and_clear();
+    let mut rows = rows.into_inner().unwrap();
+    rows.sort_by(|x, y| {
+        (x.c, noise_label(x.noise), x.e as u64).cmp(&(y.c, noise_label(y.noise), y.e as u64))
+    });
+    let cals = cals.into_inner().unwrap();
+    std::fs::create_dir_all(&a.out_dir)?;
+    write_csv(&a, &cfgs, &rows)?;
+    for noise in noises {
+        let suffix = if noise == NoiseScene::Bench {
+            ""
+        } else {
+            "-paper"
+        };
+        for ext in ["svg", "png"] {
+            let path = a.out_dir.join(format!("speed-accuracy{suffix}.{ext}"));
+            chart(&path, &cfgs, &rows, &cals, noise)?;
+        }
+    }
+    let md = summary(&cfgs, &rows, &cals);
+    std::fs::write(a.out_dir.join("speed-accuracy.md"), &md)?;
+    print!("{md}");
+    Ok(())
+}
+
+fn write_csv(a: &ParetoArgs, cfgs: &[Config], rows: &[Row]) -> Result<()> {
+    let mut s = String::from(
+        "method,knobs,noise,modulus_kpa,readings,ok,probe_time_ms,tau_ms,rms_err_pct,bias_pct,sd_pct,reported_sigma_pct,reported_repeat_pct,within5,within10,within3sigma,crb_pct,noise_rms_pct,quiet_err_pct\n",
+    );
+    for r in rows {
+        let c = &cfgs[r.c];
+        let x = &r.cell;
+        writeln!(
+            s,
+            "{},\"{}\",{},{},{},{},{:.2},{:.2},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{},{:.5},{:.4},{}",
+            c.method.name(),
+            c.label,
+            noise_label(r.noise),
+            r.e,
+            x.n,
+            x.ok,
+            x.time_ms,
+            tau_ms(r.e),
+            x.rms_pct(),
+            x.bias_pct(),
+            x.sd_pct(),
+            x.sigma_pct(),
+            x.repeat_pct(),
+            x.within5,
+            x.within10,
+            x.within3sigma,
+            r.crb,
+            x.noise_rms_pct(),
+            x.quiet_err.map_or("".to_string(), |q| format!("{:.4}", 100.0 * q))
+        )?;
+    }
+    std::fs::write(a.out_dir.join("speed-accuracy.csv"), s)?;
+    Ok(())
+}
+
+/// Aggregate over moduli: (mean time ms, RMS noise-induced error %, ok fraction).
+fn aggregate(rows: &[Row], c: usize, noise: NoiseScene) -> Option<(f64, f64, f64)> {
+    let r: Vec<&Row> = rows
+        .iter()
+        .filter(|r| r.c == c && r.noise == noise)
+        .collect();
+    if r.is_empty() {
+        return None;
+    }
+    let t = r.iter().map(|x| x.cell.time_ms).sum::<f64>() / r.len() as f64;
+    let ok: usize = r.iter().map(|x| x.cell.ok).sum();
+    let n: usize = r.iter().map(|x| x.cell.n).sum();
+    let e2: f64 = r.iter().map(|x| x.cell.sum_dev2).sum();
+    if ok == 0 {
+        return Some((t, f64::NAN, 0.0));
+    }
+    Some((t, 100.0 * (e2 / ok as f64).sqrt(), ok as f64 / n as f64))
+}
+
+const COLORS: [RGBColor; 6] = [
+    RGBColor(200, 30, 30),
+    RGBColor(30, 90, 200),
+    RGBColor(20, 150, 60),
+    RGBColor(150, 60, 180),
+    RGBColor(230, 140, 0),
+    RGBColor(0, 160, 170),
+];
+
+fn chart(
+    path: &std::path::Path,
+    cfgs: &[Config],
+    rows: &[Row],
+    cals: &[Option<PowerLaw>],
+    noise: NoiseScene,
+) -> Result<()> {
+    let pts: Vec<(usize, f64, f64, f64)> = (0..cfgs.len())
+        .filter_map(|c| aggregate(rows, c, noise).map(|(t, e, ok)| (c, t, e, ok)))
+        .filter(|p| p.2.is_finite() && p.2 > 0.0)
+        .collect();
+    // Pareto front among configs with >= 95 % ok readings.
+    let mut front: Vec<(f64, f64)> = Vec::new();
+    let mut cand: Vec<&(usize, f64, f64, f64)> = pts.iter().filter(|p| p.3 >= 0.95).collect();
+    cand.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let mut best = f64::INFINITY;
+    for p in cand {
+        if p.2 < best {
+            best = p.2;
+            front.push((p.1, p.2));
+        }
+    }
+    // CRB line: RMS over moduli of the per-modulus bound, with a representative calibration.
+    let cal = cals
+        .iter()
+        .flatten()
+        .next()
+        .copied()
+        .unwrap_or_else(PowerLaw::paper_experiment);
+    let crb: Vec<(f64, f64)> = (0..60)
+        .map(|k| {
+            let t = 10f64.powf(1.0 + 3.6 * k as f64 / 59.0);
+            let v = MODULI
+                .iter()
+                .map(|e| crb_pct(&cal, *e, noise, 5.0, t * 1e-3).powi(2))
+                .sum::<f64>()
+                / MODULI.len() as f64;
+            (t, v.sqrt())
+        })
+        .collect();
+    let ymin = pts
+        .iter()
+        .map(|p| p.2)
+        .chain(crb.iter().map(|c| c.1))
+        .fold(f64::INFINITY, f64::min)
+        .max(1e-4)
+        / 2.0;
+    let ymax = pts.iter().map(|p| p.2).fold(0.0, f64::max).max(1.0) * 2.0;
+    let title = format!(
+        "speed vs accuracy, {} noise scene (RMS over {} kPa)",
+        noise_label(noise),
+        MODULI
+            .iter()
+            .map(|e| format!("{e}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    with_backend(
+        path,
+        (1000, 680),
+        |root: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>| {
+            draw_chart(root, &title, cfgs, &pts, &front, &crb, ymin, ymax)
+        },
+        |root: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>| {
+            draw_chart(root, &title, cfgs, &pts, &front, &crb, ymin, ymax)
+        },
+    )
+}
+
+#[allow(clippy::too_many_arguments)]
+fn draw_chart<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    title: &str,
+    cfgs: &[Config],
+    pts: &[(usize, f64, f64, f64)],
+    front: &[(f64, f64)],
+    crb: &[(f64, f64)],
+    ymin: f64,
+    ymax: f64,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let e = |x: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("{x}");
+    root.fill(&WHITE).map_err(e)?;
+    let mut ch = ChartBuilder::on(root)
+        .caption(title, ("sans-serif", 18))
+        .margin(14)
+        .x_label_area_size(45)
+        .y_label_area_size(65)
+        .build_cartesian_2d((10f64..50_000f64).log_scale(), (ymin..ymax).log_scale())
+        .map_err(e)?;
+    ch.configure_mesh()
+        .x_desc("probe time per reading (ms)")
+        .y_desc("RMS modulus error caused by noise (%)")
+        .draw()
+        .map_err(e)?;
+    ch.draw_series(LineSeries::new(
+        front.iter().copied(),
+        ShapeStyle::from(&RGBColor(170, 170, 170)).stroke_width(8),
+    ))
+    .map_err(e)?
+    .label("Pareto front")
+    .legend(|(x, y)| {
+        PathElement::new(
+            vec![(x, y), (x + 20, y)],
+            RGBColor(170, 170, 170).stroke_width(6),
+        )
+    });
+    ch.draw_series(LineSeries::new(crb.iter().copied(), BLACK.stroke_width(2)))
+        .map_err(e)?
+        .label("Cramér–Rao bound")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2)));
+    for (mi, m) in pzt_probe::Method::ALL.iter().enumerate() {
+        let col = COLORS[mi % COLORS.len()];
+        let mut p: Vec<&(usize, f64, f64, f64)> =
+            pts.iter().filter(|p| cfgs[p.0].method == *m).collect();
+        if p.is_empty() {
+            continue;
+        }
+        p.sort_by(|a, b| a.1.total_cmp(&b.1));
+        ch.draw_series(LineSeries::new(
+            p.iter().map(|q| (q.1, q.2)),
+            col.stroke_width(2),
+        ))
+        .map_err(e)?
+        .label(m.name())
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(2)));
+        ch.draw_series(p.iter().map(|q| {
+            let style = if q.3 >= 0.95 {
+                col.filled()
+            } else {
+                col.stroke_width(1)
+            };
+            Circle::new((q.1, q.2), 4, style)
+        }))
+        .map_err(e)?;
+    }
+    ch.configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(e)?;
+    Ok(())
+}
+
+fn summary(cfgs: &[Config], rows: &[Row], cals: &[Option<PowerLaw>]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "<!-- generated by `cargo run --release -p probe-bench -- pareto` -->"
+    );
+    for noise in [NoiseScene::Bench, NoiseScene::Paper] {
+        let _ = writeln!(
+            s,
+            "\n### {} noise scene, 500 kPa (τ = {:.1} ms)\n",
+            noise_label(noise),
+            tau_ms(500.0)
+        );
+        let _ = writeln!(s, "| method | knobs | probe time (ms) | RMS error from noise (%) | RMS error vs truth (%) | noise-free error (%) | sd (%) | reported repeatability σ (%) | ok | CRB (%) |");
+        let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+        for r in rows.iter().filter(|r| r.noise == noise && r.e == 500.0) {
+            let c = &cfgs[r.c];
+            let x = &r.cell;
+            let _ = writeln!(
+                s,
+                "| {} | {} | {:.0} | {:.3} | {:.3} | {} | {:.3} | {:.3} | {}/{} | {:.4} |",
+                c.method.name(),
+                c.label,
+                x.time_ms,
+                x.noise_rms_pct(),
+                x.rms_pct(),
+                x.quiet_err
+                    .map_or("—".to_string(), |q| format!("{:+.3}", 100.0 * q)),
+                x.sd_pct(),
+                x.repeat_pct(),
+                x.ok,
+                x.n,
+                r.crb
+            );
+        }
+        let _ = writeln!(
+            s,
+            "\n#### reliable range, {} noise (19 of 20 within ±5 % / ±10 %)\n",
+            noise_label(noise)
+        );
+        let _ = writeln!(s, "| method | knobs | probe time at 500 kPa (ms) | highest modulus reliable ±5 % | ±10 % |");
+        let _ = writeln!(s, "|---|---|---:|---:|---:|");
+        for (i, c) in cfgs.iter().enumerate() {
+            if cals[i].is_none() {
+                continue;
+            }
+            let range = |thr: fn(&Cell) -> usize| {
+                let mut hi = None;
+                for e in super::pareto::MODULI {
+                    match rows
+                        .iter()
+                        .find(|r| r.c == i && r.noise == noise && r.e == e)
+                    {
+                        Some(r) if r.cell.n > 0 && thr(&r.cell) * 20 >= 19 * r.cell.n => {
+                            hi = Some(e)
+                        }
+                        _ => break,
+                    }
+                }
+                hi.map_or("none".to_string(), |e| format!("{e} kPa"))
+            };
+            let t = rows
+                .iter()
+                .find(|r| r.c == i && r.noise == noise && r.e == 500.0)
+                .map_or(0.0, |r| r.cell.time_ms);
+            let _ = writeln!(
+                s,
+                "| {} | {} | {:.0} | {} | {} |",
+                c.method.name(),
+                c.label,
+                t,
+                range(|c| c.within5),
+                range(|c| c.within10)
+            );
+        }
+    }
+    s
+}

@@ -1,0 +1,270 @@
+//! The speed–accuracy study: methods × knob settings × moduli × noise scenes on the simulated
+//! probe, each method calibrated on the same unit, charted against the Cramér–Rao bound.
+
+use hal_sim::{NoiseScene, Scene};
+use pzt_probe::board::sim::read;
+use pzt_probe::calibration::PowerLaw;
+use pzt_probe::estimate::ringdown::RingdownSettings;
+use pzt_probe::estimate::staged::{Refine, StagedSettings};
+use pzt_probe::measure::{Method, Settings};
+use pzt_probe::sweep::SweepSettings;
+use pzt_probe::{Hz, Seconds};
+use std::f64::consts::PI;
+
+/// One method with one set of knobs.
+#[derive(Clone, Debug)]
+pub struct Config {
+    /// Method.
+    pub method: Method,
+    /// Short description of the knobs.
+    pub label: String,
+    /// Its settings.
+    pub settings: Settings,
+}
+
+/// The knob settings the study runs.
+pub fn configs() -> Vec<Config> {
+    let mut v = Vec::new();
+    let ms = |x: f32| Seconds(x * 1e-3);
+    for (settle, int) in [(10.0, 10.0), (25.0, 25.0), (50.0, 50.0), (100.0, 100.0)] {
+        let s = SweepSettings {
+            settle: ms(settle),
+            integrate: ms(int),
+            ..Method::Paper.default_sweep()
+        };
+        v.push(Config {
+            method: Method::Paper,
+            label: format!("1 Hz, {settle}+{int} ms"),
+            settings: Settings::Sweep(s),
+        });
+    }
+    for (step, settle, int) in [
+        (4.0, 15.0, 10.0),
+        (2.0, 30.0, 20.0),
+        (2.0, 50.0, 40.0),
+        (2.0, 100.0, 100.0),
+    ] {
+        let s = SweepSettings {
+            step: Hz(step),
+            settle: ms(settle),
+            integrate: ms(int),
+            ..Method::SweepG.default_sweep()
+        };
+        v.push(Config {
+            method: Method::SweepG,
+            label: format!("{step} Hz, {settle}+{int} ms"),
+            settings: Settings::Sweep(s),
+        });
+    }
+    for int in [10.0, 20.0, 40.0] {
+        let s = StagedSettings {
+            integrate: ms(int),
+            ..StagedSettings::default_for(Refine::Conductance)
+        };
+        v.push(Config {
+            method: Method::Adaptive,
+            label: format!("{int} ms"),
+            settings: Settings::Staged(s),
+        });
+    }
+    for int in [10.0, 20.0, 40.0, 80.0] {
+        let s = StagedSettings {
+            integrate: ms(int),
+            ..StagedSettings::default_for(Refine::Bvd)
+        };
+        v.push(Config {
+            method: Method::Fit,
+            label: format!("{int} ms"),
+            settings: Settings::Staged(s),
+        });
+    }
+    for (steps, int) in [(4u8, 20.0), (8, 20.0), (8, 40.0), (16, 40.0), (16, 80.0)] {
+        let s = StagedSettings {
+            refine_points: steps,
+            integrate: ms(int),
+            ..StagedSettings::default_for(Refine::Track)
+        };
+        v.push(Config {
+            method: Method::Track,
+            label: format!("{steps} steps, {int} ms"),
+            settings: Settings::Staged(s),
+        });
+    }
+    for (stages, burst, ring) in [
+        (1u8, 20.0, 20.0),
+        (1, 40.0, 40.0),
+        (2, 20.0, 20.0),
+        (2, 40.0, 40.0),
+        (2, 60.0, 60.0),
+        (3, 60.0, 60.0),
+    ] {
+        let s = RingdownSettings {
+            stages,
+            burst: ms(burst),
+            ring: ms(ring),
+            ..RingdownSettings::DEFAULT
+        };
+        v.push(Config {
+            method: Method::Ringdown,
+            label: format!("{stages}× {burst}+{ring} ms"),
+            settings: Settings::Ringdown(s),
+        });
+    }
+    v
+}
+
+/// Calibrate `c` as the product is calibrated: phantoms A–E × `repeats` readings under `noise`
+/// (a unit is calibrated with its own front end, as the paper calibrated its prototype), robust
+/// power-law fit.
+pub fn calibrate(c: &Config, repeats: usize, noise: NoiseScene) -> Option<PowerLaw> {
+    pzt_probe::board::sim::calibrate(c.method, &c.settings, noise, repeats, 900_000).ok()
+}
+
+/// Statistics of one config at one modulus and noise scene.
+#[derive(Clone, Debug, Default)]
+pub struct Cell {
+    /// Readings taken.
+    pub n: usize,
+    /// Readings that were ok.
+    pub ok: usize,
+    /// Mean probe time per reading, ms.
+    pub time_ms: f64,
+    /// Sum of squared relative errors of ok readings.
+    pub sum_err2: f64,
+    /// Sum of relative errors of ok readings.
+    pub sum_err: f64,
+    /// Sum of squared reported (combined) relative sigmas.
+    pub sum_sig2: f64,
+    /// Sum of squared reported repeatability relative sigmas.
+    pub sum_rep2: f64,
+    /// Ok readings within ±5 % of the truth.
+    pub within5: usize,
+    /// Ok readings within ±10 %.
+    pub within10: usize,
+    /// Ok readings whose error is within 3 reported sigmas.
+    pub within3sigma: usize,
+    /// Sum of squared relative deviations from the noise-free reading of the same method.
+    pub sum_dev2: f64,
+    /// Relative error of the noise-free reading (the calibration misfit plus the method's
+    /// deterministic bias left after calibration), if that reading was ok.
+    pub quiet_err: Option<f64>,
+}
+
+impl Cell {
+    /// RMS relative error of ok readings, %.
+    pub fn rms_pct(&self) -> f64 {
+        100.0 * (self.sum_err2 / self.ok.max(1) as f64).sqrt()
+    }
+    /// Mean relative error (bias), %.
+    pub fn bias_pct(&self) -> f64 {
+        100.0 * self.sum_err / self.ok.max(1) as f64
+    }
+    /// Standard deviation of the relative error, %.
+    pub fn sd_pct(&self) -> f64 {
+        let k = self.ok.max(2) as f64;
+        let m = self.sum_err / k;
+        100.0 * ((self.sum_err2 - k * m * m).max(0.0) / (k - 1.0)).sqrt()
+    }
+    /// RMS deviation from the noise-free reading (the error noise causes), %.
+    pub fn noise_rms_pct(&self) -> f64 {
+        100.0 * (self.sum_dev2 / self.ok.max(1) as f64).sqrt()
+    }
+    /// RMS reported combined sigma, %.
+    pub fn sigma_pct(&self) -> f64 {
+        100.0 * (self.sum_sig2 / self.ok.max(1) as f64).sqrt()
+    }
+    /// RMS reported repeatability sigma, %.
+    pub fn repeat_pct(&self) -> f64 {
+        100.0 * (self.sum_rep2 / self.ok.max(1) as f64).sqrt()
+    }
+}
+
+/// Run `seeds` readings of config `c` (calibrated by `cal`) at modulus `e` under `noise`.
+pub fn evaluate(
+    c: &Config,
+    cal: &PowerLaw,
+    e: f64,
+    noise: NoiseScene,
+    seeds: usize,
+    seed0: u64,
+) -> Cell {
+    let scene = Scene::on_modulus_kpa(e).with_noise(noise);
+    // The same method, same calibration, noise-free: what the reading would be without noise.
+    let quiet = read(
+        &Scene::on_modulus_kpa(e),
+        seed0,
+        c.method,
+        &c.settings,
+        cal,
+        |_| {},
+    )
+    .ok()
+    .and_then(|r| r.modulus)
+    .map(|m| m.0 as f64);
+    let mut cell = Cell {
+        n: seeds,
+        quiet_err: quiet.map(|q| (q - e) / e),
+        ..Cell::default()
+    };
+    let mut t = 0.0;
+    for k in 0..seeds {
+        let Ok(r) = read(&scene, seed0 + k as u64, c.method, &c.settings, cal, |_| {}) else {
+            continue;
+        };
+        t += r.probe_time.0 as f64 * 1e3;
+        if let (true, Some(m), Some(s), Some(rep)) = (
+            r.status.is_ok(),
+            r.modulus,
+            r.modulus_sigma,
+            r.modulus_sigma_repeat,
+        ) {
+            let err = (m.0 as f64 - e) / e;
+            let dev = (m.0 as f64 - quiet.unwrap_or(e)) / e;
+            cell.sum_dev2 += dev * dev;
+            cell.ok += 1;
+            cell.sum_err += err;
+            cell.sum_err2 += err * err;
+            let sr = s.0 as f64 / e;
+            cell.sum_sig2 += sr * sr;
+            let rr = rep.0 as f64 / e;
+            cell.sum_rep2 += rr * rr;
+            cell.within5 += (err.abs() <= 0.05) as usize;
+            cell.within10 += (err.abs() <= 0.10) as usize;
+            cell.within3sigma += (err.abs() <= 3.0 * sr) as usize;
+        }
+    }
+    cell.time_ms = t / seeds.max(1) as f64;
+    cell
+}
+
+/// The Cramér–Rao bound on the resonance frequency (Hz) of the scene's driven resonator
+/// observed for `t_s` seconds at drive amplitude `drive_v`.
+///
+/// Steady state (Rife–Boorstyn phase bound turned into frequency through the resonance's phase
+/// slope `dφ/df = 2πτ`): `σ_f = 1 / (2π τ sqrt(2 (C/N0) T))`, with carrier power
+/// `C = (G_peak V)² / 2`, noise density `N0` (A²/Hz), `τ = Q / (π f0)`. A resonator driven from
+/// rest only reaches that carrier after a few τ; the bound uses the energy it actually has,
+/// `T_eff = ∫₀ᵀ (1 − e^{−t/τ})² dt`, which is larger than `T − 1.5 τ` and ≈ `T³/(3τ²)` for `T ≪ τ`.
+pub fn crb_hz(scene: &Scene, drive_v: f64, t_s: f64) -> f64 {
+    let k = scene.kelvin();
+    let g = scene.pzt.motional_peak_s(&k);
+    let c = 0.5 * (g * drive_v) * (g * drive_v);
+    let n0 = scene.front_end.current_noise_a_rthz.powi(2)
+        + scene.front_end.amps_per_code().powi(2) / 12.0 / (scene.front_end.sample_rate_hz / 2.0);
+    let tau = k.q() / (PI * k.natural_frequency_hz());
+    let x = t_s / tau;
+    let t_eff = tau * (x - 2.0 * (1.0 - (-x).exp()) + 0.5 * (1.0 - (-2.0 * x).exp()));
+    1.0 / (2.0 * PI * tau * (2.0 * (c / n0) * t_eff.max(1e-12)).sqrt())
+}
+
+/// The bound of [`crb_hz`] as a relative modulus error (%) through `cal`'s slope.
+pub fn crb_pct(cal: &PowerLaw, e: f64, noise: NoiseScene, drive_v: f64, t_s: f64) -> f64 {
+    let scene = Scene::on_modulus_kpa(e).with_noise(noise);
+    100.0 * crb_hz(&scene, drive_v, t_s) / cal.slope(e) / e
+}
+
+/// Time constant τ = Q/(π f0) of the scene at modulus `e`, ms.
+pub fn tau_ms(e: f64) -> f64 {
+    let s = Scene::on_modulus_kpa(e);
+    1e3 * s.q() / (PI * s.resonance_hz())
+}
