@@ -70,10 +70,25 @@ fn golden_captures_read_their_true_resonance() {
             0.1,
         ),
     ];
-    for (name, scene, layout, max_sigma) in cases {
-        let a = run(name, Method::SweepG);
+    for (name, scene, layout, max_sigma) in cases
+        .iter()
+        .flat_map(|c| {
+            // sweep-G and the BVD fit both estimate the motional resonance.
+            [Method::SweepG, Method::Fit].map(|m| (c.0, c.1, c.2, c.3, m))
+        })
+        .map(|(n, s, l, ms, m)| ((n, m), s, l, ms))
+    {
+        let (name, method) = name;
+        let a = run(name, method);
+        let name = format!("{name} [{}]", method.name());
         assert_eq!(a.capture.layout, layout, "{name}");
         let r = a.reading;
+        eprintln!(
+            "{name}: {:?} ± {:?} Hz, true {:.4} Hz",
+            r.resonance,
+            r.resonance_sigma,
+            scene.resonance_hz()
+        );
         assert_eq!(r.status, Status::Ok, "{name}");
         let f = r.resonance.unwrap().0 as f64;
         let s = r.resonance_sigma.unwrap().0 as f64;
@@ -191,6 +206,15 @@ fn out_of_band_capture_is_not_ok() {
         .unwrap();
         assert_ne!(a.reading.status, Status::Ok, "{m:?}");
         assert!(a.reading.modulus.is_none());
+    }
+}
+
+#[test]
+fn fit_method_does_not_read_ok_without_a_resonance_in_band() {
+    for name in ["bvd_capacitor_only_y.csv", "bvd_1000kpa_below_band_y.csv"] {
+        let r = run(name, Method::Fit).reading;
+        assert_ne!(r.status, Status::Ok, "{name}");
+        assert!(r.modulus.is_none(), "{name}");
     }
 }
 

@@ -70,7 +70,7 @@ fn sample(template: &str, salt: u32) -> Vec<Value> {
                 Some(match ty {
                     Ty::F32 => Value::F32(floats[k % floats.len()] * (1.0 + salt as f32)),
                     Ty::Uint => Value::Uint(k as u32 * 7 + salt),
-                    Ty::Bool => Value::Bool(k % 2 == 0),
+                    Ty::Bool => Value::Bool(k.is_multiple_of(2)),
                     Ty::Str if key == "error" => {
                         Value::Str("stop frequency must be above start frequency".into())
                     }

@@ -19,7 +19,9 @@ pub struct AnalyzeArgs {
     /// `t_s,drive_hz,v_drive_v,i_sense_a` (s, Hz, volts, amperes; stepped or continuous sweep).
     pub file: PathBuf,
     /// Resonance method: any estimator that works on measured frequency points (`sweep-g`:
-    /// conductance maximum; `paper`: |Z| minimum). Methods that steer the drive live are refused.
+    /// conductance maximum; `paper`: |Z| minimum; `fit`: Butterworth–Van Dyke fit of the complex
+    /// admittance). Methods that steer the drive while measuring (adaptive, track, ringdown) are
+    /// refused.
     #[arg(long, default_value = "sweep-g")]
     pub method: String,
     /// Calibration from resonance (Hz) to modulus (kPa): `paper-experiment` (paper 003 eq. 5),

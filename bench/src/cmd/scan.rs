@@ -562,7 +562,7 @@ where
         spec.ys_mm.first().copied().unwrap_or(0.0) - s,
         spec.ys_mm.last().copied().unwrap_or(1.0) + s,
     );
-    let (map_area, bar_area) = root.split_horizontally(830);
+    let (map_area, bar_area) = root.split_horizontally(820);
     let inc = spec.phantom.inclusion;
     let (tx, ty) = inc.centre_m();
     let (tx, ty, tr) = (tx * 1e3, ty * 1e3, inc.radius_m() * 1e3);
@@ -581,7 +581,7 @@ where
         None => format!("{} scan, {} — no lump found", spec.phantom.name, spec.method.name()),
     };
     // Equal scales on both axes: fit the data span into the plot area.
-    let (w_px, h_px) = (830.0 - 80.0, 820.0 - 110.0);
+    let (w_px, h_px) = (820.0 - 80.0, 820.0 - 110.0);
     let (xs, ys) = (x1 - x0, y1 - y0);
     let scale = (w_px / xs).min(h_px / ys);
     let (pad_x, pad_y) = (0.5 * (w_px / scale - xs), 0.5 * (h_px / scale - ys));
@@ -668,7 +668,7 @@ where
         .margin_bottom(50)
         .margin_right(10)
         .y_label_area_size(0)
-        .right_y_label_area_size(60)
+        .right_y_label_area_size(75)
         .build_cartesian_2d(0.0..1.0, fmin..fmax)
         .map_err(e)?;
     bar.configure_mesh()
