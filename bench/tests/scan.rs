@@ -139,6 +139,28 @@ fn cli_writes_the_map() {
     assert!((over - PAPER_OVER_HZ).abs() <= 3.0);
     assert!(j["lump"]["x_mm"].as_f64().is_some());
     assert_eq!(&std::fs::read(&png).unwrap()[1..4], b"PNG");
+    // Negative coordinates are numbers, not options.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_probe-bench"))
+        .args([
+            "scan",
+            "--json",
+            "--step-mm",
+            "3",
+            "--coin-at-mm",
+            "-3",
+            "2",
+            "--plot",
+        ])
+        .arg(dir.join("neg.svg"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(j["true_centre_mm"][0].as_f64(), Some(-3.0));
     // Bad input: one line, non-zero exit.
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_probe-bench"))
         .args(["scan", "--scene", "ball", "--ball-d-mm", "25"])

@@ -42,7 +42,7 @@ pub struct ScanArgs {
     #[arg(long, value_enum, default_value = "coin")]
     pub scene: ScanScene,
     /// Coin scene: where the coin's centre is, x and y in mm from the disc's centre.
-    #[arg(long, num_args = 2, value_names = ["X_MM", "Y_MM"], default_values_t = [1.5, -1.0])]
+    #[arg(long, num_args = 2, allow_negative_numbers = true, value_names = ["X_MM", "Y_MM"], default_values_t = [1.5, -1.0])]
     pub coin_at_mm: Vec<f64>,
     /// Ball scene: the ball's position along the probe path, mm (paper 002: 0–20 mm).
     #[arg(long, default_value_t = 5.0)]
