@@ -15,7 +15,6 @@
 // `!(x > 0.0)` is deliberate throughout: unlike `x <= 0.0` it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-
 pub mod board;
 pub mod calibration;
 pub mod command;

@@ -117,7 +117,7 @@ pub fn configs() -> Vec<Config> {
 /// (a unit is calibrated with its own front end, as the paper calibrated its prototype), robust
 /// power-law fit.
 pub fn calibrate(c: &Config, repeats: usize, noise: NoiseScene) -> Option<PowerLaw> {
-    pzt_probe::board::sim::calibrate(c.method, &c.settings, noise, repeats, 900_000).ok()
+    pzt_probe::board::sim::calibrate(c.method, c.settings, noise, repeats, 900_000).ok()
 }
 
 /// Statistics of one config at one modulus and noise scene.
@@ -194,7 +194,7 @@ pub fn evaluate(
         &Scene::on_modulus_kpa(e),
         seed0,
         c.method,
-        &c.settings,
+        c.settings,
         cal,
         |_| {},
     )
@@ -208,7 +208,7 @@ pub fn evaluate(
     };
     let mut t = 0.0;
     for k in 0..seeds {
-        let Ok(r) = read(&scene, seed0 + k as u64, c.method, &c.settings, cal, |_| {}) else {
+        let Ok(r) = read(&scene, seed0 + k as u64, c.method, c.settings, cal, |_| {}) else {
             continue;
         };
         t += r.probe_time.0 as f64 * 1e3;

@@ -39,7 +39,11 @@ use core::f64::consts::PI;
 /// Dimitriadis' bonded-layer correction `Φ(χ)` for an incompressible layer, `χ = a / h`
 /// capped at 1.
 pub fn thin_layer_factor(chi: f64) -> f64 {
-    let x = if chi.is_finite() { chi.clamp(0.0, 1.0) } else { 1.0 };
+    let x = if chi.is_finite() {
+        chi.clamp(0.0, 1.0)
+    } else {
+        1.0
+    };
     1.0 + x * (1.133 + x * (1.283 + x * (0.769 + x * 0.0975)))
 }
 

@@ -108,7 +108,7 @@ pub fn run(a: MeasureArgs) -> Result<()> {
     let mut first_resonance = None;
     for k in 0..a.repeat {
         let mut pts = Vec::new();
-        let reading = simboard::read(&scene, a.seed + k as u64, method, &settings, &cal, |p| {
+        let reading = simboard::read(&scene, a.seed + k as u64, method, settings, &cal, |p| {
             if k == 0 {
                 pts.push(*p)
             }
