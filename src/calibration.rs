@@ -114,6 +114,47 @@ fn robust_scale(data: &[(f64, f64, f64)], law: &PowerLaw) -> f64 {
     1.4826 * abs[m / 2]
 }
 
+/// RMS leave-one-out error (Hz) at the interior reference moduli (all but the lowest and the
+/// highest), or `None` with fewer than five distinct moduli or more than 256 readings.
+fn interior_loo_sigma(data: &[(f64, f64, f64)]) -> Option<f64> {
+    if distinct_moduli(data) < 5 || data.len() > 256 {
+        return None;
+    }
+    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+    for d in data {
+        lo = lo.min(d.0);
+        hi = hi.max(d.0);
+    }
+    let mut scratch = [(0.0f64, 0.0f64, 0.0f64); 256];
+    let (mut sum2, mut groups) = (0.0, 0u32);
+    let mut done = [0.0f64; 64];
+    let mut ndone = 0;
+    for d in data {
+        let e = d.0;
+        if e == lo || e == hi || done[..ndone].contains(&e) || ndone >= done.len() {
+            continue;
+        }
+        done[ndone] = e;
+        ndone += 1;
+        let mut n = 0;
+        let (mut fsum, mut k) = (0.0, 0.0);
+        for x in data {
+            if x.0 == e {
+                fsum += x.1;
+                k += 1.0;
+            } else {
+                scratch[n] = *x;
+                n += 1;
+            }
+        }
+        let fit = PowerLaw::fit_plain(&scratch[..n]).ok()?;
+        let r = fsum / k - fit.frequency(e);
+        sum2 += r * r;
+        groups += 1;
+    }
+    (groups > 0).then(|| libm::sqrt(sum2 / groups as f64))
+}
+
 /// Number of distinct moduli in reference data (counting stops at 64).
 fn distinct_moduli(data: &[(f64, f64, f64)]) -> usize {
     let mut seen = [0.0f64; 64];
@@ -282,7 +323,21 @@ impl PowerLaw {
     /// Variable projection: for a fixed exponent the model is linear in `(a, b)`; the exponent is
     /// found by a coarse scan and golden-section refinement over `[-3, -0.05]`. The covariance
     /// comes from the full Jacobian at the optimum, scaled by the reduced χ² when it exceeds 1.
+    ///
+    /// The curve's misfit (`model_sigma_hz`) is the larger of the residual scatter (corrected for
+    /// the three fitted parameters) and, with five or more reference moduli, the RMS
+    /// leave-one-out error at the interior moduli: each is predicted by a fit without it. The
+    /// residuals at the reference moduli understate how far the power law strays between them;
+    /// the leave-one-out errors do not.
     pub fn fit(data: &[(f64, f64, f64)]) -> Result<PowerLaw, FitError> {
+        let mut p = Self::fit_plain(data)?;
+        if let Some(loo) = interior_loo_sigma(data) {
+            p.model_sigma_hz = p.model_sigma_hz.max(loo);
+        }
+        Ok(p)
+    }
+
+    fn fit_plain(data: &[(f64, f64, f64)]) -> Result<PowerLaw, FitError> {
         if data.len() < 4 {
             return Err(FitError::TooFewPoints);
         }

@@ -158,6 +158,36 @@ impl Method {
     }
 }
 
+/// The probe's signature in free air, stored with the calibration: how contact is told apart
+/// from no contact.
+///
+/// Frequency alone cannot tell: near 330 kPa the loaded resonance equals the free one. The
+/// quality factor can: tissue damps the mode (loaded Q 7–15 over 8–5000 kPa in `hal-sim`),
+/// while the free probe rings with Q ≈ 40. A reading is `no_contact` when its Q exceeds
+/// [`NO_CONTACT_Q_FRACTION`] of the free Q *and* its resonance lies within
+/// [`NO_CONTACT_SPAN_HZ`] of the free one (a rigid contact also rings well, but far above).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct AirReference {
+    /// Free resonance.
+    pub resonance: Hz,
+    /// Free quality factor.
+    pub q: f32,
+}
+
+/// A reading whose Q exceeds this fraction of the free Q may be free air.
+pub const NO_CONTACT_Q_FRACTION: f32 = 0.6;
+/// ... if its resonance is also this close to the free one.
+pub const NO_CONTACT_SPAN_HZ: f32 = 5.0;
+
+impl AirReference {
+    /// True when `(f, q)` looks like the free probe.
+    pub fn looks_free(&self, f: Hz, q: f32) -> bool {
+        q > NO_CONTACT_Q_FRACTION * self.q
+            && libm::fabsf(f.0 - self.resonance.0) < NO_CONTACT_SPAN_HZ
+    }
+}
+
 /// The outcome of one reading: a number with its uncertainty, or a failure code.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -199,6 +229,23 @@ impl Reading {
             probe_time,
             points,
         }
+    }
+
+    /// Apply the contact check of `air` (readings without a Q cannot be checked).
+    pub fn check_contact(mut self, air: Option<&AirReference>) -> Self {
+        if let (Some(air), Some(f), Some(q)) = (air, self.resonance, self.q) {
+            let failed_for_range = matches!(
+                self.status,
+                Status::Failed(Failure::AboveRange | Failure::BelowRange)
+            );
+            if (self.status.is_ok() || failed_for_range) && air.looks_free(f, q) {
+                self.status = Status::Failed(Failure::NoContact);
+                self.modulus = None;
+                self.modulus_sigma = None;
+                self.modulus_sigma_repeat = None;
+            }
+        }
+        self
     }
 
     /// Map an estimate through `cal` into a reading.
@@ -452,7 +499,7 @@ impl Measurement for Procedure {
             Inner::Sweep(m) => m.accept(raw),
             Inner::Staged(m) => m.accept(raw, &self.scale),
             Inner::Ringdown(m) => {
-                m.accept(raw);
+                m.accept(raw, &self.scale);
                 None
             }
         }

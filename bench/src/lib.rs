@@ -12,3 +12,4 @@ pub mod pareto;
 pub mod plot;
 pub mod report;
 pub mod scene;
+pub mod stability;

@@ -32,6 +32,9 @@ enum Cmd {
     /// Speed against accuracy of every method and knob setting on the simulated probe, charted
     /// against the Cramér–Rao bound (writes docs/speed-accuracy.*).
     Pareto(cmd::pareto::ParetoArgs),
+    /// Every method through the scene catalogue where methods break: the stability map
+    /// (writes docs/stability.{csv,svg,png}).
+    Stability(cmd::stability::StabilityArgs),
     /// Analyse a bench capture (impedance analyser or DAQ CSV) with the firmware's estimator and
     /// calibration.
     Analyze(cmd::analyze::AnalyzeArgs),
@@ -53,6 +56,7 @@ fn main() -> ExitCode {
         Cmd::Calibrate(a) => cmd::calibrate::run(a),
         Cmd::Physics(a) => cmd::physics::run(a),
         Cmd::Pareto(a) => cmd::pareto::run(a),
+        Cmd::Stability(a) => cmd::stability::run(a),
         Cmd::Phantoms => {
             cmd::physics::list_phantoms();
             Ok(())

@@ -171,7 +171,8 @@ fn qemu_log_reconstructs_the_firmwares_reading() {
             g_s: p.g_s,
             b_s: p.b_s,
             sigma_s: p.sigma_s,
-            current_a: 0.0,
+            // The log carries admittance, not current: the current at the logged 5 V drive.
+            current_a: p.g_s.hypot(p.b_s) * 5.0,
             drive_v: 5.0,
             clip_fraction: 0.0,
             residual_a: 0.0,

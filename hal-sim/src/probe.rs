@@ -49,7 +49,7 @@ impl SimProbe {
             rng,
             samples: 0,
             mains_phase,
-            stuck_dac: None,
+            stuck_dac: scene.stuck_dac,
         }
     }
 

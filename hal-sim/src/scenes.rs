@@ -85,6 +85,8 @@ pub struct Scene {
     pub contact: Contact,
     /// Tissue under the tip, or `None` in free air.
     pub tissue: Option<Tissue>,
+    /// Fault: the DAC output stuck at this code whatever it is sent.
+    pub stuck_dac: Option<u16>,
 }
 
 impl Scene {
@@ -96,6 +98,7 @@ impl Scene {
             front_end: FrontEnd::default(),
             contact: Contact::default(),
             tissue: None,
+            stuck_dac: None,
         }
     }
     /// Pressed at 30 mN onto `tissue`.

@@ -214,6 +214,7 @@ mod tests {
                 g_s: (g0 + mr) as f32,
                 b_s: (b0 * f / 230.0 + mi) as f32,
                 sigma_s: 1e-10,
+                current_a: 1e-6,
                 ..SweepPoint::default()
             };
         }

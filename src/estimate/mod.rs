@@ -28,8 +28,14 @@ pub struct Estimate {
     pub points_used: u16,
 }
 
-/// Largest fraction of current samples allowed at a converter rail.
-pub const MAX_CLIP_FRACTION: f32 = 1e-3;
+/// Largest fraction of current samples allowed at a converter rail: none. A sample at a rail
+/// means the signal reached full scale; the points near it are distorted even when only the
+/// noise peaks clip.
+pub const MAX_CLIP_FRACTION: f32 = 0.0;
+
+/// Below this sense current (A, peak) at every point no current flows: the PZT or its wiring is
+/// open. (A 210 pF plate driven at 1 V and 170 Hz already carries 220 nA; 20 nA is 7 ADC codes.)
+pub const OPEN_CIRCUIT_A: f32 = 20e-9;
 
 /// Checks every sweep must pass before any estimator looks at it.
 pub fn screen(points: &[SweepPoint]) -> Result<(), Failure> {
@@ -38,6 +44,9 @@ pub fn screen(points: &[SweepPoint]) -> Result<(), Failure> {
     }
     if points.iter().any(|p| p.clip_fraction > MAX_CLIP_FRACTION) {
         return Err(Failure::Clipped);
+    }
+    if points.iter().all(|p| !(p.current_a >= OPEN_CIRCUIT_A)) {
+        return Err(Failure::OpenCircuit);
     }
     Ok(())
 }

@@ -23,7 +23,9 @@ use crate::engine::{PointPlan, PointRaw};
 use crate::hal::FrontEndScale;
 use crate::linalg::Line;
 use crate::status::Failure;
-use crate::sweep::{amplitude_codes, check_durations, check_frequency, SettingsError};
+use crate::sweep::{
+    amplitude_codes, check_durations, check_frequency, point_from_raw, PointError, SettingsError,
+};
 use crate::units::{Hz, Seconds, Volts};
 use core::f64::consts::PI;
 
@@ -182,15 +184,28 @@ impl Ringdown {
         Some(plan)
     }
 
-    /// Take a finished window.
-    pub fn accept(&mut self, raw: &PointRaw) {
+    /// Take a finished window. The burst's last cycle is screened like a sweep point: no drive,
+    /// a clipped or an absent current end the reading with their failure code (the ring-down
+    /// itself cannot see them: the drive is held while it listens).
+    pub fn accept(&mut self, raw: &PointRaw, scale: &FrontEndScale) {
         if raw.plan.tag != self.tag {
             return;
         }
         match self.phase {
             Phase::Burst => {
-                self.phase = Phase::Ring;
                 self.pending = false;
+                let check = match point_from_raw(raw, scale) {
+                    Err(PointError::NoDrive) => Err(Failure::DriveFault),
+                    Err(PointError::Degenerate) => Err(Failure::BadSettings),
+                    Ok(p) => super::screen(&[p, p, p]),
+                };
+                match check {
+                    Ok(()) => self.phase = Phase::Ring,
+                    Err(f) => {
+                        self.last = Some(Err(f));
+                        self.phase = Phase::Done;
+                    }
+                }
             }
             Phase::Ring => {
                 if let Some(p) = solve(&raw.sums.current, &raw.sums.reference) {
