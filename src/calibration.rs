@@ -33,6 +33,50 @@ impl Source {
     }
 }
 
+/// The unit's quality factor against modulus on the reference phantoms, `Q ≈ q0 + q1 ln E`:
+/// the contact condition the calibration holds for. A reading whose Q strays from it by more
+/// than [`QModel::TOLERANCE`] was not taken in that condition (a different preload changes the
+/// contact area and with it the tissue damping) and its modulus cannot be trusted.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct QModel {
+    /// Intercept.
+    pub q0: f64,
+    /// Slope per unit of `ln(E / kPa)`.
+    pub q1: f64,
+}
+
+impl QModel {
+    /// Largest relative deviation of Q from the curve that still counts as the calibrated
+    /// condition. The reference readings scatter by well under 5 %; doubling the preload lowers
+    /// Q by about 30 % in `hal-sim`.
+    pub const TOLERANCE: f64 = 0.2;
+
+    /// Least-squares fit to `(E kPa, Q)` pairs; `None` with fewer than two distinct moduli or
+    /// non-finite input.
+    pub fn fit(data: &[(f64, f64)]) -> Option<QModel> {
+        let mut l = crate::linalg::Line::default();
+        for &(e, q) in data {
+            if e > 0.0 && q > 0.0 {
+                l.add(libm::log(e), q, 1.0);
+            }
+        }
+        let f = l.solve()?;
+        (f.a.is_finite() && f.b.is_finite()).then_some(QModel { q0: f.a, q1: f.b })
+    }
+
+    /// Expected Q at `e_kpa`.
+    pub fn q_at(&self, e_kpa: f64) -> f64 {
+        self.q0 + self.q1 * libm::log(e_kpa)
+    }
+
+    /// True when `q` at `e_kpa` is within [`Self::TOLERANCE`] of the curve.
+    pub fn holds(&self, e_kpa: f64, q: f64) -> bool {
+        let expect = self.q_at(e_kpa);
+        expect > 0.0 && libm::fabs(q / expect - 1.0) <= Self::TOLERANCE
+    }
+}
+
 /// Fraction by which the calibrated span extends beyond the reference moduli on either side.
 pub const SPAN_MARGIN: f64 = 0.10;
 

@@ -158,33 +158,25 @@ impl Method {
     }
 }
 
-/// The probe's signature in free air, stored with the calibration: how contact is told apart
-/// from no contact.
-///
-/// Frequency alone cannot tell: near 330 kPa the loaded resonance equals the free one. The
-/// quality factor can: tissue damps the mode (loaded Q 7–15 over 8–5000 kPa in `hal-sim`),
-/// while the free probe rings with Q ≈ 40. A reading is `no_contact` when its Q exceeds
-/// [`NO_CONTACT_Q_FRACTION`] of the free Q *and* its resonance lies within
-/// [`NO_CONTACT_SPAN_HZ`] of the free one (a rigid contact also rings well, but far above).
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct AirReference {
-    /// Free resonance.
-    pub resonance: Hz,
-    /// Free quality factor.
-    pub q: f32,
-}
+pub use crate::store::AirReference;
 
 /// A reading whose Q exceeds this fraction of the free Q may be free air.
 pub const NO_CONTACT_Q_FRACTION: f32 = 0.6;
 /// ... if its resonance is also this close to the free one.
 pub const NO_CONTACT_SPAN_HZ: f32 = 5.0;
 
+/// How contact is told apart from no contact with the stored [`AirReference`].
+///
+/// Frequency alone cannot tell: near 330 kPa the loaded resonance equals the free one. The
+/// quality factor can: tissue damps the mode (loaded Q 7–15 over 8–5000 kPa in `hal-sim`),
+/// while the free probe rings with Q ≈ 40. A reading looks free when its Q exceeds
+/// [`NO_CONTACT_Q_FRACTION`] of the free Q *and* its resonance lies within
+/// [`NO_CONTACT_SPAN_HZ`] of the free one (a rigid contact also rings well, but far above).
 impl AirReference {
     /// True when `(f, q)` looks like the free probe.
     pub fn looks_free(&self, f: Hz, q: f32) -> bool {
-        q > NO_CONTACT_Q_FRACTION * self.q
-            && libm::fabsf(f.0 - self.resonance.0) < NO_CONTACT_SPAN_HZ
+        q > NO_CONTACT_Q_FRACTION * self.free_q
+            && libm::fabsf(f.0 - self.free_resonance.0) < NO_CONTACT_SPAN_HZ
     }
 }
 
@@ -240,6 +232,22 @@ impl Reading {
             );
             if (self.status.is_ok() || failed_for_range) && air.looks_free(f, q) {
                 self.status = Status::Failed(Failure::NoContact);
+                self.modulus = None;
+                self.modulus_sigma = None;
+                self.modulus_sigma_repeat = None;
+            }
+        }
+        self
+    }
+
+    /// Check the contact condition against the unit's calibrated Q(E) curve: an ok reading
+    /// whose Q is off it becomes `bad_contact` (readings without a Q cannot be checked).
+    pub fn check_condition(mut self, q_model: Option<&crate::calibration::QModel>) -> Self {
+        if let (Status::Ok, Some(m), Some(e), Some(q)) =
+            (self.status, q_model, self.modulus, self.q)
+        {
+            if !m.holds(e.0 as f64, q as f64) {
+                self.status = Status::Failed(Failure::BadContact);
                 self.modulus = None;
                 self.modulus_sigma = None;
                 self.modulus_sigma_repeat = None;

@@ -35,11 +35,14 @@ pub enum Failure {
     DriveFault,
     /// The settings given were invalid.
     BadSettings,
+    /// The contact is not the calibrated one: the quality factor is off the unit's calibrated
+    /// Q(E) curve (preload off nominal, or tissue far more or less lossy than the references).
+    BadContact,
 }
 
 impl Failure {
     /// Every code, in declaration order.
-    pub const ALL: [Failure; 14] = [
+    pub const ALL: [Failure; 15] = [
         Failure::NoContact,
         Failure::ContactLost,
         Failure::BelowRange,
@@ -54,6 +57,7 @@ impl Failure {
         Failure::Interference,
         Failure::DriveFault,
         Failure::BadSettings,
+        Failure::BadContact,
     ];
 
     /// Stable snake_case code, as used in JSON and logs.
@@ -73,6 +77,7 @@ impl Failure {
             Failure::Interference => "interference",
             Failure::DriveFault => "drive_fault",
             Failure::BadSettings => "bad_settings",
+            Failure::BadContact => "bad_contact",
         }
     }
 
@@ -93,6 +98,7 @@ impl Failure {
             Failure::Interference => "interference corrupts the measurement",
             Failure::DriveFault => "drive does not follow the command",
             Failure::BadSettings => "invalid settings",
+            Failure::BadContact => "contact unlike calibration: check preload (Q off its curve)",
         }
     }
 

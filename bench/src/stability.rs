@@ -4,8 +4,8 @@
 
 use hal_sim::catalogue::Case;
 use hal_sim::{NoiseScene, Scene};
-use pzt_probe::board::sim::{calibrate, read};
-use pzt_probe::calibration::PowerLaw;
+use pzt_probe::board::sim::{calibrate_unit, read};
+use pzt_probe::calibration::{PowerLaw, QModel};
 use pzt_probe::measure::{AirReference, Method, Reading, Settings};
 use pzt_probe::sweep::SweepSettings;
 use pzt_probe::{Hz, Seconds, Status, Volts};
@@ -76,28 +76,42 @@ pub fn air_reference() -> Option<AirReference> {
     )
     .ok()?;
     Some(AirReference {
-        resonance: r.resonance?,
-        q: r.q?,
+        free_resonance: r.resonance?,
+        free_q: r.q?,
     })
 }
 
-/// A method calibrated on A–E × `repeats` at bench noise with its default settings.
-pub fn calibrated(method: Method, repeats: usize) -> Option<(Settings, PowerLaw)> {
-    let s = method.default_settings();
-    let cal = calibrate(method, s, NoiseScene::Bench, repeats, 700_000).ok()?;
-    Some((s, cal))
+/// A unit calibrated for one method: settings, power law, Q(E) curve.
+pub struct Unit {
+    /// The method's settings.
+    pub settings: Settings,
+    /// Its calibration.
+    pub cal: PowerLaw,
+    /// The contact condition of the calibration (methods that measure Q).
+    pub q_model: Option<QModel>,
 }
 
-/// One reading of `case` with the contact check applied.
+/// A method calibrated on A–E × `repeats` at bench noise with its default settings.
+pub fn calibrated(method: Method, repeats: usize) -> Option<Unit> {
+    let settings = method.default_settings();
+    let (cal, q_model) =
+        calibrate_unit(method, settings, NoiseScene::Bench, repeats, 700_000).ok()?;
+    Some(Unit {
+        settings,
+        cal,
+        q_model,
+    })
+}
+
+/// One reading of `case` with the contact and condition checks applied, as the firmware would.
 pub fn run_case(
     case: &Case,
     method: Method,
-    s: &Settings,
-    cal: &PowerLaw,
+    unit: &Unit,
     air: Option<&AirReference>,
     seed: u64,
 ) -> Option<Reading> {
-    read(&case.scene, seed, method, *s, cal, |_| {})
+    read(&case.scene, seed, method, unit.settings, &unit.cal, |_| {})
         .ok()
-        .map(|r| r.check_contact(air))
+        .map(|r| r.check_contact(air).check_condition(unit.q_model.as_ref()))
 }

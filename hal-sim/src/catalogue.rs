@@ -69,7 +69,8 @@ pub fn catalogue(noise: NoiseScene) -> [Case; 17] {
     let s = phantoms::silicones();
     const RANGE_LOW: &[&str] = &["below_range", "out_of_band", "no_resonance", "low_snr"];
     const RANGE_HIGH: &[&str] = &["above_range", "out_of_band"];
-    const OK_OR_WEAK: &[&str] = &["low_snr", "no_resonance"];
+    // A much lossier tissue than the references is outside the calibrated contact condition.
+    const OK_OR_WEAK: &[&str] = &["low_snr", "no_resonance", "bad_contact"];
     [
         Case {
             name: "nominal",
@@ -196,7 +197,7 @@ pub fn catalogue(noise: NoiseScene) -> [Case; 17] {
             what: "300 kPa pressed at 60 mN instead of 30 mN",
             scene: nominal.with_preload_n(0.060),
             truth_kpa: Some(NOMINAL_KPA),
-            accept: &[],
+            accept: &["bad_contact"],
         },
     ]
 }

@@ -520,9 +520,11 @@ mod app {
             rig.watchdog.feed();
             let ok = match req {
                 Command::Measure => {
+                    // Contact is checked against the stored air reference (Q and resonance).
                     let r = rig
                         .reading(active.method, &active.sweep, &record.calibration)
-                        .await;
+                        .await
+                        .check_contact(record.air.as_ref());
                     rig.report(Report::Reading(r)).await;
                     rig.report(Report::Counters).await;
                     r.status.is_ok()

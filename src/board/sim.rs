@@ -62,7 +62,7 @@ impl SampleStream for SimBoard {
     }
 }
 
-use crate::calibration::{FitError, PowerLaw};
+use crate::calibration::{FitError, PowerLaw, QModel};
 use crate::engine::SampleEngine;
 use crate::measure::{Method, Procedure, Reading, Settings};
 use crate::runner::{run_sweep, RunError};
@@ -123,9 +123,23 @@ pub fn calibrate(
     repeats: usize,
     seed0: u64,
 ) -> Result<PowerLaw, SimError> {
+    calibrate_unit(method, settings, noise, repeats, seed0).map(|(law, _)| law)
+}
+
+/// [`calibrate`], and also the unit's Q(E) curve from the same reference readings (for methods
+/// that measure Q; `None` otherwise): the contact condition the calibration holds for.
+pub fn calibrate_unit(
+    method: Method,
+    settings: impl Into<Settings>,
+    noise: NoiseScene,
+    repeats: usize,
+    seed0: u64,
+) -> Result<(PowerLaw, Option<QModel>), SimError> {
     let repeats = repeats.clamp(1, MAX_REPEATS);
     let settings: Settings = settings.into();
     let mut data = [(0.0f64, 0.0f64, 0.0f64); 5 * MAX_REPEATS];
+    let mut qs = [(0.0f64, 0.0f64); 5 * MAX_REPEATS];
+    let mut nq = 0;
     let mut n = 0;
     // Any curve will do for the reference readings: only their resonance is used.
     let cal = PowerLaw::paper_experiment();
@@ -137,8 +151,13 @@ pub fn calibrate(
             if let (Some(f), Some(s)) = (reading.resonance, reading.resonance_sigma) {
                 data[n] = (p.modulus_kpa, f.0 as f64, (s.0 as f64).max(1e-4));
                 n += 1;
+                if let Some(q) = reading.q {
+                    qs[nq] = (p.modulus_kpa, q as f64);
+                    nq += 1;
+                }
             }
         }
     }
-    PowerLaw::fit_robust(&mut data[..n]).map_err(SimError::Fit)
+    let law = PowerLaw::fit_robust(&mut data[..n]).map_err(SimError::Fit)?;
+    Ok((law, QModel::fit(&qs[..nq])))
 }

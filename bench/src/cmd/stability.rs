@@ -40,7 +40,7 @@ pub fn run(a: StabilityArgs) -> Result<()> {
     let mut csv =
         String::from("method,scene,seed,outcome,status,modulus_kpa,modulus_sigma_kpa,truth_kpa\n");
     for m in Method::ALL {
-        let (s, cal) = calibrated(m, a.cal_repeats)
+        let unit = calibrated(m, a.cal_repeats)
             .ok_or_else(|| anyhow!("calibrating {} failed", m.name()))?;
         let mut row = Vec::new();
         for case in &cases {
@@ -50,7 +50,7 @@ pub fn run(a: StabilityArgs) -> Result<()> {
                 worst_err_sigma: 0.0,
             };
             for seed in 0..a.seeds {
-                let Some(r) = run_case(case, m, &s, &cal, Some(&air), 5000 + seed) else {
+                let Some(r) = run_case(case, m, &unit, Some(&air), 5000 + seed) else {
                     continue;
                 };
                 let o = classify(case, &r);
