@@ -188,7 +188,9 @@ impl Staged {
         let settle_s = if self.stage == 0 {
             self.s.coarse_settle.0 as f64 * if first { 4.0 } else { 1.0 }
         } else {
-            self.s.settle_tau as f64 * self.q / (core::f64::consts::PI * self.f0)
+            // The first refine point follows the jump from the band's top: twice the settling.
+            let jump = if self.next == 0 { 2.0 } else { 1.0 };
+            jump * self.s.settle_tau as f64 * self.q / (core::f64::consts::PI * self.f0)
         };
         let cycles = libm::ceilf(self.s.integrate.0 * f).max(1.0) as u32;
         self.tag = self.tag.wrapping_add(1);
@@ -269,12 +271,14 @@ impl Staged {
         if self.r == Refine::Track {
             let _ = self.plan.push(f0 as f32);
         } else {
+            // Visit the refine points starting from the end nearest the last coarse point (the
+            // band's top), so the drive never jumps across the resonance.
             let half = self.s.refine_span as f64 * f0 / self.q;
             for k in 0..n {
                 let x = if n == 1 {
                     0.0
                 } else {
-                    -1.0 + 2.0 * k as f64 / (n - 1) as f64
+                    1.0 - 2.0 * k as f64 / (n - 1) as f64
                 };
                 let _ = self.plan.push((f0 + x * half).clamp(a, b) as f32);
             }
@@ -333,8 +337,19 @@ impl Staged {
         if let Some(f) = self.failure {
             return Err(f);
         }
+        let fine = &self.fine;
         let e = match self.r {
-            Refine::Conductance => conductance::estimate(&self.fine),
+            Refine::Conductance => {
+                // The sweep estimator wants ascending frequencies; the refine points were
+                // visited from the top down.
+                let mut asc: Vec<SweepPoint, MAX_STAGE_POINTS> = Vec::new();
+                for p in fine.iter() {
+                    // Same capacity as `fine`: cannot fail.
+                    let _ = asc.push(*p);
+                }
+                asc.sort_unstable_by(|x, y| x.freq.0.total_cmp(&y.freq.0));
+                conductance::estimate(&asc)
+            }
             Refine::Bvd => {
                 let mut all: Vec<SweepPoint, { 2 * MAX_STAGE_POINTS }> = Vec::new();
                 let use_all = self.fine.len() < 4;
