@@ -135,6 +135,18 @@ pub fn calibrate_unit(
     repeats: usize,
     seed0: u64,
 ) -> Result<(PowerLaw, Option<QModel>), SimError> {
+    calibrate_unit_with(method, settings, noise, repeats, seed0, || {})
+}
+
+/// [`calibrate_unit`], calling `on_reading` after each reference reading (for progress).
+pub fn calibrate_unit_with(
+    method: Method,
+    settings: impl Into<Settings>,
+    noise: NoiseScene,
+    repeats: usize,
+    seed0: u64,
+    mut on_reading: impl FnMut(),
+) -> Result<(PowerLaw, Option<QModel>), SimError> {
     let repeats = repeats.clamp(1, MAX_REPEATS);
     let settings: Settings = settings.into();
     let mut data = [(0.0f64, 0.0f64, 0.0f64); 5 * MAX_REPEATS];
@@ -156,6 +168,7 @@ pub fn calibrate_unit(
                     nq += 1;
                 }
             }
+            on_reading();
         }
     }
     let law = PowerLaw::fit_robust(&mut data[..n]).map_err(SimError::Fit)?;

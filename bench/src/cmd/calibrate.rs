@@ -5,7 +5,7 @@ use crate::calfile::{self, CalFile};
 use crate::scene::parse_noise;
 use anyhow::{bail, Result};
 use clap::Args;
-use hal_sim::{NoiseScene, Scene};
+use hal_sim::NoiseScene;
 use pzt_probe::board::sim::{self as simboard, CALIBRATION_PHANTOMS};
 use pzt_probe::calibration::PowerLaw;
 use pzt_probe::measure::{Procedure, Settings};
@@ -27,7 +27,8 @@ pub struct CalibrateArgs {
     pub out: PathBuf,
 }
 
-/// Calibrate the simulated unit on A–E with `method` and `settings` under `noise`.
+/// Calibrate the simulated unit on A–E with `method` and `settings` under `noise`, with a
+/// progress bar (the calibration itself is `board::sim::calibrate_unit_with`).
 pub fn calibrate_unit(
     method: Method,
     settings: &Settings,
@@ -40,23 +41,10 @@ pub fn calibrate_unit(
         (CALIBRATION_PHANTOMS.len() * repeats) as u64,
         "calibrating on A–E",
     );
-    // Calibrate phantom by phantom so the bar moves; the fit itself is the library's.
-    let mut data = Vec::new();
-    let cal = PowerLaw::paper_experiment();
-    for (pi, p) in CALIBRATION_PHANTOMS.iter().enumerate() {
-        let scene = Scene::on_phantom(p).with_noise(noise);
-        for r in 0..repeats {
-            let s = seed + (pi * simboard::MAX_REPEATS + r) as u64;
-            let reading = simboard::read(&scene, s, method, settings, &cal, |_| {})
-                .map_err(|e| anyhow::anyhow!("reference reading failed: {e:?}"))?;
-            if let (Some(f), Some(sf)) = (reading.resonance, reading.resonance_sigma) {
-                data.push((p.modulus_kpa, f.0 as f64, (sf.0 as f64).max(1e-4)));
-            }
-            pb.inc(1);
-        }
-    }
+    let r = simboard::calibrate_unit_with(method, *settings, noise, repeats, seed, || pb.inc(1));
     pb.finish_and_clear();
-    PowerLaw::fit_robust(&mut data).map_err(|e| anyhow::anyhow!("calibration fit failed: {e:?}"))
+    r.map(|(law, _)| law)
+        .map_err(|e| anyhow::anyhow!("calibration failed: {e:?}"))
 }
 
 /// Run the subcommand.
