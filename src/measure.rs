@@ -34,6 +34,9 @@ pub enum Method {
     Track,
     /// Burst, hold the drive, fit the free decay.
     Ringdown,
+    /// The default strategy: fit (0.7 s), falling back to sweep-G (6 s) when fit finds no
+    /// trustworthy resonance; the reading names the method that produced it.
+    Auto,
 }
 
 /// Settings of a method: stepped sweeps, two-stage procedures or ring-down.
@@ -71,13 +74,14 @@ impl From<&Settings> for Settings {
 
 impl Method {
     /// Every method.
-    pub const ALL: [Method; 6] = [
+    pub const ALL: [Method; 7] = [
         Method::Paper,
         Method::SweepG,
         Method::Adaptive,
         Method::Fit,
         Method::Track,
         Method::Ringdown,
+        Method::Auto,
     ];
 
     /// Stable name.
@@ -89,6 +93,7 @@ impl Method {
             Method::Fit => "fit",
             Method::Track => "track",
             Method::Ringdown => "ringdown",
+            Method::Auto => "auto",
         }
     }
 
@@ -103,7 +108,9 @@ impl Method {
         match self {
             Method::Paper | Method::SweepG => Settings::Sweep(self.default_sweep()),
             Method::Adaptive => Settings::Staged(StagedSettings::default_for(Refine::Conductance)),
-            Method::Fit => Settings::Staged(StagedSettings::default_for(Refine::Bvd)),
+            Method::Fit | Method::Auto => {
+                Settings::Staged(StagedSettings::default_for(Refine::Bvd))
+            }
             Method::Track => Settings::Staged(StagedSettings::default_for(Refine::Track)),
             Method::Ringdown => Settings::Ringdown(RingdownSettings::DEFAULT),
         }
@@ -147,7 +154,8 @@ impl Method {
     pub fn estimate(self, points: &[SweepPoint]) -> Result<Estimate, Failure> {
         match self {
             Method::Paper => estimate::paper::estimate(points),
-            Method::SweepG => estimate::conductance::estimate(points),
+            // On given points the strategy's fallback is what applies.
+            Method::SweepG | Method::Auto => estimate::conductance::estimate(points),
             Method::Fit => {
                 let i = estimate::argmax(points, |p| p.g_s).ok_or(Failure::NoResonance)?;
                 let f = points[i].freq.0 as f64;
@@ -435,6 +443,19 @@ enum Inner {
     Sweep(SweepMeasurement),
     Staged(Staged),
     Ringdown(Ringdown),
+    Auto {
+        first: Staged,
+        fallback: Option<SweepMeasurement>,
+    },
+}
+
+/// Failures of the first method of [`Method::Auto`] that the fallback may cure (the resonance
+/// was missed or not resolved); the others (clipping, drive, open circuit, settings) it cannot.
+fn retryable(e: &Result<Estimate, Failure>) -> bool {
+    matches!(
+        e,
+        Err(Failure::NoResonance | Failure::LowSnr | Failure::OutOfBand | Failure::NotLocked)
+    )
 }
 
 /// A reading by any method: the method's own procedure behind one interface.
@@ -469,6 +490,14 @@ impl Procedure {
                 Inner::Staged(s.validate(Refine::Track, scale)?)
             }
             (Method::Ringdown, Settings::Ringdown(s)) => Inner::Ringdown(s.validate(scale)?),
+            (Method::Auto, Settings::Staged(s)) => {
+                // Validate the fallback now too: the interrupt must never see bad settings.
+                Method::SweepG.default_sweep().validate(scale)?;
+                Inner::Auto {
+                    first: s.validate(Refine::Bvd, scale)?,
+                    fallback: None,
+                }
+            }
             _ => return Err(SettingsError::WrongMethod),
         };
         Ok(Self {
@@ -497,6 +526,18 @@ impl Measurement for Procedure {
             Inner::Sweep(m) => m.next_plan(),
             Inner::Staged(m) => m.next_plan(&self.scale),
             Inner::Ringdown(m) => m.next_plan(),
+            Inner::Auto { first, fallback } => {
+                if fallback.is_none() && first.is_complete() && retryable(&first.estimate()) {
+                    let sweep = Method::SweepG.default_sweep();
+                    *fallback =
+                        SweepMeasurement::new(Method::SweepG, &sweep, &self.scale, self.end_sample)
+                            .ok();
+                }
+                match fallback {
+                    Some(f) => f.next_plan(),
+                    None => first.next_plan(&self.scale),
+                }
+            }
         }
     }
 
@@ -510,6 +551,10 @@ impl Measurement for Procedure {
                 m.accept(raw, &self.scale);
                 None
             }
+            Inner::Auto { first, fallback } => match fallback {
+                Some(f) => f.accept(raw),
+                None => first.accept(raw, &self.scale),
+            },
         }
     }
 
@@ -518,6 +563,10 @@ impl Measurement for Procedure {
             Inner::Sweep(m) => m.is_complete(),
             Inner::Staged(m) => m.is_complete(),
             Inner::Ringdown(m) => m.is_complete(),
+            Inner::Auto { first, fallback } => match fallback {
+                Some(f) => f.is_complete(),
+                None => first.is_complete() && !retryable(&first.estimate()),
+            },
         }
     }
 
@@ -535,6 +584,21 @@ impl Measurement for Procedure {
             Inner::Ringdown(m) => {
                 Reading::from_estimate(self.method, m.estimate(), cal, t, self.windows)
             }
+            Inner::Auto { first, fallback } => match fallback {
+                Some(f) => {
+                    let mut r = f.finish(cal);
+                    r.probe_time = t;
+                    r.points = r.points.saturating_add(first.len() as u16);
+                    r
+                }
+                None => Reading::from_estimate(
+                    Method::Fit,
+                    first.estimate(),
+                    cal,
+                    t,
+                    first.len() as u16,
+                ),
+            },
         }
     }
 }

@@ -218,3 +218,49 @@ fn random_input_never_panics() {
         }
     }
 }
+
+/// The default strategy falls back to sweep-G when fit misses the resonance, and says so.
+#[test]
+fn auto_falls_back_and_names_the_method_used() {
+    use hal_sim::{NoiseScene, Scene};
+    use pzt_probe::board::sim::read;
+    use pzt_probe::estimate::staged::{Refine, StagedSettings};
+    use pzt_probe::measure::Settings;
+    let cal = PowerLaw::paper_experiment();
+    let scene = Scene::on_modulus_kpa(1000.0).with_noise(NoiseScene::Bench);
+    let f0 = scene.resonance_hz();
+    // Default: fit finds it.
+    let r = read(
+        &scene,
+        3,
+        Method::Auto,
+        Method::Auto.default_settings(),
+        &cal,
+        |_| {},
+    )
+    .unwrap();
+    assert_eq!(r.method, Method::Fit);
+    assert!((r.resonance.unwrap().0 as f64 - f0).abs() < 0.5);
+    // A fit band that misses the resonance (170–200 Hz for 251 Hz): fit says out of band, the
+    // strategy sweeps 170–290 Hz with sweep-G and finds it.
+    let narrow = StagedSettings {
+        band_start: Hz(170.0),
+        band_stop: Hz(200.0),
+        ..StagedSettings::default_for(Refine::Bvd)
+    };
+    let r = read(
+        &scene,
+        3,
+        Method::Auto,
+        Settings::Staged(narrow),
+        &cal,
+        |_| {},
+    )
+    .unwrap();
+    assert_eq!(r.method, Method::SweepG, "{r:?}");
+    assert!((r.resonance.unwrap().0 as f64 - f0).abs() < 0.1, "{r:?}");
+    assert!(
+        r.probe_time.0 > 6.0,
+        "the probe time counts both methods: {r:?}"
+    );
+}

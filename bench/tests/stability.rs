@@ -1,4 +1,5 @@
-//! The stability catalogue: sweep-G and fit never report a silent wrong number in any scene (an
+//! The stability catalogue: sweep-G, fit and the default strategy (`auto`: fit, falling back to
+//! sweep-G) never report a silent wrong number in any scene (an
 //! off-nominal preload included: its quality factor is off the unit's calibrated Q(E) curve).
 //! Where they fail with a code the scene does not list (a lost reading, not a wrong one), the
 //! count is bounded.
@@ -9,11 +10,11 @@ use probe_bench::stability::{air_reference, calibrated, classify, run_case, Outc
 use pzt_probe::{Failure, Method, Status};
 
 #[test]
-fn sweep_g_and_fit_never_report_a_silent_wrong_number() {
+fn sweep_g_fit_and_the_default_strategy_never_report_a_silent_wrong_number() {
     let air = air_reference().expect("free-air reference");
     // The free probe: 232.3 Hz and Q 40 in hal-sim.
     assert!((air.free_resonance.0 - 232.3).abs() < 0.5 && (air.free_q / 40.0 - 1.0).abs() < 0.1);
-    for m in [Method::SweepG, Method::Fit] {
+    for m in [Method::SweepG, Method::Fit, Method::Auto] {
         let unit = calibrated(m, 10).expect("calibration");
         let mut wrong_codes = 0;
         for case in catalogue(NoiseScene::Bench) {

@@ -89,7 +89,10 @@ pub fn run(a: StabilityArgs) -> Result<()> {
         let path = a.out_dir.join(format!("stability.{ext}"));
         with_backend(
             &path,
-            (1100, 140 + 34 * names.len() as u32),
+            (
+                190 + 150 * Method::ALL.len() as u32,
+                140 + 34 * names.len() as u32,
+            ),
             |root: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>| draw(root, &names, &grid),
             |root: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>| {
                 draw(root, &names, &grid)
