@@ -1,6 +1,9 @@
 //! `probe-bench analyze`: golden captures against their known resonance, captures that must not
 //! read ok, the time-domain demodulator, and one malformed file per error kind.
 
+mod common;
+use common::{bin, run_fails_one_line, run_json, run_ok};
+
 use hal_sim::{phantoms, Scene};
 use probe_bench::capture::{self, CaptureError, DemodOptions, Layout, SweepShape};
 use probe_bench::cmd::analyze::{analysis_json, analyze, offline_method, Analysis};
@@ -521,60 +524,36 @@ fn methods_for_captures() {
     assert!(e.contains("unknown method") && e.contains("sweep-g"), "{e}");
 }
 
-fn bin() -> std::process::Command {
-    std::process::Command::new(env!("CARGO_BIN_EXE_probe-bench"))
-}
-
 #[test]
 fn cli_json_plot_and_errors() {
     let dir = std::env::temp_dir().join(format!("probe-bench-analyze-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let svg = dir.join("a.svg");
     let png = dir.join("a.png");
-    let out = bin()
-        .args(["analyze", "--json", "--plot"])
-        .arg(&svg)
-        .arg(data("bvd_300kpa_y.csv"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let j = run_json(
+        bin()
+            .args(["analyze", "--json", "--plot"])
+            .arg(&svg)
+            .arg(data("bvd_300kpa_y.csv")),
     );
-    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(j["status"], "ok");
     assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
-    let out = bin()
-        .args(["analyze", "--method", "paper", "--plot"])
-        .arg(&png)
-        .arg(data("sim_time_stepped_phantom_b.csv"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    run_ok(
+        bin()
+            .args(["analyze", "--method", "paper", "--plot"])
+            .arg(&png)
+            .arg(data("sim_time_stepped_phantom_b.csv")),
     );
     assert_eq!(&std::fs::read(&png).unwrap()[1..4], b"PNG");
     // A malformed file: non-zero exit, one line naming the line.
-    let out = bin()
-        .arg("analyze")
-        .arg(data("malformed/cell_count.csv"))
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let e = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(e.trim_end().lines().count(), 1, "{e}");
+    let e = run_fails_one_line(bin().arg("analyze").arg(data("malformed/cell_count.csv")));
     assert!(e.contains("line 4"), "{e}");
     // A failed reading is still a successful analysis (exit 0), with the failure code.
-    let out = bin()
-        .args(["analyze", "--json"])
-        .arg(data("bvd_capacitor_only_y.csv"))
-        .output()
-        .unwrap();
-    assert!(out.status.success());
-    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let j = run_json(
+        bin()
+            .args(["analyze", "--json"])
+            .arg(data("bvd_capacitor_only_y.csv")),
+    );
     assert_eq!(j["status"], "no_resonance");
     assert!(j["modulus_kpa"].is_null());
     let _ = std::fs::remove_dir_all(&dir);

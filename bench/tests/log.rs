@@ -2,6 +2,9 @@
 //! through them parse back to the same values, and a real decoded QEMU log reconstructs the
 //! reading the firmware made.
 
+mod common;
+use common::{bin, run_fails_one_line, run_ok};
+
 use probe_bench::defmt_log::{self, compile, parse_line, render, Piece, Ty, Value, TEMPLATES};
 use pzt_probe::sweep::SweepPoint;
 use pzt_probe::{Hz, Method, PowerLaw};
@@ -263,10 +266,6 @@ fn readings_sweeps_and_events_of_a_longer_log() {
     assert_eq!(s.other_lines, 1);
 }
 
-fn bin() -> std::process::Command {
-    std::process::Command::new(env!("CARGO_BIN_EXE_probe-bench"))
-}
-
 #[test]
 fn cli_table_stdin_plot_and_errors() {
     use std::io::Write;
@@ -274,18 +273,7 @@ fn cli_table_stdin_plot_and_errors() {
     let dir = std::env::temp_dir().join(format!("probe-bench-log-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let svg = dir.join("log.svg");
-    let out = bin()
-        .arg("log")
-        .arg(&log)
-        .arg("--plot")
-        .arg(&svg)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = run_ok(bin().arg("log").arg(&log).arg("--plot").arg(&svg));
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
         stdout.contains("227.968 ± 0.041") && stdout.contains("282.9 ± 5.5"),
@@ -311,18 +299,10 @@ fn cli_table_stdin_plot_and_errors() {
     assert_eq!(j["readings"][0]["status"], "ok");
     assert_eq!(j["sweeps"][0]["points"].as_array().unwrap().len(), 31);
     // Not a firmware log: one line, non-zero exit.
-    let out = bin()
-        .arg("log")
-        .arg(root().join("tests/data/bvd_300kpa_y.csv"))
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    assert_eq!(
-        String::from_utf8_lossy(&out.stderr)
-            .trim_end()
-            .lines()
-            .count(),
-        1
+    run_fails_one_line(
+        bin()
+            .arg("log")
+            .arg(root().join("tests/data/bvd_300kpa_y.csv")),
     );
     let _ = std::fs::remove_dir_all(&dir);
 }

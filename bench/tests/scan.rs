@@ -1,6 +1,9 @@
 //! `probe-bench scan`: paper 003's coin sample reads the paper's two frequencies, and the lump's
 //! centre is found within one grid step, for paper 003's coin and paper 002's ball.
 
+mod common;
+use common::{bin, run_fails_one_line, run_json};
+
 use hal_sim::lump::Inclusion;
 use hal_sim::{NoiseScene, Scene};
 use probe_bench::cmd::scan::{
@@ -123,56 +126,29 @@ fn cli_writes_the_map() {
     let dir = std::env::temp_dir().join(format!("probe-bench-scan-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let png = dir.join("scan.png");
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_probe-bench"))
-        .args(["scan", "--json", "--plot"])
-        .arg(&png)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let j = run_json(bin().args(["scan", "--json", "--plot"]).arg(&png));
     assert_eq!(j["scene"], "coin");
     let over = j["over_mean_hz"].as_f64().unwrap();
     assert!((over - PAPER_OVER_HZ).abs() <= 3.0);
     assert!(j["lump"]["x_mm"].as_f64().is_some());
     assert_eq!(&std::fs::read(&png).unwrap()[1..4], b"PNG");
     // Negative coordinates are numbers, not options.
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_probe-bench"))
-        .args([
-            "scan",
-            "--json",
-            "--step-mm",
-            "3",
-            "--coin-at-mm",
-            "-3",
-            "2",
-            "--plot",
-        ])
-        .arg(dir.join("neg.svg"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let j = run_json(
+        bin()
+            .args([
+                "scan",
+                "--json",
+                "--step-mm",
+                "3",
+                "--coin-at-mm",
+                "-3",
+                "2",
+                "--plot",
+            ])
+            .arg(dir.join("neg.svg")),
     );
-    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(j["true_centre_mm"][0].as_f64(), Some(-3.0));
     // Bad input: one line, non-zero exit.
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_probe-bench"))
-        .args(["scan", "--scene", "ball", "--ball-d-mm", "25"])
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    assert_eq!(
-        String::from_utf8_lossy(&out.stderr)
-            .trim_end()
-            .lines()
-            .count(),
-        1
-    );
+    run_fails_one_line(bin().args(["scan", "--scene", "ball", "--ball-d-mm", "25"]));
     let _ = std::fs::remove_dir_all(&dir);
 }

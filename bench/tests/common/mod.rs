@@ -1,0 +1,35 @@
+//! What the CLI tests of `probe-bench` share: running the binary and checking its two kinds of
+//! outcome (success with output, or a one-line error and a non-zero exit).
+#![allow(dead_code)] // each test file uses its own subset
+
+use std::process::{Command, Output};
+
+/// The `probe-bench` binary under test.
+pub fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_probe-bench"))
+}
+
+/// Run `cmd`, assert it succeeded (showing its stderr if not) and return its output.
+pub fn run_ok(cmd: &mut Command) -> Output {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// Run `cmd`, assert it succeeded, and parse its stdout as one JSON value.
+pub fn run_json(cmd: &mut Command) -> serde_json::Value {
+    serde_json::from_slice(&run_ok(cmd).stdout).unwrap()
+}
+
+/// Run `cmd`, assert it failed with a non-zero exit and a one-line message; return the message.
+pub fn run_fails_one_line(cmd: &mut Command) -> String {
+    let out = cmd.output().unwrap();
+    assert!(!out.status.success());
+    let e = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(e.trim_end().lines().count(), 1, "{e}");
+    e
+}
