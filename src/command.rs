@@ -121,6 +121,21 @@ impl core::fmt::Display for CommandError {
     }
 }
 
+/// An optional sign at `b[*i]`: consumes it and returns true for `-`.
+fn sign(b: &[u8], i: &mut usize) -> bool {
+    match b.get(*i) {
+        Some(b'-') => {
+            *i += 1;
+            true
+        }
+        Some(b'+') => {
+            *i += 1;
+            false
+        }
+        _ => false,
+    }
+}
+
 /// A decimal number: `[+-]digits[.digits][(e|E)[+-]digits]` (or `.digits`), finite as `f32`.
 ///
 /// A small parser of its own rather than `f32::from_str`, whose exact-rounding tables cost
@@ -130,17 +145,7 @@ impl core::fmt::Display for CommandError {
 fn number(word: &str) -> Result<f32, CommandError> {
     let b = word.as_bytes();
     let mut i = 0;
-    let negative = match b.first() {
-        Some(b'-') => {
-            i += 1;
-            true
-        }
-        Some(b'+') => {
-            i += 1;
-            false
-        }
-        _ => false,
-    };
+    let negative = sign(b, &mut i);
     let mut mantissa: u64 = 0;
     let mut digits = 0u32; // significant digits kept in `mantissa`
     let mut seen_digit = false;
@@ -172,17 +177,7 @@ fn number(word: &str) -> Result<f32, CommandError> {
     }
     if let Some(b'e' | b'E') = b.get(i) {
         i += 1;
-        let neg_exp = match b.get(i) {
-            Some(b'-') => {
-                i += 1;
-                true
-            }
-            Some(b'+') => {
-                i += 1;
-                false
-            }
-            _ => false,
-        };
+        let neg_exp = sign(b, &mut i);
         let mut e: i32 = 0;
         let mut any = false;
         while let Some(&c @ b'0'..=b'9') = b.get(i) {
