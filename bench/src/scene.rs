@@ -103,7 +103,7 @@ impl Target {
 
 /// Layers a scene uses, comma separated.
 pub fn layer_names(scene: &Scene) -> String {
-    let mut l = [hal_sim::Layer::Kelvin; 7];
+    let mut l = [hal_sim::Layer::Kelvin; hal_sim::Layer::COUNT];
     let n = scene.layers(&mut l);
     l[..n]
         .iter()

@@ -11,6 +11,10 @@
 //!    transimpedance amplifier, anti-alias filters, 12-bit ADC quantisation and clipping, white
 //!    current noise, optional mains interference.
 //!
+//! Scenes may add a second mechanical mode (a second motional branch, [`tissue::SecondMode`]) and
+//! change during a reading ([`events`]: lift-off, thermal drift of the probe's own resonance,
+//! knocks).
+//!
 //! The linear plant is discretised exactly ([`plant`]: matrix exponential of the continuous
 //! state-space model with a zero-order-hold DAC), so one step per sample is exact, not a tiny Euler
 //! step. Every random draw comes from a seeded generator ([`rng`]); a scene and a seed give the
@@ -24,6 +28,7 @@
 
 pub mod catalogue;
 pub mod complex;
+pub mod events;
 pub mod flash;
 pub mod frontend;
 pub mod linalg;
@@ -37,9 +42,10 @@ pub mod scenes;
 pub mod tissue;
 
 pub use complex::C64;
+pub use events::{Drift, Knocks, LiftOff};
 pub use frontend::{FrontEnd, Mains};
 pub use phantoms::Phantom;
 pub use probe::{AdcPair, SimProbe};
 pub use pzt::Pzt;
 pub use scenes::{Layer, NoiseScene, Scene};
-pub use tissue::{Contact, Kelvin, SensorMech, Tissue};
+pub use tissue::{Contact, Kelvin, SecondMode, SensorMech, Tissue};

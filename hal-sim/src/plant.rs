@@ -18,6 +18,11 @@
 //! drive frequency, and the capacitive current `C0 dv/dt` amplifies it by `(fs − f)/f ≈ 40`;
 //! with two poles at 1 kHz on each side the aliased current is ~1e-4 of the capacitive current.
 //!
+//! A scene with a second mechanical mode ([`crate::tissue::SecondMode`]) adds its displacement
+//! and velocity `q2, q2'` as states 9 and 10 ([`chain_two_modes`]):
+//! `q2'' = (alpha2 v - c2 q2' - k2 q2) / m2`, and `alpha2 q2'` joins the sense current. Scenes
+//! without one keep the 8-state chain (and its cost per sample).
+//!
 //! With a held input the exact discrete system is `x[n+1] = Ad x[n] + Bd u[n]`, where
 //! `[[Ad, Bd], [0, 1]] = expm([[A, B], [0, 0]] dt)`: no step-size error, whatever `dt`.
 
@@ -89,14 +94,72 @@ pub fn mechanics(mech: &Kelvin, dt: f64) -> Discrete<2> {
 
 /// Number of states of the full chain.
 pub const CHAIN_STATES: usize = 8;
+/// Number of states of the full chain with a second mechanical mode.
+pub const CHAIN2_STATES: usize = 10;
 /// Index of the PZT voltage in the chain state.
 pub const V: usize = 1;
 /// Index of the modal velocity in the chain state.
 pub const VELOCITY: usize = 3;
+/// Index of the first anti-alias section of the sense current (its inner node) in the chain
+/// state. A charge `Q` entering the sense input at once steps it by `w_a Q`.
+pub const A1: usize = 4;
 /// Index of the filtered sense current in the chain state.
 pub const Y_I: usize = 5;
 /// Index of the filtered PZT voltage in the chain state.
 pub const Y_V: usize = 7;
+/// Index of the second mode's velocity in the two-mode chain state.
+pub const VELOCITY2: usize = 9;
+
+/// Continuous-time model of the chain with an optional second motional branch (`mode2` and its
+/// force factor): states `[v1, v, q, q', a1, y_i, b1, y_v, q2, q2']`. Without a second mode the
+/// last two states are decoupled and stay at rest.
+fn chain_continuous(
+    mech: &Kelvin,
+    pzt: &Pzt,
+    mode2: Option<(&Kelvin, f64)>,
+    reconstruction_hz: f64,
+    antialias_hz: f64,
+) -> (Mat<CHAIN2_STATES>, [f64; CHAIN2_STATES]) {
+    let wr = 2.0 * PI * reconstruction_hz;
+    let wa = 2.0 * PI * antialias_hz;
+    let m = mech.mass_kg;
+    let (k, c) = (mech.stiffness_n_m, mech.damping_n_s_m);
+    let al = pzt.force_factor_n_v;
+    let c0 = pzt.c0_f;
+    let gd = pzt.leakage_s;
+    let mut a = [[0.0; CHAIN2_STATES]; CHAIN2_STATES];
+    // Reconstruction filter: v1' = wr (u - v1), v' = wr (v1 - v).
+    a[0][0] = -wr;
+    a[1][0] = wr;
+    a[1][1] = -wr;
+    // Mode 1: q'' = (alpha v - c q' - k q) / m.
+    a[2][3] = 1.0;
+    a[3][1] = al / m;
+    a[3][2] = -k / m;
+    a[3][3] = -c / m;
+    // a1' = wa (i - a1), i = C0 wr (v1 - v) + alpha q' + G_d v (+ alpha2 q2').
+    a[4][0] = wa * c0 * wr;
+    a[4][1] = wa * (gd - c0 * wr);
+    a[4][3] = wa * al;
+    a[4][4] = -wa;
+    a[5][4] = wa;
+    a[5][5] = -wa;
+    a[6][1] = wa;
+    a[6][6] = -wa;
+    a[7][6] = wa;
+    a[7][7] = -wa;
+    a[8][9] = 1.0;
+    if let Some((k2, al2)) = mode2 {
+        let m2 = k2.mass_kg;
+        a[9][1] = al2 / m2;
+        a[9][8] = -k2.stiffness_n_m / m2;
+        a[9][9] = -k2.damping_n_s_m / m2;
+        a[4][9] = wa * al2;
+    }
+    let mut b = [0.0; CHAIN2_STATES];
+    b[0] = wr;
+    (a, b)
+}
 
 /// Full chain (layers 1–3): state `[v1, v, q, q', a1, y_i, b1, y_v]`, input drive amplifier
 /// volts. The reconstruction filter and both anti-alias filters are two cascaded first-order
@@ -108,35 +171,36 @@ pub fn chain(
     antialias_hz: f64,
     dt: f64,
 ) -> Discrete<CHAIN_STATES> {
-    let wr = 2.0 * PI * reconstruction_hz;
-    let wa = 2.0 * PI * antialias_hz;
-    let m = mech.mass_kg;
-    let (k, c) = (mech.stiffness_n_m, mech.damping_n_s_m);
-    let al = pzt.force_factor_n_v;
-    let c0 = pzt.c0_f;
-    let gd = pzt.leakage_s;
-    // i = C0 wr (v1 - v) + alpha q' + G_d v
-    let a = [
-        [-wr, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-        [wr, -wr, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-        [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0],
-        [0.0, al / m, -k / m, -c / m, 0.0, 0.0, 0.0, 0.0],
-        [
-            wa * c0 * wr,
-            wa * (gd - c0 * wr),
-            0.0,
-            wa * al,
-            -wa,
-            0.0,
-            0.0,
-            0.0,
-        ],
-        [0.0, 0.0, 0.0, 0.0, wa, -wa, 0.0, 0.0],
-        [0.0, wa, 0.0, 0.0, 0.0, 0.0, -wa, 0.0],
-        [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, wa, -wa],
-    ];
-    let b = [wr, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let (a2, b2) = chain_continuous(mech, pzt, None, reconstruction_hz, antialias_hz);
+    let mut a = [[0.0; CHAIN_STATES]; CHAIN_STATES];
+    for (row, row2) in a.iter_mut().zip(a2.iter()) {
+        row.copy_from_slice(&row2[..CHAIN_STATES]);
+    }
+    let mut b = [0.0; CHAIN_STATES];
+    b.copy_from_slice(&b2[..CHAIN_STATES]);
     discretize::<CHAIN_STATES, 9>(&a, &b, dt)
+}
+
+/// Full chain with a second motional branch (`mode2`, driven and sensed through the force factor
+/// `alpha2` N/V): state `[v1, v, q, q', a1, y_i, b1, y_v, q2, q2']`. The sense current gains
+/// `alpha2 q2'`; the first eight states mean what they mean in [`chain`].
+pub fn chain_two_modes(
+    mech: &Kelvin,
+    pzt: &Pzt,
+    mode2: &Kelvin,
+    alpha2: f64,
+    reconstruction_hz: f64,
+    antialias_hz: f64,
+    dt: f64,
+) -> Discrete<CHAIN2_STATES> {
+    let (a, b) = chain_continuous(
+        mech,
+        pzt,
+        Some((mode2, alpha2)),
+        reconstruction_hz,
+        antialias_hz,
+    );
+    discretize::<CHAIN2_STATES, 11>(&a, &b, dt)
 }
 
 #[cfg(test)]

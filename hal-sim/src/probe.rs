@@ -1,8 +1,11 @@
 //! The simulated probe: DAC codes in, ADC codes out, one sample at a time through the exactly
 //! discretised chain.
 
+use crate::events::{Knock, KnockTrain, SCHEDULE_STEP_S};
 use crate::frontend::{FrontEnd, MID_CODE};
-use crate::plant::{chain, Discrete, CHAIN_STATES, VELOCITY, Y_I, Y_V};
+use crate::plant::{
+    chain, chain_two_modes, Discrete, A1, CHAIN2_STATES, CHAIN_STATES, VELOCITY, Y_I, Y_V,
+};
 use crate::rng::Rng;
 use crate::scenes::Scene;
 use crate::tissue::Tissue;
@@ -17,43 +20,122 @@ pub struct AdcPair {
     pub monitor: u16,
 }
 
-/// The simulated probe hardware.
+/// The exactly discretised chain: 8 states, or 10 with a second mechanical mode (only scenes
+/// that have one pay for it). The first eight states mean the same in both. (No boxing: the
+/// crate is `no_std` without an allocator; 320 bytes more per probe do not matter.)
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug)]
-pub struct SimProbe {
-    scene: Scene,
-    plant: Discrete<CHAIN_STATES>,
-    rng: Rng,
-    samples: u64,
-    mains_phase: f64,
-    noise_sigma_a: f64,
-    stuck_dac: Option<u16>,
+enum Plant {
+    One(Discrete<CHAIN_STATES>),
+    Two(Discrete<CHAIN2_STATES>),
 }
 
-impl SimProbe {
-    /// A probe in `scene`, at rest, with noise drawn from `seed`.
-    pub fn new(scene: Scene, seed: u64) -> Self {
-        let mut rng = Rng::new(seed);
-        let mains_phase = 2.0 * PI * rng.uniform();
-        let fe = scene.front_end;
+impl Plant {
+    fn new(scene: &Scene) -> Self {
+        let fe = &scene.front_end;
         let k = scene.kelvin();
-        Self {
-            plant: chain(
+        match &scene.second_mode {
+            None => Plant::One(chain(
                 &k,
                 &scene.pzt,
                 fe.reconstruction_hz,
                 fe.antialias_hz,
                 fe.dt(),
-            ),
+            )),
+            Some(m) => Plant::Two(chain_two_modes(
+                &k,
+                &scene.pzt,
+                &m.kelvin(),
+                m.force_factor_n_v,
+                fe.reconstruction_hz,
+                fe.antialias_hz,
+                fe.dt(),
+            )),
+        }
+    }
+    #[inline]
+    fn step(&mut self, u: f64) {
+        match self {
+            Plant::One(d) => d.step(u),
+            Plant::Two(d) => d.step(u),
+        }
+    }
+    #[inline]
+    fn x(&self, i: usize) -> f64 {
+        match self {
+            Plant::One(d) => d.x[i],
+            Plant::Two(d) => d.x[i],
+        }
+    }
+    fn add(&mut self, i: usize, dx: f64) {
+        match self {
+            Plant::One(d) => d.x[i] += dx,
+            Plant::Two(d) => d.x[i] += dx,
+        }
+    }
+    /// Same physics, new matrices; the shared states carry over (a second mode appearing starts
+    /// at rest, one disappearing is dropped).
+    fn carry_from(&mut self, old: &Plant) {
+        for i in 0..CHAIN_STATES {
+            let v = old.x(i);
+            match self {
+                Plant::One(d) => d.x[i] = v,
+                Plant::Two(d) => d.x[i] = v,
+            }
+        }
+        if let (Plant::Two(new), Plant::Two(old)) = (self, old) {
+            new.x[CHAIN_STATES..].copy_from_slice(&old.x[CHAIN_STATES..]);
+        }
+    }
+}
+
+/// The simulated probe hardware.
+#[derive(Clone, Debug)]
+pub struct SimProbe {
+    /// The scene as given (time-varying parts included).
+    base: Scene,
+    /// Its static physics now.
+    scene: Scene,
+    plant: Plant,
+    rng: Rng,
+    samples: u64,
+    mains_phase: f64,
+    noise_sigma_a: f64,
+    stuck_dac: Option<u16>,
+    /// Sample count at which the schedule is next looked at (`u64::MAX`: never).
+    next_schedule: u64,
+    knocks: Option<KnockTrain>,
+    /// Sample count of the next knock (`u64::MAX`: none).
+    next_knock: u64,
+}
+
+impl SimProbe {
+    /// A probe in `scene`, at rest, with noise (and knocks) drawn from `seed`.
+    pub fn new(scene: Scene, seed: u64) -> Self {
+        let mut rng = Rng::new(seed);
+        let mains_phase = 2.0 * PI * rng.uniform();
+        let fe = scene.front_end;
+        let now = scene.at(0.0);
+        let knocks = scene.knocks.map(|k| KnockTrain::new(k, seed));
+        let mut p = Self {
+            plant: Plant::new(&now),
             noise_sigma_a: fe.noise_sigma_a(),
-            scene,
+            base: scene,
+            scene: now,
             rng,
             samples: 0,
             mains_phase,
             stuck_dac: scene.stuck_dac,
-        }
+            next_schedule: u64::MAX,
+            knocks,
+            next_knock: u64::MAX,
+        };
+        p.plan_schedule();
+        p.plan_knock();
+        p
     }
 
-    /// The scene (as currently set).
+    /// The scene's static physics now (for a time-varying scene: at the current time).
     pub fn scene(&self) -> &Scene {
         &self.scene
     }
@@ -71,19 +153,26 @@ impl SimProbe {
     }
     /// Modal velocity now, m/s.
     pub fn velocity_m_s(&self) -> f64 {
-        self.plant.x[VELOCITY]
+        self.plant.x(VELOCITY)
+    }
+    /// Filtered sense current now (the anti-alias filter's output, before noise, mains and the
+    /// ADC), A.
+    pub fn sense_current_a(&self) -> f64 {
+        self.plant.x(Y_I)
     }
 
     /// Change what is under the probe (lift-off, new tissue), keeping the dynamic state.
     pub fn set_tissue(&mut self, tissue: Option<Tissue>) {
-        self.scene.tissue = tissue;
+        self.base.tissue = tissue;
         self.rebuild();
     }
-    /// Replace the scene's physics (not the noise stream), keeping the dynamic state.
+    /// Replace the scene's physics (not the noise stream), keeping the dynamic state. Its
+    /// time-varying parts count from the start of this probe's time.
     pub fn set_scene(&mut self, scene: Scene) {
-        self.scene = scene;
+        self.base = scene;
         self.noise_sigma_a = scene.front_end.noise_sigma_a();
         self.rebuild();
+        self.plan_schedule();
     }
     /// Fault injection: the DAC output stuck at `code` (or released with `None`).
     pub fn set_stuck_dac(&mut self, code: Option<u16>) {
@@ -91,16 +180,59 @@ impl SimProbe {
     }
 
     fn rebuild(&mut self) {
-        let fe = self.scene.front_end;
-        let x = self.plant.x;
-        self.plant = chain(
-            &self.scene.kelvin(),
-            &self.scene.pzt,
-            fe.reconstruction_hz,
-            fe.antialias_hz,
-            fe.dt(),
-        );
-        self.plant.x = x;
+        self.scene = self.base.at(self.time_s());
+        let mut plant = Plant::new(&self.scene);
+        plant.carry_from(&self.plant);
+        self.plant = plant;
+    }
+
+    fn samples_at(&self, t_s: f64) -> u64 {
+        let n = libm::ceil(t_s * self.scene.front_end.sample_rate_hz);
+        if n.is_finite() && n < u64::MAX as f64 {
+            (n as u64).max(self.samples)
+        } else {
+            u64::MAX
+        }
+    }
+
+    fn plan_schedule(&mut self) {
+        self.next_schedule = if self.base.is_time_varying() {
+            self.samples + (SCHEDULE_STEP_S * self.scene.front_end.sample_rate_hz).max(1.0) as u64
+        } else {
+            u64::MAX
+        };
+    }
+
+    fn plan_knock(&mut self) {
+        self.next_knock = match &self.knocks {
+            Some(k) => self.samples_at(k.next_time_s()),
+            None => u64::MAX,
+        };
+    }
+
+    /// Apply what happens at this sample: the schedule of changing physics (re-discretised only
+    /// when the physics changed) and knocks.
+    fn events(&mut self) {
+        if self.samples >= self.next_schedule {
+            let now = self.base.at(self.time_s());
+            if now != self.scene {
+                self.rebuild();
+            }
+            self.plan_schedule();
+        }
+        while self.samples >= self.next_knock {
+            let Some(k) = self.knocks.as_mut().map(|t| t.pop()) else {
+                break;
+            };
+            match k {
+                Knock::Mechanical(dv) => self.plant.add(VELOCITY, dv),
+                Knock::Electrical(q) => {
+                    let wa = 2.0 * PI * self.scene.front_end.antialias_hz;
+                    self.plant.add(A1, wa * q);
+                }
+            }
+            self.plan_knock();
+        }
     }
 
     /// Play `dac` (one code per sample period) and capture one ADC pair per sample of the same
@@ -110,7 +242,10 @@ impl SimProbe {
         let fe = self.scene.front_end;
         let dt = fe.dt();
         for (code, out) in dac.iter().zip(adc.iter_mut()) {
-            let mut i = self.plant.x[Y_I];
+            if self.samples >= self.next_schedule.min(self.next_knock) {
+                self.events();
+            }
+            let mut i = self.plant.x(Y_I);
             if self.noise_sigma_a > 0.0 {
                 i += self.noise_sigma_a * self.rng.normal();
             }
@@ -127,7 +262,7 @@ impl SimProbe {
             }
             *out = AdcPair {
                 current: fe.adc_code(i * fe.tia_ohm),
-                monitor: fe.adc_code(self.plant.x[Y_V] * fe.monitor_gain),
+                monitor: fe.adc_code(self.plant.x(Y_V) * fe.monitor_gain),
             };
             let c = self.stuck_dac.unwrap_or(*code);
             self.plant.step(fe.drive_volts(c));

@@ -2,10 +2,11 @@
 //! is. "Model no more than a scene needs": each scene reports the layers it uses.
 
 use crate::complex::C64;
+use crate::events::{Drift, Knocks, LiftOff};
 use crate::frontend::{FrontEnd, Mains};
 use crate::phantoms::Phantom;
 use crate::pzt::Pzt;
-use crate::tissue::{Contact, Kelvin, SensorMech, Tissue};
+use crate::tissue::{Contact, Kelvin, SecondMode, SensorMech, Tissue};
 
 /// A physics layer (or optional effect within one) that a scene switches on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -24,6 +25,14 @@ pub enum Layer {
     Noise,
     /// Mains interference.
     Mains,
+    /// A second mechanical mode of the probe (a second motional branch, two more plant states).
+    SecondMode,
+    /// Lift-off during the reading (the contact fades out and is lost).
+    LiftOff,
+    /// Thermal drift of the probe's own resonance during the reading.
+    Drift,
+    /// Random mechanical and electrical knocks.
+    Knocks,
 }
 
 impl Layer {
@@ -37,8 +46,15 @@ impl Layer {
             Layer::FrontEnd => "front-end",
             Layer::Noise => "noise",
             Layer::Mains => "mains",
+            Layer::SecondMode => "second-mode",
+            Layer::LiftOff => "lift-off",
+            Layer::Drift => "drift",
+            Layer::Knocks => "knocks",
         }
     }
+
+    /// Number of layers (the size of the array [`Scene::layers`] fills).
+    pub const COUNT: usize = 11;
 }
 
 /// Named front-end noise levels (white current noise density at the TIA input).
@@ -87,6 +103,14 @@ pub struct Scene {
     pub tissue: Option<Tissue>,
     /// Fault: the DAC output stuck at this code whatever it is sent.
     pub stuck_dac: Option<u16>,
+    /// A second mechanical mode of the probe, or `None`.
+    pub second_mode: Option<SecondMode>,
+    /// Lift-off during the reading, or `None`.
+    pub lift_off: Option<LiftOff>,
+    /// Thermal drift of the free resonance during the reading, or `None`.
+    pub drift: Option<Drift>,
+    /// Random knocks, or `None`.
+    pub knocks: Option<Knocks>,
 }
 
 impl Scene {
@@ -99,6 +123,10 @@ impl Scene {
             contact: Contact::default(),
             tissue: None,
             stuck_dac: None,
+            second_mode: None,
+            lift_off: None,
+            drift: None,
+            knocks: None,
         }
     }
     /// Pressed at 30 mN onto `tissue`.
@@ -131,6 +159,50 @@ impl Scene {
         self.contact.preload_n = preload_n;
         self
     }
+    /// With a second mechanical mode.
+    pub fn with_second_mode(mut self, mode: SecondMode) -> Self {
+        self.second_mode = Some(mode);
+        self
+    }
+    /// Lifted off during the reading.
+    pub fn with_lift_off(mut self, lift_off: LiftOff) -> Self {
+        self.lift_off = Some(lift_off);
+        self
+    }
+    /// With the free resonance drifting during the reading.
+    pub fn with_drift(mut self, drift: Drift) -> Self {
+        self.drift = Some(drift);
+        self
+    }
+    /// With random knocks.
+    pub fn with_knocks(mut self, knocks: Knocks) -> Self {
+        self.knocks = Some(knocks);
+        self
+    }
+
+    /// True when the physics change during the reading (lift-off, drift); knocks change the
+    /// state, not the physics.
+    pub fn is_time_varying(&self) -> bool {
+        self.lift_off.is_some() || self.drift.is_some()
+    }
+
+    /// The static physics at `t_s` seconds after the reading started: the drift applied to the
+    /// free resonance, the lift-off to the preload (and the tissue gone once the tip is off).
+    /// The time-varying parts stay in the result, so `at(t).at(t2)` is not meaningful; ask the
+    /// scene at `t = 0` for anything else.
+    pub fn at(&self, t_s: f64) -> Scene {
+        let mut s = *self;
+        if let Some(d) = &self.drift {
+            s.mech.free_resonance_hz += d.rate_hz_s * t_s;
+        }
+        if let Some(l) = &self.lift_off {
+            match l.preload_fraction(t_s) {
+                Some(f) => s.contact.preload_n *= f,
+                None => s.tissue = None,
+            }
+        }
+        s
+    }
 
     /// The one-degree-of-freedom mechanics of this scene.
     pub fn kelvin(&self) -> Kelvin {
@@ -147,13 +219,24 @@ impl Scene {
     pub fn q(&self) -> f64 {
         self.kelvin().q()
     }
-    /// Closed-form PZT admittance (S) at `freq_hz`.
+    /// Closed-form PZT admittance (S) at `freq_hz` (with the second motional branch, if any).
     pub fn admittance(&self, freq_hz: f64) -> C64 {
-        self.pzt.admittance(&self.kelvin(), freq_hz)
+        let y = self.pzt.admittance(&self.kelvin(), freq_hz);
+        match &self.second_mode {
+            Some(m) => {
+                let branch = Pzt {
+                    c0_f: 0.0,
+                    force_factor_n_v: m.force_factor_n_v,
+                    leakage_s: 0.0,
+                };
+                y + branch.admittance(&m.kelvin(), freq_hz)
+            }
+            None => y,
+        }
     }
 
     /// The layers this scene uses, in order; returns the count written into `out`.
-    pub fn layers(&self, out: &mut [Layer; 7]) -> usize {
+    pub fn layers(&self, out: &mut [Layer; Layer::COUNT]) -> usize {
         let mut n = 0;
         let mut push = |l: Layer| {
             out[n] = l;
@@ -173,6 +256,18 @@ impl Scene {
         }
         if self.front_end.mains.is_some() {
             push(Layer::Mains);
+        }
+        if self.second_mode.is_some() {
+            push(Layer::SecondMode);
+        }
+        if self.lift_off.is_some() {
+            push(Layer::LiftOff);
+        }
+        if self.drift.is_some() {
+            push(Layer::Drift);
+        }
+        if self.knocks.is_some() {
+            push(Layer::Knocks);
         }
         n
     }

@@ -181,6 +181,53 @@ impl TissueElements {
     }
 }
 
+/// A second mechanical mode of the probe, driven by the PZT but not moving the tip.
+///
+/// Paper 003's modal analysis finds modes at 230, 326, 391 and 1332 Hz, of which only the first
+/// moves the probe; the second (326 Hz) bends the spiral plate under the PZT, so the PZT drives it
+/// and senses it while the tissue does not load it. A mount, a bond or a temperature change can
+/// pull it down towards the measuring band. It is a second motional branch in parallel with the
+/// first: `Y_2 = alpha_2^2 / (c_2 + j w m_2 + k_2 / (j w))`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SecondMode {
+    /// Modal mass in kg.
+    pub mass_kg: f64,
+    /// Resonance in Hz (sets `k_2 = m_2 (2 pi f_2)^2`).
+    pub resonance_hz: f64,
+    /// Quality factor (sets `c_2`).
+    pub q: f64,
+    /// Force factor `alpha_2` of the PZT on this mode, N/V (= A s/m).
+    pub force_factor_n_v: f64,
+}
+
+impl SecondMode {
+    /// The mode at `resonance_hz` with quality `q` and the probe's modal mass, its coupling set
+    /// so that its peak motional conductance `alpha_2^2 / c_2` is `peak_s` siemens.
+    pub fn with_peak_conductance(resonance_hz: f64, q: f64, peak_s: f64) -> Self {
+        let mass_kg = SensorMech::default().mass_kg;
+        let c = mass_kg * 2.0 * PI * resonance_hz / q;
+        Self {
+            mass_kg,
+            resonance_hz,
+            q,
+            force_factor_n_v: libm::sqrt(peak_s.max(0.0) * c),
+        }
+    }
+    /// The mode as a Kelvin oscillator.
+    pub fn kelvin(&self) -> Kelvin {
+        let w = 2.0 * PI * self.resonance_hz;
+        Kelvin {
+            mass_kg: self.mass_kg,
+            stiffness_n_m: self.mass_kg * w * w,
+            damping_n_s_m: self.mass_kg * w / self.q,
+        }
+    }
+    /// Peak motional conductance `alpha_2^2 / c_2` in S.
+    pub fn peak_conductance_s(&self) -> f64 {
+        self.force_factor_n_v * self.force_factor_n_v / self.kelvin().damping_n_s_m
+    }
+}
+
 /// A one-degree-of-freedom Kelvin oscillator `m x'' + c x' + k x = F` (paper 003 eq. 1).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Kelvin {

@@ -1,0 +1,173 @@
+//! What changes while a reading runs: lift-off, thermal drift of the probe's own resonance, and
+//! knocks.
+//!
+//! A scene's static physics ([`crate::Scene`]) holds between events; a time-varying scene names
+//! how it changes, and [`crate::Scene::at`] gives the static physics at any time since the
+//! reading started. The simulated probe re-discretises its plant exactly (zero-order hold) each
+//! time the physics change and keeps the dynamic state, so the state is continuous across a
+//! change and nothing but the piecewise-constant schedule is approximated (see
+//! [`SCHEDULE_STEP_S`]). Knocks are impulses: they change the state, not the physics.
+
+use crate::rng::Rng;
+
+/// Time step of the piecewise-constant schedule of slowly changing physics (lift-off ramp,
+/// drift), in s. The plant is re-discretised at most this often, and only when the physics
+/// changed. A drift of 0.3 Hz/s moves the resonance by 0.0003 Hz per step.
+pub const SCHEDULE_STEP_S: f64 = 1e-3;
+
+/// The probe is lifted off the tissue during the reading.
+///
+/// From `at_s` the preload falls linearly to zero over `ramp_s` (the Hertz contact radius
+/// shrinks as the cube root of the force, so the tissue's stiffness, mass and damping fade out
+/// continuously); at `at_s + ramp_s` the tip leaves the tissue and the probe is free.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LiftOff {
+    /// Time since the reading started when the preload starts to fall, s.
+    pub at_s: f64,
+    /// Duration of the fall of the preload to zero, s (0: a step).
+    pub ramp_s: f64,
+}
+
+impl LiftOff {
+    /// Fraction of the preload left at `t_s`: 1 before the lift, 0 once the tip is off
+    /// (`None` then: no contact at all).
+    pub fn preload_fraction(&self, t_s: f64) -> Option<f64> {
+        if t_s < self.at_s {
+            Some(1.0)
+        } else if self.ramp_s > 0.0 && t_s < self.at_s + self.ramp_s {
+            Some(1.0 - (t_s - self.at_s) / self.ramp_s)
+        } else {
+            None
+        }
+    }
+}
+
+/// Thermal drift of the probe's own (free) resonance: the modal stiffness `k1` changes linearly
+/// in time, so the free resonance moves by `rate_hz_s` per second from its nominal value at the
+/// start of the reading (the temperature of the calibration and of the air reference).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Drift {
+    /// Rate of change of the free resonance, Hz/s.
+    pub rate_hz_s: f64,
+}
+
+/// Random knocks: mechanical impulses on the probe's mode and electrical charge spikes into the
+/// sense amplifier, at the times of a Poisson process.
+///
+/// Each event is mechanical or electrical with equal probability, with a random sign and a size
+/// uniform between 0.5 and 1.5 times the nominal one. The times and sizes come from their own
+/// generator seeded from the probe's seed, so a scene and a seed give the same knocks every time
+/// and the noise stream is the same with or without them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Knocks {
+    /// Mean rate of events, 1/s.
+    pub rate_hz: f64,
+    /// Nominal velocity step of the mode by a mechanical knock, m/s (momentum / modal mass).
+    pub velocity_m_s: f64,
+    /// Nominal charge of an electrical spike into the sense input, C.
+    pub charge_c: f64,
+}
+
+/// One knock.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Knock {
+    /// The mode's velocity steps by this much, m/s.
+    Mechanical(f64),
+    /// This charge (C) enters the sense amplifier's input at once.
+    Electrical(f64),
+}
+
+/// The knocks of one simulated probe, in time order.
+#[derive(Clone, Debug)]
+pub struct KnockTrain {
+    knocks: Knocks,
+    rng: Rng,
+    next_s: f64,
+}
+
+/// Salt of the knock generator's seed (kept apart from the noise stream).
+const KNOCK_SALT: u64 = 0x6b6e_6f63_6b73_2121;
+
+impl KnockTrain {
+    /// The train of `knocks` for the probe seeded with `seed`.
+    pub fn new(knocks: Knocks, seed: u64) -> Self {
+        let mut rng = Rng::new(seed ^ KNOCK_SALT);
+        let next_s = Self::gap(&mut rng, knocks.rate_hz);
+        Self {
+            knocks,
+            rng,
+            next_s,
+        }
+    }
+
+    fn gap(rng: &mut Rng, rate_hz: f64) -> f64 {
+        if !(rate_hz > 0.0) {
+            return f64::INFINITY;
+        }
+        // Exponential waiting time; 1 - u lies in (0, 1].
+        -libm::log(1.0 - rng.uniform()) / rate_hz
+    }
+
+    /// Time of the next knock, s since the start.
+    pub fn next_time_s(&self) -> f64 {
+        self.next_s
+    }
+
+    /// The next knock (at [`next_time_s`](Self::next_time_s)); advances the train.
+    pub fn pop(&mut self) -> Knock {
+        let size = 0.5 + self.rng.uniform();
+        let sign = if self.rng.uniform() < 0.5 { -1.0 } else { 1.0 };
+        let k = if self.rng.uniform() < 0.5 {
+            Knock::Mechanical(sign * size * self.knocks.velocity_m_s)
+        } else {
+            Knock::Electrical(sign * size * self.knocks.charge_c)
+        };
+        self.next_s += Self::gap(&mut self.rng, self.knocks.rate_hz);
+        k
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn knock_times_are_poisson() {
+        // Over 2000 s at 1.5/s: 3000 knocks expected, Poisson sd 55; half of each kind
+        // (binomial sd 39 of 1500).
+        let mut t = KnockTrain::new(
+            Knocks {
+                rate_hz: 1.5,
+                velocity_m_s: 1.0,
+                charge_c: 1.0,
+            },
+            3,
+        );
+        let (mut n, mut mech) = (0, 0);
+        while t.next_time_s() < 2000.0 {
+            if let Knock::Mechanical(v) = t.pop() {
+                assert!((0.5..=1.5).contains(&v.abs()));
+                mech += 1;
+            }
+            n += 1;
+        }
+        assert!((n as f64 - 3000.0).abs() < 4.0 * 55.0, "{n}");
+        assert!((mech as f64 - n as f64 / 2.0).abs() < 4.0 * 39.0, "{mech}");
+    }
+
+    #[test]
+    fn lift_off_ramp() {
+        let l = LiftOff {
+            at_s: 1.0,
+            ramp_s: 0.5,
+        };
+        assert_eq!(l.preload_fraction(0.9), Some(1.0));
+        assert!((l.preload_fraction(1.25).unwrap() - 0.5).abs() < 1e-12);
+        assert_eq!(l.preload_fraction(1.5), None);
+        let step = LiftOff {
+            at_s: 1.0,
+            ramp_s: 0.0,
+        };
+        assert_eq!(step.preload_fraction(1.0), None);
+    }
+}
