@@ -5,143 +5,23 @@
 //! Needs `qemu-system-arm`, `defmt-print` and the `thumbv7em-none-eabihf` target. Without the
 //! tools the test is skipped with a message — unless `CI=true`, where it fails.
 
+mod qemu_support;
+
+use qemu_support::{build_image, fields, last, num, run_image, tools_present};
 use std::collections::HashMap;
-use std::io::Read;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 const TIMEOUT: Duration = Duration::from_secs(180);
 const PHANTOM_B_KPA: f64 = 279.0;
 
-fn have(tool: &str) -> bool {
-    Command::new(tool)
-        .arg("--version")
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .is_ok()
-}
-
-fn build_image() -> PathBuf {
-    let target_dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("qemu-image");
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let status = Command::new(cargo)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args([
-            "build",
-            "--profile",
-            "fw",
-            "--target",
-            "thumbv7em-none-eabihf",
-            "--no-default-features",
-            "--features",
-            "qemu",
-            "--bin",
-            "probe",
-        ])
-        .env("CARGO_TARGET_DIR", &target_dir)
-        .env("DEFMT_LOG", "info")
-        // The target's link flags come from .cargo/config.toml; an outer RUSTFLAGS would
-        // replace them.
-        .env_remove("RUSTFLAGS")
-        .env_remove("CARGO_ENCODED_RUSTFLAGS")
-        .env_remove("CARGO_BUILD_TARGET")
-        .status()
-        .expect("run cargo build of the QEMU image");
-    assert!(status.success(), "building the QEMU image failed");
-    target_dir.join("thumbv7em-none-eabihf/fw/probe")
-}
-
-/// Run the image; returns QEMU's success and the decoded log lines.
-fn run_image(elf: &Path) -> (bool, Vec<String>) {
-    let mut qemu = Command::new("qemu-system-arm")
-        .args([
-            "-machine",
-            "mps2-an386",
-            "-cpu",
-            "cortex-m4",
-            "-icount",
-            "shift=0,sleep=off",
-            "-nographic",
-            "-monitor",
-            "none",
-            "-serial",
-            "null",
-            "-semihosting-config",
-            "enable=on,target=native",
-            "-kernel",
-        ])
-        .arg(elf)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .expect("start qemu-system-arm");
-    let frames = qemu.stdout.take().expect("qemu stdout");
-    let mut print = Command::new("defmt-print")
-        .arg("-e")
-        .arg(elf)
-        .args(["--log-format", "{L} {s}"])
-        .stdin(Stdio::from(frames))
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("start defmt-print");
-    let start = Instant::now();
-    let status = loop {
-        if let Some(s) = qemu.try_wait().expect("wait for qemu") {
-            break s;
-        }
-        if start.elapsed() > TIMEOUT {
-            let _ = qemu.kill();
-            let _ = print.kill();
-            panic!("QEMU image did not exit within {TIMEOUT:?}");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    };
-    let mut text = String::new();
-    print
-        .stdout
-        .take()
-        .expect("defmt-print stdout")
-        .read_to_string(&mut text)
-        .expect("read decoded log");
-    let printed = print.wait().expect("wait for defmt-print");
-    assert!(printed.success(), "defmt-print failed: {printed}");
-    (status.success(), text.lines().map(str::to_owned).collect())
-}
-
-/// `LEVEL name k=v k=v ...` → (name, map).
-fn fields(line: &str) -> Option<(String, HashMap<String, String>)> {
-    let mut words = line.split_whitespace();
-    let _level = words.next()?;
-    let name = words.next()?.to_owned();
-    let map = words
-        .filter_map(|w| w.split_once('='))
-        .map(|(k, v)| (k.to_owned(), v.to_owned()))
-        .collect();
-    Some((name, map))
-}
-
-fn num(map: &HashMap<String, String>, key: &str) -> f64 {
-    map.get(key)
-        .unwrap_or_else(|| panic!("missing {key}"))
-        .parse()
-        .unwrap_or_else(|_| panic!("{key} is not a number"))
-}
-
 #[test]
 fn qemu_image_measures_phantom_b() {
-    let ci = std::env::var("CI").is_ok_and(|v| v == "true");
-    for tool in ["qemu-system-arm", "defmt-print"] {
-        if !have(tool) {
-            assert!(!ci, "{tool} is required in CI");
-            eprintln!("SKIPPED: {tool} not installed (apt-get install qemu-system-arm; cargo install defmt-print --locked)");
-            return;
-        }
+    if !tools_present() {
+        return;
     }
     let wall = Instant::now();
-    let elf = build_image();
-    let (exited_ok, lines) = run_image(&elf);
+    let elf = build_image("probe");
+    let (exited_ok, lines) = run_image(&elf, TIMEOUT);
     for l in &lines {
         println!("{l}");
     }
@@ -149,14 +29,7 @@ fn qemu_image_measures_phantom_b() {
 
     let parsed: Vec<(String, HashMap<String, String>)> =
         lines.iter().filter_map(|l| fields(l)).collect();
-    let last = |name: &str| {
-        parsed
-            .iter()
-            .rev()
-            .find(|(n, _)| n == name)
-            .map(|(_, m)| m.clone())
-            .unwrap_or_else(|| panic!("no `{name}` line"))
-    };
+    let last = |name: &str| last(&parsed, name);
 
     // The sweep the script set, and every point of it logged once, in order.
     let settings = last("settings");

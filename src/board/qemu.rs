@@ -147,8 +147,9 @@ fn reg(base: usize, off: usize) -> *mut u32 {
     (base + off) as *mut u32
 }
 
-/// Start the free-running instruction clock (timer 1, no interrupt).
-fn start_stamp_clock() {
+/// Start the free-running instruction clock (timer 1, no interrupt) read by [`stamp`]; the
+/// stream's [`Stream::start`] does this, a program without the stream calls it itself.
+pub fn start_stamp_clock() {
     // SAFETY: CMSDK timer 1 registers of mps2-an386; the image owns the timer.
     unsafe {
         write_volatile(reg(TIMER1_BASE, CTRL), 0);
@@ -204,12 +205,18 @@ impl Stream {
         self.scale
     }
 
-    /// Prefill both DAC halves from `engine` (as the STM32 driver does before starting its
-    /// DMA), start the instruction clock and the batch timer.
-    pub fn start(&mut self, engine: &mut SampleEngine) {
+    /// Prefill both DAC halves from `engine`, as the STM32 driver does before starting its DMA
+    /// (and a program calling [`capture`](Self::capture) itself, without the batch timer,
+    /// before its first batch).
+    pub fn prefill(&mut self, engine: &mut SampleEngine) {
         for half in self.dac.iter_mut() {
             engine.generate(half);
         }
+    }
+
+    /// [`prefill`](Self::prefill), then start the instruction clock and the batch timer.
+    pub fn start(&mut self, engine: &mut SampleEngine) {
+        self.prefill(engine);
         start_stamp_clock();
         let period = (SYSCLK_HZ as f32 * BATCH as f32 / self.scale.sample_rate.0) as u32;
         // SAFETY: CMSDK timer 0 registers; the image owns the timer.

@@ -1,0 +1,385 @@
+//! On-target cost of every estimation method: a QEMU-only image that counts the instructions
+//! the Cortex-M4F build spends per sample and per reading.
+//!
+//! Built like the QEMU firmware image (`thumbv7em-none-eabihf`, profile `fw`, feature `qemu`,
+//! so the same `opt-level = "z"` code generation as the STM32 image) and run on QEMU's
+//! `mps2-an386` with `-icount shift=0,sleep=off`, where one guest instruction is one nanosecond
+//! of virtual time: CMSDK timer 1 at 25 MHz then counts 40 instructions per tick
+//! ([`board::stamp`], [`board::elapsed`]; ±40 per measured span). Run it with `cargo qemu-cost`;
+//! `tests/qemu_cost.rs` runs it in CI and checks every figure against the budget.
+//!
+//! For every method of [`Method::ALL`] (with its default settings) and every modulus of
+//! [`MODULI_KPA`], plus one reading of the `auto` strategy that has to fall back
+//! ([`FALLBACK_KPA`]), it takes one reading of the simulated probe exactly as the firmware does:
+//! the QEMU board's [`board::Stream`] plays each DAC batch through `hal-sim` and captures the
+//! ADC batch with the firmware's two-batch latency, the [`SampleEngine`] demodulates and
+//! generates, and the method's [`Procedure`] plans, accepts points and finishes. It counts,
+//! separately,
+//!
+//! * **per sample**: the sample engine's work per batch (plan intake, `demodulate`,
+//!   `generate`) — the sample interrupt's work without its channel hand-off — as mean and
+//!   maximum over the reading's batches;
+//! * **per reading**: every call of the measurement side, which runs at priority 1 in the
+//!   firmware: `Procedure::new` (validation), `next_plan`, `accept` (point conversion, stage
+//!   changes, intermediate fits), `is_complete` (for `auto` this runs the first stage's
+//!   estimate) and `finish` (the estimator and the calibration mapping) — their sum, and the
+//!   largest single call.
+//!
+//! The simulated plant (`hal-sim`'s exchange inside [`board::Stream::capture`]) is outside
+//! every counted span. Nothing here runs in an interrupt: the image is one loop, so no other
+//! work interleaves with a counted span.
+//!
+//! # Log lines (parsed by `tests/qemu_cost.rs`)
+//!
+//! ```text
+//! budget core_hz=<u32> fs_hz=<f32> batch=<u32> budget_pct=<f32> unit=instructions
+//! cost method=<str> e_kpa=<f32> status=<str> expect=<str> used=<str> e_read_kpa=<f32> probe_time_s=<f32> points=<u16> batches=<u32> engine_mean=<u32> engine_max=<u32> calls=<u32> reading=<u32> call_max=<u32> call_max_in=<str> sample_mean_pct=<f32> sample_max_pct=<f32> reading_pct=<f32> call_max_us=<f32>
+//! exit ok=<bool>
+//! ```
+//!
+//! `engine_mean`/`engine_max` are instructions per batch of `batch` samples; `reading` is the
+//! sum over all measurement calls of the reading and `call_max` the largest one (in
+//! `call_max_in`: `new`, `next_plan`, `accept`, `is_complete` or `finish`). The percentages are
+//! of a `core_hz` core, counting one cycle per instruction: per sample at `fs_hz`, per reading
+//! over the reading's probe time; `call_max_us` is the largest call in microseconds at
+//! `core_hz`. `expect` is the status the reading must end in (`ok`, or the failure code of the
+//! fallback case); the image exits with success iff every reading ended as expected.
+#![cfg_attr(target_os = "none", no_std, no_main)]
+
+#[cfg(not(target_os = "none"))]
+fn main() {}
+
+#[cfg(all(target_os = "none", not(feature = "qemu")))]
+compile_error!(
+    "the cost image runs on QEMU only: build it with --no-default-features --features qemu"
+);
+
+#[cfg(all(target_os = "none", feature = "qemu"))]
+use pzt_probe::board::qemu as board;
+
+#[cfg(all(target_os = "none", feature = "qemu"))]
+use defmt_semihosting as _;
+
+#[cfg(all(target_os = "none", feature = "qemu"))]
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    defmt::error!("panic {}", defmt::Display2Format(info));
+    board::exit(false)
+}
+
+#[cfg(all(target_os = "none", feature = "qemu"))]
+#[defmt::panic_handler]
+fn defmt_panic() -> ! {
+    board::exit(false)
+}
+
+#[cfg(all(target_os = "none", feature = "qemu"))]
+#[cortex_m_rt::exception]
+unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    board::exit(false)
+}
+
+#[cfg(all(target_os = "none", feature = "qemu"))]
+mod harness {
+    //! The measuring loop.
+
+    use crate::board;
+    use core::sync::atomic::{compiler_fence, Ordering};
+    use hal_sim::{NoiseScene, Scene, SimProbe};
+    use pzt_probe::dsp::dds::frequency_hz;
+    use pzt_probe::engine::{PointPlan, SampleEngine};
+    use pzt_probe::measure::{Measurement, Procedure};
+    use pzt_probe::runner::BATCH;
+    use pzt_probe::{Failure, Method, PowerLaw, Reading, Seconds, Status};
+
+    /// Core clock the budget is stated for: the STM32G474 at 170 MHz.
+    pub const CORE_HZ: u32 = 170_000_000;
+    /// The budget: this share of the core, per sample and per reading (percent).
+    pub const BUDGET_PCT: f32 = 2.0;
+    /// Moduli every method reads (kPa): soft, middle and hard end of the calibrated range.
+    pub const MODULI_KPA: [f32; 3] = [200.0, 500.0, 2500.0];
+    /// A modulus below the band, where `auto`'s fit finds no resonance and it falls back to
+    /// sweep-G (whose answer there is `out_of_band`): the strategy's most expensive path.
+    pub const FALLBACK_KPA: f32 = 60.0;
+    /// Noise stream of every reading (the QEMU firmware image uses the same).
+    pub const SEED: u64 = 1;
+
+    /// One reading to measure: method, modulus and the status it must end in.
+    #[derive(Clone, Copy)]
+    pub struct Case {
+        /// The method, with its default settings.
+        pub method: Method,
+        /// Modulus of the simulated tissue (bench noise).
+        pub e_kpa: f32,
+        /// The status code the reading must end in.
+        pub expect: &'static str,
+    }
+
+    /// Which measurement call a span was.
+    #[derive(Clone, Copy, PartialEq, Eq)]
+    pub enum Call {
+        /// `Procedure::new`.
+        New,
+        /// `Measurement::next_plan`.
+        NextPlan,
+        /// `Measurement::accept`.
+        Accept,
+        /// `Measurement::is_complete`.
+        IsComplete,
+        /// `Measurement::finish`.
+        Finish,
+    }
+
+    impl Call {
+        /// Name in the log.
+        pub const fn name(self) -> &'static str {
+            match self {
+                Call::New => "new",
+                Call::NextPlan => "next_plan",
+                Call::Accept => "accept",
+                Call::IsComplete => "is_complete",
+                Call::Finish => "finish",
+            }
+        }
+    }
+
+    /// Instruction counts of one reading.
+    pub struct Cost {
+        /// Batches the engine ran.
+        pub batches: u32,
+        /// Sum of the engine's instructions over those batches.
+        pub engine_sum: u64,
+        /// Largest engine batch.
+        pub engine_max: u32,
+        /// Measurement calls.
+        pub calls: u32,
+        /// Sum of the measurement calls' instructions.
+        pub reading: u64,
+        /// Largest single measurement call.
+        pub call_max: u32,
+        /// Which call that was.
+        pub call_max_in: Call,
+        /// Instructions per kind of call, indexed by `Call as usize` (declaration order).
+        pub split: [u64; 5],
+    }
+
+    impl Cost {
+        const fn new() -> Self {
+            Self {
+                batches: 0,
+                engine_sum: 0,
+                engine_max: 0,
+                calls: 0,
+                reading: 0,
+                call_max: 0,
+                call_max_in: Call::New,
+                split: [0; 5],
+            }
+        }
+
+        /// Run `f` as one measurement call of kind `call` and count it.
+        fn call<R>(&mut self, call: Call, f: impl FnOnce() -> R) -> R {
+            compiler_fence(Ordering::SeqCst);
+            let t0 = board::stamp();
+            compiler_fence(Ordering::SeqCst);
+            let r = core::hint::black_box(f());
+            compiler_fence(Ordering::SeqCst);
+            let n = board::elapsed(t0);
+            compiler_fence(Ordering::SeqCst);
+            self.calls += 1;
+            self.reading += n as u64;
+            self.split[call as usize] += n as u64;
+            if n > self.call_max {
+                self.call_max = n;
+                self.call_max_in = call;
+            }
+            r
+        }
+
+        fn batch(&mut self, n: u32) {
+            self.batches += 1;
+            self.engine_sum += n as u64;
+            self.engine_max = self.engine_max.max(n);
+        }
+
+        fn engine_mean(&self) -> u32 {
+            (self.engine_sum / self.batches.max(1) as u64) as u32
+        }
+    }
+
+    /// Percent of a [`CORE_HZ`] core that `instructions` per sample take at `fs_hz`.
+    fn per_sample_pct(instructions_per_batch: u32, fs_hz: f32) -> f32 {
+        instructions_per_batch as f32 / BATCH as f32 * fs_hz / CORE_HZ as f32 * 100.0
+    }
+
+    /// A point did not arrive within its sample budget.
+    struct Stalled;
+
+    /// Batches a plan may take: settling, its windows plus two cycles to find the boundary,
+    /// the two-batch pipeline and margin (as the firmware's point timeout).
+    fn budget_batches(plan: &PointPlan, fs: f32) -> u32 {
+        let f = frequency_hz(plan.ftw, fs as f64).max(1.0) as f32;
+        let windows = plan.windows.max(1) as f32;
+        let samples = plan.settle_samples as f32 + (plan.cycles as f32 * windows + 2.0) * fs / f;
+        (samples / BATCH as f32) as u32 + 6
+    }
+
+    /// One reading of `case`, counted into `cost`.
+    fn read(case: &Case, cal: &PowerLaw, cost: &mut Cost) -> Result<Reading, Stalled> {
+        let scene = Scene::on_modulus_kpa(case.e_kpa as f64).with_noise(NoiseScene::Bench);
+        let mut stream = board::Stream::new(SimProbe::new(scene, SEED));
+        let scale = stream.scale();
+        let fs = scale.sample_rate.0;
+        let mut engine = SampleEngine::new();
+        stream.prefill(&mut engine);
+        let method = case.method;
+        let settings = method.default_settings();
+        let start = engine.samples();
+        let mut m = match cost.call(Call::New, || {
+            Procedure::new(method, &settings, &scale, start)
+        }) {
+            Ok(m) => m,
+            Err(_) => {
+                return Ok(Reading::failed(
+                    method,
+                    Failure::BadSettings,
+                    Seconds(0.0),
+                    0,
+                ))
+            }
+        };
+        // The plan the next batch takes in (the firmware's plan channel), the windows of the
+        // plan in flight still to come, and the batches it may still take.
+        let mut intake: Option<PointPlan> = None;
+        let mut windows_due: u16 = 0;
+        let mut budget: u32 = 0;
+        loop {
+            if windows_due == 0 {
+                if cost.call(Call::IsComplete, || m.is_complete()) {
+                    break;
+                }
+                match cost.call(Call::NextPlan, || m.next_plan()) {
+                    Some(plan) => {
+                        intake = Some(plan);
+                        windows_due = plan.windows.max(1);
+                        budget = budget_batches(&plan, fs);
+                    }
+                    None => break,
+                }
+            }
+            // The plant plays the DAC batch and fills the ADC batch: not counted.
+            let (adc, dac) = stream.capture();
+            compiler_fence(Ordering::SeqCst);
+            let t0 = board::stamp();
+            compiler_fence(Ordering::SeqCst);
+            if let Some(plan) = intake.take() {
+                engine.load(plan);
+            }
+            let point = engine.demodulate(adc);
+            engine.generate(dac);
+            compiler_fence(Ordering::SeqCst);
+            cost.batch(board::elapsed(t0));
+            compiler_fence(Ordering::SeqCst);
+            match point {
+                Some(raw) => {
+                    cost.call(Call::Accept, || m.accept(&raw));
+                    windows_due = windows_due.saturating_sub(1);
+                }
+                None if budget == 0 => return Err(Stalled),
+                None => budget -= 1,
+            }
+        }
+        engine.stop();
+        Ok(cost.call(Call::Finish, || m.finish(cal)))
+    }
+
+    fn nan_or(v: Option<f32>) -> f32 {
+        v.unwrap_or(f32::NAN)
+    }
+
+    /// Measure one case and log its line; true when it ended as expected.
+    fn measure(case: &Case, cal: &PowerLaw, fs: f32) -> bool {
+        let mut cost = Cost::new();
+        let (reading, status) = match read(case, cal, &mut cost) {
+            Ok(r) => (Some(r), r.status.code()),
+            Err(Stalled) => (None, "stalled"),
+        };
+        let probe_time = reading.map_or(0.0, |r| r.probe_time.0);
+        let reading_pct = if probe_time > 0.0 {
+            cost.reading as f32 / (probe_time * CORE_HZ as f32) * 100.0
+        } else {
+            f32::NAN
+        };
+        defmt::info!(
+            "cost method={=str} e_kpa={=f32} status={=str} expect={=str} used={=str} e_read_kpa={=f32} probe_time_s={=f32} points={=u16} batches={=u32} engine_mean={=u32} engine_max={=u32} calls={=u32} reading={=u32} call_max={=u32} call_max_in={=str} sample_mean_pct={=f32} sample_max_pct={=f32} reading_pct={=f32} call_max_us={=f32}",
+            case.method.name(),
+            case.e_kpa,
+            status,
+            case.expect,
+            reading.map_or("none", |r| r.method.name()),
+            nan_or(reading.and_then(|r| r.modulus.map(|v| v.0))),
+            probe_time,
+            reading.map_or(0, |r| r.points),
+            cost.batches,
+            cost.engine_mean(),
+            cost.engine_max,
+            cost.calls,
+            cost.reading.min(u32::MAX as u64) as u32,
+            cost.call_max,
+            cost.call_max_in.name(),
+            per_sample_pct(cost.engine_mean(), fs),
+            per_sample_pct(cost.engine_max, fs),
+            reading_pct,
+            cost.call_max as f32 / (CORE_HZ as f32 / 1e6)
+        );
+        let [new, next_plan, accept, is_complete, finish] =
+            cost.split.map(|n| n.min(u32::MAX as u64) as u32);
+        defmt::info!(
+            "split method={=str} e_kpa={=f32} new={=u32} next_plan={=u32} accept={=u32} is_complete={=u32} finish={=u32}",
+            case.method.name(),
+            case.e_kpa,
+            new,
+            next_plan,
+            accept,
+            is_complete,
+            finish
+        );
+        status == case.expect
+    }
+
+    /// The image: every case in turn, then exit with success iff all ended as expected.
+    #[cortex_m_rt::entry]
+    fn main() -> ! {
+        board::start_stamp_clock();
+        let fs = board::scale().sample_rate.0;
+        defmt::info!(
+            "budget core_hz={=u32} fs_hz={=f32} batch={=u32} budget_pct={=f32} unit={=str}",
+            CORE_HZ,
+            fs,
+            BATCH as u32,
+            BUDGET_PCT,
+            board::ELAPSED_UNIT
+        );
+        // The QEMU image's calibration (the store's fallback): only the status matters here.
+        let cal = PowerLaw::paper_experiment();
+        let mut ok = true;
+        for &e_kpa in MODULI_KPA.iter() {
+            for method in Method::ALL {
+                let case = Case {
+                    method,
+                    e_kpa,
+                    expect: Status::Ok.code(),
+                };
+                ok &= measure(&case, &cal, fs);
+            }
+        }
+        let fallback = Case {
+            method: Method::Auto,
+            e_kpa: FALLBACK_KPA,
+            expect: Status::Failed(Failure::OutOfBand).code(),
+        };
+        ok &= measure(&fallback, &cal, fs);
+        defmt::info!("exit ok={=bool}", ok);
+        board::exit(ok)
+    }
+}

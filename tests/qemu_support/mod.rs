@@ -1,0 +1,157 @@
+//! What the QEMU tests share: build a firmware binary for `thumbv7em-none-eabihf` (profile `fw`,
+//! feature `qemu`), run it on `mps2-an386` with deterministic time and decode its defmt log.
+//!
+//! Needs `qemu-system-arm`, `defmt-print` and the target; [`tools_present`] says whether to skip.
+
+use std::collections::HashMap;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn have(tool: &str) -> bool {
+    Command::new(tool)
+        .arg("--version")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok()
+}
+
+/// True when `qemu-system-arm` and `defmt-print` are installed. Without them the caller skips
+/// (with a message) — except under `CI=true`, where this panics.
+pub fn tools_present() -> bool {
+    let ci = std::env::var("CI").is_ok_and(|v| v == "true");
+    for tool in ["qemu-system-arm", "defmt-print"] {
+        if !have(tool) {
+            assert!(!ci, "{tool} is required in CI");
+            eprintln!("SKIPPED: {tool} not installed (apt-get install qemu-system-arm; cargo install defmt-print --locked)");
+            return false;
+        }
+    }
+    true
+}
+
+/// Build firmware binary `bin` with feature `qemu` into the tests' own target directory (shared
+/// by the QEMU tests, so the second build only links) and return its ELF.
+pub fn build_image(bin: &str) -> PathBuf {
+    let target_dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("qemu-image");
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let status = Command::new(cargo)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args([
+            "build",
+            "--profile",
+            "fw",
+            "--target",
+            "thumbv7em-none-eabihf",
+            "--no-default-features",
+            "--features",
+            "qemu",
+            "--bin",
+            bin,
+        ])
+        .env("CARGO_TARGET_DIR", &target_dir)
+        .env("DEFMT_LOG", "info")
+        // The target's link flags come from .cargo/config.toml; an outer RUSTFLAGS would
+        // replace them.
+        .env_remove("RUSTFLAGS")
+        .env_remove("CARGO_ENCODED_RUSTFLAGS")
+        .env_remove("CARGO_BUILD_TARGET")
+        .status()
+        .expect("run cargo build of the QEMU image");
+    assert!(status.success(), "building the QEMU image `{bin}` failed");
+    target_dir.join("thumbv7em-none-eabihf/fw").join(bin)
+}
+
+/// Run `elf` as `scripts/qemu-run` does (`-icount shift=0,sleep=off`: one instruction per
+/// virtual nanosecond); panics after `timeout` of wall time. Returns QEMU's success and the
+/// decoded log lines (`LEVEL message`).
+pub fn run_image(elf: &Path, timeout: Duration) -> (bool, Vec<String>) {
+    let mut qemu = Command::new("qemu-system-arm")
+        .args([
+            "-machine",
+            "mps2-an386",
+            "-cpu",
+            "cortex-m4",
+            "-icount",
+            "shift=0,sleep=off",
+            "-nographic",
+            "-monitor",
+            "none",
+            "-serial",
+            "null",
+            "-semihosting-config",
+            "enable=on,target=native",
+            "-kernel",
+        ])
+        .arg(elf)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("start qemu-system-arm");
+    let frames = qemu.stdout.take().expect("qemu stdout");
+    let mut print = Command::new("defmt-print")
+        .arg("-e")
+        .arg(elf)
+        .args(["--log-format", "{L} {s}"])
+        .stdin(Stdio::from(frames))
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("start defmt-print");
+    let start = Instant::now();
+    let status = loop {
+        if let Some(s) = qemu.try_wait().expect("wait for qemu") {
+            break s;
+        }
+        if start.elapsed() > timeout {
+            let _ = qemu.kill();
+            let _ = print.kill();
+            panic!("QEMU image did not exit within {timeout:?}");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let mut text = String::new();
+    print
+        .stdout
+        .take()
+        .expect("defmt-print stdout")
+        .read_to_string(&mut text)
+        .expect("read decoded log");
+    let printed = print.wait().expect("wait for defmt-print");
+    assert!(printed.success(), "defmt-print failed: {printed}");
+    (status.success(), text.lines().map(str::to_owned).collect())
+}
+
+/// A decoded line `LEVEL name k=v k=v ...` as (name, map).
+pub type Fields = (String, HashMap<String, String>);
+
+/// `LEVEL name k=v k=v ...` → (name, map).
+pub fn fields(line: &str) -> Option<Fields> {
+    let mut words = line.split_whitespace();
+    let _level = words.next()?;
+    let name = words.next()?.to_owned();
+    let map = words
+        .filter_map(|w| w.split_once('='))
+        .map(|(k, v)| (k.to_owned(), v.to_owned()))
+        .collect();
+    Some((name, map))
+}
+
+/// The number under `key` (panics when missing or not a number).
+pub fn num(map: &HashMap<String, String>, key: &str) -> f64 {
+    map.get(key)
+        .unwrap_or_else(|| panic!("missing {key}"))
+        .parse()
+        .unwrap_or_else(|_| panic!("{key} is not a number"))
+}
+
+/// The last line named `name` (panics when there is none).
+pub fn last(parsed: &[Fields], name: &str) -> HashMap<String, String> {
+    parsed
+        .iter()
+        .rev()
+        .find(|(n, _)| n == name)
+        .map(|(_, m)| m.clone())
+        .unwrap_or_else(|| panic!("no `{name}` line"))
+}
