@@ -33,4 +33,4 @@ pub mod units;
 pub use calibration::PowerLaw;
 pub use measure::{Method, Reading, SweepMeasurement};
 pub use status::{Failure, Status};
-pub use units::{AdcCode, DacCode, Hz, KPa, Newtons, Seconds, Volts};
+pub use units::{AdcCode, DacCode, Farads, Hz, KPa, Newtons, Seconds, Siemens, Volts};

@@ -7,6 +7,7 @@
 
 use crate::calibration::PowerLaw;
 use crate::engine::{PointPlan, PointRaw};
+use crate::estimate::hold::{Hold, HoldSettings};
 use crate::estimate::ringdown::{Ringdown, RingdownSettings};
 use crate::estimate::staged::{Refine, Staged, StagedSettings};
 use crate::estimate::{self, Estimate};
@@ -34,12 +35,14 @@ pub enum Method {
     Track,
     /// Burst, hold the drive, fit the free decay.
     Ringdown,
+    /// Seed with a ring-down, then hold the drive on the resonance and fit its response.
+    Hold,
     /// The default strategy: fit (0.7 s), falling back to sweep-G (6 s) when fit finds no
     /// trustworthy resonance; the reading names the method that produced it.
     Auto,
 }
 
-/// Settings of a method: stepped sweeps, two-stage procedures or ring-down.
+/// Settings of a method: stepped sweeps, two-stage procedures, ring-down or hold.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Settings {
@@ -49,6 +52,8 @@ pub enum Settings {
     Staged(StagedSettings),
     /// ringdown.
     Ringdown(RingdownSettings),
+    /// hold.
+    Hold(HoldSettings),
 }
 
 impl From<&SweepSettings> for Settings {
@@ -66,6 +71,11 @@ impl From<&RingdownSettings> for Settings {
         Settings::Ringdown(*s)
     }
 }
+impl From<&HoldSettings> for Settings {
+    fn from(s: &HoldSettings) -> Self {
+        Settings::Hold(*s)
+    }
+}
 impl From<&Settings> for Settings {
     fn from(s: &Settings) -> Self {
         *s
@@ -74,13 +84,14 @@ impl From<&Settings> for Settings {
 
 impl Method {
     /// Every method.
-    pub const ALL: [Method; 7] = [
+    pub const ALL: [Method; 8] = [
         Method::Paper,
         Method::SweepG,
         Method::Adaptive,
         Method::Fit,
         Method::Track,
         Method::Ringdown,
+        Method::Hold,
         Method::Auto,
     ];
 
@@ -93,6 +104,7 @@ impl Method {
             Method::Fit => "fit",
             Method::Track => "track",
             Method::Ringdown => "ringdown",
+            Method::Hold => "hold",
             Method::Auto => "auto",
         }
     }
@@ -113,6 +125,7 @@ impl Method {
             }
             Method::Track => Settings::Staged(StagedSettings::default_for(Refine::Track)),
             Method::Ringdown => Settings::Ringdown(RingdownSettings::DEFAULT),
+            Method::Hold => Settings::Hold(HoldSettings::DEFAULT),
         }
     }
 
@@ -443,6 +456,7 @@ enum Inner {
     Sweep(SweepMeasurement),
     Staged(Staged),
     Ringdown(Ringdown),
+    Hold(Hold),
     Auto {
         first: Staged,
         fallback: Option<SweepMeasurement>,
@@ -490,6 +504,7 @@ impl Procedure {
                 Inner::Staged(s.validate(Refine::Track, scale)?)
             }
             (Method::Ringdown, Settings::Ringdown(s)) => Inner::Ringdown(s.validate(scale)?),
+            (Method::Hold, Settings::Hold(s)) => Inner::Hold(s.validate(scale)?),
             (Method::Auto, Settings::Staged(s)) => {
                 // Validate the fallback now too: the interrupt must never see bad settings.
                 Method::SweepG.default_sweep().validate(scale)?;
@@ -526,6 +541,7 @@ impl Measurement for Procedure {
             Inner::Sweep(m) => m.next_plan(),
             Inner::Staged(m) => m.next_plan(&self.scale),
             Inner::Ringdown(m) => m.next_plan(),
+            Inner::Hold(m) => m.next_plan(),
             Inner::Auto { first, fallback } => {
                 if fallback.is_none() && first.is_complete() && retryable(&first.estimate()) {
                     let sweep = Method::SweepG.default_sweep();
@@ -551,6 +567,10 @@ impl Measurement for Procedure {
                 m.accept(raw, &self.scale);
                 None
             }
+            Inner::Hold(m) => {
+                m.accept(raw, &self.scale);
+                None
+            }
             Inner::Auto { first, fallback } => match fallback {
                 Some(f) => f.accept(raw),
                 None => first.accept(raw, &self.scale),
@@ -563,6 +583,7 @@ impl Measurement for Procedure {
             Inner::Sweep(m) => m.is_complete(),
             Inner::Staged(m) => m.is_complete(),
             Inner::Ringdown(m) => m.is_complete(),
+            Inner::Hold(m) => m.is_complete(),
             Inner::Auto { first, fallback } => match fallback {
                 Some(f) => f.is_complete(),
                 None => first.is_complete() && !retryable(&first.estimate()),
@@ -582,6 +603,9 @@ impl Measurement for Procedure {
                 Reading::from_estimate(self.method, m.estimate(), cal, t, m.len() as u16)
             }
             Inner::Ringdown(m) => {
+                Reading::from_estimate(self.method, m.estimate(), cal, t, self.windows)
+            }
+            Inner::Hold(m) => {
                 Reading::from_estimate(self.method, m.estimate(), cal, t, self.windows)
             }
             Inner::Auto { first, fallback } => match fallback {

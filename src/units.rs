@@ -1,7 +1,8 @@
 //! Physical units of the public interface and newtypes for raw converter codes.
 //!
 //! Every quantity that crosses a public API carries its unit in its type: frequencies in [`Hz`],
-//! durations in [`Seconds`], drive levels in [`Volts`], moduli in [`KPa`], forces in [`Newtons`].
+//! durations in [`Seconds`], drive levels in [`Volts`], moduli in [`KPa`], forces in [`Newtons`], the static
+//! admittance in [`Farads`] and [`Siemens`].
 //! Raw converter values are [`DacCode`] and [`AdcCode`], never bare integers.
 
 macro_rules! unit {
@@ -69,6 +70,16 @@ unit!(
     /// Force in newtons.
     Newtons,
     "N"
+);
+unit!(
+    /// Capacitance in farads.
+    Farads,
+    "F"
+);
+unit!(
+    /// Conductance in siemens.
+    Siemens,
+    "S"
 );
 
 /// A 12-bit DAC code (0..=4095, mid-scale 2048 is zero drive).

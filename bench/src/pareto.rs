@@ -4,6 +4,7 @@
 use hal_sim::{NoiseScene, Scene};
 use pzt_probe::board::sim::read;
 use pzt_probe::calibration::PowerLaw;
+use pzt_probe::estimate::hold::HoldSettings;
 use pzt_probe::estimate::ringdown::RingdownSettings;
 use pzt_probe::estimate::staged::{Refine, StagedSettings};
 use pzt_probe::measure::{Method, Settings};
@@ -110,7 +111,48 @@ pub fn configs() -> Vec<Config> {
             settings: Settings::Ringdown(s),
         });
     }
+    // hold needs the unit's static admittance: its air reference, taken once.
+    let air = air_static();
+    for (burst, refine, hold) in [
+        (15.0, 0.0, 80.0),
+        (20.0, 50.0, 150.0),
+        (20.0, 80.0, 300.0),
+        (20.0, 100.0, 500.0),
+        (20.0, 150.0, 800.0),
+        (20.0, 200.0, 1300.0),
+    ] {
+        let s = HoldSettings {
+            seed_burst: ms(burst),
+            refine: ms(refine),
+            hold: ms(hold),
+            ..air
+        };
+        let label = if refine > 0.0 {
+            format!("{burst} ms seed, {refine}+{} ms", hold - refine)
+        } else {
+            format!("{burst} ms seed, {hold} ms")
+        };
+        v.push(Config {
+            method: Method::Hold,
+            label,
+            settings: Settings::Hold(s),
+        });
+    }
     v
+}
+
+/// [`HoldSettings::DEFAULT`] with the static admittance of the simulated unit's air reference
+/// ([`pzt_probe::board::sim::air_reference`], bench noise, noise stream 77).
+pub fn air_static() -> HoldSettings {
+    let unit = Scene::on_modulus_kpa(300.0);
+    // The nominal simulated unit in free air always has a resonance to fit.
+    let (_, c0, g0) = pzt_probe::board::sim::air_reference(&unit, NoiseScene::Bench, 77)
+        .expect("air reference of the nominal simulated unit");
+    HoldSettings {
+        static_capacitance: c0,
+        static_conductance: g0,
+        ..HoldSettings::DEFAULT
+    }
 }
 
 /// Calibrate `c` as the product is calibrated: phantoms A–E × `repeats` readings under `noise`

@@ -66,7 +66,9 @@ use crate::calibration::{FitError, PowerLaw, QModel};
 use crate::engine::SampleEngine;
 use crate::measure::{Method, Procedure, Reading, Settings};
 use crate::runner::{run_sweep, RunError};
-use crate::sweep::{SettingsError, SweepPoint};
+use crate::status::Failure;
+use crate::sweep::{SettingsError, SweepPoint, SweepSettings};
+use crate::units::{Farads, Seconds, Siemens, Volts};
 use hal_sim::{NoiseScene, Phantom, Scene};
 
 /// Why a simulated reading could not run.
@@ -78,6 +80,8 @@ pub enum SimError {
     Run(RunError),
     /// The calibration fit failed.
     Fit(FitError),
+    /// The air reference found no resonance to fit.
+    Air(Failure),
 }
 
 /// One reading of `scene` (noise stream `seed`) with `method` and `settings`, mapped through
@@ -173,4 +177,51 @@ pub fn calibrate_unit_with(
     }
     let law = PowerLaw::fit_robust(&mut data[..n]).map_err(SimError::Fit)?;
     Ok((law, QModel::fit(&qs[..nq])))
+}
+
+/// The air reference of a simulated unit, as the firmware's air-reference command takes it: a
+/// stepped sweep of the free probe (170–290 Hz in 2 Hz steps, 50 ms settle, 100 ms integration,
+/// 5 V; 9.2 s of probe time) and a Butterworth–Van Dyke fit of its admittance, which gives the
+/// free resonance and Q and the static admittance `C0`, `G0` that
+/// [`HoldSettings`](crate::estimate::hold::HoldSettings) needs.
+/// `hardware` is the unit (its PZT and front end; its tissue is ignored), `seed` the noise stream.
+pub fn air_reference(
+    hardware: &Scene,
+    noise: NoiseScene,
+    seed: u64,
+) -> Result<(crate::store::AirReference, Farads, Siemens), SimError> {
+    let scene = Scene {
+        tissue: None,
+        ..*hardware
+    }
+    .with_noise(noise);
+    let sweep = SweepSettings {
+        start: Hz(170.0),
+        stop: Hz(290.0),
+        step: Hz(2.0),
+        settle: Seconds(0.05),
+        integrate: Seconds(0.1),
+        drive: Volts(5.0),
+    };
+    let mut points: heapless::Vec<SweepPoint, 64> = heapless::Vec::new();
+    read(
+        &scene,
+        seed,
+        Method::SweepG,
+        &sweep,
+        &PowerLaw::paper_experiment(),
+        |p| {
+            let _ = points.push(*p);
+        },
+    )?;
+    let i =
+        crate::estimate::argmax(&points, |p| p.g_s).ok_or(SimError::Air(Failure::NoResonance))?;
+    let b = crate::estimate::fit::fit_bvd(&points, points[i].freq.0 as f64, 30.0)
+        .map_err(SimError::Air)?;
+    let air = crate::store::AirReference {
+        free_resonance: Hz(b.f0 as f32),
+        free_q: b.q as f32,
+    };
+    let c0 = b.b0 / (2.0 * core::f64::consts::PI * b.f_ref);
+    Ok((air, Farads(c0 as f32), Siemens(b.g0 as f32)))
 }

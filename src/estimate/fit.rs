@@ -31,6 +31,11 @@ pub struct Bvd {
     pub q: f64,
     /// Standard uncertainty of `f0`, Hz.
     pub sigma_f0: f64,
+    /// Standard uncertainty of `G0` from the noise alone (not scaled by χ²), S.
+    pub sigma_g0: f64,
+    /// Standard uncertainty of `b0` from the noise alone (not scaled by χ²), S: the part of its
+    /// error that changes from reading to reading (a misfit's part repeats and is calibrated).
+    pub sigma_b0: f64,
 }
 
 impl Bvd {
@@ -163,6 +168,8 @@ pub fn fit_bvd(points: &[SweepPoint], f_start: f64, q_start: f64) -> Result<Bvd,
         1.0
     };
     let sigma_f0 = libm::sqrt((cov[3][3] * scale).max(0.0));
+    let sigma_g0 = libm::sqrt(cov[0][0].max(0.0));
+    let sigma_b0 = libm::sqrt(cov[1][1].max(0.0));
     if !p.iter().all(|v| v.is_finite()) || !sigma_f0.is_finite() {
         return Err(Failure::NoResonance);
     }
@@ -174,6 +181,8 @@ pub fn fit_bvd(points: &[SweepPoint], f_start: f64, q_start: f64) -> Result<Bvd,
         f0: p[3],
         q: p[4],
         sigma_f0,
+        sigma_g0,
+        sigma_b0,
     })
 }
 

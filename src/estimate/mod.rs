@@ -6,6 +6,7 @@
 
 pub mod conductance;
 pub mod fit;
+pub mod hold;
 pub mod paper;
 pub mod ringdown;
 pub mod staged;

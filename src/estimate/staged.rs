@@ -79,7 +79,7 @@ impl StagedSettings {
                 integrate: Seconds(0.02),
                 refine_points: 7,
                 refine_span: 0.6,
-                settle_tau: 3.0,
+                settle_tau: 8.0,
                 drive: Volts(5.0),
             },
             Refine::Bvd => Self {
@@ -90,14 +90,16 @@ impl StagedSettings {
                 integrate: Seconds(0.02),
                 refine_points: 5,
                 refine_span: 0.8,
-                settle_tau: 3.0,
+                settle_tau: 5.0,
                 drive: Volts(5.0),
             },
             Refine::Track => Self {
                 band_start: Hz(170.0),
                 band_stop: Hz(290.0),
                 coarse_points: 6,
-                coarse_settle: Seconds(0.02),
+                // The tracker subtracts the static part fitted on the coarse points: they must
+                // have settled (4 τ), or their transients change that part from reading to reading.
+                coarse_settle: Seconds(0.06),
                 integrate: Seconds(0.02),
                 refine_points: 8,
                 refine_span: 0.0,
@@ -394,7 +396,19 @@ impl Staged {
         if last_move > 0.1 * linewidth || chi2 / dof > conductance::GROSS_CHI2 {
             return Err(Failure::NotLocked);
         }
-        let sigma = libm::sqrt(1.0 / sw);
+        // Every step subtracts the same fitted static part, so its error is common to all steps
+        // and does not average down: a susceptance error dB turns the motional phase by dB / g,
+        // and f0 by f0 / (2 Q) of that (at the resonance, where the steps sit; an error in the
+        // conductance G0 changes only the magnitude there).
+        let common = self.bvd.map_or(0.0, |b| {
+            let db = b.sigma_b0 * mean / b.f_ref;
+            if b.g > 0.0 {
+                mean / (2.0 * self.q) * db / b.g
+            } else {
+                0.0
+            }
+        });
+        let sigma = libm::sqrt(1.0 / sw + common * common);
         Ok(Estimate {
             resonance: Hz(mean as f32),
             sigma: Hz(sigma as f32),

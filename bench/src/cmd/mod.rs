@@ -91,6 +91,16 @@ impl MethodArgs {
                 s.drive = self.drive_v.map(Volts).unwrap_or(s.drive);
                 Settings::Ringdown(s)
             }
+            Settings::Hold(_) => {
+                // The simulated unit's own static admittance, from its air reference.
+                let mut s = crate::pareto::air_static();
+                s.band_start = self.start_hz.map(Hz).unwrap_or(s.band_start);
+                s.band_stop = self.stop_hz.map(Hz).unwrap_or(s.band_stop);
+                s.seed = Hz(0.5 * (s.band_start.0 + s.band_stop.0));
+                s.hold = self.integrate_s.map(Seconds).unwrap_or(s.hold);
+                s.drive = self.drive_v.map(Volts).unwrap_or(s.drive);
+                Settings::Hold(s)
+            }
         }
     }
 }

@@ -169,13 +169,15 @@ fn aggregate(rows: &[Row], c: usize, noise: NoiseScene) -> Option<(f64, f64, f64
     Some((t, 100.0 * (e2 / ok as f64).sqrt(), ok as f64 / n as f64))
 }
 
-const COLORS: [RGBColor; 6] = [
+const COLORS: [RGBColor; 8] = [
     RGBColor(200, 30, 30),
     RGBColor(30, 90, 200),
     RGBColor(20, 150, 60),
     RGBColor(150, 60, 180),
     RGBColor(230, 140, 0),
     RGBColor(0, 160, 170),
+    RGBColor(120, 70, 20),
+    RGBColor(90, 90, 90),
 ];
 
 fn chart(
@@ -338,17 +340,21 @@ fn summary(cfgs: &[Config], rows: &[Row], cals: &[Option<PowerLaw>]) -> String {
             noise_label(noise),
             tau_ms(500.0)
         );
-        let _ = writeln!(s, "| method | knobs | probe time (ms) | RMS error from noise (%) | RMS error vs truth (%) | noise-free error (%) | sd (%) | reported repeatability σ (%) | ok | CRB (%) |");
-        let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+        let _ = writeln!(s, "| method | knobs | probe time (ms) | probe time (τ) | RMS error from noise (%) | RMS error vs truth (%) | noise-free error (%) | sd (%) | reported repeatability σ (%) | ok | CRB (%) | error / CRB |");
+        let _ = writeln!(
+            s,
+            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        );
         for r in rows.iter().filter(|r| r.noise == noise && r.e == 500.0) {
             let c = &cfgs[r.c];
             let x = &r.cell;
             let _ = writeln!(
                 s,
-                "| {} | {} | {:.0} | {:.3} | {:.3} | {} | {:.3} | {:.3} | {}/{} | {:.4} |",
+                "| {} | {} | {:.0} | {:.1} | {:.3} | {:.3} | {} | {:.3} | {:.3} | {}/{} | {:.4} | {:.1} |",
                 c.method.name(),
                 c.label,
                 x.time_ms,
+                x.time_ms / tau_ms(500.0),
                 x.noise_rms_pct(),
                 x.rms_pct(),
                 x.quiet_err
@@ -357,7 +363,8 @@ fn summary(cfgs: &[Config], rows: &[Row], cals: &[Option<PowerLaw>]) -> String {
                 x.repeat_pct(),
                 x.ok,
                 x.n,
-                r.crb
+                r.crb,
+                x.noise_rms_pct() / r.crb
             );
         }
         let _ = writeln!(
@@ -405,6 +412,69 @@ fn summary(cfgs: &[Config], rows: &[Row], cals: &[Option<PowerLaw>]) -> String {
                 list(|c| c.within10)
             );
         }
+    }
+    s.push_str(&honesty(cfgs, rows));
+    s
+}
+
+/// Honest uncertainty: for every config, modulus and noise scene with at least 10 ok readings,
+/// the ratio of the observed scatter (RMS deviation from the noise-free reading) to the RMS
+/// reported repeatability σ; the worst cell per method.
+fn honesty(cfgs: &[Config], rows: &[Row]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "\n### honest uncertainty: observed scatter / reported repeatability σ\n\n         Every (knobs, modulus 150–2500 kPa, noise scene) cell with at least 10 ok readings; \
+         scatter = RMS deviation from the same method's noise-free reading. 1 is honest; the \
+         issue's bar is 1/1.5 … 1.5.\n"
+    );
+    let _ = writeln!(
+        s,
+        "| method | cells | within 1/1.5 … 1.5 | lowest (over-stated) | highest (under-stated) |"
+    );
+    let _ = writeln!(s, "|---|---:|---:|---|---|");
+    for m in pzt_probe::Method::ALL {
+        let mut n = 0;
+        let mut good = 0;
+        let mut lo: Option<(f64, String)> = None;
+        let mut hi: Option<(f64, String)> = None;
+        for r in rows
+            .iter()
+            .filter(|r| cfgs[r.c].method == m && r.cell.ok >= 10)
+        {
+            let rep = r.cell.repeat_pct();
+            if !(rep > 0.0) {
+                continue;
+            }
+            let ratio = r.cell.noise_rms_pct() / rep;
+            let what = format!(
+                "{:.2} ({}, {} kPa, {})",
+                ratio,
+                cfgs[r.c].label,
+                r.e,
+                noise_label(r.noise)
+            );
+            n += 1;
+            good += (1.0 / 1.5..=1.5).contains(&ratio) as usize;
+            if lo.as_ref().is_none_or(|l| ratio < l.0) {
+                lo = Some((ratio, what.clone()));
+            }
+            if hi.as_ref().is_none_or(|h| ratio > h.0) {
+                hi = Some((ratio, what));
+            }
+        }
+        if n == 0 {
+            continue;
+        }
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} |",
+            m.name(),
+            n,
+            good,
+            lo.map_or(String::new(), |l| l.1),
+            hi.map_or(String::new(), |h| h.1)
+        );
     }
     s
 }
