@@ -33,16 +33,36 @@ const CALL_MAX_US: f64 = 100_000.0;
 /// Fewest moduli every method must have been measured at.
 const MIN_MODULI: usize = 3;
 
-/// Methods whose per-reading work is known to exceed the budget: (method, why, ceiling in
-/// percent of the core). Their per-reading figure must stay under the ceiling *and* over the
-/// budget — once it comes within budget the entry is stale and the test fails until it is
-/// struck from this list.
-const KNOWN_OVER_READING_BUDGET: &[(&str, &str, f64)] = &[(
-    "auto",
-    "Procedure computes the fit stage's final estimate twice (once to decide about the \
-     fallback in is_complete/next_plan, again in finish): one BVD fit too many",
-    3.0,
-)];
+/// A method known to exceed the per-reading budget or the call latency bound: why, and the
+/// ceilings it must still stay under (stated tolerances, about 1.2–1.3 times the worst figure
+/// measured when it was listed). Once a listed method is within budget everywhere, the entry is
+/// stale and the test fails until it is struck from [`KNOWN_OVER_BUDGET`].
+struct Known {
+    method: &'static str,
+    why: &'static str,
+    /// Ceiling of the per-reading work, percent of the core.
+    reading_pct: f64,
+    /// Ceiling of the largest single call, µs at 170 MHz.
+    call_us: f64,
+}
+
+/// The methods over budget (see `docs/firmware.md`).
+const KNOWN_OVER_BUDGET: &[Known] = &[
+    Known {
+        method: "auto",
+        why: "Procedure computes the fit stage's final estimate twice (once to decide about \
+              the fallback in is_complete/next_plan, again in finish): one BVD fit too many",
+        reading_pct: 3.5,
+        call_us: CALL_MAX_US,
+    },
+    Known {
+        method: "hold",
+        why: "its accept calls take up to 21 M instructions (f64 fits): 35-45 % of the core \
+              over its 0.4 s reading, single calls of up to 125 ms",
+        reading_pct: 60.0,
+        call_us: 160_000.0,
+    },
+];
 
 /// A `cost` line with its `split` line.
 struct Case {
@@ -176,36 +196,46 @@ fn every_method_fits_its_budget_on_target() {
             "{who}: per-sample max {:.2} %",
             sample_pct(max)
         );
-        // Per reading: the measurement task's work over the reading's probe time.
-        match KNOWN_OVER_READING_BUDGET
-            .iter()
-            .find(|(m, _, _)| *m == c.method())
-        {
-            None => assert!(
-                reading_pct < BUDGET_PCT,
-                "{who}: per-reading work {reading_pct:.2} % of the core"
-            ),
-            Some(&(_, why, ceiling)) => {
+        // Per reading: the measurement task's work over the reading's probe time; and the
+        // largest single call, the latency of the priority-1 measurement task.
+        let call = c.str("call_max_in");
+        match KNOWN_OVER_BUDGET.iter().find(|k| k.method == c.method()) {
+            None => {
                 assert!(
-                    reading_pct < ceiling,
-                    "{who}: {reading_pct:.2} % ≥ {ceiling} %"
+                    reading_pct < BUDGET_PCT,
+                    "{who}: per-reading work {reading_pct:.2} % of the core"
                 );
-                if reading_pct >= BUDGET_PCT {
-                    over.push(format!("{who}: {reading_pct:.2} % ({why})"));
+                assert!(
+                    call_max_us < CALL_MAX_US,
+                    "{who}: a single {call} call takes {call_max_us:.0} µs at 170 MHz"
+                );
+            }
+            Some(k) => {
+                assert!(
+                    reading_pct < k.reading_pct,
+                    "{who}: {reading_pct:.2} % ≥ its ceiling {} %",
+                    k.reading_pct
+                );
+                assert!(
+                    call_max_us < k.call_us,
+                    "{who}: a single {call} call of {call_max_us:.0} µs ≥ its ceiling {} µs",
+                    k.call_us
+                );
+                if reading_pct >= BUDGET_PCT || call_max_us >= CALL_MAX_US {
+                    over.push(format!(
+                        "{who}: {reading_pct:.2} % of the core, {call} {call_max_us:.0} µs ({})",
+                        k.why
+                    ));
                 }
             }
         }
-        // The largest single call: latency of the priority-1 measurement task.
-        assert!(
-            call_max_us < CALL_MAX_US,
-            "{who}: a single {} call takes {call_max_us:.0} µs at 170 MHz",
-            c.str("call_max_in")
-        );
     }
-    for (m, _, _) in KNOWN_OVER_READING_BUDGET {
+    for k in KNOWN_OVER_BUDGET {
         assert!(
-            over.iter().any(|o| o.starts_with(&format!("{m} at "))),
-            "{m} is within budget now: strike it from KNOWN_OVER_READING_BUDGET"
+            over.iter()
+                .any(|o| o.starts_with(&format!("{} at ", k.method))),
+            "{} is within budget now: strike it from KNOWN_OVER_BUDGET",
+            k.method
         );
     }
     for o in &over {
