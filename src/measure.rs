@@ -459,6 +459,8 @@ enum Inner {
     Hold(Hold),
     Auto {
         first: Staged,
+        /// The first method's estimate, computed once when it completes.
+        first_result: Option<Result<Estimate, Failure>>,
         fallback: Option<SweepMeasurement>,
     },
 }
@@ -510,6 +512,7 @@ impl Procedure {
                 Method::SweepG.default_sweep().validate(scale)?;
                 Inner::Auto {
                     first: s.validate(Refine::Bvd, scale)?,
+                    first_result: None,
                     fallback: None,
                 }
             }
@@ -542,8 +545,12 @@ impl Measurement for Procedure {
             Inner::Staged(m) => m.next_plan(&self.scale),
             Inner::Ringdown(m) => m.next_plan(),
             Inner::Hold(m) => m.next_plan(),
-            Inner::Auto { first, fallback } => {
-                if fallback.is_none() && first.is_complete() && retryable(&first.estimate()) {
+            Inner::Auto {
+                first,
+                first_result,
+                fallback,
+            } => {
+                if fallback.is_none() && first_result.as_ref().is_some_and(retryable) {
                     let sweep = Method::SweepG.default_sweep();
                     *fallback =
                         SweepMeasurement::new(Method::SweepG, &sweep, &self.scale, self.end_sample)
@@ -571,9 +578,19 @@ impl Measurement for Procedure {
                 m.accept(raw, &self.scale);
                 None
             }
-            Inner::Auto { first, fallback } => match fallback {
+            Inner::Auto {
+                first,
+                first_result,
+                fallback,
+            } => match fallback {
                 Some(f) => f.accept(raw),
-                None => first.accept(raw, &self.scale),
+                None => {
+                    let p = first.accept(raw, &self.scale);
+                    if first.is_complete() && first_result.is_none() {
+                        *first_result = Some(first.estimate());
+                    }
+                    p
+                }
             },
         }
     }
@@ -584,9 +601,13 @@ impl Measurement for Procedure {
             Inner::Staged(m) => m.is_complete(),
             Inner::Ringdown(m) => m.is_complete(),
             Inner::Hold(m) => m.is_complete(),
-            Inner::Auto { first, fallback } => match fallback {
+            Inner::Auto {
+                first_result,
+                fallback,
+                ..
+            } => match fallback {
                 Some(f) => f.is_complete(),
-                None => first.is_complete() && !retryable(&first.estimate()),
+                None => first_result.as_ref().is_some_and(|r| !retryable(r)),
             },
         }
     }
@@ -608,7 +629,11 @@ impl Measurement for Procedure {
             Inner::Hold(m) => {
                 Reading::from_estimate(self.method, m.estimate(), cal, t, self.windows)
             }
-            Inner::Auto { first, fallback } => match fallback {
+            Inner::Auto {
+                first,
+                first_result,
+                fallback,
+            } => match fallback {
                 Some(f) => {
                     let mut r = f.finish(cal);
                     r.probe_time = t;
@@ -617,7 +642,7 @@ impl Measurement for Procedure {
                 }
                 None => Reading::from_estimate(
                     Method::Fit,
-                    first.estimate(),
+                    first_result.unwrap_or_else(|| first.estimate()),
                     cal,
                     t,
                     first.len() as u16,

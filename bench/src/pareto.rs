@@ -23,10 +23,22 @@ pub struct Config {
     pub settings: Settings,
 }
 
+impl Config {
+    /// True when these are the method's default settings (for hold: with the unit's own air
+    /// reference).
+    pub fn is_default(&self) -> bool {
+        let default = match self.method {
+            Method::Hold => Settings::Hold(air_static()),
+            m => m.default_settings(),
+        };
+        self.settings == default
+    }
+}
+
 /// The knob settings the study runs.
 pub fn configs() -> Vec<Config> {
     let mut v = Vec::new();
-    let ms = |x: f32| Seconds(x * 1e-3);
+    let ms = |x: f32| Seconds(x / 1000.0);
     for (settle, int) in [(10.0, 10.0), (25.0, 25.0), (50.0, 50.0), (100.0, 100.0)] {
         let s = SweepSettings {
             settle: ms(settle),

@@ -1,0 +1,145 @@
+//! The speed–accuracy must-shows of the estimator family, on the simulated probe (probe time is
+//! simulated time, so it is asserted exactly). References: the Cramér–Rao bound in closed form
+//! (`pareto::crb_pct`), the phantom's true modulus, and the paper's own finding (its method is
+//! reliable only below about 500 kPa in its noise).
+
+use hal_sim::NoiseScene;
+use probe_bench::pareto::{air_static, calibrate, crb_pct, evaluate, tau_ms, Config};
+use pzt_probe::estimate::hold::HoldSettings;
+use pzt_probe::measure::{Method, Settings};
+use pzt_probe::sweep::SweepSettings;
+use pzt_probe::Seconds;
+
+fn config(method: Method, settings: Settings) -> Config {
+    Config {
+        method,
+        label: String::new(),
+        settings,
+    }
+}
+
+fn hold(seed_burst_ms: f32, refine_ms: f32, hold_ms: f32) -> Config {
+    config(
+        Method::Hold,
+        Settings::Hold(HoldSettings {
+            seed_burst: Seconds(seed_burst_ms / 1000.0),
+            refine: Seconds(refine_ms / 1000.0),
+            hold: Seconds(hold_ms / 1000.0),
+            ..air_static()
+        }),
+    )
+}
+
+fn paper(settle_ms: f32, integrate_ms: f32) -> Config {
+    config(
+        Method::Paper,
+        Settings::Sweep(SweepSettings {
+            settle: Seconds(settle_ms / 1000.0),
+            integrate: Seconds(integrate_ms / 1000.0),
+            ..Method::Paper.default_sweep()
+        }),
+    )
+}
+
+/// Efficiency: hold's error from noise stays within 3× the Cramér–Rao bound at the same probe
+/// time, from about 10 τ to about 100 τ (bench scene, 500 kPa, 20 readings each).
+#[test]
+fn hold_stays_within_three_times_the_cramer_rao_bound_from_10_to_100_tau() {
+    let tau = tau_ms(500.0);
+    for (c, lo_tau, hi_tau) in [
+        (hold(15.0, 0.0, 80.0), 9.0, 12.0),
+        (hold(20.0, 80.0, 300.0), 20.0, 35.0),
+        (hold(20.0, 200.0, 1300.0), 90.0, 110.0),
+    ] {
+        let cal = calibrate(&c, 10, NoiseScene::Bench).expect("calibration");
+        let cell = evaluate(&c, &cal, 500.0, NoiseScene::Bench, 20, 31_000);
+        assert_eq!(cell.ok, 20);
+        let t = cell.time_ms / tau;
+        assert!((lo_tau..=hi_tau).contains(&t), "{t} tau");
+        let crb = crb_pct(&cal, 500.0, NoiseScene::Bench, 5.0, cell.time_ms * 1e-3);
+        let ratio = cell.noise_rms_pct() / crb;
+        assert!(
+            ratio <= 3.0,
+            "{t:.1} tau: {:.4} % vs CRB {crb:.4} % ({ratio:.2}x)",
+            cell.noise_rms_pct()
+        );
+    }
+}
+
+/// Speed at equal accuracy: hold reads 500 kPa within 1 % RMS of the truth in at most 15 τ; the
+/// paper method with points short enough to finish in 20× that time misses 1 %.
+#[test]
+fn hold_reaches_one_percent_in_fifteen_tau_and_the_paper_method_needs_twenty_times_longer() {
+    let tau = tau_ms(500.0);
+    let c = hold(15.0, 0.0, 80.0);
+    let cal = calibrate(&c, 20, NoiseScene::Bench).expect("calibration");
+    let fast = evaluate(&c, &cal, 500.0, NoiseScene::Bench, 20, 32_000);
+    assert_eq!(fast.ok, 20);
+    assert!(fast.time_ms <= 15.0 * tau, "{} ms", fast.time_ms);
+    assert!(fast.rms_pct() <= 1.0, "{:.3} %", fast.rms_pct());
+    // 101 points of 11 + 11 ms: 2.9 s, just under 20× hold's time.
+    let p = paper(11.0, 11.0);
+    let pcal = calibrate(&p, 20, NoiseScene::Bench).expect("calibration");
+    let slow = evaluate(&p, &pcal, 500.0, NoiseScene::Bench, 20, 32_000);
+    assert!(slow.time_ms < 20.0 * fast.time_ms, "{} ms", slow.time_ms);
+    assert!(slow.rms_pct() > 1.0, "{:.3} %", slow.rms_pct());
+}
+
+/// Range at equal noise and time (paper scene): the paper method's own setting (50 + 50 ms a
+/// point, 10.9 s) is not reliable (19 of 20 within ±5 %) at 1000 and 2500 kPa, as the paper
+/// found; fit and hold, in a tenth of that time, are reliable within ±5 % from 150 to 2500 kPa.
+#[test]
+fn in_the_papers_noise_fit_and_hold_read_to_2500_kpa_where_the_paper_method_stops() {
+    let p = paper(50.0, 50.0);
+    let pcal = calibrate(&p, 20, NoiseScene::Paper).expect("calibration");
+    let paper_time = evaluate(&p, &pcal, 500.0, NoiseScene::Paper, 20, 33_000).time_ms;
+    for e in [1000.0, 2500.0] {
+        let cell = evaluate(&p, &pcal, e, NoiseScene::Paper, 20, 33_000);
+        assert!(cell.within5 < 19, "paper at {e} kPa: {}/20", cell.within5);
+    }
+    for c in [
+        config(Method::Fit, Method::Fit.default_settings()),
+        hold(20.0, 80.0, 300.0),
+    ] {
+        let cal = calibrate(&c, 20, NoiseScene::Paper).expect("calibration");
+        for e in [150.0, 300.0, 500.0, 1000.0, 2500.0] {
+            let cell = evaluate(&c, &cal, e, NoiseScene::Paper, 20, 33_000);
+            assert!(cell.time_ms <= 0.1 * paper_time, "{} ms", cell.time_ms);
+            assert!(
+                cell.within5 >= 19,
+                "{} at {e} kPa: {}/20 within 5 %",
+                c.method.name(),
+                cell.within5
+            );
+        }
+    }
+}
+
+/// Honest uncertainty at the default settings: the scatter of 20 readings is within 1.5× of the
+/// reported repeatability σ (either way) at 500 kPa in both noise scenes, for every method.
+#[test]
+fn every_method_reports_the_scatter_it_has() {
+    for m in Method::ALL {
+        if m == Method::Auto {
+            continue; // auto is fit here (covered); its fallback is sweep-g (covered)
+        }
+        let settings = match m {
+            Method::Hold => Settings::Hold(air_static()),
+            m => m.default_settings(),
+        };
+        let c = config(m, settings);
+        for noise in [NoiseScene::Bench, NoiseScene::Paper] {
+            let cal = calibrate(&c, 10, noise).expect("calibration");
+            let cell = evaluate(&c, &cal, 500.0, noise, 20, 34_000);
+            assert!(cell.ok >= 18, "{} {noise:?}: {} ok", m.name(), cell.ok);
+            let ratio = cell.sd_pct() / cell.repeat_pct();
+            assert!(
+                (1.0 / 1.5..=1.5).contains(&ratio),
+                "{} {noise:?}: scatter {:.4} % vs reported {:.4} % ({ratio:.2})",
+                m.name(),
+                cell.sd_pct(),
+                cell.repeat_pct()
+            );
+        }
+    }
+}
