@@ -2,11 +2,15 @@
 //!
 //! Every estimator takes the measured points and returns either an [`Estimate`] with an honest
 //! standard uncertainty or a [`Failure`] code. The checks every sweep shares (clipping, missing
-//! drive, no current) live here in [`screen`].
+//! drive, no current, knocks) live here in [`screen`]; the detectors of interference and of lost
+//! contact that the estimators call on their final points are in [`interference`] and
+//! [`contact`].
 
 pub mod conductance;
+pub mod contact;
 pub mod fit;
 pub mod hold;
+pub mod interference;
 pub mod paper;
 pub mod ringdown;
 pub mod staged;
@@ -38,7 +42,8 @@ pub const MAX_CLIP_FRACTION: f32 = 0.0;
 /// open. (A 210 pF plate driven at 1 V and 170 Hz already carries 220 nA; 20 nA is 7 ADC codes.)
 pub const OPEN_CIRCUIT_A: f32 = 20e-9;
 
-/// Checks every sweep must pass before any estimator looks at it.
+/// Checks every sweep must pass before any estimator looks at it: enough points, no clipping, a
+/// current at all, no knock ([`interference::transients`]).
 pub fn screen(points: &[SweepPoint]) -> Result<(), Failure> {
     if points.len() < 3 {
         return Err(Failure::NoResonance);
@@ -49,7 +54,7 @@ pub fn screen(points: &[SweepPoint]) -> Result<(), Failure> {
     if points.iter().all(|p| !(p.current_a >= OPEN_CIRCUIT_A)) {
         return Err(Failure::OpenCircuit);
     }
-    Ok(())
+    interference::transients(points)
 }
 
 /// Index of the largest value of `key` over `points` (first on ties); `None` on empty input or

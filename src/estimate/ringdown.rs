@@ -304,6 +304,7 @@ fn fit(w: &[Window], f_ref: f64) -> Result<Estimate, Failure> {
     }
     let m = mag.solve().ok_or(Failure::NoResonance)?;
     let p = ph.solve().ok_or(Failure::NoResonance)?;
+    super::interference::decay(&m, &p)?;
     let decay = -m.b;
     if !(decay > 0.0) {
         return Err(Failure::NoResonance);

@@ -339,6 +339,9 @@ impl Staged {
         if let Some(f) = self.failure {
             return Err(f);
         }
+        // A knock among the refine points, then a lift-off between the stages.
+        super::interference::transients(&self.fine)?;
+        super::contact::lost(&self.coarse, self.bvd.map(|b| b.g), &self.fine)?;
         let fine = &self.fine;
         let e = match self.r {
             Refine::Conductance => {
@@ -366,6 +369,11 @@ impl Staged {
             }
             Refine::Track => self.track_estimate(),
         }?;
+        // Settled refine points scattering at random far beyond their σ: a tone (mains).
+        if self.r != Refine::Track && fine.len() >= 4 {
+            let q = e.q.map_or(f64::NAN, f64::from);
+            super::interference::misfit(fine, e.resonance.0 as f64, q)?;
+        }
         let f = e.resonance.0;
         if f < self.s.band_start.0 || f > self.s.band_stop.0 {
             return Err(Failure::OutOfBand);

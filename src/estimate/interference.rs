@@ -1,0 +1,429 @@
+//! Interference: what the lock-in's white-noise uncertainty does not describe.
+//!
+//! Every point's standard uncertainty comes from the residual of its exact sine fit
+//! ([`crate::dsp::lockin`]): whatever is not at the drive frequency is counted as if it were white
+//! noise spread evenly over the window. Two kinds of disturbance break that assumption, and both
+//! are caught here by what they do to the points, not by a noise level the probe would have to
+//! know in advance:
+//!
+//! * **Knocks** ([`transients`]). A mechanical knock leaves a decaying ring of the mode
+//!   (τ = Q / π f0, about 14 ms loaded), an electrical spike a short pulse through the anti-alias
+//!   filter; either lands in one integration window. That point's residual jumps far above the
+//!   residuals of the points measured just before and after it, which the steady noise sets
+//!   (knocks are rare on the scale of one point, 40–100 ms). The jump is checked as a burst of
+//!   one or two points more than [`SPIKE_RATIO`] times the residuals on both sides: white noise
+//!   moves a residual by a few per cent, and a transient of the probe's own (settling after a
+//!   jump, a switch-on) decays over several points (at most 3.4× between neighbours in the
+//!   coarse stages of the staged methods, in every scene of the catalogue, 6× at the switch-on
+//!   of a continuous chirp), while most knocks of the catalogue's `knocks` scene raise it
+//!   10–120× in one point. Smaller knocks raise the point's own uncertainty and weigh less in
+//!   the fits.
+//! * **Tones** ([`misfit`]), mains hum above all. A tone at `f_h` leaks into the phasor of a
+//!   point driven at `f` by about `A / (π |f − f_h| T)` for a window of `T` — coherent, and with
+//!   harmonics every 50 or 60 Hz always one within `1/T` of the drive — while its share of the
+//!   residual only raises the stated uncertainty to `A / √N` (`N` samples). The leakage is then
+//!   5–15 stated σ, with a phase that differs from point to point. So the points scatter about
+//!   the resonance the method reports far beyond their σ, and at random: the Butterworth–Van
+//!   Dyke admittance at the reported `f0` and `Q` (static `G0 + j b0 f`, motional `g`, fitted
+//!   linearly) leaves a reduced χ² above [`GROSS_CHI2`] with uncorrelated residuals. A
+//!   misfit from physics the model leaves out (a second mode, leakage in a `1/G` fit, a settling
+//!   transient) is smooth instead: neighbouring residuals correlate (lag-one correlation above
+//!   [`SMOOTH_CORRELATION`], tested where there are enough points). The test is made only on
+//!   settled points of a loaded resonance (`Q ≤` [`SETTLED_Q`]): with a free or rigidly loaded
+//!   mode (Q 30–40) every method's settling is short against τ and the ring-up alone breaks the
+//!   steady-state model; those readings are judged by the contact and range checks. A misfit
+//!   must also exceed [`MIN_RELATIVE_MISFIT`] of the admittance: with a quantisation-limited
+//!   front end the points' σ is so small that the model's own residue (up to 1e-3) is "gross".
+//! * **Ring-downs** ([`decay`]). A free decay is a straight line in `ln|z|` and in the unwrapped
+//!   phase; a tone does not decay and beats with the reference, a knock adds a second decay. The
+//!   straight-line fits' reduced χ² (weights from the windows' own noise) then exceeds
+//!   [`GROSS_CHI2`] — judged once the burst is near the resonance, where the model is exact.
+//!
+//! Everything here is allocation-free and returns `Ok` on input it cannot judge (too few points,
+//! non-finite values): the estimators' own checks see those.
+
+use crate::linalg::{LineFit, Lsq3};
+use crate::status::Failure;
+use crate::sweep::SweepPoint;
+
+/// One or two adjacent points whose residuals exceed this many times the residuals on either
+/// side of them hold a transient (a knock).
+pub const SPIKE_RATIO: f32 = 8.0;
+
+/// Reduced χ² of the reported resonance against its points above which they scatter far beyond
+/// their own uncertainty (the estimators' threshold for a gross misfit).
+pub const GROSS_CHI2: f64 = 16.0;
+
+/// Above this quality factor the points are not settled enough for [`misfit`] to mean anything.
+pub const SETTLED_Q: f64 = 20.0;
+
+/// With at least [`SMOOTH_MIN_POINTS`] points, a lag-one correlation of the normalised residuals
+/// above this marks a smooth (model) misfit rather than interference.
+pub const SMOOTH_CORRELATION: f64 = 0.5;
+
+/// Fewest points for the correlation test of [`misfit`].
+pub const SMOOTH_MIN_POINTS: usize = 12;
+
+/// Half-width of the points [`misfit`] looks at, in linewidths `f0 / Q`.
+pub const MISFIT_SPAN_LINEWIDTHS: f64 = 2.0;
+
+/// A misfit smaller than this fraction of the admittance is within what the steady-state model
+/// promises (the settling residue of points settled three time constants and the converters'
+/// aliased images reach 1e-3 of `|Y|`: measured on a quantisation-limited front end, 100–2500
+/// kPa) and too small to move the resonance by a noticeable fraction of its uncertainty, so it
+/// is not called interference however small the points' noise. Mains hum of the catalogue
+/// leaves 1–3 %.
+pub const MIN_RELATIVE_MISFIT: f64 = 3e-3;
+
+/// Knocks: `interference` when the residual of one point, or of two adjacent points, exceeds
+/// [`SPIKE_RATIO`] times the larger of the residuals just outside them (in the order given,
+/// which is the order of measurement or of frequency — the same for a stepped sweep). A burst
+/// that short is a knock; a transient of the probe's own (a switch-on, a jump across the
+/// resonance) decays over several points, so the point beside its peak is still raised and it
+/// does not qualify. The first point is nobody's neighbour: every procedure settles it four
+/// times longer than the rest (from rest), so with a quantisation-limited front end its residual
+/// lies far below that of the next.
+pub fn transients(points: &[SweepPoint]) -> Result<(), Failure> {
+    let r = |i: usize| points.get(i).map_or(f32::NAN, |p| p.residual_a);
+    let n = points.len();
+    // A run [i, j] (one or two points) with both outer neighbours present, from index 1 on.
+    for i in 2..n {
+        for j in [i, i + 1] {
+            if j + 1 >= n {
+                continue;
+            }
+            let outside = {
+                let (a, b) = (r(i - 1), r(j + 1));
+                if a > b {
+                    a
+                } else {
+                    b
+                }
+            };
+            let inside = if r(i) < r(j) { r(i) } else { r(j) };
+            if inside > SPIKE_RATIO * outside {
+                return Err(Failure::Interference);
+            }
+        }
+    }
+    Ok(())
+}
+
+/// How far the points scatter about a resonance, from [`bvd_misfit`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Misfit {
+    /// Reduced χ² (per degree of freedom) of the linear BVD fit.
+    pub chi2_per_dof: f64,
+    /// Lag-one correlation of the normalised residuals, in frequency order.
+    pub lag1: f64,
+    /// RMS residual (per degree of freedom) over the RMS admittance of the points.
+    pub relative: f64,
+    /// Points used.
+    pub points: usize,
+}
+
+fn motional_shape(f0: f64, q: f64, f: f64) -> (f64, f64) {
+    let u = f / f0 - f0 / f;
+    let d = 1.0 + q * q * u * u;
+    (1.0 / d, -q * u / d)
+}
+
+/// Scatter of `points` within [`MISFIT_SPAN_LINEWIDTHS`] of `f0_hz` about the admittance
+/// `G0 + j b0 f/f0 + g / (1 + j Q (f/f0 − f0/f))` with `G0, b0, g` fitted (weights `1/σ²`);
+/// `None` with fewer than three such points or on degenerate input. The points are taken in the
+/// order given; the lag-one correlation is meaningful when that is frequency order.
+pub fn bvd_misfit(points: &[SweepPoint], f0_hz: f64, q: f64) -> Option<Misfit> {
+    if !(f0_hz > 0.0) || !(q > 0.0) || !f0_hz.is_finite() || !q.is_finite() {
+        return None;
+    }
+    let span = MISFIT_SPAN_LINEWIDTHS * f0_hz / q;
+    let near = |p: &SweepPoint| {
+        let f = p.freq.0 as f64;
+        let s = p.sigma_s as f64;
+        libm::fabs(f - f0_hz) <= span && f > 0.0 && s > 0.0 && s.is_finite()
+    };
+    let mut l = Lsq3::default();
+    let mut n = 0usize;
+    for p in points.iter().filter(|p| near(p)) {
+        let f = p.freq.0 as f64;
+        let w = 1.0 / ((p.sigma_s as f64) * (p.sigma_s as f64));
+        let (hr, hi) = motional_shape(f0_hz, q, f);
+        l.add([1.0, 0.0, hr], p.g_s as f64, w);
+        l.add([0.0, f / f0_hz, hi], p.b_s as f64, w);
+        n += 1;
+    }
+    if n < 3 {
+        return None;
+    }
+    let fit = l.solve()?;
+    let [g0, b0, g] = fit.p;
+    let (mut ss, mut lag, mut raw, mut y2) = (0.0, 0.0, 0.0, 0.0);
+    let mut prev: Option<(f64, f64)> = None;
+    for p in points.iter().filter(|p| near(p)) {
+        let f = p.freq.0 as f64;
+        let s = p.sigma_s as f64;
+        let (hr, hi) = motional_shape(f0_hz, q, f);
+        let d = (
+            p.g_s as f64 - g0 - g * hr,
+            p.b_s as f64 - b0 * f / f0_hz - g * hi,
+        );
+        raw += d.0 * d.0 + d.1 * d.1;
+        y2 += (p.g_s as f64) * (p.g_s as f64) + (p.b_s as f64) * (p.b_s as f64);
+        let r = (d.0 / s, d.1 / s);
+        ss += r.0 * r.0 + r.1 * r.1;
+        if let Some(q) = prev {
+            lag += q.0 * r.0 + q.1 * r.1;
+        }
+        prev = Some(r);
+    }
+    let dof = (2 * n - 3) as f64;
+    let m = Misfit {
+        chi2_per_dof: ss / dof,
+        lag1: if ss > 0.0 { lag / ss } else { 0.0 },
+        relative: libm::sqrt(raw / dof) / libm::sqrt(y2 / n as f64),
+        points: n,
+    };
+    let finite = m.chi2_per_dof.is_finite() && m.lag1.is_finite() && m.relative.is_finite();
+    finite.then_some(m)
+}
+
+/// Tones: `interference` when the settled points of a loaded resonance (`q ≤` [`SETTLED_Q`])
+/// scatter about the reported `f0_hz`, `q` far beyond their own uncertainty, at random (see the
+/// module's notes). Call it with the points of a final estimate, settled as the method settles
+/// them, in frequency or measurement order.
+pub fn misfit(points: &[SweepPoint], f0_hz: f64, q: f64) -> Result<(), Failure> {
+    if !(q <= SETTLED_Q) {
+        return Ok(());
+    }
+    match bvd_misfit(points, f0_hz, q) {
+        Some(m)
+            if m.chi2_per_dof > GROSS_CHI2
+                && m.relative > MIN_RELATIVE_MISFIT
+                && (m.points < SMOOTH_MIN_POINTS || m.lag1 < SMOOTH_CORRELATION) =>
+        {
+            Err(Failure::Interference)
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Ring-downs: `interference` when the straight-line fits of `ln|z|` (`magnitude`) and of the
+/// unwrapped phase (`phase`) over the kept windows leave a reduced χ² above [`GROSS_CHI2`]
+/// (their weights are the windows' `|z|² / σ²`, so a free decay in white noise gives about 1).
+///
+/// Judged only when the ring is within half a linewidth of the reference (phase slope `2π
+/// (f_d − f_ref)` at most the decay rate `π f0 / Q`), as it is once a stage bursts at an
+/// estimate: a burst far off the resonance leaves windows a sample longer or shorter than
+/// others rotating by different angles, a systematic phase jitter of order `2π |f_d − f_ref| /
+/// 2 fs` (0.01 rad at 30 Hz off) that the noise weights do not describe.
+pub fn decay(magnitude: &LineFit, phase: &LineFit) -> Result<(), Failure> {
+    if !(libm::fabs(phase.b) <= libm::fabs(magnitude.b)) {
+        return Ok(());
+    }
+    for f in [magnitude, phase] {
+        if f.n > 2 && f.chi2 / (f.n - 2) as f64 > GROSS_CHI2 {
+            return Err(Failure::Interference);
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::linalg::Line;
+    use crate::units::Hz;
+
+    /// Deterministic standard normal deviates (Box–Muller over a 64-bit LCG).
+    struct Gauss(u64);
+    impl Gauss {
+        fn uniform(&mut self) -> f64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((self.0 >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        }
+        fn next(&mut self) -> f64 {
+            let (u, v) = (self.uniform(), self.uniform());
+            libm::sqrt(-2.0 * libm::log(u)) * libm::cos(2.0 * core::f64::consts::PI * v)
+        }
+    }
+
+    /// Closed-form BVD points `G0 + j b0 f/f0 + g/(1 + jQu)` at 2 Hz steps, noise `sigma` on
+    /// each component, residual `res` each.
+    fn bvd_points(f0: f64, q: f64, sigma: f64, seed: u64) -> heapless::Vec<SweepPoint, 64> {
+        let (g0, b0, g) = (2e-9, 3e-7, 1.5e-7);
+        let mut n = Gauss(seed);
+        let mut v = heapless::Vec::new();
+        for k in 0..61 {
+            let f = 170.0 + 2.0 * k as f64;
+            let (hr, hi) = motional_shape(f0, q, f);
+            let _ = v.push(SweepPoint {
+                freq: Hz(f as f32),
+                g_s: (g0 + g * hr + sigma * n.next()) as f32,
+                b_s: (b0 * f / f0 + g * hi + sigma * n.next()) as f32,
+                sigma_s: sigma as f32,
+                current_a: 1e-6,
+                drive_v: 5.0,
+                clip_fraction: 0.0,
+                residual_a: 7e-9,
+            });
+        }
+        v
+    }
+
+    #[test]
+    fn a_knock_is_a_local_spike_and_a_ramp_is_not() {
+        let mut p = bvd_points(230.0, 10.0, 1e-10, 1);
+        assert_eq!(transients(&p), Ok(()));
+        // A settling bump (up to 3x between neighbours, up and down) is no knock.
+        for (k, x) in p.iter_mut().enumerate().take(9) {
+            x.residual_a = 7e-9 * libm::powf(3.0, 4.0 - libm::fabsf(k as f32 - 4.0));
+        }
+        assert_eq!(transients(&p), Ok(()));
+        // One point 10x both neighbours, and a two-point knock (10x and 40x).
+        let mut one = bvd_points(230.0, 10.0, 1e-10, 1);
+        one[30].residual_a = 7e-8;
+        assert_eq!(transients(&one), Err(Failure::Interference));
+        let mut two = bvd_points(230.0, 10.0, 1e-10, 1);
+        two[30].residual_a = 7e-8;
+        two[31].residual_a = 2.8e-7;
+        assert_eq!(transients(&two), Err(Failure::Interference));
+        // A switch-on decaying over windows (26x, 4.4x, 1.5x the floor) is the probe's own.
+        let mut on = bvd_points(230.0, 10.0, 1e-10, 1);
+        for (k, r) in [1.8e-7, 3.1e-8, 1.07e-8].iter().enumerate() {
+            on[40 + k].residual_a = *r;
+        }
+        assert_eq!(transients(&on), Ok(()));
+        // The first point (settled four times longer) is nobody's neighbour.
+        let mut first = bvd_points(230.0, 10.0, 1e-10, 1);
+        first[0].residual_a = 1e-10;
+        first[1].residual_a = 7e-8;
+        first[2].residual_a = 6.9e-8;
+        assert_eq!(transients(&first), Ok(()));
+        // Degenerate input never panics and never flags.
+        let mut nan = bvd_points(230.0, 10.0, 1e-10, 1);
+        nan[5].residual_a = f32::NAN;
+        assert_eq!(transients(&nan), Ok(()));
+        assert_eq!(transients(&[]), Ok(()));
+    }
+
+    /// White noise at the stated σ: the reduced χ² of the 3-parameter fit has mean 1 and
+    /// standard deviation sqrt(2 / dof) (dof = 2n − 3); exact points give zero.
+    #[test]
+    fn white_noise_fits_and_exact_points_fit_exactly() {
+        let exact = bvd_points(230.0, 10.0, 0.0, 1);
+        let mut sigma_set = exact.clone();
+        for p in sigma_set.iter_mut() {
+            p.sigma_s = 1e-10;
+        }
+        let m = bvd_misfit(&sigma_set, 230.0, 10.0).unwrap();
+        // f32 storage of the points (1e-7 relative of 3e-7 S) is the only misfit.
+        assert!(m.chi2_per_dof < 0.05, "{m:?}");
+        let mut mean = 0.0;
+        for seed in 0..40 {
+            let p = bvd_points(230.0, 10.0, 1e-10, seed);
+            let m = bvd_misfit(&p, 230.0, 10.0).unwrap();
+            assert_eq!(m.points, 47); // 184..276 Hz
+            let sd = libm::sqrt(2.0 / (2.0 * 47.0 - 3.0));
+            assert!((m.chi2_per_dof - 1.0).abs() < 5.0 * sd, "{m:?}");
+            assert!(m.lag1.abs() < 0.5, "{m:?}");
+            assert_eq!(misfit(&p, 230.0, 10.0), Ok(()));
+            mean += m.chi2_per_dof / 40.0;
+        }
+        assert!(
+            (mean - 1.0).abs() < 5.0 * libm::sqrt(2.0 / 91.0 / 40.0),
+            "{mean}"
+        );
+    }
+
+    /// Random-phase leakage of `leak` siemens added to points of noise `sigma`.
+    fn leaky(sigma: f64, leak: f64) -> heapless::Vec<SweepPoint, 64> {
+        let mut p = bvd_points(230.0, 10.0, sigma, 3);
+        let mut n = Gauss(99);
+        for x in p.iter_mut() {
+            let ph = 2.0 * core::f64::consts::PI * n.uniform();
+            x.g_s += (leak * libm::cos(ph)) as f32;
+            x.b_s += (leak * libm::sin(ph)) as f32;
+        }
+        p
+    }
+
+    /// Hum as the catalogue's: the tone's residual raises σ to 1e-9 S and its leakage is 10 σ
+    /// (3 % of |Y|) at random phase: interference. A second motional branch at 295 Hz (smooth)
+    /// is not, however large its misfit; nor is anything at Q above the settled limit; nor a
+    /// random misfit of 3e-4 |Y| however small the noise (a quantisation-limited front end).
+    #[test]
+    fn random_leakage_is_interference_and_a_smooth_misfit_is_not() {
+        let p = leaky(1e-9, 1e-8);
+        let m = bvd_misfit(&p, 230.0, 10.0).unwrap();
+        // 10 σ in both components: about 50 on top of the noise's 1.
+        assert!(m.chi2_per_dof > 30.0 && m.lag1.abs() < 0.3, "{m:?}");
+        assert!(m.relative > 0.02 && m.relative < 0.05, "{m:?}");
+        assert_eq!(misfit(&p, 230.0, 10.0), Err(Failure::Interference));
+        assert_eq!(misfit(&p, 230.0, 30.0), Ok(()));
+        let tiny = leaky(1e-12, 1e-10);
+        let m = bvd_misfit(&tiny, 230.0, 10.0).unwrap();
+        assert!(
+            m.chi2_per_dof > 1000.0 && m.relative < MIN_RELATIVE_MISFIT,
+            "{m:?}"
+        );
+        assert_eq!(misfit(&tiny, 230.0, 10.0), Ok(()));
+        let mut two = bvd_points(230.0, 10.0, 1e-10, 4);
+        for x in two.iter_mut() {
+            let (hr, hi) = motional_shape(295.0, 40.0, x.freq.0 as f64);
+            x.g_s += (7.5e-8 * hr) as f32;
+            x.b_s += (7.5e-8 * hi) as f32;
+        }
+        let m = bvd_misfit(&two, 230.0, 10.0).unwrap();
+        assert!(
+            m.chi2_per_dof > GROSS_CHI2 && m.lag1 > SMOOTH_CORRELATION,
+            "{m:?}"
+        );
+        assert_eq!(misfit(&two, 230.0, 10.0), Ok(()));
+        // Nothing to judge: too few points, nonsense resonance.
+        assert_eq!(misfit(&p[..2], 230.0, 10.0), Ok(()));
+        assert_eq!(misfit(&p, f64::NAN, 10.0), Ok(()));
+        assert_eq!(misfit(&p, 230.0, f64::NAN), Ok(()));
+    }
+
+    /// A free decay in white noise fits straight lines; a tone that does not decay does not.
+    #[test]
+    fn a_decay_is_straight_and_a_tone_is_not() {
+        let (s, df, var) = (30.0, 2.0, 1.0);
+        let fits = |tone: f64, seed: u64| {
+            let mut n = Gauss(seed);
+            let (mut mag, mut ph) = (Line::default(), Line::default());
+            for k in 0..20 {
+                let t = k as f64 * 0.0087;
+                let a = 400.0 * libm::exp(-s * t);
+                let arg = 2.0 * core::f64::consts::PI * df * t;
+                let tone_arg = 2.0 * core::f64::consts::PI * 20.0 * t;
+                let re = a * libm::cos(arg) + tone * libm::cos(tone_arg) + n.next();
+                let im = a * libm::sin(arg) + tone * libm::sin(tone_arg) + n.next();
+                let a2 = re * re + im * im;
+                // As the ring-down does: only windows 5 σ above the noise.
+                if a2 < 25.0 * var {
+                    break;
+                }
+                mag.add(t, 0.5 * libm::log(a2), a2 / var);
+                ph.add(t, libm::atan2(im, re), a2 / var);
+            }
+            (mag.solve().unwrap(), ph.solve().unwrap())
+        };
+        for seed in 0..10 {
+            let (m, p) = fits(0.0, seed);
+            assert_eq!(decay(&m, &p), Ok(()), "{m:?} {p:?}");
+        }
+        let (m, p) = fits(30.0, 1);
+        assert!(libm::fabs(p.b) <= libm::fabs(m.b), "judged: {m:?} {p:?}");
+        assert_eq!(decay(&m, &p), Err(Failure::Interference), "{m:?} {p:?}");
+        // Far off the reference (phase slope above the decay rate) it is not judged.
+        let off = LineFit {
+            b: 2.0 * core::f64::consts::PI * 30.0,
+            ..p
+        };
+        assert_eq!(decay(&m, &off), Ok(()));
+    }
+}
