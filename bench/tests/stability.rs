@@ -1,29 +1,58 @@
-//! The stability catalogue: sweep-G, fit and the default strategy (`auto`: fit, falling back to
-//! sweep-G) never report a silent wrong number in any scene (an
-//! off-nominal preload included: its quality factor is off the unit's calibrated Q(E) curve).
-//! Where they fail with a code the scene does not list (a lost reading, not a wrong one), the
-//! count is bounded.
+//! The stability catalogue: the default strategy (`auto`: fit, falling back to sweep-G) reports
+//! a modulus within 3 of its stated standard uncertainties in at least 99 % of its ok readings
+//! over every scene, and never a number where none is due; fit never reports a silent wrong
+//! number, sweep-G only under within-reading drift (its 6 s sweep). Where they fail with a code
+//! the scene does not list (a lost reading, not a wrong one), the count is bounded.
 
 use hal_sim::catalogue::catalogue;
 use hal_sim::{NoiseScene, Scene};
-use probe_bench::stability::{air_reference, calibrated, classify, run_case, Outcome};
+use probe_bench::stability::{
+    air_reference, calibrated, classify, run_case, statement, tally, Outcome, FIRST_SEED,
+};
 use pzt_probe::{Failure, Method, Status};
 
+/// The statement for the firmware's default strategy, over the whole catalogue: 40
+/// seeds per scene give about 300 ok readings, so 99 % allows at most 3 beyond 3 σ.
 #[test]
-fn sweep_g_fit_and_the_default_strategy_never_report_a_silent_wrong_number() {
+fn the_default_strategy_is_within_three_sigma_in_99_percent_of_its_readings() {
+    let air = air_reference().expect("free-air reference");
+    let unit = calibrated(Method::Auto, 10).expect("calibration");
+    let cases = catalogue(NoiseScene::Bench);
+    let seeds = 40;
+    let t = tally(&cases, Method::Auto, &unit, Some(&air), seeds);
+    println!("{}", statement(Method::Auto, &t, cases.len(), seeds));
+    assert_eq!(t.readings, cases.len() * seeds as usize);
+    assert!(t.ok >= 100, "{t:?}");
+    assert!(t.within_fraction() >= 0.99, "{t:?}");
+    assert_eq!(t.ok_without_truth, 0, "{t:?}");
+    // The lost readings: bad_contact under mains hum (the fit's Q pulled off the Q(E) curve by
+    // less than a gross misfit), about 1 in 10 of the 80 mains readings.
+    assert!(t.wrong_failures <= 12, "{t:?}");
+}
+
+#[test]
+fn sweep_g_and_fit_never_report_a_silent_wrong_number_but_sweep_g_under_drift() {
     let air = air_reference().expect("free-air reference");
     // The free probe: 232.3 Hz and Q 40 in hal-sim.
     assert!((air.free_resonance.0 - 232.3).abs() < 0.5 && (air.free_q / 40.0 - 1.0).abs() < 0.1);
-    for m in [Method::SweepG, Method::Fit, Method::Auto] {
+    for m in [Method::SweepG, Method::Fit] {
         let unit = calibrated(m, 10).expect("calibration");
         let mut wrong_codes = 0;
+        let mut readings = 0;
         for case in catalogue(NoiseScene::Bench) {
-            for seed in 0..3 {
-                let r = run_case(&case, m, &unit, Some(&air), 5000 + seed).expect("reading");
+            for seed in FIRST_SEED..FIRST_SEED + 3 {
+                let r = run_case(&case, m, &unit, Some(&air), seed).expect("reading");
+                readings += 1;
                 let o = classify(&case, &r);
                 // A wrong failure code is a lost reading, not a wrong one; count it.
                 if o == Outcome::WrongFailure {
                     wrong_codes += 1;
+                }
+                // sweep-G's 6 s sweep passes the resonance 3 s in: 0.9 Hz of drift at 0.3 Hz/s,
+                // 3–4 of its stated σ (docs/methods.md).
+                let drift = case.name.starts_with("drift-");
+                if m == Method::SweepG && drift {
+                    continue;
                 }
                 assert_ne!(
                     o,
@@ -35,9 +64,9 @@ fn sweep_g_fit_and_the_default_strategy_never_report_a_silent_wrong_number() {
                 );
             }
         }
-        // 17 scenes × 3 seeds: at most the dielectric-leakage and mains scenes lose readings.
+        // 23 scenes × 3 seeds: at most the dielectric-leakage and mains scenes lose readings.
         println!(
-            "{}: {wrong_codes} wrong failure codes of 51 readings",
+            "{}: {wrong_codes} wrong failure codes of {readings} readings",
             m.name()
         );
         assert!(
@@ -45,6 +74,32 @@ fn sweep_g_fit_and_the_default_strategy_never_report_a_silent_wrong_number() {
             "{}: {wrong_codes} wrong failure codes",
             m.name()
         );
+    }
+}
+
+/// The detectors end to end: knocks and mains hum end fit's readings as `interference` (or
+/// leave them within 3 σ), a lift-off between its stages as `contact_lost`.
+#[test]
+fn fit_names_interference_and_lost_contact() {
+    let air = air_reference().expect("free-air reference");
+    let unit = calibrated(Method::Fit, 10).expect("calibration");
+    let cases = catalogue(NoiseScene::Bench);
+    let case = |n: &str| cases.iter().find(|c| c.name == n).expect(n);
+    let mut interference = 0;
+    for name in ["knocks", "mains-60"] {
+        for seed in FIRST_SEED..FIRST_SEED + 5 {
+            let r = run_case(case(name), Method::Fit, &unit, Some(&air), seed).unwrap();
+            match r.status {
+                Status::Failed(Failure::Interference) => interference += 1,
+                _ => assert_eq!(classify(case(name), &r), Outcome::Correct, "{name}: {r:?}"),
+            }
+        }
+    }
+    // mains-60 puts 240 Hz within a linewidth of the resonance: every reading sees it.
+    assert!(interference >= 5, "{interference}");
+    for seed in FIRST_SEED..FIRST_SEED + 5 {
+        let r = run_case(case("lift-off-0.4s"), Method::Fit, &unit, Some(&air), seed).unwrap();
+        assert_eq!(r.status, Status::Failed(Failure::ContactLost), "{r:?}");
     }
 }
 
