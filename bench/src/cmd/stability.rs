@@ -33,6 +33,8 @@ pub struct StabilityArgs {
 struct Cell {
     counts: [usize; 4],
     codes: Vec<&'static str>,
+    /// The first code seen with each outcome.
+    first_code: [Option<&'static str>; 4],
     worst_err_sigma: f64,
 }
 
@@ -53,6 +55,7 @@ pub fn run(a: StabilityArgs) -> Result<()> {
             let mut cell = Cell {
                 counts: [0; 4],
                 codes: Vec::new(),
+                first_code: [None; 4],
                 worst_err_sigma: 0.0,
             };
             for seed in 0..a.seeds {
@@ -61,6 +64,7 @@ pub fn run(a: StabilityArgs) -> Result<()> {
                 };
                 let o = classify(case, &r);
                 cell.counts[o as usize] += 1;
+                cell.first_code[o as usize].get_or_insert(r.status.code());
                 if !cell.codes.contains(&r.status.code()) {
                     cell.codes.push(r.status.code());
                 }
@@ -223,7 +227,7 @@ where
                 "{}/{} {}",
                 c.counts[worst],
                 n,
-                c.codes.first().copied().unwrap_or("")
+                c.first_code[worst].unwrap_or("")
             );
             if c.worst_err_sigma > 0.0 && worst == 3 {
                 label = format!("{}/{} {:.0}σ", c.counts[worst], n, c.worst_err_sigma);
