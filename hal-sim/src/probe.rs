@@ -54,13 +54,6 @@ impl Plant {
         }
     }
     #[inline]
-    fn step(&mut self, u: f64) {
-        match self {
-            Plant::One(d) => d.step(u),
-            Plant::Two(d) => d.step(u),
-        }
-    }
-    #[inline]
     fn x(&self, i: usize) -> f64 {
         match self {
             Plant::One(d) => d.x[i],
@@ -239,34 +232,29 @@ impl SimProbe {
     /// periods into `adc` (sampled at the start of each period). Extra entries of the longer
     /// slice are left untouched / not played.
     pub fn exchange(&mut self, dac: &[u16], adc: &mut [AdcPair]) {
-        let fe = self.scene.front_end;
-        let dt = fe.dt();
-        for (code, out) in dac.iter().zip(adc.iter_mut()) {
+        let n = dac.len().min(adc.len());
+        let mut k = 0;
+        while k < n {
             if self.samples >= self.next_schedule.min(self.next_knock) {
                 self.events();
             }
-            let mut i = self.plant.x(Y_I);
-            if self.noise_sigma_a > 0.0 {
-                i += self.noise_sigma_a * self.rng.normal();
-            }
-            if let Some(m) = &fe.mains {
-                let t = self.samples as f64 * dt;
-                let mut acc = 0.0;
-                for (h, amp) in m.harmonic_amplitude_a.iter().enumerate() {
-                    if *amp != 0.0 {
-                        let w = 2.0 * PI * m.fundamental_hz * (h + 1) as f64;
-                        acc += amp * libm::sin(w * t + self.mains_phase * (h + 1) as f64);
-                    }
-                }
-                i += acc;
-            }
-            *out = AdcPair {
-                current: fe.adc_code(i * fe.tia_ohm),
-                monitor: fe.adc_code(self.plant.x(Y_V) * fe.monitor_gain),
+            // Run to the next event (or the end) with the plant's variant matched once.
+            let until = (self.next_schedule.min(self.next_knock)).saturating_sub(self.samples);
+            let m = (n - k).min(usize::try_from(until.max(1)).unwrap_or(usize::MAX));
+            let mut run = Run {
+                fe: &self.scene.front_end,
+                rng: &mut self.rng,
+                samples: &mut self.samples,
+                noise_sigma_a: self.noise_sigma_a,
+                mains_phase: self.mains_phase,
+                stuck_dac: self.stuck_dac,
             };
-            let c = self.stuck_dac.unwrap_or(*code);
-            self.plant.step(fe.drive_volts(c));
-            self.samples += 1;
+            let (dac, adc) = (&dac[k..k + m], &mut adc[k..k + m]);
+            match &mut self.plant {
+                Plant::One(d) => run.samples_through(d, dac, adc),
+                Plant::Two(d) => run.samples_through(d, dac, adc),
+            }
+            k += m;
         }
     }
 
@@ -279,6 +267,54 @@ impl SimProbe {
             let k = left.min(64);
             self.exchange(&zeros[..k], &mut sink[..k]);
             left -= k;
+        }
+    }
+}
+
+/// What one stretch of samples between events needs besides the plant.
+struct Run<'a> {
+    fe: &'a FrontEnd,
+    rng: &'a mut Rng,
+    samples: &'a mut u64,
+    noise_sigma_a: f64,
+    mains_phase: f64,
+    stuck_dac: Option<u16>,
+}
+
+impl Run<'_> {
+    /// Sample the ADC at the start of each period, then step the plant with the held DAC code.
+    #[inline]
+    fn samples_through<const N: usize>(
+        &mut self,
+        plant: &mut Discrete<N>,
+        dac: &[u16],
+        adc: &mut [AdcPair],
+    ) {
+        let fe = self.fe;
+        let dt = fe.dt();
+        for (code, out) in dac.iter().zip(adc.iter_mut()) {
+            let mut i = plant.x[Y_I];
+            if self.noise_sigma_a > 0.0 {
+                i += self.noise_sigma_a * self.rng.normal();
+            }
+            if let Some(m) = &fe.mains {
+                let t = *self.samples as f64 * dt;
+                let mut acc = 0.0;
+                for (h, amp) in m.harmonic_amplitude_a.iter().enumerate() {
+                    if *amp != 0.0 {
+                        let w = 2.0 * PI * m.fundamental_hz * (h + 1) as f64;
+                        acc += amp * libm::sin(w * t + self.mains_phase * (h + 1) as f64);
+                    }
+                }
+                i += acc;
+            }
+            *out = AdcPair {
+                current: fe.adc_code(i * fe.tia_ohm),
+                monitor: fe.adc_code(plant.x[Y_V] * fe.monitor_gain),
+            };
+            let c = self.stuck_dac.unwrap_or(*code);
+            plant.step(fe.drive_volts(c));
+            *self.samples += 1;
         }
     }
 }
