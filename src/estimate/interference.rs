@@ -388,6 +388,50 @@ mod tests {
         assert_eq!(misfit(&p, 230.0, f64::NAN), Ok(()));
     }
 
+    /// Any input, however broken, gives a verdict and never a panic.
+    #[test]
+    fn garbage_never_panics() {
+        let vals = [
+            0.0f32,
+            -1.0,
+            1e-30,
+            1e30,
+            f32::NAN,
+            f32::INFINITY,
+            -f32::INFINITY,
+        ];
+        let mut g = Gauss(5);
+        for round in 0..400 {
+            let n = round % 9;
+            let mut p = [SweepPoint::default(); 8];
+            for x in p.iter_mut() {
+                let mut pick = || vals[(g.uniform() * vals.len() as f64) as usize % vals.len()];
+                *x = SweepPoint {
+                    freq: Hz(pick()),
+                    g_s: pick(),
+                    b_s: pick(),
+                    sigma_s: pick(),
+                    current_a: pick(),
+                    drive_v: pick(),
+                    clip_fraction: pick(),
+                    residual_a: pick(),
+                };
+            }
+            let pts = &p[..n.min(8)];
+            let _ = transients(pts);
+            for (f0, q) in [
+                (230.0, 10.0),
+                (0.0, 10.0),
+                (f64::INFINITY, 1.0),
+                (230.0, 0.0),
+            ] {
+                let _ = misfit(pts, f0, q);
+                let _ = bvd_misfit(pts, f0, q);
+            }
+            let _ = super::super::contact::lost(pts, Some(f64::NAN), pts);
+        }
+    }
+
     /// A free decay in white noise fits straight lines; a tone that does not decay does not.
     #[test]
     fn a_decay_is_straight_and_a_tone_is_not() {
