@@ -47,22 +47,7 @@ struct Known {
 }
 
 /// The methods over budget (see `docs/firmware.md`).
-const KNOWN_OVER_BUDGET: &[Known] = &[
-    Known {
-        method: "auto",
-        why: "Procedure computes the fit stage's final estimate twice (once to decide about \
-              the fallback in is_complete/next_plan, again in finish): one BVD fit too many",
-        reading_pct: 3.5,
-        call_us: CALL_MAX_US,
-    },
-    Known {
-        method: "hold",
-        why: "its accept calls take up to 21 M instructions (f64 fits): 35-45 % of the core \
-              over its 0.4 s reading, single calls of up to 125 ms",
-        reading_pct: 60.0,
-        call_us: 160_000.0,
-    },
-];
+const KNOWN_OVER_BUDGET: &[Known] = &[];
 
 /// A `cost` line with its `split` line.
 struct Case {

@@ -41,17 +41,18 @@
 use super::ringdown::{Ringdown, RingdownSettings};
 use super::Estimate;
 use crate::dsp::dds::{frequency_hz, tuning_word};
+use crate::dsp::lockin::{solve, ChannelSums, ReferenceSums};
 use crate::engine::{PointPlan, PointRaw};
 use crate::hal::FrontEndScale;
 use crate::linalg::spd_inverse;
 use crate::status::Failure;
-use crate::sweep::{amplitude_codes, check_durations, point_from_raw, PointError, SettingsError};
+use crate::sweep::{amplitude_codes, check_durations, SettingsError};
 use crate::units::{Farads, Hz, Seconds, Siemens, Volts};
 use core::f64::consts::PI;
 use num_complex::Complex64 as C64;
 
 /// Most windows of the hold.
-pub const MAX_WINDOWS: usize = 32;
+pub const MAX_WINDOWS: usize = 16;
 
 /// Settings of the hold method.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -154,6 +155,7 @@ impl HoldSettings {
             n_windows: 0,
             segment: 0,
             seeds_tried: 1,
+            monitor: Default::default(),
             windows: heapless::Vec::new(),
             clipped: false,
             last: None,
@@ -165,6 +167,21 @@ impl Default for HoldSettings {
     fn default() -> Self {
         Self::DEFAULT
     }
+}
+
+/// Add one window's monitor and reference sums to a segment's (saturating: never overflows).
+fn add_sums(acc: &mut (ChannelSums, ReferenceSums), m: &ChannelSums, r: &ReferenceSums) {
+    let (a, b) = acc;
+    a.xc = a.xc.saturating_add(m.xc);
+    a.xs = a.xs.saturating_add(m.xs);
+    a.x = a.x.saturating_add(m.x);
+    a.xx = a.xx.saturating_add(m.xx);
+    b.cc = b.cc.saturating_add(r.cc);
+    b.ss = b.ss.saturating_add(r.ss);
+    b.cs = b.cs.saturating_add(r.cs);
+    b.c = b.c.saturating_add(r.c);
+    b.s = b.s.saturating_add(r.s);
+    b.n = b.n.saturating_add(r.n);
 }
 
 /// Samples the converters' filters need after the drive comes back on (2 ms: > 10 time
@@ -215,6 +232,7 @@ pub struct Hold {
     n_windows: u16,
     segment: u8,
     seeds_tried: u8,
+    monitor: (ChannelSums, ReferenceSums),
     windows: heapless::Vec<HoldWindow, MAX_WINDOWS>,
     clipped: bool,
     last: Option<Result<Estimate, Failure>>,
@@ -262,22 +280,30 @@ impl Hold {
                 if raw.plan.tag != HOLD_TAG + self.segment as u16 {
                     return;
                 }
-                match point_from_raw(raw, scale) {
-                    Ok(p) => {
-                        self.clipped |= p.clip_fraction > super::MAX_CLIP_FRACTION;
-                        let len = raw.sums.reference.n as f64 / self.fs;
+                // Each window's current phasor; the drive is steady during a hold, so its monitor
+                // sums are added up and solved once at the end (half the work per window).
+                let s = &raw.sums;
+                self.clipped |= s.current_rail_hits > 0;
+                add_sums(&mut self.monitor, &s.monitor, &s.reference);
+                match solve(&s.current, &s.reference) {
+                    Some(p) => {
+                        let ai = scale.amps_per_code as f64;
+                        let len = s.reference.n as f64 / self.fs;
                         let end = raw.end_sample as f64 / self.fs;
                         let _ = self.windows.push(HoldWindow {
                             t0: end - len,
                             len,
-                            y: C64::new(p.g_s as f64, p.b_s as f64),
-                            var: (p.sigma_s as f64) * (p.sigma_s as f64),
+                            y: p.value * ai,
+                            var: p.variance * ai * ai,
                         });
                     }
-                    Err(PointError::NoDrive) => self.finish(Err(Failure::DriveFault)),
-                    Err(PointError::Degenerate) => self.finish(Err(Failure::BadSettings)),
+                    None => self.finish(Err(Failure::BadSettings)),
                 }
                 if raw.window + 1 >= self.n_windows && self.phase == Phase::Hold {
+                    if let Err(f) = self.currents_to_admittances(scale) {
+                        self.finish(Err(f));
+                        return;
+                    }
                     let est = self.estimate_hold();
                     match est {
                         Ok(h) if self.segment == 0 && self.s.refine.0 > 0.0 => {
@@ -290,6 +316,7 @@ impl Hold {
                             self.ftw = tuning_word(self.f_seed, self.fs);
                             self.f_hold = frequency_hz(self.ftw, self.fs);
                             self.windows.clear();
+                            self.monitor = Default::default();
                             self.pending = false;
                         }
                         _ => self.finish(est.map(|h| h.estimate)),
@@ -298,6 +325,26 @@ impl Hold {
             }
             Phase::Done => {}
         }
+    }
+
+    /// Turn the windows' currents into admittances with the segment's drive phasor.
+    fn currents_to_admittances(&mut self, scale: &FrontEndScale) -> Result<(), Failure> {
+        let (m, r) = &self.monitor;
+        let pv = solve(m, r).ok_or(Failure::BadSettings)?;
+        // A drive below 2 monitor codes is no drive (as for sweep points).
+        if !(pv.value.norm() > 2.0) {
+            return Err(Failure::DriveFault);
+        }
+        let av = scale.monitor_volts_per_code as f64;
+        let v = pv.value * av;
+        let (v2, var_v) = (v.norm_sqr(), pv.variance * av * av);
+        for x in self.windows.iter_mut() {
+            let y = x.y / v;
+            // Var(Y) = (Var(I) + |Y|² Var(V)) / |V|²; Var(V) is that of the whole segment.
+            x.var = (x.var + y.norm_sqr() * var_v) / v2;
+            x.y = y;
+        }
+        Ok(())
     }
 
     fn finish(&mut self, r: Result<Estimate, Failure>) {
@@ -421,6 +468,38 @@ pub struct HoldFit {
     pub sigma_q: f64,
 }
 
+/// A window as the fit's inner loop uses it: start relative to the first window, length, the
+/// admittance without its static part, all `f32`; `gap` when it does not start where the
+/// previous one ended.
+#[derive(Clone, Copy, Debug, Default)]
+struct Win32 {
+    a: f32,
+    len: f32,
+    y: num_complex::Complex32,
+    gap: bool,
+}
+
+/// The windows in `f32` (less the static admittance `y_s`) and the scale of their admittances.
+fn prepare(w: &[HoldWindow], y_s: C64) -> (heapless::Vec<Win32, MAX_WINDOWS>, f32) {
+    let mut out = heapless::Vec::new();
+    let t0 = w.first().map_or(0.0, |x| x.t0);
+    let mut next = 0.0f64;
+    let mut big = 0.0f64;
+    for (k, x) in w.iter().enumerate() {
+        let a = x.t0 - t0;
+        let y = x.y - y_s;
+        big = big.max(y.norm_sqr());
+        let _ = out.push(Win32 {
+            a: a as f32,
+            len: x.len as f32,
+            y: num_complex::Complex32::new(y.re as f32, y.im as f32),
+            gap: k == 0 || libm::fabs(a - next) > 1e-6,
+        });
+        next = a + x.len;
+    }
+    (out, (libm::sqrt(big) as f32).max(1e-30))
+}
+
 /// The model's parameters: resonance, quality factor, motional peak conductance, initial state.
 #[derive(Clone, Copy, Debug)]
 struct Params {
@@ -433,13 +512,14 @@ struct Params {
 /// χ² of `p` against the windows (`y` already without the static part) and, when `jac` is set,
 /// the normal equations `JᵀWJ`, `JᵀW r` over (f0, Q, g, Re z, Im z).
 ///
-/// Cost: one complex `f32` exponential per window (the window's decay factor), the rest complex
-/// `f32` arithmetic; sums in `f64`. On the Cortex-M4F's single-precision FPU this is a few
+/// Cost: two complex `f32` exponentials per call (the windows are gap-free, so `exp(λ t)` is
+/// carried from one to the next), the rest complex `f32` arithmetic; sums in `f64`. On the Cortex-M4F's single-precision FPU this is a few
 /// hundred instructions per window (`docs/firmware.md` has the measured totals). `f32` carries
 /// the model values with a relative error of about 1e-7 of `g`, far below the noise of any
 /// window (1e-3 of `g` at the bench noise and the longest hold).
 fn evaluate(
-    w: &[HoldWindow],
+    w: &[Win32],
+    gs: f32,
     f_h: f64,
     p: &Params,
     wt: f64,
@@ -467,24 +547,49 @@ fn evaluate(
     let c = |x: C64| C32::new(x.re as f32, x.im as f32);
     let (g_dh_df0, g_dh_dq) = (c(dh_df0 * p.g), c(dh_dq * p.g));
     let (dl_f0, dl_q) = (c(dlam_df0), c(dlam_dq));
-    let mut chi2 = 0.0f64;
     let mut jtj = [[0.0f64; 5]; 5];
     let mut jtr = [0.0f64; 5];
-    let t0 = w.first().map_or(0.0, |x| x.t0);
+    // The normal equations' sums (at most 16 products each) in f32, each column scaled to about
+    // unit size first; f32's relative precision (1e-7) is far finer than what the steps and the
+    // covariance need.
+    let scale: [f32; 5] = [
+        1.0 / (gs * (q / f0) as f32),
+        1.0 / (gs / q as f32),
+        1.0,
+        1.0,
+        1.0,
+    ];
+    let mut jtj32 = [[0.0f32; 5]; 5];
+    let mut jtr32 = [0.0f32; 5];
+    let inv_lam = one / lam;
+    // exp(λ a) carried from window to window (they are gap-free), exp(λ len) cached per window
+    // length (they differ by at most a sample): no transcendental per window.
+    let mut ea = one;
+    // Whole-cycle windows alternate between two lengths a sample apart: two cache entries.
+    let mut cache: [(f32, C32); 2] = [(-1.0, one); 2];
+    let mut chi2 = 0.0f32;
     for x in w {
-        let a = (x.t0 - t0) as f32;
-        let len = x.len as f32;
-        // exp(λ a) and exp(λ (a + len)); their mean over the window and its λ-derivative.
-        let ea = (lam * a).exp();
-        let eb = ea * (lam * len).exp();
-        let ll = lam * len;
-        let e = (eb - ea) / ll;
+        let (a, len) = (x.a, x.len);
+        if x.gap {
+            ea = (lam * a).exp();
+        }
+        let decay = if cache[0].0 == len {
+            cache[0].1
+        } else if cache[1].0 == len {
+            cache[1].1
+        } else {
+            cache[1] = cache[0];
+            cache[0] = (len, (lam * len).exp());
+            cache[0].1
+        };
+        // exp(λ a), exp(λ (a + len)); their mean over the window and its λ-derivative.
+        let eb = ea * decay;
+        let e = (eb - ea) * inv_lam / len;
         let m = gh * (one - e) + z * e;
-        let y = C32::new(x.y.re as f32, x.y.im as f32);
-        let r = y - m;
-        chi2 += (r.re as f64) * (r.re as f64) + (r.im as f64) * (r.im as f64);
+        let r = x.y - m;
+        chi2 += r.norm_sqr();
         if jac {
-            let de = (eb * (a + len) - ea * a) / ll - e / lam;
+            let de = ((eb * (a + len) - ea * a) / len - e) * inv_lam;
             let k = (z - gh) * de;
             let cols = [
                 g_dh_df0 * (one - e) + k * dl_f0,
@@ -493,25 +598,27 @@ fn evaluate(
                 e,
                 C32::new(-e.im, e.re),
             ];
+            let cols: [C32; 5] = core::array::from_fn(|i| cols[i] * scale[i]);
             for i in 0..5 {
-                let (ci_re, ci_im) = (cols[i].re as f64, cols[i].im as f64);
-                jtr[i] += ci_re * r.re as f64 + ci_im * r.im as f64;
+                let ci = cols[i];
+                jtr32[i] += ci.re * r.re + ci.im * r.im;
                 for j in 0..=i {
-                    jtj[i][j] += ci_re * cols[j].re as f64 + ci_im * cols[j].im as f64;
+                    jtj32[i][j] += ci.re * cols[j].re + ci.im * cols[j].im;
                 }
             }
         }
+        ea = eb;
     }
-    for v in jtr.iter_mut() {
-        *v *= wt;
+    for (i, v) in jtr.iter_mut().enumerate() {
+        *v = wt * jtr32[i] as f64 / scale[i] as f64;
     }
-    let lower = jtj;
     for (i, row) in jtj.iter_mut().enumerate() {
         for (j, v) in row.iter_mut().enumerate() {
-            *v = wt * if j <= i { lower[i][j] } else { lower[j][i] };
+            let x = if j <= i { jtj32[i][j] } else { jtj32[j][i] } as f64;
+            *v = wt * x / (scale[i] as f64 * scale[j] as f64);
         }
     }
-    (chi2 * wt, jtj, jtr)
+    (chi2 as f64 * wt, jtj, jtr)
 }
 
 /// The least-squares fit of the switched-on response (module documentation) to `windows`, driven
@@ -533,11 +640,8 @@ pub fn fit(
     if windows.len() < 4 {
         return Err(Failure::NoResonance);
     }
-    let mut w: heapless::Vec<HoldWindow, MAX_WINDOWS> = heapless::Vec::new();
-    for x in windows {
-        let _ = w.push(HoldWindow { y: x.y - y_s, ..*x });
-    }
-    let var = noise_variance(&w);
+    let var = noise_variance(windows);
+    let (w, gs) = prepare(windows, y_s);
     if !(var > 0.0) || !var.is_finite() || !f_start.is_finite() || !(f_start > 0.0) {
         return Err(Failure::NoResonance);
     }
@@ -552,7 +656,7 @@ pub fn fit(
         z: C64::new(0.0, 0.0),
     };
     {
-        let (_, jtj, jtr) = evaluate(&w, f_h, &p, wt, true);
+        let (_, jtj, jtr) = evaluate(&w, gs, f_h, &p, wt, true);
         let mut m3 = [[0.0; 3]; 3];
         for i in 0..3 {
             for j in 0..3 {
@@ -564,19 +668,25 @@ pub fn fit(
         p.g = step[0];
         p.z = C64::new(step[1], step[2]);
     }
-    let mut c = evaluate(&w, f_h, &p, wt, false).0 + prior(p.q);
+    let mut c = evaluate(&w, gs, f_h, &p, wt, false).0 + prior(p.q);
     let mut lambda = 1e-3;
-    for _ in 0..30 {
-        let (_, mut jtj, mut jtr) = evaluate(&w, f_h, &p, wt, true);
+    // The normal equations at the current point, with the prior on Q; recomputed only when a
+    // step is taken (a rejected step costs one χ² evaluation).
+    let normal = |p: &Params| {
+        let (_, mut jtj, mut jtr) = evaluate(&w, gs, f_h, p, wt, true);
         jtj[1][1] += q_w;
         jtr[1] += (q_start - p.q) * q_w;
+        (jtj, jtr)
+    };
+    let (mut jtj, mut jtr) = normal(&p);
+    for _ in 0..30 {
         let mut m = jtj;
         for (i, row) in m.iter_mut().enumerate() {
             row[i] *= 1.0 + lambda;
         }
         let Some(inv) = spd_inverse(&m) else {
             lambda *= 10.0;
-            if lambda > 1e10 {
+            if lambda > 1e6 {
                 break;
             }
             continue;
@@ -589,26 +699,27 @@ pub fn fit(
             z: p.z + C64::new(step[3], step[4]),
         };
         let tc = if t.f0 > 0.0 && t.q > 0.5 {
-            evaluate(&w, f_h, &t, wt, false).0 + prior(t.q)
+            evaluate(&w, gs, f_h, &t, wt, false).0 + prior(t.q)
         } else {
             f64::INFINITY
         };
         if tc < c {
-            let done = (c - tc) <= 1e-6 * c.max(1e-300);
+            // Converged when χ² no longer falls by a hundredth of one unit: the parameters then move
+            // by less than a tenth of their standard uncertainty.
+            let done = c - tc <= 1e-2;
             (p, c) = (t, tc);
             lambda = (lambda * 0.3).max(1e-12);
+            (jtj, jtr) = normal(&p);
             if done {
                 break;
             }
         } else {
             lambda *= 10.0;
-            if lambda > 1e10 {
+            if lambda > 1e6 {
                 break;
             }
         }
     }
-    let (_, mut jtj, _) = evaluate(&w, f_h, &p, wt, true);
-    jtj[1][1] += q_w;
     let cov = spd_inverse(&jtj).ok_or(Failure::NoResonance)?;
     let dof = (2 * w.len() + 1).saturating_sub(5).max(1) as f64;
     let red = c / dof;
@@ -643,7 +754,7 @@ mod tests {
 
     /// Windows of the closed-form switched-on BVD response (f64 reference, computed here
     /// independently of [`basis`] by integrating the mean with the trapezoid rule).
-    fn synthetic(
+    pub(super) fn synthetic(
         f0: f64,
         q: f64,
         g: f64,
@@ -712,5 +823,48 @@ mod tests {
         assert!(fit(&w, 230.0, C64::new(0.0, 0.0), 230.0, (10.0, 1.0)).is_err());
         assert!(fit(&w[..2], 230.0, C64::new(0.0, 0.0), f64::NAN, (10.0, 1.0)).is_err());
         assert!(fit(&w, 230.0, C64::new(0.0, 0.0), 230.0, (10.0, 0.0)).is_err());
+    }
+}
+
+#[cfg(test)]
+mod gradcheck {
+    use super::*;
+
+    /// The analytic gradient of χ² against central differences (f64 reference on the same
+    /// windows).
+    #[test]
+    fn gradient_matches_finite_differences() {
+        let y_s = C64::new(0.0, 0.0);
+        for f_h in [241.3, 238.0] {
+            let w = super::tests::synthetic(241.3, 10.4, 1.5e-7, f_h, C64::new(1e-8, 0.0), y_s, 24);
+            let p = Params {
+                f0: 241.0,
+                q: 8.0,
+                g: 1.4e-7,
+                z: C64::new(0.0, 0.0),
+            };
+            let (w, gs) = prepare(&w, y_s);
+            let (_, _, jtr) = evaluate(&w, gs, f_h, &p, 1.0, true);
+            for (i, g) in jtr.iter().take(2).enumerate() {
+                let h = 1e-2;
+                let (mut a, mut b) = (p, p);
+                if i == 0 {
+                    a.f0 += h;
+                    b.f0 -= h;
+                } else {
+                    a.q += h;
+                    b.q -= h;
+                }
+                let num = (evaluate(&w, gs, f_h, &a, 1.0, false).0
+                    - evaluate(&w, gs, f_h, &b, 1.0, false).0)
+                    / (2.0 * h);
+                let ana = -2.0 * g;
+                std::eprintln!("{f_h} param {i}: numeric {num:e} analytic {ana:e}");
+                assert!(
+                    (ana / num - 1.0).abs() < 0.05,
+                    "{f_h} param {i}: {ana:e} vs {num:e}"
+                );
+            }
+        }
     }
 }
