@@ -9,9 +9,11 @@
 //! a calibration on the same unit absorbs the bias only while those stay as they were during
 //! calibration. The method gives no quality factor.
 //!
-//! Its uncertainty comes from a parametric bootstrap: a weighted parabola through the top of the
-//! dip stands for the noise-free curve, [`BOOTSTRAP`] replicates add each point's own noise to
-//! it, and the spread of their three-point vertices is the reported σ. With the paper's 1 Hz
+//! Its uncertainty comes from a parametric bootstrap: a weighted parabola through the top 3 % of
+//! the dip stands for the noise-free curve (the dip is the motional susceptance's extremum, a
+//! skewed peak: wider windows fit a flatter parabola and over-state σ up to 2×),
+//! [`BOOTSTRAP`] replicates add each point's own noise to it, and the spread of their
+//! three-point vertices is the reported σ. With the paper's 1 Hz
 //! steps across a 23 Hz wide dip the maximum lands on different points from reading to reading,
 //! which propagating the three points' noise through one vertex misses (it under-stated the
 //! scatter 2–3× in the paper's noise).
@@ -98,7 +100,7 @@ pub const BOOTSTRAP: usize = 40;
 const TOP_MAX: usize = 48;
 
 /// Spread of the three-point vertex over [`BOOTSTRAP`] replicates of the dip: the weighted
-/// parabola through the points within the top 10 % of the dip (at least `imax ± 2`) plus each
+/// parabola through the points within the top 3 % of the dip (at least `imax ± 2`) plus each
 /// point's noise (σ from `sigma`), the other points as measured. `None` when the parabola
 /// cannot be fitted or fewer than half the replicates give a vertex.
 fn bootstrap_sigma(
@@ -110,10 +112,10 @@ fn bootstrap_sigma(
     y0: f64,
 ) -> Option<f64> {
     let (mut lo, mut hi) = (imax, imax);
-    while lo > 0 && d(lo - 1) >= 0.9 * y0 && imax - lo < TOP_MAX / 2 - 1 {
+    while lo > 0 && d(lo - 1) >= 0.97 * y0 && imax - lo < TOP_MAX / 2 - 1 {
         lo -= 1;
     }
-    while hi + 1 < n && d(hi + 1) >= 0.9 * y0 && hi - imax < TOP_MAX / 2 - 1 {
+    while hi + 1 < n && d(hi + 1) >= 0.97 * y0 && hi - imax < TOP_MAX / 2 - 1 {
         hi += 1;
     }
     lo = lo.min(imax.saturating_sub(2));

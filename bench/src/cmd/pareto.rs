@@ -18,7 +18,7 @@ pub const MODULI: [f64; 5] = [150.0, 300.0, 500.0, 1000.0, 2500.0];
 #[derive(Args)]
 pub struct ParetoArgs {
     /// Readings per (method, knobs, modulus, noise).
-    #[arg(long, default_value_t = 20)]
+    #[arg(long, default_value_t = 60)]
     pub seeds: usize,
     /// Calibration readings per phantom A–E (under each noise scene; the paper took 20).
     #[arg(long, default_value_t = 20)]
