@@ -193,13 +193,14 @@ pub fn describe_settings(s: &Settings) -> String {
             s.drive.0
         ),
         Settings::Hold(s) => format!(
-            "band {}–{} Hz, seed {} Hz ({} ms burst + {} ms ring), hold {} ms, drive {} V, C0 {:.2} pF, G0 {:.3} nS",
+            "band {}–{} Hz, seed {} Hz ({} ms burst + {} ms ring), hold {} ms (first {} ms on the seed), drive {} V, C0 {:.2} pF, G0 {:.3} nS",
             s.band_start.0,
             s.band_stop.0,
             s.seed.0,
             s.seed_burst.0 * 1e3,
             s.seed_ring.0 * 1e3,
             s.hold.0 * 1e3,
+            s.refine.0 * 1e3,
             s.drive.0,
             s.static_capacitance.0 * 1e12,
             s.static_conductance.0 * 1e9
