@@ -10,6 +10,28 @@ use crate::linalg::inverse3;
 use crate::status::Failure;
 use crate::units::{Hz, KPa};
 
+/// `x^y` of the power law. On the host `libm::pow`; in the firmware images
+/// (`target_os = "none"`) `exp(y ln x)`, which keeps libm's `pow` (2.5 KiB) out of the STM32
+/// image's 64 KiB of flash (`docs/firmware.md`): for the exponents and moduli of a calibration
+/// (`|y ln x|` below 20) it differs from `pow` by at most a few tens of `f64` ulps, far below
+/// anything a reading reports in `f32`. Same special values where they matter: `x = 0` gives 0 for `y > 0` and
+/// infinity for `y < 0`, `x < 0` or NaN gives NaN, `y = 0` gives 1.
+#[inline]
+fn pow(x: f64, y: f64) -> f64 {
+    #[cfg(target_os = "none")]
+    {
+        if y == 0.0 {
+            1.0
+        } else {
+            libm::exp(y * libm::log(x))
+        }
+    }
+    #[cfg(not(target_os = "none"))]
+    {
+        libm::pow(x, y)
+    }
+}
+
 /// Where a calibration comes from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -133,7 +155,7 @@ pub enum FitError {
 /// on: `sqrt((1 − R²) · Var(f(E_i)))`.
 fn misfit_from_r2(a: f64, b: f64, c: f64, r2: f64, moduli: &[f64]) -> f64 {
     let n = moduli.len() as f64;
-    let f = |e: f64| a + b * libm::pow(e, c);
+    let f = |e: f64| a + b * pow(e, c);
     let mean = moduli.iter().map(|&e| f(e)).sum::<f64>() / n;
     let var = moduli
         .iter()
@@ -254,12 +276,12 @@ impl PowerLaw {
 
     /// Resonance (Hz) of tissue of modulus `e_kpa`.
     pub fn frequency(&self, e_kpa: f64) -> f64 {
-        self.a + self.b * libm::pow(e_kpa, self.c)
+        self.a + self.b * pow(e_kpa, self.c)
     }
 
     /// Slope `df/dE` in Hz/kPa at `e_kpa`.
     pub fn slope(&self, e_kpa: f64) -> f64 {
-        self.b * self.c * libm::pow(e_kpa, self.c - 1.0)
+        self.b * self.c * pow(e_kpa, self.c - 1.0)
     }
 
     /// True when the parameters describe a usable saturating curve.
@@ -284,7 +306,7 @@ impl PowerLaw {
             return Err(Failure::AboveRange);
         }
         let u = (self.a - f) / -self.b;
-        let e = libm::pow(u, 1.0 / self.c);
+        let e = pow(u, 1.0 / self.c);
         if !e.is_finite() || e > self.max_kpa {
             return Err(Failure::AboveRange);
         }
@@ -403,7 +425,7 @@ impl PowerLaw {
                 (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
             for &(e, f, s) in data {
                 let w = 1.0 / (s * s);
-                let x = libm::pow(e, c);
+                let x = pow(e, c);
                 s11 += w;
                 s12 += w * x;
                 s22 += w * x * x;
@@ -467,7 +489,7 @@ impl PowerLaw {
         let mut jtj = [[0.0; 3]; 3];
         for &(e, _, s) in data {
             let w = 1.0 / (s * s);
-            let x = libm::pow(e, c);
+            let x = pow(e, c);
             let j = [1.0, x, b * x * libm::log(e)];
             for r in 0..3 {
                 for q in 0..3 {
@@ -487,7 +509,7 @@ impl PowerLaw {
         // `distinct` reference moduli (only those carry independent misfit).
         let mut ss = 0.0;
         for &(e, f, _) in data {
-            let r = f - (a + b * libm::pow(e, c));
+            let r = f - (a + b * pow(e, c));
             ss += r * r;
         }
         let groups = distinct_moduli(data) as f64;

@@ -193,6 +193,82 @@ impl XorShift {
     /// Standard normal.
     fn gauss(&mut self) -> f64 {
         let (u1, u2) = (self.uniform(), self.uniform());
-        (libm::sqrtf(-2.0 * libm::logf(u1)) * libm::cosf(core::f32::consts::TAU * u2)) as f64
+        (libm::sqrtf(-2.0 * libm::logf(u1)) * cosf_small(core::f32::consts::TAU * u2)) as f64
+    }
+}
+
+/// `libm::cosf(x)` for `0 ≤ x ≤ 9π/4`, bit for bit (the same kernels and branches), without
+/// its general argument reduction: that (`rem_pio2f`, `rem_pio2_large`) costs the firmware
+/// image 2 KiB of flash and is never needed here (`x = 2π u`, `u` in (0, 1]).
+///
+/// Kernels from libm's `k_cosf.rs` and `k_sinf.rs` (FreeBSD msun; Copyright (C) 1993 by Sun
+/// Microsystems, Inc.: "Permission to use, copy, modify, and distribute this software is
+/// freely granted, provided that this notice is preserved.").
+// The kernels' constants as libm has them (the same `f64` values).
+#[allow(clippy::excessive_precision)]
+fn cosf_small(x: f32) -> f32 {
+    use core::f64::consts::FRAC_PI_2;
+    fn k_cosf(x: f64) -> f32 {
+        const C0: f64 = -0.499999997251031003120;
+        const C1: f64 = 0.0416666233237390631894;
+        const C2: f64 = -0.00138867637746099294692;
+        const C3: f64 = 0.0000243904487962774090654;
+        let z = x * x;
+        let w = z * z;
+        let r = C2 + z * C3;
+        (((1.0 + z * C0) + w * C1) + (w * z) * r) as f32
+    }
+    fn k_sinf(x: f64) -> f32 {
+        const S1: f64 = -0.166666666416265235595;
+        const S2: f64 = 0.0083333293858894631756;
+        const S3: f64 = -0.000198393348360966317347;
+        const S4: f64 = 0.0000027183114939898219064;
+        let z = x * x;
+        let w = z * z;
+        let r = S3 + z * S4;
+        let s = z * x;
+        ((x + s * (S1 + z * S2)) + s * w * r) as f32
+    }
+    let x64 = x as f64;
+    let ix = x.to_bits() & 0x7fff_ffff;
+    if ix < 0x3980_0000 {
+        // |x| < 2^-12
+        1.0
+    } else if ix <= 0x3f49_0fda {
+        // |x| ≲ π/4
+        k_cosf(x64)
+    } else if ix <= 0x4016_cbe3 {
+        // |x| ≲ 3π/4
+        k_sinf(FRAC_PI_2 - x64)
+    } else if ix <= 0x407b_53d1 {
+        // |x| ≲ 5π/4
+        -k_cosf(x64 - 2.0 * FRAC_PI_2)
+    } else if ix <= 0x40af_eddf {
+        // |x| ≲ 7π/4
+        k_sinf(x64 - 3.0 * FRAC_PI_2)
+    } else {
+        // |x| ≲ 9π/4
+        k_cosf(x64 - 4.0 * FRAC_PI_2)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::cosf_small;
+
+    #[test]
+    fn cosf_small_is_libm_cosf_bit_for_bit() {
+        // Every argument the bootstrap can give: 2π u for u = (k + 1) / 2^24.
+        for k in 0..(1u32 << 24) {
+            let u = (k as f32 + 1.0) / (1u64 << 24) as f32;
+            let x = core::f32::consts::TAU * u;
+            assert_eq!(cosf_small(x).to_bits(), libm::cosf(x).to_bits(), "x = {x}");
+        }
+        // And every 97th float from 0 to 9π/4.
+        let top = (9.0 * core::f32::consts::FRAC_PI_4).to_bits();
+        for b in (0..=top).step_by(97) {
+            let x = f32::from_bits(b);
+            assert_eq!(cosf_small(x).to_bits(), libm::cosf(x).to_bits(), "x = {x}");
+        }
     }
 }
