@@ -43,6 +43,15 @@ pub enum Refine {
     Track,
 }
 
+impl Refine {
+    /// True for the refinements this build runs: all three with the cargo feature
+    /// `all-methods`; only the BVD fit (fit, auto) without it (the STM32 image, which leaves out
+    /// adaptive and track for flash).
+    pub const fn in_image(self) -> bool {
+        cfg!(feature = "all-methods") || matches!(self, Refine::Bvd)
+    }
+}
+
 /// Settings of the two-stage methods.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -109,8 +118,11 @@ impl StagedSettings {
         }
     }
 
-    /// Validate for a board.
+    /// Validate for a board (`wrong_method` for a refinement this build leaves out).
     pub fn validate(&self, r: Refine, scale: &FrontEndScale) -> Result<Staged, SettingsError> {
+        if !r.in_image() {
+            return Err(SettingsError::WrongMethod);
+        }
         check_frequency(self.band_start.0, scale)?;
         check_frequency(self.band_stop.0, scale)?;
         if !(self.band_stop.0 > self.band_start.0) {
@@ -180,6 +192,16 @@ pub struct Staged {
 }
 
 impl Staged {
+    /// The refinement, a constant where the build runs only one (so the others' code is left
+    /// out of the image).
+    fn refine(&self) -> Refine {
+        if cfg!(feature = "all-methods") {
+            self.r
+        } else {
+            Refine::Bvd
+        }
+    }
+
     /// The next plan, or `None` when done (or waiting for a point).
     pub fn next_plan(&mut self, scale: &FrontEndScale) -> Option<PointPlan> {
         if self.pending || self.is_complete() {
@@ -232,7 +254,7 @@ impl Staged {
             }
         } else {
             let _ = self.fine.push(p);
-            if self.r == Refine::Track {
+            if self.refine() == Refine::Track {
                 self.track_step(&p);
             }
         }
@@ -240,7 +262,7 @@ impl Staged {
     }
 
     fn after_coarse(&mut self) {
-        let est = match self.r {
+        let est = match self.refine() {
             Refine::Conductance => conductance::estimate(&self.coarse)
                 .map(|e| (e.resonance.0 as f64, e.q.unwrap_or(10.0) as f64)),
             Refine::Bvd | Refine::Track => {
@@ -270,7 +292,7 @@ impl Staged {
         self.next = 0;
         self.plan.clear();
         let n = self.s.refine_points as usize;
-        if self.r == Refine::Track {
+        if self.refine() == Refine::Track {
             let _ = self.plan.push(f0 as f32);
         } else {
             // Visit the refine points starting from the end nearest the last coarse point (the
@@ -343,7 +365,7 @@ impl Staged {
         super::interference::transients(&self.fine)?;
         super::contact::lost(&self.coarse, self.bvd.map(|b| b.g), &self.fine)?;
         let fine = &self.fine;
-        let e = match self.r {
+        let e = match self.refine() {
             Refine::Conductance => {
                 // The sweep estimator wants ascending frequencies; the refine points were
                 // visited from the top down. Put in order by insertion (at most
@@ -374,7 +396,7 @@ impl Staged {
             Refine::Track => self.track_estimate(),
         }?;
         // Settled refine points scattering at random far beyond their σ: a tone (mains).
-        if self.r != Refine::Track && fine.len() >= 4 {
+        if self.refine() != Refine::Track && fine.len() >= 4 {
             let q = e.q.map_or(f64::NAN, f64::from);
             super::interference::misfit(fine, e.resonance.0 as f64, q)?;
         }
