@@ -8,14 +8,24 @@
 //! # Grammar
 //!
 //! Words are separated by ASCII blanks; numbers are decimal (`f32` syntax; NaN and infinities
-//! are refused).
+//! are refused); counts (`coarse_points`, `refine_points`, `stages`, `window_cycles`) are whole
+//! numbers 0–255. Settings are checked against the board here; that they are settings of the
+//! active method (and within that method's knob ranges) is checked when the firmware applies
+//! them, by the method's own validation ([`crate::measure::Procedure::new`]).
 //!
 //! | line | command |
 //! |---|---|
-//! | `measure` | take a reading with the current method and sweep |
-//! | `method <paper\|sweep-g>` | choose the method (its default sweep is selected too) |
-//! | `sweep <start_hz> <stop_hz> <step_hz> <settle_s> <integrate_s> <drive_v>` | set the sweep, validated against the board |
-//! | `sweep default` | back to the method's default sweep |
+//! | `measure` | take a reading with the current method and settings |
+//! | `method <name>` | choose the method by its [`Method::name`] — `auto` (the default: fit, falling back to sweep-G), `fit`, `sweep-g`, `paper`, `adaptive`, `track`, `ringdown`, ... — with its default settings |
+//! | `sweep <start_hz> <stop_hz> <step_hz> <settle_s> <integrate_s> <drive_v>` | stepped-sweep settings (paper, sweep-g), validated against the board |
+//! | `staged <band_start_hz> <band_stop_hz> <coarse_points> <coarse_settle_s> <integrate_s> <refine_points> <refine_span> <settle_tau> <drive_v>` | two-stage settings (auto, fit, adaptive, track), validated against the board |
+//! | `ringdown <band_start_hz> <band_stop_hz> <seed_hz> <burst_s> <ring_s> <stages> <window_cycles> <drive_v>` | ring-down settings, validated against the board |
+//!
+//! Without the cargo feature `all-methods` (the STM32 image) the methods adaptive, track,
+//! ring-down and hold are left out: `method` with one of their names
+//! ([`Method::NOT_IN_IMAGE`]) and the `ringdown` line give [`CommandError::NotInImage`] ("method
+//! not in this image"), and `staged` settings are checked for fit and auto only.
+//! | `sweep default` | back to the method's default settings |
 //! | `air` | measure the air reference (probe lifted off) |
 //! | `calibrate add <modulus_kpa>` | measure a reference sample of known modulus |
 //! | `calibrate fit` | fit the calibration curve to the reference readings |
@@ -24,16 +34,19 @@
 //! | `store` | write calibration and air reference to flash |
 //! | `status` | report settings, calibration and counters |
 
+#[cfg(feature = "all-methods")]
+use crate::estimate::ringdown::RingdownSettings;
+use crate::estimate::staged::{Refine, StagedSettings};
 use crate::hal::FrontEndScale;
-use crate::measure::Method;
+use crate::measure::{Method, Settings};
 use crate::sweep::{SettingsError, SweepSettings};
 use crate::units::{Hz, KPa, Seconds, Volts};
 
 /// Longest accepted line in bytes (without the terminator).
 pub const MAX_LINE: usize = 96;
 
-/// Most words in a line (the longest command, `sweep`, has seven).
-const MAX_WORDS: usize = 8;
+/// Most words in a line (the longest command, `staged`, has ten).
+const MAX_WORDS: usize = 10;
 
 /// Lowest and highest reference modulus `calibrate add` accepts, kPa.
 pub const REFERENCE_KPA: (f32, f32) = (1.0, 100_000.0);
@@ -44,12 +57,13 @@ pub const REFERENCE_KPA: (f32, f32) = (1.0, 100_000.0);
 pub enum Command {
     /// Take a reading.
     Measure,
-    /// Select a method (and its default sweep).
+    /// Select a method (with its default settings).
     Method(Method),
-    /// Use these (already validated) sweep settings.
-    Sweep(SweepSettings),
-    /// Use the method's default sweep.
-    SweepDefault,
+    /// Use these settings (checked against the board; the firmware checks they suit the
+    /// active method).
+    Settings(Settings),
+    /// Back to the active method's default settings.
+    SettingsDefault,
     /// Measure the air reference.
     Air,
     /// Measure a reference sample of this modulus for the calibration fit.
@@ -86,9 +100,13 @@ pub enum CommandError {
     BadNumber,
     /// `method` names no method.
     UnknownMethod,
+    /// A method (or its settings) that this image leaves out (feature `all-methods` off:
+    /// ring-down and hold in the STM32 image, [`Method::NOT_IN_IMAGE`]).
+    NotInImage,
     /// `calibrate` with an unknown sub-command.
     UnknownSubcommand,
-    /// A number outside its range (reference modulus).
+    /// A number outside its range (reference modulus, a count that is not a whole number
+    /// 0–255).
     OutOfRange,
     /// Sweep settings the board rejects.
     Settings(SettingsError),
@@ -105,7 +123,13 @@ impl CommandError {
             CommandError::MissingArgument => "missing argument",
             CommandError::TooManyArguments => "too many arguments",
             CommandError::BadNumber => "not a finite number",
-            CommandError::UnknownMethod => "unknown method (paper, sweep-g)",
+            #[cfg(feature = "all-methods")]
+            CommandError::UnknownMethod => {
+                "unknown method (auto, fit, sweep-g, paper, adaptive, track, ringdown)"
+            }
+            #[cfg(not(feature = "all-methods"))]
+            CommandError::UnknownMethod => "unknown method (auto, fit, sweep-g, paper)",
+            CommandError::NotInImage => "method not in this image",
             CommandError::UnknownSubcommand => {
                 "unknown calibrate sub-command (add, fit, clear, paper)"
             }
@@ -209,6 +233,24 @@ fn number(word: &str) -> Result<f32, CommandError> {
     }
 }
 
+/// A count: a number that is whole, 0–255.
+fn count(v: f32) -> Result<u8, CommandError> {
+    if (0.0..=255.0).contains(&v) && v == libm::truncf(v) {
+        Ok(v as u8)
+    } else {
+        Err(CommandError::OutOfRange)
+    }
+}
+
+/// The `N` numbers of `args` (the caller checked the arity).
+fn numbers<const N: usize>(args: &[&str]) -> Result<[f32; N], CommandError> {
+    let mut v = [0.0f32; N];
+    for (slot, w) in v.iter_mut().zip(args) {
+        *slot = number(w)?;
+    }
+    Ok(v)
+}
+
 /// Exact powers of ten in `f64` (10^0 ..= 10^22).
 const POW10: [f64; 23] = [
     1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
@@ -249,21 +291,19 @@ pub fn parse(line: &[u8], scale: &FrontEndScale) -> Result<Command, CommandError
         "status" => arity(0).map(|_| Command::Status),
         "method" => {
             arity(1)?;
-            args.first()
-                .and_then(|m| Method::from_name(m))
-                .map(Command::Method)
-                .ok_or(CommandError::UnknownMethod)
+            let name = args.first().copied().unwrap_or_default();
+            match Method::from_name(name) {
+                Some(m) => Ok(Command::Method(m)),
+                None if Method::NOT_IN_IMAGE.contains(&name) => Err(CommandError::NotInImage),
+                None => Err(CommandError::UnknownMethod),
+            }
         }
         "sweep" => {
             if args.first() == Some(&"default") {
-                return arity(1).map(|_| Command::SweepDefault);
+                return arity(1).map(|_| Command::SettingsDefault);
             }
             arity(6)?;
-            let mut v = [0.0f32; 6];
-            for (slot, w) in v.iter_mut().zip(args) {
-                *slot = number(w)?;
-            }
-            let [start, stop, step, settle, integrate, drive] = v;
+            let [start, stop, step, settle, integrate, drive] = numbers(args)?;
             let s = SweepSettings {
                 start: Hz(start),
                 stop: Hz(stop),
@@ -273,7 +313,54 @@ pub fn parse(line: &[u8], scale: &FrontEndScale) -> Result<Command, CommandError
                 drive: Volts(drive),
             };
             s.validate(scale).map_err(CommandError::Settings)?;
-            Ok(Command::Sweep(s))
+            Ok(Command::Settings(Settings::Sweep(s)))
+        }
+        "staged" => {
+            arity(9)?;
+            let [start, stop, coarse_points, coarse_settle, integrate, refine_points, refine_span, settle_tau, drive] =
+                numbers(args)?;
+            let s = StagedSettings {
+                band_start: Hz(start),
+                band_stop: Hz(stop),
+                coarse_points: count(coarse_points)?,
+                coarse_settle: Seconds(coarse_settle),
+                integrate: Seconds(integrate),
+                refine_points: count(refine_points)?,
+                refine_span,
+                settle_tau,
+                drive: Volts(drive),
+            };
+            // Valid for one of the two-stage refinements at least; the firmware checks the
+            // active method's own.
+            let bvd = s.validate(Refine::Bvd, scale).map(|_| ());
+            let any = bvd.or_else(|e| {
+                [Refine::Conductance, Refine::Track]
+                    .iter()
+                    .any(|r| s.validate(*r, scale).is_ok())
+                    .then_some(())
+                    .ok_or(e)
+            });
+            any.map_err(CommandError::Settings)?;
+            Ok(Command::Settings(Settings::Staged(s)))
+        }
+        #[cfg(not(feature = "all-methods"))]
+        "ringdown" => Err(CommandError::NotInImage),
+        #[cfg(feature = "all-methods")]
+        "ringdown" => {
+            arity(8)?;
+            let [start, stop, seed, burst, ring, stages, window_cycles, drive] = numbers(args)?;
+            let s = RingdownSettings {
+                band_start: Hz(start),
+                band_stop: Hz(stop),
+                seed: Hz(seed),
+                burst: Seconds(burst),
+                ring: Seconds(ring),
+                stages: count(stages)?,
+                window_cycles: count(window_cycles)?,
+                drive: Volts(drive),
+            };
+            s.validate(scale).map_err(CommandError::Settings)?;
+            Ok(Command::Settings(Settings::Ringdown(s)))
         }
         "calibrate" => {
             let (&sub, rest) = args.split_first().ok_or(CommandError::MissingArgument)?;
@@ -379,20 +466,69 @@ mod tests {
         assert_eq!(p("status"), Ok(Command::Status));
         assert_eq!(p("store"), Ok(Command::Store));
         assert_eq!(p("air"), Ok(Command::Air));
-        assert_eq!(p("method sweep-g"), Ok(Command::Method(Method::SweepG)));
-        assert_eq!(p("method paper"), Ok(Command::Method(Method::Paper)));
-        assert_eq!(p("sweep default"), Ok(Command::SweepDefault));
+        // Every method by its name.
+        for m in Method::ALL {
+            assert_eq!(
+                p(&std::format!("method {}", m.name())),
+                Ok(Command::Method(m))
+            );
+        }
+        assert_eq!(p("method auto"), Ok(Command::Method(Method::Auto)));
+        assert_eq!(p("sweep default"), Ok(Command::SettingsDefault));
         assert_eq!(
             p("sweep 200 260 2 0.02 0.03 5"),
-            Ok(Command::Sweep(SweepSettings {
+            Ok(Command::Settings(Settings::Sweep(SweepSettings {
                 start: Hz(200.0),
                 stop: Hz(260.0),
                 step: Hz(2.0),
                 settle: Seconds(0.02),
                 integrate: Seconds(0.03),
                 drive: Volts(5.0),
-            }))
+            })))
         );
+        // (Every refinement and ring-down exist only with `all-methods`.)
+        #[cfg(feature = "all-methods")]
+        {
+            // The defaults of the two-stage and ring-down methods, spelled out, parse back to
+            // themselves.
+            for r in [Refine::Conductance, Refine::Bvd, Refine::Track] {
+                let s = StagedSettings::default_for(r);
+                let line = std::format!(
+                    "staged {} {} {} {} {} {} {} {} {}",
+                    s.band_start.0,
+                    s.band_stop.0,
+                    s.coarse_points,
+                    s.coarse_settle.0,
+                    s.integrate.0,
+                    s.refine_points,
+                    s.refine_span,
+                    s.settle_tau,
+                    s.drive.0
+                );
+                assert_eq!(
+                    p(&line),
+                    Ok(Command::Settings(Settings::Staged(s))),
+                    "{line}"
+                );
+            }
+            let s = RingdownSettings::DEFAULT;
+            let line = std::format!(
+                "ringdown {} {} {} {} {} {} {} {}",
+                s.band_start.0,
+                s.band_stop.0,
+                s.seed.0,
+                s.burst.0,
+                s.ring.0,
+                s.stages,
+                s.window_cycles,
+                s.drive.0
+            );
+            assert_eq!(p(&line), Ok(Command::Settings(Settings::Ringdown(s))));
+            // Settings valid for one two-stage refinement only: adaptive's three coarse points,
+            // track's zero span.
+            assert!(p("staged 170 290 3 0.02 0.02 5 0.8 3 5").is_ok());
+            assert!(p("staged 170 290 6 0.02 0.02 8 0 2 5").is_ok());
+        }
         assert_eq!(
             p("calibrate add 279"),
             Ok(Command::CalibrateAdd(KPa(279.0)))
@@ -444,6 +580,52 @@ mod tests {
             p("sweep 200 260 2 -1 0.03 5"),
             Err(Settings(SettingsError::SettleNegative))
         );
+        assert_eq!(
+            p("staged 170 290 6 0.02 0.02 5 0.8 3"),
+            Err(MissingArgument)
+        );
+        assert_eq!(
+            p("staged 170 290 6 0.02 0.02 5 0.8 3 5 6"),
+            Err(TooManyArguments)
+        );
+        assert_eq!(p("staged 170 290 6.5 0.02 0.02 5 0.8 3 5"), Err(OutOfRange));
+        assert_eq!(p("staged 170 290 256 0.02 0.02 5 0.8 3 5"), Err(OutOfRange));
+        assert_eq!(p("staged 170 290 6 0.02 0.02 -1 0.8 3 5"), Err(OutOfRange));
+        assert_eq!(p("staged 170 290 6 0.02 0.02 5 x 3 5"), Err(BadNumber));
+        assert_eq!(
+            p("staged 290 170 6 0.02 0.02 5 0.8 3 5"),
+            Err(Settings(SettingsError::EmptyBand))
+        );
+        // Two coarse points suit no refinement; a span of 5 linewidths with one refine point
+        // neither (track ignores the span but needs two steps).
+        assert_eq!(
+            p("staged 170 290 2 0.02 0.02 5 0.8 3 5"),
+            Err(Settings(SettingsError::KnobOutOfRange))
+        );
+        assert_eq!(
+            p("staged 170 290 6 0.02 0.02 1 5 3 5"),
+            Err(Settings(SettingsError::KnobOutOfRange))
+        );
+        assert_eq!(
+            p("staged 170 290 6 0.02 0.02 5 0.8 3 500"),
+            Err(Settings(SettingsError::DriveOutOfRange))
+        );
+        #[cfg(feature = "all-methods")]
+        {
+            assert_eq!(
+                p("ringdown 170 290 230 0.04 0.04 2 2"),
+                Err(MissingArgument)
+            );
+            assert_eq!(
+                p("ringdown 170 290 230 0.04 0.04 5 2 5"),
+                Err(Settings(SettingsError::KnobOutOfRange))
+            );
+            assert_eq!(p("ringdown 170 290 230 0.04 0.04 2 2.5 5"), Err(OutOfRange));
+            assert_eq!(
+                p("ringdown 170 290 9000 0.04 0.04 2 2 5"),
+                Err(Settings(SettingsError::AboveNyquist))
+            );
+        }
         assert_eq!(p("calibrate"), Err(MissingArgument));
         assert_eq!(p("calibrate add"), Err(MissingArgument));
         assert_eq!(p("calibrate add 0"), Err(OutOfRange));
@@ -471,6 +653,24 @@ mod tests {
             }
         }
         out
+    }
+
+    #[test]
+    fn methods_not_in_the_image() {
+        let p = |s: &str| parse(s.as_bytes(), &scale());
+        for name in Method::NOT_IN_IMAGE {
+            assert_eq!(
+                p(&std::format!("method {name}")),
+                Err(CommandError::NotInImage)
+            );
+            assert!(Method::from_name(name).is_none());
+        }
+        #[cfg(not(feature = "all-methods"))]
+        assert_eq!(
+            p("ringdown 170 290 230 0.04 0.04 2 2 5"),
+            Err(CommandError::NotInImage)
+        );
+        assert_eq!(p("method fft"), Err(CommandError::UnknownMethod));
     }
 
     #[test]
@@ -546,7 +746,7 @@ mod tests {
     fn arbitrary_bytes_never_panic() {
         let mut x: u64 = 0x2545_F491_4F6C_DD1D;
         let mut lb = LineBuffer::new();
-        let alphabet = b"measure method sweep calibrate add fit status store air paper sweep-g default 0123456789.-e+ \n\r\xff\xc3\x80NaNinf";
+        let alphabet = b"measure method sweep staged ringdown calibrate add fit auto status store air paper sweep-g default 0123456789.-e+ \n\r\xff\xc3\x80NaNinf";
         let mut lines = 0;
         for _ in 0..200_000 {
             x ^= x << 13;

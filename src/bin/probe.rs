@@ -11,17 +11,22 @@
 //! |---|---|---|
 //! | `sample` (hardware) | 3 | per batch: demodulate the ADC half, refill the DAC half ([`SampleEngine`]) |
 //! | `uart_rx` (hardware, STM32) | 2 | host bytes from LPUART1 (ST-LINK virtual COM port) into a channel |
-//! | `measure` | 1 | owns settings, calibration and the flash store; runs readings point by point |
+//! | `measure` | 1 | owns settings, calibration and the flash store; runs readings plan by plan ([`pzt_probe::measure::Procedure`]) |
 //! | `command` | 1 | bytes → lines → [`pzt_probe::command::parse`] → requests to `measure` (QEMU: `command_script`, a fixed script through the same parser) |
 //! | `report` | 1 | the only place that logs: one defmt line per event, formats below |
 //!
 //! Data flow: `command` → (request channel) → `measure` → (plan channel, capacity 2: the double
 //! buffer of the interrupt's settings) → `sample` → (point channel) → `measure` → (report channel)
-//! → `report`. Settings are validated twice before anything reaches the interrupt: by the
-//! command parser against the board's converter scale and again by
-//! [`SweepMeasurement::new`]; the interrupt only ever sees [`PointPlan`]s of a validated sweep.
-//! The running reading keeps the settings it started with; a new `sweep` or `method` applies
-//! from the next reading.
+//! → `report`. Settings are validated before anything reaches the interrupt: by the command
+//! parser against the board's converter scale, by the method's own validation when they are
+//! applied, and again by [`pzt_probe::measure::Procedure::new`] when a reading starts; the
+//! interrupt only ever sees [`PointPlan`]s of validated settings. The running reading keeps the
+//! settings it started with; a new `method`, `sweep`, `staged` or `ringdown` applies from the
+//! next reading.
+//!
+//! The default method is `auto` ([`pzt_probe::Method::Auto`]): fit, falling back to sweep-G
+//! when fit finds no trustworthy resonance; its `reading` line names the method that produced
+//! it (`fit` or `sweep-g`).
 //!
 //! # Log lines (parsed by `probe-bench log` and `tests/qemu.rs`; keep them stable)
 //!
@@ -48,7 +53,11 @@
 //! exit ok=<bool>                                           (QEMU script end)
 //! ```
 //!
-//! `status` of a reading is `ok` or a failure code of [`pzt_probe::Failure::code`]. `isr_mean`
+//! `settings` carries a stepped sweep's own fields; for the two-stage methods (auto, fit,
+//! adaptive, track) `start_hz`/`stop_hz` are the band, `step_hz` is `NaN`, `settle_s` the
+//! coarse settling and `integrate_s` the integration; for ring-down the band, `NaN`, the burst
+//! and the ring. `status` of a reading is `ok` or a failure code of
+//! [`pzt_probe::Failure::code`]. `isr_mean`
 //! and `isr_max` are the sample interrupt's work per batch (plan intake, demodulation, DAC
 //! refill, point hand-off) in `unit`: instructions under QEMU, core cycles on the STM32.
 #![cfg_attr(target_os = "none", no_std, no_main)]
@@ -115,8 +124,9 @@ mod shared {
     use core::sync::atomic::{AtomicU32, Ordering};
     use pzt_probe::command::CommandError;
     use pzt_probe::engine::PointPlan;
+    use pzt_probe::measure::Settings;
     use pzt_probe::store::{Loaded, SlotState, StoreError};
-    use pzt_probe::sweep::{SweepPoint, SweepSettings};
+    use pzt_probe::sweep::SweepPoint;
     use pzt_probe::{Method, PowerLaw, Reading};
 
     /// Batches serviced by the sample interrupt.
@@ -170,7 +180,7 @@ mod shared {
             seq: u32,
         },
         StoreFailed(StoreError),
-        Settings(Method, SweepSettings),
+        Settings(Method, Settings),
         Point {
             tag: u16,
             point: SweepPoint,
@@ -230,14 +240,14 @@ mod app {
     use crate::board;
     use crate::shared::*;
     use core::sync::atomic::Ordering;
-    use pzt_probe::command::{parse, Command, LineBuffer};
+    use pzt_probe::command::{parse, Command, CommandError, LineBuffer};
     use pzt_probe::dsp::dds::frequency_hz;
     use pzt_probe::engine::{PointRaw, SampleEngine};
     use pzt_probe::hal::FrontEndScale;
+    use pzt_probe::measure::{Measurement, Procedure, Settings};
     use pzt_probe::runner::BATCH;
     use pzt_probe::store::{AirReference, LoadSource, Store};
-    use pzt_probe::sweep::SweepSettings;
-    use pzt_probe::{Failure, Method, PowerLaw, Reading, Seconds, SweepMeasurement};
+    use pzt_probe::{Failure, Method, PowerLaw, Reading, Seconds};
     use rtic_monotonics::systick::prelude::*;
     use rtic_sync::channel::{Receiver, Sender};
     use rtic_sync::make_channel;
@@ -256,9 +266,11 @@ mod app {
     /// The measurement task feeds the watchdog at least this often while it is alive (ms).
     const FEED_MS: u32 = 100;
 
-    /// The QEMU image has no host link: it runs this script through the same line parser.
+    /// The QEMU image has no host link: it runs this script through the same line parser — a
+    /// reading with the default method (auto), one with sweep-G over a sweep of its own, back to
+    /// auto with two-stage settings of its own, store, status.
     #[cfg(feature = "qemu")]
-    const SCRIPT: &[u8] = b"method sweep-g\nsweep 200 260 2 0.02 0.03 5\nmeasure\nstore\nstatus\n";
+    const SCRIPT: &[u8] = b"status\nmeasure\nmethod sweep-g\nsweep 200 260 2 0.02 0.03 5\nmeasure\nmethod auto\nstaged 180 280 6 0.02 0.03 5 0.8 5 4\nstore\nstatus\n";
 
     #[shared]
     struct Shared {}
@@ -417,7 +429,17 @@ mod app {
     /// The active settings: what the next reading uses.
     struct Active {
         method: Method,
-        sweep: SweepSettings,
+        settings: Settings,
+    }
+
+    impl Active {
+        /// `method` with its default settings.
+        fn of(method: Method) -> Self {
+            Self {
+                method,
+                settings: method.default_settings(),
+            }
+        }
     }
 
     /// What one reading needs from the measurement task's context.
@@ -435,56 +457,56 @@ mod app {
             let _ = self.reports.send(r).await;
         }
 
-        /// One reading with `method` and `sweep`, point by point through the interrupt.
+        /// One reading with `method` and `settings`, plan by plan through the interrupt: every
+        /// window of a plan (one for a sweep point, several for a ring-down) is waited for with
+        /// a timeout and handed to the procedure.
         async fn reading(
             &mut self,
             method: Method,
-            sweep: &SweepSettings,
+            settings: &Settings,
             cal: &PowerLaw,
         ) -> Reading {
             let start = BATCHES.load(Ordering::Relaxed) as u64 * BATCH as u64;
-            let mut m = match SweepMeasurement::new(method, sweep, &self.scale, start) {
+            let mut m = match Procedure::new(method, settings, &self.scale, start) {
                 Ok(m) => m,
                 Err(_) => return Reading::failed(method, Failure::BadSettings, Seconds(0.0), 0),
             };
             let fs = self.scale.sample_rate.0;
             let batch_s = BATCH as f32 / fs;
-            while let Some(plan) = m.next_plan() {
+            let mut points: u16 = 0;
+            while !m.is_complete() {
+                let Some(plan) = m.next_plan() else { break };
                 if self.plans.send(EngineCmd::Load(plan)).await.is_err() {
                     break;
                 }
-                // Budget: settling, the window, a cycle to find the boundary, the two-batch
-                // pipeline and margin.
+                // Budget of each window: settling, the window, a cycle to find the boundary,
+                // the two-batch pipeline and margin.
                 let f = frequency_hz(plan.ftw, fs as f64).max(1.0) as f32;
                 let window_s = plan.settle_samples as f32 / fs + (plan.cycles as f32 + 2.0) / f;
                 let budget_ms = ((window_s + 6.0 * batch_s) * 1000.0) as u32 + FEED_MS;
-                let got = loop {
-                    match Mono::timeout_after(budget_ms.millis(), self.points.recv()).await {
-                        Ok(Ok(raw)) if raw.plan == plan => break Some(raw),
-                        Ok(Ok(_stale)) => continue,
-                        _ => break None,
-                    }
-                };
-                self.watchdog.feed();
-                match got {
-                    Some(raw) => {
-                        if let Some(p) = m.accept(&raw) {
-                            self.report(Report::Point {
-                                tag: plan.tag,
-                                point: p,
-                            })
-                            .await;
+                for _ in 0..plan.windows.max(1) {
+                    let got = loop {
+                        match Mono::timeout_after(budget_ms.millis(), self.points.recv()).await {
+                            Ok(Ok(raw)) if raw.plan == plan => break Some(raw),
+                            Ok(Ok(_stale)) => continue,
+                            _ => break None,
                         }
-                    }
-                    None => {
+                    };
+                    self.watchdog.feed();
+                    let Some(raw) = got else {
                         let _ = self.plans.send(EngineCmd::Stop).await;
                         self.report(Report::Stalled { tag: plan.tag }).await;
-                        return Reading::failed(
-                            method,
-                            Failure::DriveFault,
-                            m.probe_time(),
-                            m.points().len() as u16,
-                        );
+                        let now = BATCHES.load(Ordering::Relaxed) as u64 * BATCH as u64;
+                        let t = Seconds(now.saturating_sub(start) as f32 / fs);
+                        return Reading::failed(method, Failure::DriveFault, t, points);
+                    };
+                    if let Some(p) = m.accept(&raw) {
+                        points = points.saturating_add(1);
+                        self.report(Report::Point {
+                            tag: plan.tag,
+                            point: p,
+                        })
+                        .await;
                     }
                 }
             }
@@ -509,10 +531,8 @@ mod app {
         let mut record = loaded.record;
         let mut fallback = loaded.is_fallback();
         let _ = reports.send(Report::Loaded(loaded)).await;
-        let mut active = Active {
-            method: Method::SweepG,
-            sweep: Method::SweepG.default_sweep(),
-        };
+        // The default strategy: fit, falling back to sweep-G.
+        let mut active = Active::of(Method::Auto);
         let mut refs: heapless::Vec<(f64, f64, f64), MAX_REFERENCES> = heapless::Vec::new();
         let mut rig = Rig {
             plans: &mut plans,
@@ -541,7 +561,7 @@ mod app {
                 Command::Measure => {
                     // Contact is checked against the stored air reference (Q and resonance).
                     let r = rig
-                        .reading(active.method, &active.sweep, &record.calibration)
+                        .reading(active.method, &active.settings, &record.calibration)
                         .await
                         .check_contact(record.air.as_ref());
                     rig.report(Report::Reading(r)).await;
@@ -549,30 +569,46 @@ mod app {
                     r.status.is_ok()
                 }
                 Command::Method(m) => {
-                    active = Active {
-                        method: m,
-                        sweep: m.default_sweep(),
-                    };
-                    rig.report(Report::Settings(active.method, active.sweep))
+                    active = Active::of(m);
+                    rig.report(Report::Settings(active.method, active.settings))
                         .await;
                     true
                 }
-                Command::Sweep(s) => {
-                    active.sweep = s;
-                    rig.report(Report::Settings(active.method, active.sweep))
-                        .await;
-                    true
+                Command::Settings(s) => {
+                    // Parsed and checked against the board; that they are settings of the
+                    // active method is checked here, by the method's own validation.
+                    // (The procedure is dropped at once: it must not live across an await.)
+                    let checked = Procedure::new(active.method, &s, &rig.scale, 0).map(|_| ());
+                    match checked {
+                        Ok(()) => {
+                            active.settings = s;
+                            rig.report(Report::Settings(active.method, active.settings))
+                                .await;
+                            true
+                        }
+                        Err(e) => {
+                            rig.report(Report::Rejected(CommandError::Settings(e)))
+                                .await;
+                            false
+                        }
+                    }
                 }
-                Command::SweepDefault => {
-                    active.sweep = active.method.default_sweep();
-                    rig.report(Report::Settings(active.method, active.sweep))
+                Command::SettingsDefault => {
+                    active = Active::of(active.method);
+                    rig.report(Report::Settings(active.method, active.settings))
                         .await;
                     true
                 }
                 Command::Air => {
-                    // The conductance method measures Q; the calibration does not matter here.
+                    // Sweep-G measures Q: with the active sweep when sweep settings are active
+                    // (a fine sweep over the free resonance), else its default sweep. The
+                    // calibration does not matter here.
+                    let sweep = match active.settings {
+                        Settings::Sweep(s) => s,
+                        _ => Method::SweepG.default_sweep(),
+                    };
                     let r = rig
-                        .reading(Method::SweepG, &active.sweep, &record.calibration)
+                        .reading(Method::SweepG, &Settings::Sweep(sweep), &record.calibration)
                         .await;
                     rig.report(Report::Reading(r)).await;
                     match (r.resonance, r.q) {
@@ -598,7 +634,7 @@ mod app {
                 }
                 Command::CalibrateAdd(e) => {
                     let r = rig
-                        .reading(active.method, &active.sweep, &record.calibration)
+                        .reading(active.method, &active.settings, &record.calibration)
                         .await;
                     rig.report(Report::Reading(r)).await;
                     match (r.resonance, r.resonance_sigma) {
@@ -756,6 +792,46 @@ mod app {
         v.unwrap_or(f32::NAN)
     }
 
+    /// The `settings` line's fields `[start_hz, stop_hz, step_hz, settle_s, integrate_s,
+    /// drive_v]` of any method's settings: a sweep's own; for the staged methods the band, no
+    /// step (`NaN`), the coarse settling, the integration and the drive; for ring-down the
+    /// band, no step, the burst as settling, the ring as integration and the drive; `NaN` for
+    /// settings of other kinds.
+    fn settings_fields(s: &Settings) -> [f32; 6] {
+        if let Settings::Sweep(s) = s {
+            return [
+                s.start.0,
+                s.stop.0,
+                s.step.0,
+                s.settle.0,
+                s.integrate.0,
+                s.drive.0,
+            ];
+        }
+        if let Settings::Staged(s) = s {
+            return [
+                s.band_start.0,
+                s.band_stop.0,
+                f32::NAN,
+                s.coarse_settle.0,
+                s.integrate.0,
+                s.drive.0,
+            ];
+        }
+        #[cfg(feature = "all-methods")]
+        if let Settings::Ringdown(s) = s {
+            return [
+                s.band_start.0,
+                s.band_stop.0,
+                f32::NAN,
+                s.burst.0,
+                s.ring.0,
+                s.drive.0,
+            ];
+        }
+        [f32::NAN; 6]
+    }
+
     /// The report task: the only task that logs. Formats are listed in the crate docs.
     #[task(priority = 1)]
     async fn report(_cx: report::Context, mut rx: Receiver<'static, Report, REPORT_CAP>) {
@@ -779,16 +855,19 @@ mod app {
                     defmt::info!("store saved slot={=u8} seq={=u32}", slot, seq)
                 }
                 Report::StoreFailed(e) => defmt::error!("store error={=str}", store_error_name(e)),
-                Report::Settings(m, s) => defmt::info!(
-                    "settings method={=str} start_hz={=f32} stop_hz={=f32} step_hz={=f32} settle_s={=f32} integrate_s={=f32} drive_v={=f32}",
-                    m.name(),
-                    s.start.0,
-                    s.stop.0,
-                    s.step.0,
-                    s.settle.0,
-                    s.integrate.0,
-                    s.drive.0
-                ),
+                Report::Settings(m, s) => {
+                    let [start, stop, step, settle, integrate, drive] = settings_fields(&s);
+                    defmt::info!(
+                        "settings method={=str} start_hz={=f32} stop_hz={=f32} step_hz={=f32} settle_s={=f32} integrate_s={=f32} drive_v={=f32}",
+                        m.name(),
+                        start,
+                        stop,
+                        step,
+                        settle,
+                        integrate,
+                        drive
+                    )
+                }
                 Report::Point { tag, point } => defmt::info!(
                     "point tag={=u16} f_hz={=f32} g_s={=f32} b_s={=f32} sigma_s={=f32}",
                     tag,
