@@ -20,11 +20,6 @@
 //! | `sweep <start_hz> <stop_hz> <step_hz> <settle_s> <integrate_s> <drive_v>` | stepped-sweep settings (paper, sweep-g), validated against the board |
 //! | `staged <band_start_hz> <band_stop_hz> <coarse_points> <coarse_settle_s> <integrate_s> <refine_points> <refine_span> <settle_tau> <drive_v>` | two-stage settings (auto, fit, adaptive, track), validated against the board |
 //! | `ringdown <band_start_hz> <band_stop_hz> <seed_hz> <burst_s> <ring_s> <stages> <window_cycles> <drive_v>` | ring-down settings, validated against the board |
-//!
-//! Without the cargo feature `all-methods` (the STM32 image) the methods adaptive, track,
-//! ring-down and hold are left out: `method` with one of their names
-//! ([`Method::NOT_IN_IMAGE`]) and the `ringdown` line give [`CommandError::NotInImage`] ("method
-//! not in this image"), and `staged` settings are checked for fit and auto only.
 //! | `sweep default` | back to the method's default settings |
 //! | `air` | measure the air reference (probe lifted off) |
 //! | `calibrate add <modulus_kpa>` | measure a reference sample of known modulus |
@@ -33,6 +28,11 @@
 //! | `calibrate paper` | use the paper's published calibration |
 //! | `store` | write calibration and air reference to flash |
 //! | `status` | report settings, calibration and counters |
+//!
+//! Without the cargo feature `all-methods` (the STM32 image) the methods adaptive, track,
+//! ring-down and hold are left out: `method` with one of their names
+//! ([`Method::NOT_IN_IMAGE`]) and the `ringdown` line give [`CommandError::NotInImage`] ("method
+//! not in this image"), and `staged` settings are checked for fit and auto only.
 
 #[cfg(feature = "all-methods")]
 use crate::estimate::ringdown::RingdownSettings;
