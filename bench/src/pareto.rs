@@ -197,7 +197,8 @@ pub struct Cell {
     pub within10: usize,
     /// Ok readings whose error is within 3 reported sigmas.
     pub within3sigma: usize,
-    /// Sum of squared relative deviations from the noise-free reading of the same method.
+    /// Sum of squared relative deviations from the noise-free reading of the same method (from
+    /// the readings' own mean when the method refuses the noise-free data).
     pub sum_dev2: f64,
     /// Relative error of the noise-free reading (the calibration misfit plus the method's
     /// deterministic bias left after calibration), if that reading was ok.
@@ -273,8 +274,10 @@ pub fn evaluate(
             r.modulus_sigma_repeat,
         ) {
             let err = (m.0 as f64 - e) / e;
-            let dev = (m.0 as f64 - quiet.unwrap_or(e)) / e;
-            cell.sum_dev2 += dev * dev;
+            if let Some(q) = quiet {
+                let dev = (m.0 as f64 - q) / e;
+                cell.sum_dev2 += dev * dev;
+            }
             cell.ok += 1;
             cell.sum_err += err;
             cell.sum_err2 += err * err;
@@ -288,6 +291,14 @@ pub fn evaluate(
         }
     }
     cell.time_ms = t / seeds.max(1) as f64;
+    if quiet.is_none() && cell.ok > 1 {
+        // No noise-free reading to compare with (a method may refuse perfectly clean data,
+        // e.g. a decay check whose χ² has no noise to divide by): the deviation from the
+        // readings' own mean, i.e. the scatter, stands in — never the error against the truth.
+        let k = cell.ok as f64;
+        let mean = cell.sum_err / k;
+        cell.sum_dev2 = (cell.sum_err2 - k * mean * mean).max(0.0);
+    }
     cell
 }
 
