@@ -205,6 +205,24 @@ impl Line {
     }
 }
 
+/// Solve the (Levenberg–Marquardt damped) normal equations `(JᵀWJ + λ diag(JᵀWJ)) x = JᵀW r`
+/// by [`spd_inverse`]; `lambda = 0` is the plain Gauss–Newton step. `None` when the damped
+/// matrix is not positive definite.
+pub fn damped_solve<const N: usize>(
+    jtj: &[[f64; N]; N],
+    jtr: &[f64; N],
+    lambda: f64,
+) -> Option<[f64; N]> {
+    let mut m = *jtj;
+    for (i, row) in m.iter_mut().enumerate() {
+        row[i] *= 1.0 + lambda;
+    }
+    let inv = spd_inverse(&m)?;
+    Some(core::array::from_fn(|i| {
+        inv[i].iter().zip(jtr).map(|(a, b)| a * b).sum()
+    }))
+}
+
 /// Inverse of a symmetric positive-definite matrix by Cholesky factorisation; `None` if `m` is
 /// not positive definite.
 #[allow(clippy::needless_range_loop)] // triangular index arithmetic reads best as indices

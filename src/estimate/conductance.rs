@@ -83,7 +83,7 @@ pub fn estimate(points: &[SweepPoint]) -> Result<Estimate, Failure> {
     // non-resonant curve) scale it up. Modest excess from settling transients is a repeatable
     // bias that the calibration absorbs; inflating by it would overstate the scatter.
     let chi2 = fit.reduced_chi2();
-    let scale = if chi2 > GROSS_CHI2 { chi2 } else { 1.0 };
+    let scale = super::gross_scale(chi2);
     let (db, dc) = (-x0 / (4.0 * b), x0 / (4.0 * c));
     let var_x0 =
         scale * (db * db * fit.cov[1][1] + 2.0 * db * dc * fit.cov[1][2] + dc * dc * fit.cov[2][2]);

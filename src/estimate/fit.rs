@@ -9,7 +9,7 @@
 //! is scaled by the reduced χ² only when the fit is grossly wrong (as for sweep-G).
 
 use super::{screen, Estimate};
-use crate::linalg::{spd_inverse, Lsq3};
+use crate::linalg::{damped_solve, spd_inverse, Lsq3};
 use crate::status::Failure;
 use crate::sweep::SweepPoint;
 use crate::units::Hz;
@@ -125,15 +125,7 @@ pub fn fit_bvd(points: &[SweepPoint], f_start: f64, q_start: f64) -> Result<Bvd,
     let mut chi2 = chi2_of(&p);
     for _ in 0..50 {
         let (jtj, jtr) = normal(&p);
-        let mut m = jtj;
-        for (a, row) in m.iter_mut().enumerate() {
-            row[a] *= 1.0 + lambda;
-        }
-        let inv = spd_inverse(&m).ok_or(Failure::NoResonance)?;
-        let mut step = [0.0; 5];
-        for (a, s) in step.iter_mut().enumerate() {
-            *s = (0..5).map(|b| inv[a][b] * jtr[b]).sum();
-        }
+        let step = damped_solve(&jtj, &jtr, lambda).ok_or(Failure::NoResonance)?;
         let mut trial = p;
         for a in 0..5 {
             trial[a] += step[a];
@@ -162,11 +154,7 @@ pub fn fit_bvd(points: &[SweepPoint], f_start: f64, q_start: f64) -> Result<Bvd,
     let cov = spd_inverse(&jtj).ok_or(Failure::NoResonance)?;
     let dof = (2 * points.len()).saturating_sub(5).max(1) as f64;
     let red = chi2 / dof;
-    let scale = if red > super::conductance::GROSS_CHI2 {
-        red
-    } else {
-        1.0
-    };
+    let scale = super::gross_scale(red);
     let sigma_f0 = libm::sqrt((cov[3][3] * scale).max(0.0));
     let sigma_g0 = libm::sqrt(cov[0][0].max(0.0));
     let sigma_b0 = libm::sqrt(cov[1][1].max(0.0));

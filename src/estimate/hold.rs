@@ -44,7 +44,7 @@ use crate::dsp::dds::{frequency_hz, tuning_word};
 use crate::dsp::lockin::{solve, ChannelSums, ReferenceSums};
 use crate::engine::{PointPlan, PointRaw};
 use crate::hal::FrontEndScale;
-use crate::linalg::spd_inverse;
+use crate::linalg::{damped_solve, spd_inverse};
 use crate::status::Failure;
 use crate::sweep::{amplitude_codes, check_durations, SettingsError};
 use crate::units::{Farads, Hz, Seconds, Siemens, Volts};
@@ -444,11 +444,7 @@ impl Hold {
     /// The reading's estimate.
     pub fn estimate(&self) -> Result<Estimate, Failure> {
         let e = self.last.unwrap_or(Err(Failure::NoResonance))?;
-        let f = e.resonance.0;
-        if f < self.s.band_start.0 || f > self.s.band_stop.0 {
-            return Err(Failure::OutOfBand);
-        }
-        Ok(e)
+        super::in_band(e, self.s.band_start, self.s.band_stop)
     }
 }
 
@@ -657,14 +653,10 @@ pub fn fit(
     };
     {
         let (_, jtj, jtr) = evaluate(&w, gs, f_h, &p, wt, true);
-        let mut m3 = [[0.0; 3]; 3];
-        for i in 0..3 {
-            for j in 0..3 {
-                m3[i][j] = jtj[i + 2][j + 2];
-            }
-        }
-        let inv = spd_inverse(&m3).ok_or(Failure::NoResonance)?;
-        let step: [f64; 3] = core::array::from_fn(|i| (0..3).map(|j| inv[i][j] * jtr[j + 2]).sum());
+        let m3: [[f64; 3]; 3] =
+            core::array::from_fn(|i| core::array::from_fn(|j| jtj[i + 2][j + 2]));
+        let r3: [f64; 3] = core::array::from_fn(|i| jtr[i + 2]);
+        let step = damped_solve(&m3, &r3, 0.0).ok_or(Failure::NoResonance)?;
         p.g = step[0];
         p.z = C64::new(step[1], step[2]);
     }
@@ -680,18 +672,13 @@ pub fn fit(
     };
     let (mut jtj, mut jtr) = normal(&p);
     for _ in 0..30 {
-        let mut m = jtj;
-        for (i, row) in m.iter_mut().enumerate() {
-            row[i] *= 1.0 + lambda;
-        }
-        let Some(inv) = spd_inverse(&m) else {
+        let Some(step) = damped_solve(&jtj, &jtr, lambda) else {
             lambda *= 10.0;
             if lambda > 1e6 {
                 break;
             }
             continue;
         };
-        let step: [f64; 5] = core::array::from_fn(|i| (0..5).map(|j| inv[i][j] * jtr[j]).sum());
         let t = Params {
             f0: p.f0 + step[0],
             q: p.q + step[1],
@@ -723,11 +710,7 @@ pub fn fit(
     let cov = spd_inverse(&jtj).ok_or(Failure::NoResonance)?;
     let dof = (2 * w.len() + 1).saturating_sub(5).max(1) as f64;
     let red = c / dof;
-    let scale = if red > super::conductance::GROSS_CHI2 {
-        red
-    } else {
-        1.0
-    };
+    let scale = super::gross_scale(red);
     let sigma = libm::sqrt((cov[0][0] * scale).max(0.0));
     let sigma_q = libm::sqrt((cov[1][1] * scale).max(0.0));
     let (f0, q) = (p.f0, p.q);

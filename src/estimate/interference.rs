@@ -51,8 +51,8 @@ use crate::sweep::SweepPoint;
 pub const SPIKE_RATIO: f32 = 8.0;
 
 /// Reduced χ² of the reported resonance against its points above which they scatter far beyond
-/// their own uncertainty (the estimators' threshold for a gross misfit).
-pub const GROSS_CHI2: f64 = 16.0;
+/// their own uncertainty: the estimators' own threshold for a gross misfit.
+pub use super::conductance::GROSS_CHI2;
 
 /// Above this quality factor the points are not settled enough for [`misfit`] to mean anything.
 pub const SETTLED_Q: f64 = 20.0;

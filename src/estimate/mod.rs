@@ -42,6 +42,27 @@ pub const MAX_CLIP_FRACTION: f32 = 0.0;
 /// open. (A 210 pF plate driven at 1 V and 170 Hz already carries 220 nA; 20 nA is 7 ADC codes.)
 pub const OPEN_CIRCUIT_A: f32 = 20e-9;
 
+/// The factor an estimator's covariance is scaled by for a fit with reduced χ² `reduced`: the
+/// reduced χ² itself when the fit is grossly wrong (above [`conductance::GROSS_CHI2`]), else 1
+/// (the per-point uncertainties are measured; modest excess from settling transients is a
+/// repeatable bias the calibration absorbs, and inflating by it would overstate the scatter).
+pub fn gross_scale(reduced: f64) -> f64 {
+    if reduced > conductance::GROSS_CHI2 {
+        reduced
+    } else {
+        1.0
+    }
+}
+
+/// `e` if its resonance lies within `[start, stop]`, else `out_of_band`.
+pub fn in_band(e: Estimate, start: Hz, stop: Hz) -> Result<Estimate, Failure> {
+    let f = e.resonance.0;
+    if f < start.0 || f > stop.0 {
+        return Err(Failure::OutOfBand);
+    }
+    Ok(e)
+}
+
 /// Checks every sweep must pass before any estimator looks at it: enough points, no clipping, a
 /// current at all, no knock ([`interference::transients`]).
 pub fn screen(points: &[SweepPoint]) -> Result<(), Failure> {

@@ -245,11 +245,7 @@ impl Ringdown {
     /// The estimate of the last stage.
     pub fn estimate(&self) -> Result<Estimate, Failure> {
         let e = self.last.unwrap_or(Err(Failure::NoResonance))?;
-        let f = e.resonance.0;
-        if f < self.s.band_start.0 || f > self.s.band_stop.0 {
-            return Err(Failure::OutOfBand);
-        }
-        Ok(e)
+        super::in_band(e, self.s.band_start, self.s.band_stop)
     }
 }
 

@@ -400,11 +400,7 @@ impl Staged {
             let q = e.q.map_or(f64::NAN, f64::from);
             super::interference::misfit(fine, e.resonance.0 as f64, q)?;
         }
-        let f = e.resonance.0;
-        if f < self.s.band_start.0 || f > self.s.band_stop.0 {
-            return Err(Failure::OutOfBand);
-        }
-        Ok(e)
+        super::in_band(e, self.s.band_start, self.s.band_stop)
     }
 
     fn track_estimate(&self) -> Result<Estimate, Failure> {
