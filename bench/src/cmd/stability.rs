@@ -38,6 +38,18 @@ struct Cell {
     worst_err_sigma: f64,
 }
 
+impl Cell {
+    /// Index of the worst outcome seen (0 when none).
+    fn worst(&self) -> usize {
+        self.counts
+            .iter()
+            .enumerate()
+            .rev()
+            .find(|(_, k)| **k > 0)
+            .map_or(0, |(i, _)| i)
+    }
+}
+
 /// Run the subcommand.
 pub fn run(a: StabilityArgs) -> Result<()> {
     let cases = catalogue(NoiseScene::Bench);
@@ -161,13 +173,7 @@ pub fn run(a: StabilityArgs) -> Result<()> {
 
 fn summary(c: &Cell) -> String {
     let n: usize = c.counts.iter().sum();
-    let worst = c
-        .counts
-        .iter()
-        .enumerate()
-        .rev()
-        .find(|(_, k)| **k > 0)
-        .map_or(0, |(i, _)| i);
+    let worst = c.worst();
     let label = ["ok", "fail ok", "WRONG CODE", "SILENT WRONG"][worst];
     format!("{label} {}/{n} ({})", c.counts[worst], c.codes.join(","))
 }
@@ -209,13 +215,7 @@ where
             .map_err(e)?;
         for (i, row) in grid.iter().enumerate() {
             let c = &row[j];
-            let worst = c
-                .counts
-                .iter()
-                .enumerate()
-                .rev()
-                .find(|(_, k)| **k > 0)
-                .map_or(0, |(i, _)| i);
+            let worst = c.worst();
             let x = x0 + i as i32 * w;
             root.draw(&Rectangle::new(
                 [(x, y), (x + w - 3, y + h - 3)],
