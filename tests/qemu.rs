@@ -2,23 +2,69 @@
 //! simulated probe with deterministic time (`-icount shift=0,sleep=off`), decode its defmt log
 //! and check what it measured.
 //!
-//! Needs `qemu-system-arm`, `defmt-print` and the `thumbv7em-none-eabihf` target. Without the
-//! tools the test is skipped with a message — unless `CI=true`, where it fails.
+//! Needs `qemu-system-arm`, `defmt-print` and the `thumbv7em-none-eabihf` target. Without them
+//! the test fails with the command that installs each (it never passes by skipping).
 
 mod qemu_support;
 
-use qemu_support::{build_image, fields, last, num, run_image, tools_present};
+use qemu_support::{build_image, fields, last, num, require_tools, run_image};
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
 const TIMEOUT: Duration = Duration::from_secs(180);
 const PHANTOM_B_KPA: f64 = 279.0;
 
+/// The modulus (kPa) where paper 003's experimental curve `266.6 − 2305 E^−0.7243` (the
+/// image's fallback calibration) equals `f`, by bisection of `ln E` with `f64::powf`: an
+/// independent inverse of the calibration the image computes on target (with its own `pow`).
+fn paper_inverse(f: f64) -> f64 {
+    let g = |e: f64| 266.6 - 2305.0 * e.powf(-0.7243) - f;
+    let (mut lo, mut hi) = (1e-3f64, 1e9f64);
+    assert!(g(lo) < 0.0 && g(hi) > 0.0, "{f} Hz outside the curve");
+    for _ in 0..200 {
+        let mid = (lo * hi).sqrt();
+        if mid <= lo || mid >= hi {
+            break;
+        }
+        if g(mid) < 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// Checks a logged reading of phantom B against the references: its resonance against the
+/// scene's closed-form `sqrt(k/m)/2pi` within `tol_hz`, and its modulus against the
+/// independent inverse of the paper's curve at the logged resonance. Both are logged as `f32`
+/// (rounded by up to 2^-24 relative), and the image inverts its resonance before rounding it
+/// (measured: 1.5e-7 off the inverse of the rounded value), so the modulus must lie within the
+/// inverse of the resonance's rounding interval, widened by its own rounding.
+fn check_reading(who: &str, r: &HashMap<String, String>, f0: f64, tol_hz: f64) {
+    let f = num(r, "f_hz");
+    let e = num(r, "e_kpa");
+    println!(
+        "{who}: f {f} Hz ({:+.4} Hz from the closed form, reported sigma {} Hz), E {e} kPa ({:+.2} % from {PHANTOM_B_KPA} kPa)",
+        f - f0,
+        num(r, "f_sigma_hz"),
+        100.0 * (e / PHANTOM_B_KPA - 1.0)
+    );
+    assert!(
+        (f - f0).abs() <= tol_hz,
+        "{who} read phantom B's resonance as {f} Hz, closed form {f0} Hz ± {tol_hz} Hz"
+    );
+    const U: f64 = 1.0 / 16_777_216.0;
+    let (e_lo, e_hi) = (paper_inverse(f * (1.0 - U)), paper_inverse(f * (1.0 + U)));
+    assert!(
+        (e_lo * (1.0 - U)..=e_hi * (1.0 + U)).contains(&e),
+        "{who}: {e} kPa at {f} Hz, the paper's curve gives {e_lo}…{e_hi} kPa"
+    );
+}
+
 #[test]
 fn qemu_image_measures_phantom_b() {
-    if !tools_present() {
-        return;
-    }
+    require_tools();
     let wall = Instant::now();
     let elf = build_image("probe");
     let (exited_ok, lines) = run_image(&elf, TIMEOUT);
@@ -62,18 +108,24 @@ fn qemu_image_measures_phantom_b() {
     assert_eq!(first_status["method"], "auto");
 
     // 1. The default reading of phantom B: auto, whose fit found it (the reading names the
-    // method that produced it) — ok and within 3 % of the phantom's modulus through the
-    // calibration the image uses (the store's fallback, paper 003's experimental curve; the
-    // host reads phantom B at 281 kPa with it, 0.8 % high). Its points are the fit's: tagged
-    // in order, inside auto's band, as many as the reading counts.
+    // method that produced it) — ok, its resonance and modulus as below through the
+    // calibration the image uses (the store's fallback, paper 003's experimental curve). Its
+    // points are the fit's: tagged in order, inside auto's band, as many as the reading counts.
+    //
+    // References: the image's scene is phantom B with bench noise (src/board/qemu.rs); its
+    // closed-form resonance is 227.8527 Hz, which the paper's curve puts at 281.74 kPa (+0.98 %
+    // from 279 kPa: the simulated unit's own deviation from that curve, +0.28 Hz at 279 kPa,
+    // docs/physics.md). Tolerances on the resonance, from the host's reading of the same scene
+    // and settings over seeds 1–60 (worst error) plus 25 %: auto (fit) 0.028 Hz → 0.035 Hz;
+    // sweep-G with the script's short settle (20 ms, 1.4 time constants, so the upward sweep
+    // lags: +0.11…+0.14 Hz) 0.138 Hz → 0.17 Hz. Measured here: +0.0022 Hz and +0.124 Hz.
+    // Through the curve's slope (0.10 Hz/kPa) these are 0.35 and 1.7 kPa; they replace a
+    // round ±3 % of 279 kPa (8.4 kPa) on the modulus.
+    let f0 = hal_sim::Scene::on_phantom(&hal_sim::phantoms::B).resonance_hz();
     let (auto, points) = &readings[0];
     assert_eq!(auto["status"], "ok");
     assert_eq!(auto["method"], "fit");
-    let e = num(auto, "e_kpa");
-    assert!(
-        (e / PHANTOM_B_KPA - 1.0).abs() < 0.03,
-        "auto read phantom B as {e} kPa, expected {PHANTOM_B_KPA} kPa ± 3 %"
-    );
+    check_reading("auto", auto, f0, 0.035);
     assert!(num(auto, "e_sigma_kpa") > 0.0 && num(auto, "q") > 0.0);
     assert_eq!(num(auto, "points") as usize, points.len());
     assert!(points.len() >= 4, "{} points", points.len());
@@ -108,11 +160,7 @@ fn qemu_image_measures_phantom_b() {
     assert_eq!(sweep_g["status"], "ok");
     assert_eq!(sweep_g["method"], "sweep-g");
     assert_eq!(num(sweep_g, "points") as usize, expected_points);
-    let e = num(sweep_g, "e_kpa");
-    assert!(
-        (e / PHANTOM_B_KPA - 1.0).abs() < 0.03,
-        "sweep-G read phantom B as {e} kPa, expected {PHANTOM_B_KPA} kPa ± 3 %"
-    );
+    check_reading("sweep-G", sweep_g, f0, 0.17);
     assert!(num(sweep_g, "e_sigma_kpa") > 0.0);
 
     // 3. Back to auto with two-stage settings of the script's own (`staged 180 280 6 0.02 0.03

@@ -1,7 +1,8 @@
 //! What the QEMU tests share: build a firmware binary for `thumbv7em-none-eabihf` (profile `fw`,
 //! feature `qemu`), run it on `mps2-an386` with deterministic time and decode its defmt log.
 //!
-//! Needs `qemu-system-arm`, `defmt-print` and the target; [`tools_present`] says whether to skip.
+//! Needs `qemu-system-arm`, `defmt-print` and the target; [`require_tools`] fails the test with
+//! the install commands when one is missing. A test never passes by skipping.
 
 use std::collections::HashMap;
 use std::io::Read;
@@ -9,27 +10,53 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+const TARGET: &str = "thumbv7em-none-eabihf";
+
 fn have(tool: &str) -> bool {
     Command::new(tool)
         .arg("--version")
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .status()
-        .is_ok()
+        .is_ok_and(|s| s.success())
 }
 
-/// True when `qemu-system-arm` and `defmt-print` are installed. Without them the caller skips
-/// (with a message) — except under `CI=true`, where this panics.
-pub fn tools_present() -> bool {
-    let ci = std::env::var("CI").is_ok_and(|v| v == "true");
-    for tool in ["qemu-system-arm", "defmt-print"] {
-        if !have(tool) {
-            assert!(!ci, "{tool} is required in CI");
-            eprintln!("SKIPPED: {tool} not installed (apt-get install qemu-system-arm; cargo install defmt-print --locked)");
-            return false;
-        }
+/// True when the Rust standard library for [`TARGET`] is installed for the toolchain this
+/// crate builds with (`rust-toolchain.toml`).
+fn have_target() -> bool {
+    let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into());
+    Command::new(rustc)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["--print", "target-libdir", "--target", TARGET])
+        .stderr(Stdio::null())
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| PathBuf::from(String::from_utf8_lossy(&o.stdout).trim()))
+        .is_some_and(|dir| dir.is_dir())
+}
+
+/// Panics, naming every missing tool and the command that installs it, unless
+/// `qemu-system-arm`, `defmt-print` and the `thumbv7em-none-eabihf` target are all present.
+pub fn require_tools() {
+    let mut missing = Vec::new();
+    if !have("qemu-system-arm") {
+        missing.push("qemu-system-arm is not installed: apt-get install qemu-system-arm");
     }
-    true
+    if !have("defmt-print") {
+        missing.push("defmt-print is not installed: cargo install defmt-print --locked");
+    }
+    if !have_target() {
+        missing.push(
+            "the thumbv7em-none-eabihf target is not installed: \
+             rustup target add thumbv7em-none-eabihf",
+        );
+    }
+    assert!(
+        missing.is_empty(),
+        "this test runs the firmware image in QEMU and cannot run without its tools:\n  {}",
+        missing.join("\n  ")
+    );
 }
 
 /// Build firmware binary `bin` with feature `qemu` into the tests' own target directory (shared
@@ -44,7 +71,7 @@ pub fn build_image(bin: &str) -> PathBuf {
             "--profile",
             "fw",
             "--target",
-            "thumbv7em-none-eabihf",
+            TARGET,
             "--no-default-features",
             "--features",
             "qemu",
@@ -61,7 +88,7 @@ pub fn build_image(bin: &str) -> PathBuf {
         .status()
         .expect("run cargo build of the QEMU image");
     assert!(status.success(), "building the QEMU image `{bin}` failed");
-    target_dir.join("thumbv7em-none-eabihf/fw").join(bin)
+    target_dir.join(TARGET).join("fw").join(bin)
 }
 
 /// Run `elf` as `scripts/qemu-run` does (`-icount shift=0,sleep=off`: one instruction per
