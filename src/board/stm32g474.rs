@@ -1,7 +1,22 @@
 //! The STM32G474RE board (NUCLEO-G474RE): clocks from `stm32g4xx-hal`, and a small
 //! register-level driver for what the HAL lacks — the timer-triggered DAC/ADC sample stream
-//! with circular DMA — plus the internal-flash driver of the calibration store and the
-//! LPUART1 receive path.
+//! with circular DMA — plus the internal-flash driver of the calibration store, the
+//! independent watchdog and the LPUART1 receive path.
+//!
+//! # Bring-up (RM0440 references; audit table in `docs/firmware.md`)
+//!
+//! [`init`] runs, in order: the cycle counter (it times every bounded wait), DBGMCU freezes the
+//! IWDG while the core is halted, PWR's bus clock (the HAL's `Rcc::freeze` reads PWR_CR1 but
+//! never clocks PWR), flash prefetch and 4 wait states read back before the clock goes up, the
+//! 24 MHz HSE crystal (X3) with a bounded start-up wait and HSI16 as the fallback, a bounded
+//! PLL lock probe, then the HAL's `Rcc::freeze` (range 1 boost, PLL 170 MHz), the option-byte
+//! check of dual-bank mode and the watchdog. [`Stream::start`] calibrates and enables ADC1 with
+//! bounded waits. Nothing on this path panics or spins without a bound: a wait that times out
+//! records a [`BootError`] (the first one is kept, see [`boot_error`]) and the board carries on
+//! degraded — without the PLL at 16 MHz, without the sample stream, or without flash writes.
+//! [`clock_source`] says which oscillator the PLL runs from. Waits that remain inside the HAL
+//! (`enable_hse`, `enable_hsi`, `config_pll`, the SYSCLK switch) are entered only once the
+//! condition they wait for is known to hold (HSE ready, HSI16 on at reset, PLL locked once).
 //!
 //! # Analog stream (RM0440 references)
 //!
@@ -25,6 +40,12 @@
 //! cover the same 50 sample periods (the DAC's one-sample output register delay shifts drive and
 //! monitor alike and cancels in the admittance).
 //!
+//! DMA transfer errors (TEIF1, TEIF2; the hardware then disables the channel: RM0440 DMA chapter,
+//! "DMA error management") and DAC DMA underruns (DMAUDR1; the DAC then stops requesting: RM0440
+//! DAC chapter, "DMA underrun") are checked at every batch: they make [`Stream::late`] true
+//! for that batch (the `LATE` counter of the application), are counted in [`stream_faults`]
+//! and stop TIM6, so readings stall rather than run on without drive or samples.
+//!
 //! Pins: PA0 sense current (TIA output), PA1 drive monitor, PA4 DAC out to the drive amplifier,
 //! PA2/PA3 LPUART1 TX/RX (AF12) to the ST-LINK virtual COM port.
 
@@ -33,16 +54,16 @@ use crate::hal::{AdcFrame, FrontEndScale};
 use crate::runner::BATCH;
 use crate::units::{AdcCode, DacCode, Hz};
 use core::ptr::{addr_of_mut, read_volatile, write_volatile};
+use core::sync::atomic::{AtomicU32, AtomicU8, Ordering};
 use embedded_storage::nor_flash::{
     check_erase, check_read, check_write, ErrorType, NorFlash, NorFlashError, NorFlashErrorKind,
     ReadNorFlash,
 };
-use stm32g4xx_hal::independent_watchdog::IndependentWatchdog;
 use stm32g4xx_hal::pwr::{PwrExt, VoltageScale};
 use stm32g4xx_hal::rcc::{
     Config, PllConfig, PllMDiv, PllNMul, PllRDiv, PllSrc, RccExt, SysClockSrc,
 };
-use stm32g4xx_hal::time::ExtU32;
+use stm32g4xx_hal::time::RateExtU32;
 
 /// The device crate (PAC) RTIC binds to.
 pub use stm32g4xx_hal::stm32 as device;
@@ -90,6 +111,160 @@ pub fn elapsed(start: u32) -> u32 {
     stamp().wrapping_sub(start)
 }
 
+// ---- boot errors, clock source, stream faults ---------------------------------------------
+
+/// A bring-up step that did not complete within its bound. The board carries on degraded;
+/// [`boot_error`] holds the first one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum BootError {
+    /// PWR_CR1.VOS did not read range 1 after PWR was clocked (or SYSCLK already ran from the
+    /// PLL): the clock configuration was skipped, the core runs from HSI16 at 16 MHz.
+    PowerRange = 1,
+    /// FLASH_ACR did not take the wait states within its bound: clock configuration skipped.
+    FlashLatency,
+    /// The PLL did not lock within its bound: clock configuration skipped (HSI16, 16 MHz).
+    PllLock,
+    /// The independent watchdog did not acknowledge its prescaler and reload (IWDG_SR): it runs
+    /// with its reset configuration (about 512 ms).
+    Watchdog,
+    /// The flash controller stayed busy at boot.
+    FlashBusy,
+    /// FLASH_OPTR.DBANK is 0 (single-bank mode, 4 KiB pages): the store's erase and program
+    /// are refused (they would address the wrong pages).
+    FlashSingleBank,
+    /// ADC1 calibration (ADCAL) did not finish: the sample stream is not started.
+    AdcCalibration,
+    /// ADC1 did not become ready (ADRDY) after ADEN: the sample stream is not started.
+    AdcReady,
+}
+
+impl BootError {
+    const ALL: [BootError; 8] = [
+        BootError::PowerRange,
+        BootError::FlashLatency,
+        BootError::PllLock,
+        BootError::Watchdog,
+        BootError::FlashBusy,
+        BootError::FlashSingleBank,
+        BootError::AdcCalibration,
+        BootError::AdcReady,
+    ];
+
+    /// Short name for the log.
+    pub fn name(self) -> &'static str {
+        match self {
+            BootError::PowerRange => "power_range",
+            BootError::FlashLatency => "flash_latency",
+            BootError::PllLock => "pll_lock",
+            BootError::Watchdog => "watchdog",
+            BootError::FlashBusy => "flash_busy",
+            BootError::FlashSingleBank => "flash_single_bank",
+            BootError::AdcCalibration => "adc_calibration",
+            BootError::AdcReady => "adc_ready",
+        }
+    }
+}
+
+/// First boot error (0: none).
+static BOOT_ERROR: AtomicU8 = AtomicU8::new(0);
+
+fn record(e: BootError) {
+    let _ = BOOT_ERROR.compare_exchange(0, e as u8, Ordering::Relaxed, Ordering::Relaxed);
+}
+
+/// The first bring-up step that failed, if any — complete once [`init`] and [`Stream::start`]
+/// have run.
+pub fn boot_error() -> Option<BootError> {
+    let v = BOOT_ERROR.load(Ordering::Relaxed);
+    BootError::ALL.into_iter().find(|e| *e as u8 == v)
+}
+
+/// The oscillator the core clock comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ClockSource {
+    /// The NUCLEO-G474RE's 24 MHz crystal (X3) through the PLL: 170 MHz.
+    Hse24,
+    /// HSI16 through the PLL (the HSE did not start): 170 MHz, RC accuracy.
+    Hsi16Pll,
+    /// HSI16 directly, 16 MHz: clock configuration skipped (see [`boot_error`]).
+    Hsi16,
+}
+
+impl ClockSource {
+    /// Short name for the log.
+    pub fn name(self) -> &'static str {
+        match self {
+            ClockSource::Hse24 => "hse24",
+            ClockSource::Hsi16Pll => "hsi16-pll",
+            ClockSource::Hsi16 => "hsi16",
+        }
+    }
+}
+
+/// 0: HSI16 (reset state), 1: HSE through the PLL, 2: HSI16 through the PLL.
+static CLOCK: AtomicU8 = AtomicU8::new(0);
+
+/// The oscillator the core runs from (set by [`init`]).
+pub fn clock_source() -> ClockSource {
+    match CLOCK.load(Ordering::Relaxed) {
+        1 => ClockSource::Hse24,
+        2 => ClockSource::Hsi16Pll,
+        _ => ClockSource::Hsi16,
+    }
+}
+
+static DMA_TRANSFER_ERRORS: AtomicU32 = AtomicU32::new(0);
+static DAC_UNDERRUNS: AtomicU32 = AtomicU32::new(0);
+
+/// Hardware faults of the sample stream since boot. Either ends the stream (the DMA disables
+/// the channel, the DAC stops its requests), and the driver then stops TIM6: after a non-zero
+/// count the readings stall until reset.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StreamFaults {
+    /// DMA1 transfer errors (TEIF) on channel 1 (ADC) or 2 (DAC).
+    pub dma_transfer_errors: u32,
+    /// DAC1 channel 1 DMA underruns (DMAUDR1).
+    pub dac_underruns: u32,
+}
+
+/// The stream's hardware fault counts (readable from any task).
+pub fn stream_faults() -> StreamFaults {
+    StreamFaults {
+        dma_transfer_errors: DMA_TRANSFER_ERRORS.load(Ordering::Relaxed),
+        dac_underruns: DAC_UNDERRUNS.load(Ordering::Relaxed),
+    }
+}
+
+/// Poll `done` until it holds or `cycles` core cycles have passed (DWT cycle counter, enabled
+/// first thing in [`init`]); true if it holds. Should the cycle counter be stopped (a debugger
+/// can clear DEMCR.TRCENA), the poll count ends the wait: every poll takes at least one cycle.
+fn spin_until(cycles: u32, mut done: impl FnMut() -> bool) -> bool {
+    let t0 = stamp();
+    let mut polls = cycles;
+    while polls > 0 && elapsed(t0) < cycles {
+        if done() {
+            return true;
+        }
+        polls -= 1;
+    }
+    done()
+}
+
+// Bounds of the waits, in core cycles at the clock the wait runs under.
+/// HSE crystal start-up, at HSI16: 100 ms (ST's HSE_STARTUP_TIMEOUT; typical start-up 2 ms).
+const HSE_TIMEOUT: u32 = 16_000_000 / 10;
+/// PLL lock, at HSI16: 10 ms (typical lock time tens of µs).
+const PLL_TIMEOUT: u32 = 16_000_000 / 100;
+/// FLASH_ACR write taking effect: a few bus cycles.
+const ACR_TIMEOUT: u32 = 1_000;
+/// IWDG register updates (PVU, RVU: up to a few LSI periods), at 170 MHz: 10 ms.
+const IWDG_TIMEOUT: u32 = SYSCLK_HZ / 100;
+/// ADC calibration (about 116 ADC clocks) and ADRDY, at 170 MHz: 1 ms.
+const ADC_TIMEOUT: u32 = SYSCLK_HZ / 1_000;
+/// Flash page erase (about 22 ms) or double-word program (about 82 µs), at 170 MHz: 50 ms.
+const FLASH_TIMEOUT: u32 = SYSCLK_HZ / 20;
+
 // ---- register map (RM0440) --------------------------------------------------------------
 
 const RCC_AHB1ENR_DMA1EN: u32 = 1 << 0;
@@ -98,7 +273,43 @@ const RCC_AHB2ENR_GPIOAEN: u32 = 1 << 0;
 const RCC_AHB2ENR_ADC12EN: u32 = 1 << 13;
 const RCC_AHB2ENR_DAC1EN: u32 = 1 << 16;
 const RCC_APB1ENR1_TIM6EN: u32 = 1 << 4;
+const RCC_APB1ENR1_PWREN: u32 = 1 << 28;
 const RCC_APB1ENR2_LPUART1EN: u32 = 1 << 0;
+const RCC_CR_HSEON: u32 = 1 << 16;
+const RCC_CR_HSERDY: u32 = 1 << 17;
+const RCC_CR_HSEBYP: u32 = 1 << 18;
+const RCC_CR_PLLON: u32 = 1 << 24;
+const RCC_CR_PLLRDY: u32 = 1 << 25;
+const RCC_CFGR_SWS_MASK: u32 = 0b11 << 2;
+const RCC_CFGR_SWS_PLL: u32 = 0b11 << 2;
+const RCC_PLLCFGR_SRC_HSI16: u32 = 0b10;
+const RCC_PLLCFGR_SRC_HSE: u32 = 0b11;
+const RCC_PLLCFGR_N85: u32 = 85 << 8;
+/// PLLR = /2 (field 00), output enabled.
+const RCC_PLLCFGR_REN_R2: u32 = 1 << 24;
+/// HSE frequency of the NUCLEO-G474RE's crystal X3.
+const HSE_HZ: u32 = 24_000_000;
+
+const PWR_CR1_VOS_MASK: u32 = 0b11 << 9;
+const PWR_CR1_VOS_RANGE1: u32 = 0b01 << 9;
+
+const FLASH_ACR_LATENCY_MASK: u32 = 0xF;
+/// 4 wait states: range 1 boost, 136–170 MHz.
+const FLASH_ACR_LATENCY_4WS: u32 = 4;
+const FLASH_ACR_PRFTEN: u32 = 1 << 8;
+const FLASH_ACR_DCEN: u32 = 1 << 10;
+const FLASH_ACR_DCRST: u32 = 1 << 12;
+const FLASH_OPTR_DBANK: u32 = 1 << 22;
+
+const DBGMCU_APB1FZR1_DBG_IWDG_STOP: u32 = 1 << 12;
+
+const IWDG_KEY_START: u16 = 0xCCCC;
+const IWDG_KEY_UNLOCK: u16 = 0x5555;
+const IWDG_KEY_FEED: u16 = 0xAAAA;
+/// Prescaler /4: LSI 32 kHz → 8 kHz.
+const IWDG_PR_DIV4: u16 = 0;
+/// 500 ms at 8 kHz.
+const IWDG_RLR_500MS: u16 = 500 * 8 - 1;
 
 const TIM_CR1_CEN: u32 = 1 << 0;
 const TIM_CR2_MMS_UPDATE: u32 = 0b010 << 4;
@@ -109,12 +320,15 @@ const DAC_CR_TEN1: u32 = 1 << 1;
 const DAC_CR_TSEL1_TIM6: u32 = 7 << 2;
 const DAC_CR_DMAEN1: u32 = 1 << 12;
 const DAC_MCR_HFSEL_160: u32 = 0b10 << 14;
+const DAC_SR_DMAUDR1: u32 = 1 << 13;
 
 const ADC_CR_ADEN: u32 = 1 << 0;
 const ADC_CR_ADSTART: u32 = 1 << 2;
 const ADC_CR_ADVREGEN: u32 = 1 << 28;
-const ADC_CR_DEEPPWD: u32 = 1 << 29;
 const ADC_CR_ADCAL: u32 = 1 << 31;
+/// Core cycles from the end of ADCAL to ADEN: at least 4 ADC clocks (HCLK/4), 16 core cycles;
+/// 64 leaves a margin.
+const ADC_CAL_TO_ADEN_CYCLES: u32 = 64;
 const ADC_ISR_ADRDY: u32 = 1 << 0;
 const ADC_CFGR_DMAEN: u32 = 1 << 0;
 const ADC_CFGR_DMACFG: u32 = 1 << 1;
@@ -142,7 +356,11 @@ const DMA_CCR_MSIZE_16: u32 = 0b01 << 10;
 const DMA_CCR_PL_VERY_HIGH: u32 = 0b11 << 12;
 const DMA_ISR_TCIF1: u32 = 1 << 1;
 const DMA_ISR_HTIF1: u32 = 1 << 2;
+const DMA_ISR_TEIF1: u32 = 1 << 3;
+const DMA_ISR_TEIF2: u32 = 1 << 7;
 const DMA_IFCR_CGIF1: u32 = 1 << 0;
+const DMA_IFCR_CGIF2: u32 = 1 << 4;
+const DMA_IFCR_CTEIF2: u32 = 1 << 7;
 
 const GPIOA_MODER_PA2_PA3_AF: u32 = (0b10 << 4) | (0b10 << 6);
 const GPIOA_MODER_PA2_PA3_MASK: u32 = (0b11 << 4) | (0b11 << 6);
@@ -174,6 +392,7 @@ fn pac() -> device::Peripherals {
 pub struct Stream {
     frames: [AdcFrame; BATCH],
     late_seen: bool,
+    fault_seen: bool,
 }
 
 impl Stream {
@@ -186,11 +405,14 @@ impl Stream {
         Self {
             frames: [AdcFrame::default(); BATCH],
             late_seen: false,
+            fault_seen: false,
         }
     }
 
     /// Prefill both DAC halves from `engine`, configure the converters and DMA and start the
-    /// trigger timer. Called once from `init` with interrupts disabled.
+    /// trigger timer. Called once from `init` with interrupts disabled. If ADC1 does not
+    /// calibrate or become ready within its bound, records [`BootError::AdcCalibration`] or
+    /// [`BootError::AdcReady`] and leaves the timer stopped (no batches, readings stall).
     pub fn start(&mut self, engine: &mut SampleEngine) {
         let dp = pac();
         // SAFETY: init context, the DMA is not running yet; the buffers are only reached
@@ -220,6 +442,13 @@ impl Stream {
             tim.arr().write(|w| w.bits(SYSCLK_HZ / SAMPLE_RATE_HZ - 1));
             tim.cr2().write(|w| w.bits(TIM_CR2_MMS_UPDATE));
             tim.egr().write(|w| w.bits(TIM_EGR_UG));
+
+            // Stale fault flags would be counted as faults of this stream: clear channel 1's and
+            // 2's DMA flags and the DAC underrun (RM0440 DMA_IFCR, DAC_SR; no HAL driver).
+            dp.DMA1
+                .ifcr()
+                .write(|w| w.bits(DMA_IFCR_CGIF1 | DMA_IFCR_CGIF2));
+            dp.DAC1.sr().write(|w| w.bits(DAC_SR_DMAUDR1));
 
             // DMAMUX: request lines of the two DMA1 channels.
             dp.DMAMUX.ccr(0).write(|w| w.bits(DMAMUX_REQ_ADC1));
@@ -280,8 +509,16 @@ impl Stream {
             adc.cr().write(|w| w.bits(0)); // leave deep power-down
             adc.cr().write(|w| w.bits(ADC_CR_ADVREGEN));
             cortex_m::asm::delay(SYSCLK_HZ / 50_000); // t_ADCVREG_STUP = 20 µs
+
+            // Calibration, bounded (RM0440 21.4.8; the HAL's ADC driver is not used).
             adc.cr().write(|w| w.bits(ADC_CR_ADVREGEN | ADC_CR_ADCAL));
-            while adc.cr().read().bits() & ADC_CR_ADCAL != 0 {}
+            if !spin_until(ADC_TIMEOUT, || adc.cr().read().bits() & ADC_CR_ADCAL == 0) {
+                record(BootError::AdcCalibration);
+                return;
+            }
+            // ADEN must not be set within 4 ADC clock cycles of ADCAL's end (RM0440 21.4.8,
+            // 21.4.9); the register writes below take fewer, hence the explicit delay.
+            cortex_m::asm::delay(ADC_CAL_TO_ADEN_CYCLES);
             adc.cfgr().write(|w| {
                 w.bits(
                     ADC_CFGR_DMAEN
@@ -294,11 +531,14 @@ impl Stream {
             adc.smpr1().write(|w| w.bits(ADC_SMPR1_IN1_IN2));
             adc.sqr1().write(|w| w.bits(ADC_SQR1_SEQ));
             adc.isr().write(|w| w.bits(ADC_ISR_ADRDY));
+            // Enable, bounded wait for ADRDY (RM0440 21.4.9).
             adc.cr().write(|w| w.bits(ADC_CR_ADVREGEN | ADC_CR_ADEN));
-            while adc.isr().read().bits() & ADC_ISR_ADRDY == 0 {}
+            if !spin_until(ADC_TIMEOUT, || adc.isr().read().bits() & ADC_ISR_ADRDY != 0) {
+                record(BootError::AdcReady);
+                return;
+            }
             adc.cr()
                 .write(|w| w.bits(ADC_CR_ADVREGEN | ADC_CR_ADEN | ADC_CR_ADSTART));
-            debug_assert_eq!(adc.cr().read().bits() & ADC_CR_DEEPPWD, 0);
 
             // Go: every TIM6 update now plays one DAC code and converts one frame.
             tim.cr1().write(|w| w.bits(TIM_CR1_CEN));
@@ -306,12 +546,41 @@ impl Stream {
     }
 
     /// Acknowledge the DMA half/full-transfer interrupt; returns the ADC half just captured
-    /// (de-interleaved into frames) and the DAC half just played (to refill).
+    /// (de-interleaved into frames) and the DAC half just played (to refill). Counts DMA
+    /// transfer errors and DAC underruns ([`stream_faults`]); a batch that saw one is late.
     pub fn capture(&mut self) -> (&[AdcFrame], &mut [DacCode]) {
         let dp = pac();
         let flags = dp.DMA1.isr().read().bits();
-        // SAFETY: write-one-to-clear of channel 1's flags.
-        unsafe { dp.DMA1.ifcr().write(|w| w.bits(DMA_IFCR_CGIF1)) };
+        // Faults the register-level stream must watch itself (no HAL driver; RM0440 DMA_ISR
+        // TEIFx, DAC_SR DMAUDR1): on a transfer error the DMA disables the channel, on an
+        // underrun the DAC stops its DMA requests.
+        let dac_sr = dp.DAC1.sr().read().bits();
+        let te2 = flags & DMA_ISR_TEIF2 != 0;
+        // SAFETY: write-one-to-clear of channel 1's flags, of channel 2's transfer error flag
+        // and of the DAC's underrun flag.
+        unsafe {
+            dp.DMA1
+                .ifcr()
+                .write(|w| w.bits(DMA_IFCR_CGIF1 | if te2 { DMA_IFCR_CTEIF2 } else { 0 }));
+        }
+        let transfer_errors = (flags & DMA_ISR_TEIF1 != 0) as u32 + te2 as u32;
+        let underrun = dac_sr & DAC_SR_DMAUDR1 != 0;
+        if underrun {
+            // SAFETY: as above.
+            unsafe { dp.DAC1.sr().write(|w| w.bits(DAC_SR_DMAUDR1)) };
+            DAC_UNDERRUNS.fetch_add(1, Ordering::Relaxed);
+        }
+        if transfer_errors != 0 {
+            DMA_TRANSFER_ERRORS.fetch_add(transfer_errors, Ordering::Relaxed);
+        }
+        self.fault_seen = underrun || transfer_errors != 0;
+        if self.fault_seen {
+            // Either fault ends the stream as a whole (a disabled DMA channel, a DAC that no
+            // longer requests data): stop the trigger, so the measurement task's readings end
+            // as `stalled` rather than run on with a dead drive or stale samples.
+            // SAFETY: TIM6 belongs to this driver.
+            unsafe { dp.TIM6.cr1().write(|w| w.bits(0)) };
+        }
         let both = DMA_ISR_HTIF1 | DMA_ISR_TCIF1;
         // Both flags at once: a whole half went by unserviced.
         self.late_seen = flags & both == both;
@@ -334,10 +603,11 @@ impl Stream {
     }
 
     /// True when the handler was late: a half went by unserviced, or the next half completed
-    /// before the handler finished.
+    /// before the handler finished — or the batch saw a DMA transfer error or DAC underrun
+    /// (its data are stale; [`stream_faults`] tells the two apart).
     pub fn late(&self) -> bool {
         let flags = pac().DMA1.isr().read().bits();
-        self.late_seen || flags & (DMA_ISR_HTIF1 | DMA_ISR_TCIF1) != 0
+        self.late_seen || self.fault_seen || flags & (DMA_ISR_HTIF1 | DMA_ISR_TCIF1) != 0
     }
 }
 
@@ -384,13 +654,49 @@ impl Uart {
     }
 }
 
-/// The independent watchdog (LSI): 500 ms timeout, fed by the measurement task while alive.
-pub struct Watchdog(IndependentWatchdog);
+/// The independent watchdog (LSI): 500 ms timeout, fed by the measurement task while alive;
+/// frozen while a debugger halts the core.
+pub struct Watchdog(());
 
 impl Watchdog {
+    /// Freeze the IWDG under the debugger, start it, set 500 ms. Register level rather than
+    /// the HAL's `IndependentWatchdog::start`, whose waits on IWDG_SR are unbounded and which
+    /// carries an `expect`: here a wait that times out records [`BootError::Watchdog`] and the
+    /// IWDG keeps its reset configuration (/4, reload 0xFFF: about 512 ms).
+    fn start() -> Self {
+        let dp = pac();
+        // SAFETY: DBGMCU and IWDG belong to this driver; values per RM0440 (DBGMCU_APB1FZR1,
+        // IWDG_KR/PR/RLR/SR).
+        unsafe {
+            // Freeze the IWDG counter while the core is halted (DBG_IWDG_STOP; the HAL has no
+            // DBGMCU API; RM0440 DBGMCU chapter, DBGMCU_APB1FZR1), so a breakpoint does not
+            // reset the board.
+            dp.DBGMCU
+                .apb1l_fz()
+                .modify(|r, w| w.bits(r.bits() | DBGMCU_APB1FZR1_DBG_IWDG_STOP));
+            let iwdg = &dp.IWDG;
+            iwdg.kr().write(|w| w.bits(IWDG_KEY_START));
+            iwdg.kr().write(|w| w.bits(IWDG_KEY_UNLOCK));
+            // PR and RLR take writes only while PVU/RVU are clear, and PVU/RVU/WVU clear once
+            // the LSI domain took the values (RM0440 IWDG chapter, IWDG_SR): bounded waits
+            // before and after.
+            let idle = || iwdg.sr().read().bits() == 0;
+            if spin_until(IWDG_TIMEOUT, idle) {
+                iwdg.pr().write(|w| w.bits(IWDG_PR_DIV4));
+                iwdg.rlr().write(|w| w.bits(IWDG_RLR_500MS));
+            }
+            if !spin_until(IWDG_TIMEOUT, idle) {
+                record(BootError::Watchdog);
+            }
+            iwdg.kr().write(|w| w.bits(IWDG_KEY_FEED));
+        }
+        Watchdog(())
+    }
+
     /// Feed the watchdog.
     pub fn feed(&mut self) {
-        self.0.feed();
+        // SAFETY: the refresh key (RM0440 IWDG_KR).
+        unsafe { pac().IWDG.kr().write(|w| w.bits(IWDG_KEY_FEED)) };
     }
 }
 
@@ -401,13 +707,19 @@ pub enum FlashError {
     Args(NorFlashErrorKind),
     /// The controller reported an error (FLASH_SR bits).
     Controller(u32),
+    /// FLASH_SR.BSY did not clear within its bound.
+    Busy,
+    /// The flash is in single-bank mode (FLASH_OPTR.DBANK = 0): erase and program refused.
+    SingleBank,
 }
 
 impl NorFlashError for FlashError {
     fn kind(&self) -> NorFlashErrorKind {
         match self {
             FlashError::Args(k) => *k,
-            FlashError::Controller(_) => NorFlashErrorKind::Other,
+            FlashError::Controller(_) | FlashError::Busy | FlashError::SingleBank => {
+                NorFlashErrorKind::Other
+            }
         }
     }
 }
@@ -434,18 +746,41 @@ const FLASH_SR_BSY: u32 = 1 << 16;
 const FLASH_SR_ERRORS: u32 = 0xC3FA;
 const FLASH_SR_EOP: u32 = 1 << 0;
 
-/// The internal flash as a NOR flash (dual-bank mode, the reset default of the STM32G474RE:
-/// 2 KiB pages, 8-byte double-word programming). Offsets count from 0x0800_0000. The store
-/// lives in bank 2 while the code runs from bank 1, so erasing and programming do not stall
-/// the sample interrupt (read-while-write across banks).
+/// The internal flash as a NOR flash (dual-bank mode, the factory default of the
+/// STM32G474RE: 2 KiB pages, 8-byte double-word programming; checked in FLASH_OPTR.DBANK, and
+/// erase and program are refused in single-bank mode). Offsets count from 0x0800_0000. The
+/// store lives in bank 2 while the code runs from bank 1, so erasing and programming do not
+/// stall the sample interrupt (read-while-write across banks). Every wait on FLASH_SR.BSY is
+/// bounded ([`FlashError::Busy`]). Register level: the HAL's `FlashWriter` waits on BSY
+/// without a bound and knows nothing of DBANK or the data cache.
 pub struct InternalFlash(());
 
 impl InternalFlash {
-    fn wait() -> Result<(), FlashError> {
+    /// Dual-bank mode (RM0440 3.3.1, FLASH_OPTR.DBANK; the HAL does not check it).
+    fn dual_bank() -> bool {
+        pac().FLASH.optr().read().bits() & FLASH_OPTR_DBANK != 0
+    }
+
+    /// Bounded wait for BSY to clear (RM0440 3.3.7/3.3.8, step "check BSY"; the HAL's waits
+    /// are unbounded).
+    fn wait_idle() -> Result<(), FlashError> {
         let dp = pac();
-        while dp.FLASH.sr().read().bits() & FLASH_SR_BSY != 0 {}
+        if spin_until(FLASH_TIMEOUT, || {
+            dp.FLASH.sr().read().bits() & FLASH_SR_BSY == 0
+        }) {
+            Ok(())
+        } else {
+            Err(FlashError::Busy)
+        }
+    }
+
+    /// Wait for the operation to end, then read and clear FLASH_SR: its error flags are the
+    /// operation's result.
+    fn finish() -> Result<(), FlashError> {
+        Self::wait_idle()?;
+        let dp = pac();
         let sr = dp.FLASH.sr().read().bits();
-        // SAFETY: write-one-to-clear of the status flags.
+        // SAFETY: write-one-to-clear of the status flags (RM0440 FLASH_SR).
         unsafe {
             dp.FLASH
                 .sr()
@@ -458,7 +793,13 @@ impl InternalFlash {
         }
     }
 
+    /// Unlock, wait for idle, clear stale error flags (a flag left by an earlier operation
+    /// would block the next one: PGSERR and friends, RM0440 3.3.7/3.3.8 "check and clear all
+    /// error programming flags due to a previous programming"), run `f`, lock again.
     fn unlocked<T>(f: impl FnOnce() -> Result<T, FlashError>) -> Result<T, FlashError> {
+        if !Self::dual_bank() {
+            return Err(FlashError::SingleBank);
+        }
         let dp = pac();
         // SAFETY: the documented unlock sequence, then CR is restored to locked.
         unsafe {
@@ -467,10 +808,38 @@ impl InternalFlash {
                 dp.FLASH.keyr().write(|w| w.bits(FLASH_KEY2));
             }
         }
-        let r = Self::wait().and_then(|_| f());
-        // SAFETY: lock again.
+        let r = Self::wait_idle().and_then(|_| {
+            // SAFETY: write-one-to-clear of stale flags before the operation (RM0440 FLASH_SR).
+            unsafe {
+                dp.FLASH
+                    .sr()
+                    .write(|w| w.bits(FLASH_SR_ERRORS | FLASH_SR_EOP))
+            };
+            f()
+        });
+        // SAFETY: lock again (clears PER/PG with it).
         unsafe { dp.FLASH.cr().write(|w| w.bits(FLASH_CR_LOCK)) };
         r
+    }
+
+    /// Reset the flash data cache so reads of the store see what the operation left, not
+    /// lines cached before it (RM0440 3.3.4: DCRST may only be written with DCEN = 0; the HAL
+    /// has no cache maintenance). Bank 2 holds no code, so the instruction cache needs none.
+    fn flush_data_cache() {
+        let dp = pac();
+        let acr = dp.FLASH.acr().read().bits();
+        if acr & FLASH_ACR_DCEN == 0 {
+            return;
+        }
+        let off = acr & !FLASH_ACR_DCEN;
+        // SAFETY: FLASH_ACR sequence DCEN off, DCRST pulse, DCEN back; nothing else writes ACR
+        // after boot.
+        unsafe {
+            dp.FLASH.acr().write(|w| w.bits(off));
+            dp.FLASH.acr().write(|w| w.bits(off | FLASH_ACR_DCRST));
+            dp.FLASH.acr().write(|w| w.bits(off));
+            dp.FLASH.acr().write(|w| w.bits(acr));
+        }
     }
 }
 
@@ -504,7 +873,7 @@ impl NorFlash for InternalFlash {
         for page in (from / FLASH_PAGE as u32)..(to / FLASH_PAGE as u32) {
             let bank2 = page >= FLASH_BANK_PAGES;
             let pnb = page % FLASH_BANK_PAGES;
-            Self::unlocked(|| {
+            let r = Self::unlocked(|| {
                 let dp = pac();
                 let bker = if bank2 { FLASH_CR_BKER } else { 0 };
                 // SAFETY: page erase per RM0440 3.3.7.
@@ -516,15 +885,18 @@ impl NorFlash for InternalFlash {
                         .cr()
                         .write(|w| w.bits(FLASH_CR_PER | bker | (pnb << 3) | FLASH_CR_STRT));
                 }
-                Self::wait()
-            })?;
+                Self::finish()
+            });
+            // Also after a failed erase: the page may be partly erased.
+            Self::flush_data_cache();
+            r?;
         }
         Ok(())
     }
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
         check_write(self, offset, bytes.len())?;
-        Self::unlocked(|| {
+        let r = Self::unlocked(|| {
             let dp = pac();
             // SAFETY: double-word programming per RM0440 3.3.8: PG set, two word writes.
             unsafe { dp.FLASH.cr().write(|w| w.bits(FLASH_CR_PG)) };
@@ -537,10 +909,13 @@ impl NorFlash for InternalFlash {
                     write_volatile(addr as *mut u32, lo);
                     write_volatile((addr + 4) as *mut u32, hi);
                 }
-                Self::wait()?;
+                Self::finish()?;
             }
             Ok(())
-        })
+        });
+        // A line read between the erase and this write may hold the erased bytes.
+        Self::flush_data_cache();
+        r
     }
 }
 
@@ -556,13 +931,144 @@ pub struct Parts {
     pub uart: Uart,
 }
 
-/// Set the board up: 170 MHz from HSI16 through the PLL (range 1 boost), cycle counter, UART,
-/// watchdog. Call once, from `init`.
+/// Set the board up: cycle counter; 170 MHz from the 24 MHz HSE crystal through the PLL
+/// (HSI16 if the crystal does not start), range 1 boost; UART; watchdog (frozen under the
+/// debugger). Call once, from `init`. Never panics or waits without a bound: see
+/// [`boot_error`] and [`clock_source`] for what happened.
 pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
+    // The cycle counter first: it times the bounded waits below.
+    core.DCB.enable_trace();
+    core.DWT.enable_cycle_counter();
+    match configure_clocks() {
+        Ok(source) => CLOCK.store(source, Ordering::Relaxed),
+        Err(e) => record(e),
+    }
+    check_flash();
+    Parts {
+        stream: Stream::new(),
+        watchdog: Watchdog::start(),
+        flash: InternalFlash(()),
+        uart: Uart::new(),
+    }
+}
+
+/// The flash controller at boot: idle, no stale error flags, dual-bank mode.
+fn check_flash() {
+    if InternalFlash::wait_idle().is_err() {
+        record(BootError::FlashBusy);
+    } else {
+        // SAFETY: write-one-to-clear of stale FLASH_SR flags (RM0440 FLASH_SR).
+        unsafe {
+            pac()
+                .FLASH
+                .sr()
+                .write(|w| w.bits(FLASH_SR_ERRORS | FLASH_SR_EOP))
+        };
+    }
+    if !InternalFlash::dual_bank() {
+        record(BootError::FlashSingleBank);
+    }
+}
+
+/// The clock tree: the HAL's `Rcc::freeze` with what it leaves out done around it. Returns
+/// the [`CLOCK`] code of the PLL's source; on an error the core stays on HSI16 at 16 MHz.
+fn configure_clocks() -> Result<u8, BootError> {
     let dp = pac();
+    // SAFETY (all `bits` writes): RCC, PWR and FLASH_ACR belong to this function during
+    // `init`; values per RM0440.
+    unsafe {
+        // PWR's bus clock. The HAL's `Rcc::freeze` reads PWR_CR1 (`pwr::current_vos`) and
+        // writes PWR_CR5 (boost) but neither `PwrExt::constrain` nor `RccExt::constrain` /
+        // `freeze` sets RCC_APB1ENR1.PWREN (only `Rcc::unlock_rtc` does); unclocked, PWR_CR1
+        // reads 0 and `current_vos` hits `unreachable!()`. RM0440 7.4 (RCC_APB1ENR1), 6.4.1
+        // (PWR_CR1). The read back is the delay RM0440 asks for after a clock enable.
+        dp.RCC
+            .apb1enr1()
+            .modify(|r, w| w.bits(r.bits() | RCC_APB1ENR1_PWREN));
+        let _ = dp.RCC.apb1enr1().read().bits();
+    }
+    // The HAL's freeze handles only range 1 (normal or boost) → range 1 boost and has `todo!`
+    // for the rest, and cannot stop a PLL that already clocks the core (its wait for PLLRDY to
+    // clear would never end): check both before calling it (RM0440 6.1.5, 7.4.3 SWS).
+    let vos = dp.PWR.cr1().read().bits() & PWR_CR1_VOS_MASK;
+    let sws = dp.RCC.cfgr().read().bits() & RCC_CFGR_SWS_MASK;
+    if vos != PWR_CR1_VOS_RANGE1 || sws == RCC_CFGR_SWS_PLL {
+        return Err(BootError::PowerRange);
+    }
+    unsafe {
+        // Flash: prefetch on (the HAL never sets PRFTEN; RM0440 3.3.4), and the 4 wait states
+        // of 136–170 MHz in range 1 boost (RM0440 3.3.3, Table 9) set and read back *before*
+        // the clock goes up, as RM0440 3.3.3 asks (the HAL's `configure_wait_states` writes
+        // the same LATENCY but does not read it back). 4 wait states are valid at 16 MHz too.
+        dp.FLASH.acr().modify(|r, w| {
+            w.bits((r.bits() & !FLASH_ACR_LATENCY_MASK) | FLASH_ACR_LATENCY_4WS | FLASH_ACR_PRFTEN)
+        });
+    }
+    let want = FLASH_ACR_LATENCY_4WS | FLASH_ACR_PRFTEN;
+    if !spin_until(ACR_TIMEOUT, || {
+        dp.FLASH.acr().read().bits() & (FLASH_ACR_LATENCY_MASK | FLASH_ACR_PRFTEN) == want
+    }) {
+        return Err(BootError::FlashLatency);
+    }
+
+    // HSE: the NUCLEO-G474RE's 24 MHz crystal X3 (not a bypass clock). The HAL's `enable_hse`
+    // waits for HSERDY without a bound; start it here with a bounded wait (RM0440 7.2.1, HSE
+    // clock) and hand it to the HAL only once it is ready. Otherwise switch it off again and
+    // run the PLL from HSI16.
+    unsafe {
+        dp.RCC
+            .cr()
+            .modify(|r, w| w.bits((r.bits() & !RCC_CR_HSEBYP) | RCC_CR_HSEON));
+    }
+    let hse = spin_until(HSE_TIMEOUT, || {
+        dp.RCC.cr().read().bits() & RCC_CR_HSERDY != 0
+    });
+    let (mux, m, src_bits, code) = if hse {
+        // 24 MHz / 6 = 4 MHz PLL input.
+        (
+            PllSrc::HSE(HSE_HZ.Hz()),
+            PllMDiv::DIV_6,
+            RCC_PLLCFGR_SRC_HSE | (5 << 4),
+            1,
+        )
+    } else {
+        unsafe {
+            dp.RCC.cr().modify(|r, w| w.bits(r.bits() & !RCC_CR_HSEON));
+        }
+        // 16 MHz / 4 = 4 MHz PLL input.
+        (
+            PllSrc::HSI,
+            PllMDiv::DIV_4,
+            RCC_PLLCFGR_SRC_HSI16 | (3 << 4),
+            2,
+        )
+    };
+
+    // PLL lock probe: the HAL's `config_pll` waits for PLLRDY without a bound. Lock the same
+    // configuration (4 MHz × 85 / 2 = 170 MHz, RM0440 7.2.4 / 7.4.4 PLLCFGR) once here with a
+    // bounded wait, switch it off again and let the HAL redo it: a PLL that locked from this
+    // input will lock again.
+    unsafe {
+        dp.RCC
+            .pllcfgr()
+            .write(|w| w.bits(src_bits | RCC_PLLCFGR_N85 | RCC_PLLCFGR_REN_R2));
+        dp.RCC.cr().modify(|r, w| w.bits(r.bits() | RCC_CR_PLLON));
+    }
+    let locked = spin_until(PLL_TIMEOUT, || {
+        dp.RCC.cr().read().bits() & RCC_CR_PLLRDY != 0
+    });
+    unsafe {
+        dp.RCC.cr().modify(|r, w| w.bits(r.bits() & !RCC_CR_PLLON));
+    }
+    if !locked {
+        return Err(BootError::PllLock);
+    }
+
+    // The HAL: range 1 boost (R1MODE via the RM0440 6.1.5 sequence: AHB /2, boost, wait
+    // states, switch, 1 µs, AHB /1), 4 wait states, PLL, SYSCLK switch.
     let pll = PllConfig {
-        mux: PllSrc::HSI,
-        m: PllMDiv::DIV_4,
+        mux,
+        m,
         n: PllNMul::MUL_85,
         r: Some(PllRDiv::DIV_2),
         q: None,
@@ -577,14 +1083,5 @@ pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
         .RCC
         .constrain()
         .freeze(Config::new(SysClockSrc::PLL).pll_cfg(pll), pwr);
-    core.DCB.enable_trace();
-    core.DWT.enable_cycle_counter();
-    let mut iwdg = IndependentWatchdog::new(dp.IWDG);
-    iwdg.start(500.millis());
-    Parts {
-        stream: Stream::new(),
-        watchdog: Watchdog(iwdg),
-        flash: InternalFlash(()),
-        uart: Uart::new(),
-    }
+    Ok(code)
 }
