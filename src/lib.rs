@@ -24,6 +24,8 @@ pub mod estimate;
 pub mod hal;
 pub mod linalg;
 pub mod measure;
+pub mod pipeline;
+pub mod profile;
 pub mod runner;
 pub mod status;
 pub mod store;
@@ -32,5 +34,6 @@ pub mod units;
 
 pub use calibration::PowerLaw;
 pub use measure::{Method, Reading, SweepMeasurement};
+pub use profile::{AirReference, UnitProfile};
 pub use status::{Failure, Status};
 pub use units::{AdcCode, DacCode, Farads, Hz, KPa, Newtons, Seconds, Siemens, Volts};

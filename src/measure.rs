@@ -5,7 +5,6 @@
 //! [`crate::runner`]): it hands out one [`PointPlan`] at a time, takes back each finished
 //! [`PointRaw`], and at the end estimates the resonance and maps it through the calibration.
 
-use crate::calibration::PowerLaw;
 use crate::engine::{PointPlan, PointRaw};
 #[cfg(feature = "all-methods")]
 use crate::estimate::hold::{Hold, HoldSettings};
@@ -14,6 +13,8 @@ use crate::estimate::ringdown::{Ringdown, RingdownSettings};
 use crate::estimate::staged::{Refine, Staged, StagedSettings};
 use crate::estimate::{self, Estimate};
 use crate::hal::FrontEndScale;
+use crate::pipeline::conclude;
+use crate::profile::UnitProfile;
 use crate::status::{Failure, Status};
 use crate::sweep::{
     point_from_raw, PointError, SettingsError, Sweep, SweepPoint, SweepSettings, MAX_POINTS,
@@ -67,6 +68,9 @@ pub enum Settings {
     #[cfg(feature = "all-methods")]
     Hold(HoldSettings),
 }
+
+/// The default method of every caller: the firmware's measurement task and `probe-bench`.
+pub const DEFAULT_METHOD: Method = Method::Auto;
 
 impl From<&SweepSettings> for Settings {
     fn from(s: &SweepSettings) -> Self {
@@ -215,27 +219,7 @@ impl Method {
     }
 }
 
-pub use crate::store::AirReference;
-
-/// A reading whose Q exceeds this fraction of the free Q may be free air.
-pub const NO_CONTACT_Q_FRACTION: f32 = 0.6;
-/// ... if its resonance is also this close to the free one.
-pub const NO_CONTACT_SPAN_HZ: f32 = 5.0;
-
-/// How contact is told apart from no contact with the stored [`AirReference`].
-///
-/// Frequency alone cannot tell: near 330 kPa the loaded resonance equals the free one. The
-/// quality factor can: tissue damps the mode (loaded Q 7–15 over 8–5000 kPa in `hal-sim`),
-/// while the free probe rings with Q ≈ 40. A reading looks free when its Q exceeds
-/// [`NO_CONTACT_Q_FRACTION`] of the free Q *and* its resonance lies within
-/// [`NO_CONTACT_SPAN_HZ`] of the free one (a rigid contact also rings well, but far above).
-impl AirReference {
-    /// True when `(f, q)` looks like the free probe.
-    pub fn looks_free(&self, f: Hz, q: f32) -> bool {
-        q > NO_CONTACT_Q_FRACTION * self.free_q
-            && libm::fabsf(f.0 - self.free_resonance.0) < NO_CONTACT_SPAN_HZ
-    }
-}
+pub use crate::profile::AirReference;
 
 /// The outcome of one reading: a number with its uncertainty, or a failure code.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -278,74 +262,6 @@ impl Reading {
             probe_time,
             points,
         }
-    }
-
-    /// Apply the contact check of `air` (readings without a Q cannot be checked).
-    pub fn check_contact(mut self, air: Option<&AirReference>) -> Self {
-        if let (Some(air), Some(f), Some(q)) = (air, self.resonance, self.q) {
-            let failed_for_range = matches!(
-                self.status,
-                Status::Failed(Failure::AboveRange | Failure::BelowRange)
-            );
-            if (self.status.is_ok() || failed_for_range) && air.looks_free(f, q) {
-                self.status = Status::Failed(Failure::NoContact);
-                self.modulus = None;
-                self.modulus_sigma = None;
-                self.modulus_sigma_repeat = None;
-            }
-        }
-        self
-    }
-
-    /// Check the contact condition against the unit's calibrated Q(E) curve: an ok reading
-    /// whose Q is off it becomes `bad_contact` (readings without a Q cannot be checked).
-    pub fn check_condition(mut self, q_model: Option<&crate::calibration::QModel>) -> Self {
-        if let (Status::Ok, Some(m), Some(e), Some(q)) =
-            (self.status, q_model, self.modulus, self.q)
-        {
-            if !m.holds(e.0 as f64, q as f64) {
-                self.status = Status::Failed(Failure::BadContact);
-                self.modulus = None;
-                self.modulus_sigma = None;
-                self.modulus_sigma_repeat = None;
-            }
-        }
-        self
-    }
-
-    /// Map an estimate through `cal` into a reading.
-    pub fn from_estimate(
-        method: Method,
-        est: Result<Estimate, Failure>,
-        cal: &PowerLaw,
-        probe_time: Seconds,
-        points: u16,
-    ) -> Self {
-        let est = match est {
-            Ok(e) => e,
-            Err(f) => return Self::failed(method, f, probe_time, points),
-        };
-        let mut r = Self {
-            status: Status::Ok,
-            method,
-            resonance: Some(est.resonance),
-            resonance_sigma: Some(est.sigma),
-            modulus: None,
-            modulus_sigma: None,
-            modulus_sigma_repeat: None,
-            q: est.q,
-            probe_time,
-            points,
-        };
-        match cal.invert(est.resonance, est.sigma) {
-            Ok(m) => {
-                r.modulus = Some(m.value);
-                r.modulus_sigma = Some(m.sigma);
-                r.modulus_sigma_repeat = Some(m.sigma_repeat);
-            }
-            Err(f) => r.status = Status::Failed(f),
-        }
-        r
     }
 }
 
@@ -441,18 +357,22 @@ impl SweepMeasurement {
         )
     }
 
-    /// Estimate and calibrate.
-    pub fn finish(&self, cal: &PowerLaw) -> Reading {
-        let n = self.points.len() as u16;
-        if let Some(f) = self.failure {
-            return Reading::failed(self.method, f, self.probe_time(), n);
+    /// The estimate of the points (or the failure that ended the sweep).
+    pub fn estimate(&self) -> Result<Estimate, Failure> {
+        match self.failure {
+            Some(f) => Err(f),
+            None => self.method.estimate(&self.points),
         }
-        Reading::from_estimate(
+    }
+
+    /// The reading, through the one [`pipeline`](crate::pipeline) with the unit's profile.
+    pub fn finish(&self, unit: &UnitProfile) -> Reading {
+        conclude(
             self.method,
-            self.method.estimate(&self.points),
-            cal,
+            self.estimate(),
+            unit,
             self.probe_time(),
-            n,
+            self.points.len() as u16,
         )
     }
 }
@@ -465,8 +385,8 @@ pub trait Measurement {
     fn accept(&mut self, raw: &PointRaw) -> Option<SweepPoint>;
     /// True when no more points are needed.
     fn is_complete(&self) -> bool;
-    /// Estimate and calibrate.
-    fn finish(&self, cal: &PowerLaw) -> Reading;
+    /// The reading, through the one [`pipeline`](crate::pipeline) with the unit's profile.
+    fn finish(&self, unit: &UnitProfile) -> Reading;
 }
 
 impl Measurement for SweepMeasurement {
@@ -479,8 +399,8 @@ impl Measurement for SweepMeasurement {
     fn is_complete(&self) -> bool {
         SweepMeasurement::is_complete(self)
     }
-    fn finish(&self, cal: &PowerLaw) -> Reading {
-        SweepMeasurement::finish(self, cal)
+    fn finish(&self, unit: &UnitProfile) -> Reading {
+        SweepMeasurement::finish(self, unit)
     }
 }
 
@@ -525,13 +445,32 @@ pub struct Procedure {
 
 impl Procedure {
     /// Validate `settings` for `method` on a board of `scale`; `now_sample` is the engine's
-    /// sample count when the reading starts.
+    /// sample count when the reading starts. `unit` supplies the unit data a method measures
+    /// with: hold subtracts the air reference's static admittance (its settings' own `C0`, `G0`
+    /// apply only to a unit without one, whose readings the pipeline then refuses).
     pub fn new(
         method: Method,
         settings: &Settings,
         scale: &FrontEndScale,
         now_sample: u64,
+        unit: &UnitProfile,
     ) -> Result<Self, SettingsError> {
+        #[cfg(feature = "all-methods")]
+        let with_air;
+        #[cfg(feature = "all-methods")]
+        let settings = match (settings, unit.air) {
+            (Settings::Hold(h), Some(air)) => {
+                with_air = Settings::Hold(HoldSettings {
+                    static_capacitance: air.static_capacitance,
+                    static_conductance: air.static_conductance,
+                    ..*h
+                });
+                &with_air
+            }
+            _ => settings,
+        };
+        #[cfg(not(feature = "all-methods"))]
+        let _ = unit;
         let inner = match (method, settings) {
             (Method::Paper | Method::SweepG, Settings::Sweep(s)) => {
                 Inner::Sweep(SweepMeasurement::new(method, s, scale, now_sample)?)
@@ -660,44 +599,32 @@ impl Measurement for Procedure {
         }
     }
 
-    fn finish(&self, cal: &PowerLaw) -> Reading {
+    fn finish(&self, unit: &UnitProfile) -> Reading {
         let t = self.probe_time();
-        match &self.inner {
-            Inner::Sweep(m) => {
-                let mut r = m.finish(cal);
-                r.probe_time = t;
-                r
-            }
-            Inner::Staged(m) => {
-                Reading::from_estimate(self.method, m.estimate(), cal, t, m.len() as u16)
-            }
+        let (method, est, points) = match &self.inner {
+            Inner::Sweep(m) => (self.method, m.estimate(), m.points().len() as u16),
+            Inner::Staged(m) => (self.method, m.estimate(), m.len() as u16),
             #[cfg(feature = "all-methods")]
-            Inner::Ringdown(m) => {
-                Reading::from_estimate(self.method, m.estimate(), cal, t, self.windows)
-            }
+            Inner::Ringdown(m) => (self.method, m.estimate(), self.windows),
             #[cfg(feature = "all-methods")]
-            Inner::Hold(m) => {
-                Reading::from_estimate(self.method, m.estimate(), cal, t, self.windows)
-            }
+            Inner::Hold(m) => (self.method, m.estimate(), self.windows),
             Inner::Auto {
                 first,
                 first_result,
                 fallback,
             } => match fallback {
-                Some(f) => {
-                    let mut r = f.finish(cal);
-                    r.probe_time = t;
-                    r.points = r.points.saturating_add(first.len() as u16);
-                    r
-                }
-                None => Reading::from_estimate(
+                Some(f) => (
+                    Method::SweepG,
+                    f.estimate(),
+                    (f.points().len() + first.len()) as u16,
+                ),
+                None => (
                     Method::Fit,
                     first_result.unwrap_or_else(|| first.estimate()),
-                    cal,
-                    t,
                     first.len() as u16,
                 ),
             },
-        }
+        };
+        conclude(method, est, unit, t, points)
     }
 }

@@ -1,11 +1,12 @@
-//! A blocking driver of a measurement over any [`SampleStream`]: what the firmware's interrupt
-//! and measurement task do together, in one loop, for the host (tests, `probe-bench`) and for
-//! single-threaded images.
+//! The one reading driver over any [`SampleStream`]: what the firmware's interrupt and
+//! measurement task do together, in one loop, for the host (tests, `probe-bench`) and for
+//! single-threaded images. The time-out rule of a point ([`window_budget_samples`]) is shared
+//! with the firmware's measurement task.
 
-use crate::calibration::PowerLaw;
-use crate::engine::SampleEngine;
+use crate::engine::{PointPlan, SampleEngine};
 use crate::hal::{AdcFrame, SampleStream, StreamError};
 use crate::measure::{Measurement, Reading};
+use crate::profile::UnitProfile;
 use crate::sweep::SweepPoint;
 use crate::units::DacCode;
 
@@ -21,13 +22,24 @@ pub enum RunError {
     Stalled,
 }
 
+/// The stall rule: samples a window of `plan` may take before it counts as lost — its
+/// settling, its cycles and two more (to find the window's boundary), and the stream's
+/// pipeline of `latency_batches` plus two batches of margin.
+pub fn window_budget_samples(plan: &PointPlan, fs: f64, latency_batches: usize) -> u64 {
+    let f = crate::dsp::dds::frequency_hz(plan.ftw, fs).max(1.0);
+    let period = fs / f;
+    plan.settle_samples as u64
+        + ((plan.cycles as f64 + 2.0) * period) as u64
+        + (BATCH * (latency_batches + 2)) as u64
+}
+
 /// Run `m` to completion on `stream`, calling `on_point` for every measured admittance point,
-/// and return the calibrated reading.
+/// and return the reading concluded with the unit's profile.
 pub fn run_sweep<S: SampleStream, M: Measurement>(
     stream: &mut S,
     engine: &mut SampleEngine,
     m: &mut M,
-    cal: &PowerLaw,
+    unit: &UnitProfile,
     mut on_point: impl FnMut(&SweepPoint),
 ) -> Result<Reading, RunError> {
     let mut dac = [DacCode::MID; BATCH];
@@ -41,11 +53,7 @@ pub fn run_sweep<S: SampleStream, M: Measurement>(
             match m.next_plan() {
                 Some(plan) => {
                     engine.load(plan);
-                    let f = crate::dsp::dds::frequency_hz(plan.ftw, fs).max(1.0);
-                    let period = fs / f;
-                    budget = plan.settle_samples as u64
-                        + ((plan.cycles as f64 * plan.windows.max(1) as f64 + 2.0) * period) as u64
-                        + (BATCH * (latency + 2)) as u64;
+                    budget = window_budget_samples(&plan, fs, latency);
                     used = 0;
                 }
                 None => break,
@@ -58,6 +66,8 @@ pub fn run_sweep<S: SampleStream, M: Measurement>(
             if let Some(p) = m.accept(&raw) {
                 on_point(&p);
             }
+            // Each window of a plan has its own budget.
+            used = 0;
             if raw.window + 1 < raw.plan.windows {
                 // More windows of the same plan follow without a new plan.
                 continue;
@@ -67,5 +77,5 @@ pub fn run_sweep<S: SampleStream, M: Measurement>(
         }
     }
     engine.stop();
-    Ok(m.finish(cal))
+    Ok(m.finish(unit))
 }

@@ -38,11 +38,15 @@ pub enum Failure {
     /// The contact is not the calibrated one: the quality factor is off the unit's calibrated
     /// Q(E) curve (preload off nominal, or tissue far more or less lossy than the references).
     BadContact,
+    /// The unit has no air reference, so contact cannot be told from no contact.
+    NoAirReference,
+    /// The unit has no calibrated contact condition (Q model): it was never calibrated.
+    Uncalibrated,
 }
 
 impl Failure {
     /// Every code, in declaration order.
-    pub const ALL: [Failure; 15] = [
+    pub const ALL: [Failure; 17] = [
         Failure::NoContact,
         Failure::ContactLost,
         Failure::BelowRange,
@@ -58,6 +62,8 @@ impl Failure {
         Failure::DriveFault,
         Failure::BadSettings,
         Failure::BadContact,
+        Failure::NoAirReference,
+        Failure::Uncalibrated,
     ];
 
     /// Stable snake_case code, as used in JSON and logs.
@@ -78,27 +84,31 @@ impl Failure {
             Failure::DriveFault => "drive_fault",
             Failure::BadSettings => "bad_settings",
             Failure::BadContact => "bad_contact",
+            Failure::NoAirReference => "no_air_reference",
+            Failure::Uncalibrated => "uncalibrated",
         }
     }
 
     /// One line for a human.
     pub const fn message(self) -> &'static str {
         match self {
-            Failure::NoContact => "probe is not in contact with tissue",
-            Failure::ContactLost => "contact was lost during the reading",
+            Failure::NoContact => "probe is not in contact with tissue: press it on",
+            Failure::ContactLost => "contact was lost during the reading: hold the probe still",
             Failure::BelowRange => "softer than the calibrated range",
             Failure::AboveRange => "stiffer than the calibrated range",
-            Failure::OutOfBand => "resonance is outside the swept band",
-            Failure::NoResonance => "no resonance found",
-            Failure::LowSnr => "signal too weak for a reliable reading",
+            Failure::OutOfBand => "resonance is outside the swept band: widen the band",
+            Failure::NoResonance => "no resonance found: check contact and drive",
+            Failure::LowSnr => "signal too weak for a reliable reading: raise the drive or integrate longer",
             Failure::Clipped => "sense amplifier clipped; lower the drive",
             Failure::OpenCircuit => "no current: PZT or wiring open",
             Failure::ShortCircuit => "PZT or wiring shorted",
-            Failure::NotLocked => "phase tracker did not lock",
-            Failure::Interference => "interference corrupts the measurement",
+            Failure::NotLocked => "phase tracker did not lock: hold the probe still and retry",
+            Failure::Interference => "interference corrupts the measurement: retry away from the source",
             Failure::DriveFault => "drive does not follow the command",
             Failure::BadSettings => "invalid settings",
-            Failure::BadContact => "contact unlike calibration: check preload (Q off its curve)",
+            Failure::BadContact => "contact unlike calibration: press at the calibrated force (Q off its curve), or retake the air reference",
+            Failure::NoAirReference => "no air reference: lift the probe into free air and take one (air)",
+            Failure::Uncalibrated => "unit not calibrated: calibrate it on reference phantoms",
         }
     }
 

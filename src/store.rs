@@ -1,9 +1,10 @@
-//! The calibration store: the unit's calibration curve and its air reference, kept in NOR flash
+//! The profile store: the unit's [`UnitProfile`] (calibration curve, contact condition, air
+//! reference), kept in NOR flash
 //! with integrity, over the `embedded-storage` [`NorFlash`] traits.
 //!
 //! # Layout and protocol
 //!
-//! Two slots, each a whole number of erase sectors, hold one [`Record`] each. A record is
+//! Two slots, each a whole number of erase sectors, hold one [`UnitProfile`] each. A record is
 //! [`RECORD_LEN`] bytes, little endian:
 //!
 //! | offset | size | field |
@@ -12,7 +13,7 @@
 //! | 4 | 2 | format version ([`FORMAT_VERSION`]) |
 //! | 6 | 2 | record length ([`RECORD_LEN`]) |
 //! | 8 | 4 | sequence number |
-//! | 12 | 1 | flags (bit 0: air reference present) |
+//! | 12 | 1 | flags (bit 0: air reference present, bit 1: Q model present) |
 //! | 13 | 1 | calibration source (0 paper-simulation, 1 paper-experiment, 2 fitted) |
 //! | 14 | 2 | zero |
 //! | 16 | 24 | `a`, `b`, `c` (f64) |
@@ -20,8 +21,10 @@
 //! | 112 | 16 | `min_kpa`, `max_kpa` (f64) |
 //! | 128 | 8 | `model_sigma_hz` (f64) |
 //! | 136 | 8 | air reference: free resonance Hz, free Q (f32) |
-//! | 144 | 12 | zero |
-//! | 156 | 4 | CRC-32 (IEEE) of bytes 0..156 |
+//! | 144 | 8 | air reference: static capacitance F, static conductance S (f32) |
+//! | 152 | 16 | Q model `q0`, `q1` (f64) |
+//! | 168 | 20 | zero |
+//! | 188 | 4 | CRC-32 (IEEE) of bytes 0..188 |
 //!
 //! [`Store::save`] writes the slot that does **not** hold the newest valid record (erase, program,
 //! read back and compare), with the sequence number one above the newest. The newest valid record
@@ -35,67 +38,19 @@
 //! reference, and says so in [`Loaded::source`] so the caller can log a warning and raise a
 //! status flag. Nothing here panics, whatever the flash contains.
 
-use crate::calibration::{PowerLaw, Source};
-use crate::units::Hz;
+use crate::calibration::{PowerLaw, QModel, Source};
+pub use crate::profile::{AirReference, UnitProfile};
+use crate::units::{Farads, Hz, Siemens};
 use embedded_storage::nor_flash::NorFlash;
 
 /// Bytes of one record (a multiple of every common program word: 1, 2, 4, 8, 16, 32).
-pub const RECORD_LEN: usize = 160;
+pub const RECORD_LEN: usize = 192;
 /// Format version written into every record.
-pub const FORMAT_VERSION: u16 = 1;
+pub const FORMAT_VERSION: u16 = 2;
 const MAGIC: [u8; 4] = *b"PZTC";
 const CRC_AT: usize = RECORD_LEN - 4;
 const FLAG_AIR: u8 = 1;
-
-/// The probe's free (unloaded, in air) resonance: what "no contact" looks like.
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct AirReference {
-    /// Resonance in air.
-    pub free_resonance: Hz,
-    /// Quality factor in air.
-    pub free_q: f32,
-}
-
-impl AirReference {
-    /// True when both values are finite and positive.
-    pub fn is_valid(&self) -> bool {
-        self.free_resonance.0.is_finite()
-            && self.free_resonance.0 > 0.0
-            && self.free_q.is_finite()
-            && self.free_q > 0.0
-    }
-}
-
-/// What the store keeps: the calibration curve and, once measured, the air reference.
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Record {
-    /// Calibration curve of this unit.
-    pub calibration: PowerLaw,
-    /// Air reference, once measured.
-    pub air: Option<AirReference>,
-}
-
-impl Record {
-    /// The fallback: the paper's experimental calibration, no air reference.
-    pub fn fallback() -> Self {
-        Self {
-            calibration: PowerLaw::paper_experiment(),
-            air: None,
-        }
-    }
-
-    /// True when the record may be stored and used (valid curve, finite covariance, valid air
-    /// reference if present).
-    pub fn is_valid(&self) -> bool {
-        self.calibration.is_valid()
-            && self.calibration.cov.iter().flatten().all(|v| v.is_finite())
-            && self.calibration.model_sigma_hz.is_finite()
-            && self.calibration.model_sigma_hz >= 0.0
-            && self.air.is_none_or(|a| a.is_valid())
-    }
-}
+const FLAG_Q_MODEL: u8 = 2;
 
 /// State of one slot as found by a scan.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -136,7 +91,7 @@ pub enum LoadSource {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Loaded {
     /// The record to use.
-    pub record: Record,
+    pub record: UnitProfile,
     /// Where it came from.
     pub source: LoadSource,
 }
@@ -175,7 +130,7 @@ pub enum StoreError {
     /// The slots do not fit the flash, or its program/read size does not divide [`RECORD_LEN`],
     /// or the base is not sector aligned.
     Geometry,
-    /// The record is not valid (see [`Record::is_valid`]); nothing was written.
+    /// The record is not valid (see [`UnitProfile::is_valid`]); nothing was written.
     InvalidRecord,
     /// The flash failed to erase the target slot.
     Erase,
@@ -235,7 +190,7 @@ impl<F: NorFlash> Store<F> {
         self.flash
     }
 
-    fn scan(&mut self, slot: usize) -> (SlotState, Option<Record>) {
+    fn scan(&mut self, slot: usize) -> (SlotState, Option<UnitProfile>) {
         let mut buf = [0u8; RECORD_LEN];
         let Some(&at) = self.slots.get(slot) else {
             return (SlotState::Unreadable, None);
@@ -274,7 +229,7 @@ impl<F: NorFlash> Store<F> {
         let states = [s0, s1];
         match Self::newest(&states) {
             Some((0, seq)) => Loaded {
-                record: r0.unwrap_or_else(Record::fallback),
+                record: r0.unwrap_or_else(UnitProfile::fallback),
                 source: LoadSource::Stored {
                     slot: 0,
                     seq,
@@ -282,7 +237,7 @@ impl<F: NorFlash> Store<F> {
                 },
             },
             Some((_, seq)) => Loaded {
-                record: r1.unwrap_or_else(Record::fallback),
+                record: r1.unwrap_or_else(UnitProfile::fallback),
                 source: LoadSource::Stored {
                     slot: 1,
                     seq,
@@ -290,14 +245,14 @@ impl<F: NorFlash> Store<F> {
                 },
             },
             None => Loaded {
-                record: Record::fallback(),
+                record: UnitProfile::fallback(),
                 source: LoadSource::Fallback { slots: states },
             },
         }
     }
 
     /// Store `record` as the new newest record, in the slot not holding the current newest.
-    pub fn save(&mut self, record: &Record) -> Result<Saved, StoreError> {
+    pub fn save(&mut self, record: &UnitProfile) -> Result<Saved, StoreError> {
         if !record.is_valid() {
             return Err(StoreError::InvalidRecord);
         }
@@ -419,7 +374,7 @@ fn source_of(b: u8) -> Option<Source> {
 }
 
 /// Serialise `record` with sequence number `seq` (layout in the module documentation).
-pub fn encode(record: &Record, seq: u32) -> [u8; RECORD_LEN] {
+pub fn encode(record: &UnitProfile, seq: u32) -> [u8; RECORD_LEN] {
     let mut w = Writer {
         buf: [0u8; RECORD_LEN],
         at: 0,
@@ -430,7 +385,12 @@ pub fn encode(record: &Record, seq: u32) -> [u8; RECORD_LEN] {
     w.put(&(RECORD_LEN as u16).to_le_bytes());
     w.put(&seq.to_le_bytes());
     w.put(&[
-        if record.air.is_some() { FLAG_AIR } else { 0 },
+        if record.air.is_some() { FLAG_AIR } else { 0 }
+            | if record.q_model.is_some() {
+                FLAG_Q_MODEL
+            } else {
+                0
+            },
         source_code(c.source),
         0,
         0,
@@ -444,11 +404,20 @@ pub fn encode(record: &Record, seq: u32) -> [u8; RECORD_LEN] {
     w.put(&c.min_kpa.to_le_bytes());
     w.put(&c.max_kpa.to_le_bytes());
     w.put(&c.model_sigma_hz.to_le_bytes());
-    let (f, q) = record
-        .air
-        .map_or((0.0, 0.0), |a| (a.free_resonance.0, a.free_q));
-    w.put(&f.to_le_bytes());
-    w.put(&q.to_le_bytes());
+    let (f, q, c0, g0) = record.air.map_or((0.0, 0.0, 0.0, 0.0), |a| {
+        (
+            a.free_resonance.0,
+            a.free_q,
+            a.static_capacitance.0,
+            a.static_conductance.0,
+        )
+    });
+    for v in [f, q, c0, g0] {
+        w.put(&v.to_le_bytes());
+    }
+    let (q0, q1) = record.q_model.map_or((0.0, 0.0), |m| (m.q0, m.q1));
+    w.put(&q0.to_le_bytes());
+    w.put(&q1.to_le_bytes());
     let crc = crc32(w.buf.get(..CRC_AT).unwrap_or(&[]));
     w.at = CRC_AT;
     w.put(&crc.to_le_bytes());
@@ -457,7 +426,7 @@ pub fn encode(record: &Record, seq: u32) -> [u8; RECORD_LEN] {
 
 /// Parse and check a record: magic, version, length, CRC and content validity. Returns the
 /// sequence number and the record.
-pub fn decode(buf: &[u8; RECORD_LEN]) -> Option<(u32, Record)> {
+pub fn decode(buf: &[u8; RECORD_LEN]) -> Option<(u32, UnitProfile)> {
     let mut r = Reader { buf, at: 0 };
     if r.take::<4>() != MAGIC
         || u16::from_le_bytes(r.take()) != FORMAT_VERSION
@@ -484,12 +453,16 @@ pub fn decode(buf: &[u8; RECORD_LEN]) -> Option<(u32, Record)> {
     }
     let (min_kpa, max_kpa) = (r.f64(), r.f64());
     let model_sigma_hz = r.f64();
-    let (f, q) = (r.f32(), r.f32());
+    let (f, q, c0, g0) = (r.f32(), r.f32(), r.f32(), r.f32());
     let air = (flags & FLAG_AIR != 0).then_some(AirReference {
         free_resonance: Hz(f),
         free_q: q,
+        static_capacitance: Farads(c0),
+        static_conductance: Siemens(g0),
     });
-    let record = Record {
+    let (q0, q1) = (r.f64(), r.f64());
+    let q_model = (flags & FLAG_Q_MODEL != 0).then_some(QModel { q0, q1 });
+    let record = UnitProfile {
         calibration: PowerLaw {
             a,
             b,
@@ -500,6 +473,7 @@ pub fn decode(buf: &[u8; RECORD_LEN]) -> Option<(u32, Record)> {
             max_kpa,
             source,
         },
+        q_model,
         air,
     };
     record.is_valid().then_some((seq, record))
@@ -520,16 +494,19 @@ mod tests {
         let mut cal = PowerLaw::paper_simulation();
         cal.cov[1][2] = 0.25;
         cal.source = Source::Fitted;
-        let rec = Record {
+        let rec = UnitProfile {
             calibration: cal,
+            q_model: Some(QModel { q0: 2.5, q1: 1.25 }),
             air: Some(AirReference {
                 free_resonance: Hz(232.3),
                 free_q: 41.5,
+                static_capacitance: Farads(210e-12),
+                static_conductance: Siemens(1e-9),
             }),
         };
         let buf = encode(&rec, 7);
         assert_eq!(decode(&buf), Some((7, rec)));
-        let no_air = Record::fallback();
+        let no_air = UnitProfile::fallback();
         assert_eq!(decode(&encode(&no_air, u32::MAX)), Some((u32::MAX, no_air)));
     }
 

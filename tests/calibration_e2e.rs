@@ -5,7 +5,7 @@
 //! pipeline's own output.
 
 use hal_sim::{NoiseScene, Scene};
-use pzt_probe::board::sim::{calibrate, read};
+use pzt_probe::board::sim::{read, unit_profile};
 use pzt_probe::Method;
 
 const REPEATS: usize = 20;
@@ -24,7 +24,9 @@ fn stats(v: &[f64]) -> (f64, f64) {
 fn calibrated_unit_reads_unseen_moduli() {
     let method = Method::SweepG;
     let settings = method.default_sweep();
-    let cal = calibrate(method, &settings, NoiseScene::Bench, REPEATS, 1000).expect("calibration");
+    let unit =
+        unit_profile(method, &settings, NoiseScene::Bench, REPEATS, 1000).expect("calibration");
+    let cal = unit.calibration;
     println!("fitted: f = {:.3} + {:.1} E^{:.4}", cal.a, cal.b, cal.c);
     for (k, e_true) in [200.0f64, 350.0, 700.0, 1500.0].into_iter().enumerate() {
         let scene = Scene::on_modulus_kpa(e_true).with_noise(NoiseScene::Bench);
@@ -33,7 +35,7 @@ fn calibrated_unit_reads_unseen_moduli() {
         let mut combined = Vec::new();
         for r in 0..SCATTER_REPEATS {
             let seed = 50_000 + (k * SCATTER_REPEATS + r) as u64;
-            let reading = read(&scene, seed, method, &settings, &cal, |_| {}).unwrap();
+            let reading = read(&scene, seed, method, &settings, &unit, |_| {}).unwrap();
             assert!(
                 reading.status.is_ok(),
                 "{e_true} kPa seed {seed}: {:?}",

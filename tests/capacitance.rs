@@ -5,7 +5,7 @@
 use hal_sim::{NoiseScene, Scene};
 use pzt_probe::board::sim::read;
 use pzt_probe::sweep::SweepSettings;
-use pzt_probe::{Hz, Method, PowerLaw, Seconds, Volts};
+use pzt_probe::{Hz, Method, Seconds, Volts};
 
 #[test]
 fn conductance_is_unbiased_where_impedance_minimum_is_not() {
@@ -21,7 +21,8 @@ fn conductance_is_unbiased_where_impedance_minimum_is_not() {
         "capacitive/motional at resonance {}",
         y.im / y.re
     );
-    let cal = PowerLaw::paper_experiment();
+    // Only resonances are compared: no unit profile is needed.
+    let cal = pzt_probe::profile::UnitProfile::fallback();
     // 2 V keeps the larger capacitive current inside the ADC range.
     let sweep = |m: Method| SweepSettings {
         drive: Volts(2.0),

@@ -14,11 +14,14 @@ use std::time::{Duration, Instant};
 const TIMEOUT: Duration = Duration::from_secs(180);
 const PHANTOM_B_KPA: f64 = 279.0;
 
-/// The modulus (kPa) where paper 003's experimental curve `266.6 − 2305 E^−0.7243` (the
-/// image's fallback calibration) equals `f`, by bisection of `ln E` with `f64::powf`: an
-/// independent inverse of the calibration the image computes on target (with its own `pow`).
-fn paper_inverse(f: f64) -> f64 {
-    let g = |e: f64| 266.6 - 2305.0 * e.powf(-0.7243) - f;
+/// The modulus (kPa) where the image's calibration curve `a + b E^c` — the simulated unit's
+/// factory profile, which the QEMU board programs into its store at power-on — equals `f`, by
+/// bisection of `ln E` with `f64::powf`: an independent inverse of the calibration the image
+/// computes on target (with its own `pow`).
+fn curve_inverse(f: f64) -> f64 {
+    let p = pzt_probe::board::sim_factory::profile().expect("factory record");
+    let (a, b, c) = (p.calibration.a, p.calibration.b, p.calibration.c);
+    let g = |e: f64| a + b * e.powf(c) - f;
     let (mut lo, mut hi) = (1e-3f64, 1e9f64);
     assert!(g(lo) < 0.0 && g(hi) > 0.0, "{f} Hz outside the curve");
     for _ in 0..200 {
@@ -37,7 +40,7 @@ fn paper_inverse(f: f64) -> f64 {
 
 /// Checks a logged reading of phantom B against the references: its resonance against the
 /// scene's closed-form `sqrt(k/m)/2pi` within `tol_hz`, and its modulus against the
-/// independent inverse of the paper's curve at the logged resonance. Both are logged as `f32`
+/// independent inverse of the image's curve at the logged resonance. Both are logged as `f32`
 /// (rounded by up to 2^-24 relative), and the image inverts its resonance before rounding it
 /// (measured: 1.5e-7 off the inverse of the rounded value), so the modulus must lie within the
 /// inverse of the resonance's rounding interval, widened by its own rounding.
@@ -55,10 +58,10 @@ fn check_reading(who: &str, r: &HashMap<String, String>, f0: f64, tol_hz: f64) {
         "{who} read phantom B's resonance as {f} Hz, closed form {f0} Hz ± {tol_hz} Hz"
     );
     const U: f64 = 1.0 / 16_777_216.0;
-    let (e_lo, e_hi) = (paper_inverse(f * (1.0 - U)), paper_inverse(f * (1.0 + U)));
+    let (e_lo, e_hi) = (curve_inverse(f * (1.0 - U)), curve_inverse(f * (1.0 + U)));
     assert!(
         (e_lo * (1.0 - U)..=e_hi * (1.0 + U)).contains(&e),
-        "{who}: {e} kPa at {f} Hz, the paper's curve gives {e_lo}…{e_hi} kPa"
+        "{who}: {e} kPa at {f} Hz, the image's curve gives {e_lo}…{e_hi} kPa"
     );
 }
 
@@ -106,16 +109,29 @@ fn qemu_image_measures_phantom_b() {
         .map(|(_, m)| m)
         .expect("a status line");
     assert_eq!(first_status["method"], "auto");
+    // The store holds the factory profile: a fitted curve and an air reference.
+    assert_eq!(first_status["calibration"], "fitted");
+    assert_eq!(first_status["fallback"], "false");
+    assert_eq!(first_status["air"], "true");
+    let loaded = parsed
+        .iter()
+        .find(|(n, _)| n == "store")
+        .map(|(_, m)| m)
+        .expect("a store line");
+    assert_eq!(
+        (loaded["slot"].as_str(), loaded["seq"].as_str()),
+        ("0", "1")
+    );
 
     // 1. The default reading of phantom B: auto, whose fit found it (the reading names the
     // method that produced it) — ok, its resonance and modulus as below through the
-    // calibration the image uses (the store's fallback, paper 003's experimental curve). Its
+    // calibration the image uses (the factory profile in its store, checked by every reading's
+    // pipeline: air reference, contact, range, Q model). Its
     // points are the fit's: tagged in order, inside auto's band, as many as the reading counts.
     //
     // References: the image's scene is phantom B with bench noise (src/board/qemu.rs); its
-    // closed-form resonance is 227.8527 Hz, which the paper's curve puts at 281.74 kPa (+0.98 %
-    // from 279 kPa: the simulated unit's own deviation from that curve, +0.28 Hz at 279 kPa,
-    // docs/physics.md). Tolerances on the resonance, from the host's reading of the same scene
+    // closed-form resonance is 227.8527 Hz (the unit's fitted curve puts it at 278.1 kPa).
+    // Tolerances on the resonance, from the host's reading of the same scene
     // and settings over seeds 1–60 (worst error) plus 25 %: auto (fit) 0.028 Hz → 0.035 Hz;
     // sweep-G with the script's short settle (20 ms, 1.4 time constants, so the upward sweep
     // lags: +0.11…+0.14 Hz) 0.138 Hz → 0.17 Hz. Measured here: +0.0022 Hz and +0.124 Hz.

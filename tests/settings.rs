@@ -226,7 +226,8 @@ fn auto_falls_back_and_names_the_method_used() {
     use pzt_probe::board::sim::read;
     use pzt_probe::estimate::staged::{Refine, StagedSettings};
     use pzt_probe::measure::Settings;
-    let cal = PowerLaw::paper_experiment();
+    // Only the method used and the resonance are checked: no unit profile is needed.
+    let cal = pzt_probe::profile::UnitProfile::fallback();
     let scene = Scene::on_modulus_kpa(1000.0).with_noise(NoiseScene::Bench);
     let f0 = scene.resonance_hz();
     // Default: fit finds it.

@@ -4,6 +4,7 @@ use hal_sim::plant::mechanics;
 use hal_sim::tissue::Kelvin;
 use hal_sim::{NoiseScene, Scene};
 use pzt_probe::board::sim::read;
+use pzt_probe::profile::UnitProfile;
 use pzt_probe::sweep::SweepSettings;
 use pzt_probe::{Hz, Method, PowerLaw, Seconds, Volts};
 
@@ -79,8 +80,16 @@ fn free_resonance_is_the_prototypes() {
         integrate: Seconds(0.1),
         drive: Volts(2.0),
     };
-    let cal = PowerLaw::paper_experiment();
-    let r = read(&scene, 7, Method::SweepG, &settings, &cal, |_| {}).unwrap();
+    // Only the resonance and Q are read: no unit profile is needed for them.
+    let r = read(
+        &scene,
+        7,
+        Method::SweepG,
+        &settings,
+        &UnitProfile::fallback(),
+        |_| {},
+    )
+    .unwrap();
     let f = r.resonance.expect("resonance").0 as f64;
     assert!((f - 232.3).abs() <= 0.0015, "free resonance {f}");
     let q = r.q.expect("Q") as f64;
@@ -123,7 +132,15 @@ fn contact_resonances_follow_the_papers_curve() {
     for e in [150.0, 414.0, 2465.0] {
         let scene = Scene::on_modulus_kpa(e);
         let m = Method::SweepG;
-        let r = read(&scene, 1, m, &m.default_sweep(), &fe, |_| {}).unwrap();
+        let r = read(
+            &scene,
+            1,
+            m,
+            &m.default_sweep(),
+            &UnitProfile::fallback(),
+            |_| {},
+        )
+        .unwrap();
         let f = r.resonance.unwrap().0 as f64;
         let sigma = r.resonance_sigma.unwrap().0 as f64;
         let err = f - scene.resonance_hz();

@@ -2,25 +2,32 @@
 //! point of a save leaves a valid record, corruption is detected, and the fallback is reported.
 
 use hal_sim::flash::SimFlash;
+use pzt_probe::calibration::QModel;
 use pzt_probe::calibration::Source;
 use pzt_probe::store::{
-    AirReference, LoadSource, Record, SlotState, Store, StoreError, RECORD_LEN,
+    AirReference, LoadSource, SlotState, Store, StoreError, UnitProfile, RECORD_LEN,
 };
-use pzt_probe::{Hz, PowerLaw};
+use pzt_probe::{Farads, Hz, PowerLaw, Siemens};
 
 /// 4 KiB of 2 KiB sectors, 8-byte program words: two slots of one sector each.
 type Flash = SimFlash<4096, 2048, 8>;
 
-fn record(n: u32) -> Record {
+fn record(n: u32) -> UnitProfile {
     let mut cal = PowerLaw::paper_experiment();
     cal.a += n as f64 * 0.125;
     cal.source = Source::Fitted;
     cal.cov[0][0] = 0.01 * n as f64;
-    Record {
+    UnitProfile {
         calibration: cal,
+        q_model: Some(QModel {
+            q0: 4.0 + n as f64,
+            q1: 1.0,
+        }),
         air: Some(AirReference {
             free_resonance: Hz(232.0 + n as f32),
             free_q: 40.0 + n as f32,
+            static_capacitance: Farads(200e-12 + n as f32 * 1e-12),
+            static_conductance: Siemens(n as f32 * 1e-9),
         }),
     }
 }
@@ -44,7 +51,7 @@ fn empty_flash_falls_back_and_says_so() {
     let l = s.load();
     assert!(l.is_fallback());
     assert!(!l.damage_seen());
-    assert_eq!(l.record, Record::fallback());
+    assert_eq!(l.record, UnitProfile::fallback());
     assert_eq!(l.record.calibration, PowerLaw::paper_experiment());
     assert_eq!(
         l.source,
@@ -90,6 +97,8 @@ fn invalid_records_are_refused_without_touching_flash() {
     bad.air = Some(AirReference {
         free_resonance: Hz(f32::NAN),
         free_q: 3.0,
+        static_capacitance: Farads(210e-12),
+        static_conductance: Siemens(0.0),
     });
     assert_eq!(s.save(&bad), Err(StoreError::InvalidRecord));
     let mut bad = record(2);
@@ -232,7 +241,7 @@ fn both_records_corrupt_falls_back_with_damage_reported() {
     let l = s.load();
     assert!(l.is_fallback());
     assert!(l.damage_seen());
-    assert_eq!(l.record, Record::fallback());
+    assert_eq!(l.record, UnitProfile::fallback());
     assert_eq!(
         l.source,
         LoadSource::Fallback {
@@ -264,7 +273,7 @@ fn multi_bit_damage_never_yields_a_wrong_record() {
         }
         let l = s.load();
         assert!(
-            l.record == record(2) || l.record == record(1) || l.record == Record::fallback(),
+            l.record == record(2) || l.record == record(1) || l.record == UnitProfile::fallback(),
             "{:?}",
             l
         );

@@ -1,7 +1,11 @@
-//! Calibration files: a fitted power law as JSON, and the names of the built-in curves.
+//! Unit profile files: the calibration curve, the contact condition (Q model) and the air
+//! reference of one unit as JSON (`probe-bench calibrate --out unit.json`,
+//! `measure --profile unit.json`), and the names of the built-in curves.
 
 use anyhow::{bail, Context, Result};
-use pzt_probe::calibration::{PowerLaw, Source};
+use pzt_probe::calibration::{PowerLaw, QModel, Source};
+use pzt_probe::profile::{AirReference, UnitProfile};
+use pzt_probe::{Farads, Hz, Siemens};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -71,14 +75,86 @@ impl CalFile {
         }
         Ok(p)
     }
+}
 
-    /// Read and validate a calibration file.
-    pub fn load(path: &Path) -> Result<PowerLaw> {
+/// The on-disk form of the air reference.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct AirFile {
+    /// Free resonance, Hz.
+    pub free_resonance_hz: f32,
+    /// Free quality factor.
+    pub free_q: f32,
+    /// Static capacitance, F.
+    pub static_capacitance_f: f32,
+    /// Static conductance, S.
+    pub static_conductance_s: f32,
+}
+
+/// The on-disk form of the contact condition `Q = q0 + q1 ln(E / kPa)`.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct QModelFile {
+    /// Intercept.
+    pub q0: f64,
+    /// Slope per unit of `ln(E / kPa)`.
+    pub q1: f64,
+}
+
+/// The on-disk form of a unit profile.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct ProfileFile {
+    /// Calibration curve.
+    pub calibration: CalFile,
+    /// Contact condition of the calibration.
+    pub q_model: Option<QModelFile>,
+    /// Air reference.
+    pub air: Option<AirFile>,
+    /// How and when the profile was taken (free text: method, noise, repeats, seeds).
+    #[serde(default)]
+    pub taken: String,
+}
+
+impl ProfileFile {
+    /// From a profile.
+    pub fn from_profile(p: &UnitProfile, method: Option<&str>, taken: String) -> Self {
+        Self {
+            calibration: CalFile::from_law(&p.calibration, method),
+            q_model: p.q_model.map(|m| QModelFile { q0: m.q0, q1: m.q1 }),
+            air: p.air.map(|a| AirFile {
+                free_resonance_hz: a.free_resonance.0,
+                free_q: a.free_q,
+                static_capacitance_f: a.static_capacitance.0,
+                static_conductance_s: a.static_conductance.0,
+            }),
+            taken,
+        }
+    }
+
+    /// To a profile, validated.
+    pub fn to_profile(&self) -> Result<UnitProfile> {
+        let p = UnitProfile {
+            calibration: self.calibration.to_law()?,
+            q_model: self.q_model.as_ref().map(|m| QModel { q0: m.q0, q1: m.q1 }),
+            air: self.air.as_ref().map(|a| AirReference {
+                free_resonance: Hz(a.free_resonance_hz),
+                free_q: a.free_q,
+                static_capacitance: Farads(a.static_capacitance_f),
+                static_conductance: Siemens(a.static_conductance_s),
+            }),
+        };
+        if !p.is_valid() {
+            bail!("the profile's Q model or air reference is not valid");
+        }
+        Ok(p)
+    }
+
+    /// Read and validate a profile file.
+    pub fn load(path: &Path) -> Result<UnitProfile> {
         let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read calibration file {}", path.display()))?;
-        let f: CalFile = serde_json::from_str(&text)
-            .with_context(|| format!("{} is not a calibration file", path.display()))?;
-        f.to_law().with_context(|| format!("{}", path.display()))
+            .with_context(|| format!("cannot read profile file {}", path.display()))?;
+        let f: ProfileFile = serde_json::from_str(&text)
+            .with_context(|| format!("{} is not a unit profile file", path.display()))?;
+        f.to_profile()
+            .with_context(|| format!("{}", path.display()))
     }
 
     /// Write as pretty JSON.
@@ -110,4 +186,41 @@ pub fn describe(p: &PowerLaw) -> String {
         p.min_kpa,
         p.max_kpa
     )
+}
+
+/// The profile for humans.
+pub fn describe_profile(p: &UnitProfile) -> String {
+    let q = p.q_model.map_or("no Q model".to_owned(), |m| {
+        format!("Q = {:.2} + {:.3} ln E", m.q0, m.q1)
+    });
+    let air = p.air.map_or("no air reference".to_owned(), |a| {
+        format!(
+            "air {:.3} Hz, Q {:.1}, C0 {:.2} pF",
+            a.free_resonance.0,
+            a.free_q,
+            a.static_capacitance.0 * 1e12
+        )
+    });
+    format!("{}; {q}; {air}", describe(&p.calibration))
+}
+
+/// The profile a command reads with: the file given with `--profile`, else the simulated
+/// unit's own (`make_unit`: its air reference and a calibration with the command's method),
+/// with the curve replaced by a built-in one when `calibration` names one (`paper-experiment`,
+/// `paper-simulation`; `unit` keeps the unit's). A `calibration` that is neither is read as
+/// a profile file too.
+pub fn resolve(
+    profile: Option<&Path>,
+    calibration: &str,
+    make_unit: impl FnOnce() -> Result<UnitProfile>,
+) -> Result<UnitProfile> {
+    let mut p = match profile {
+        Some(path) => ProfileFile::load(path)?,
+        None if calibration == "unit" || builtin(calibration).is_some() => make_unit()?,
+        None => ProfileFile::load(Path::new(calibration))?,
+    };
+    if let Some(law) = builtin(calibration) {
+        p.calibration = law;
+    }
+    Ok(p)
 }

@@ -32,6 +32,7 @@ pub const TEMPLATES: &[&str] = &[
     "air f_hz={=f32} q={=f32}",
     "reference e_kpa={=f32} f_hz={=f32} f_sigma_hz={=f32} n={=u16}",
     "calibration source={=str} a={=f32} b={=f32} c={=f32} min_kpa={=f32} max_kpa={=f32}",
+    "hint code={=str} message={=str}",
     "rejected error={=str}",
     "stalled tag={=u16}",
     "overrun late={=u32} ring={=u32} dropped={=u32}",

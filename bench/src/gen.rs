@@ -12,7 +12,7 @@ use hal_sim::rng::Rng;
 use hal_sim::{NoiseScene, Scene, SimProbe};
 use pzt_probe::board::sim as simboard;
 use pzt_probe::sweep::SweepSettings;
-use pzt_probe::{Method, PowerLaw};
+use pzt_probe::Method;
 use std::f64::consts::PI;
 use std::path::Path;
 
@@ -29,7 +29,7 @@ pub fn sim_sweep(
         seed,
         method,
         settings,
-        &PowerLaw::paper_experiment(),
+        &pzt_probe::profile::UnitProfile::fallback(),
         |p| pts.push((p.freq.0 as f64, p.g_s as f64, p.b_s as f64)),
     )
     .map_err(|e| anyhow!("simulated reading failed: {e:?}"))?;

@@ -8,6 +8,7 @@ use pzt_probe::estimate::hold::HoldSettings;
 use pzt_probe::estimate::ringdown::RingdownSettings;
 use pzt_probe::estimate::staged::{Refine, StagedSettings};
 use pzt_probe::measure::{Method, Settings};
+use pzt_probe::profile::UnitProfile;
 use pzt_probe::sweep::SweepSettings;
 use pzt_probe::{Hz, Seconds};
 use std::f64::consts::PI;
@@ -24,14 +25,9 @@ pub struct Config {
 }
 
 impl Config {
-    /// True when these are the method's default settings (for hold: with the unit's own air
-    /// reference).
+    /// True when these are the method's default settings.
     pub fn is_default(&self) -> bool {
-        let default = match self.method {
-            Method::Hold => Settings::Hold(air_static()),
-            m => m.default_settings(),
-        };
-        self.settings == default
+        self.settings == self.method.default_settings()
     }
 }
 
@@ -123,8 +119,8 @@ pub fn configs() -> Vec<Config> {
             settings: Settings::Ringdown(s),
         });
     }
-    // hold needs the unit's static admittance: its air reference, taken once.
-    let air = air_static();
+    // hold subtracts the unit's static admittance: the profile's air reference supplies it.
+    let air = HoldSettings::DEFAULT;
     for (burst, refine, hold) in [
         (15.0, 0.0, 80.0),
         (20.0, 50.0, 150.0),
@@ -153,25 +149,11 @@ pub fn configs() -> Vec<Config> {
     v
 }
 
-/// [`HoldSettings::DEFAULT`] with the static admittance of the simulated unit's air reference
-/// ([`pzt_probe::board::sim::air_reference`], bench noise, noise stream 77).
-pub fn air_static() -> HoldSettings {
-    let unit = Scene::on_modulus_kpa(300.0);
-    // The nominal simulated unit in free air always has a resonance to fit.
-    let (_, c0, g0) = pzt_probe::board::sim::air_reference(&unit, NoiseScene::Bench, 77)
-        .expect("air reference of the nominal simulated unit");
-    HoldSettings {
-        static_capacitance: c0,
-        static_conductance: g0,
-        ..HoldSettings::DEFAULT
-    }
-}
-
-/// Calibrate `c` as the product is calibrated: phantoms A–E × `repeats` readings under `noise`
-/// (a unit is calibrated with its own front end, as the paper calibrated its prototype), robust
-/// power-law fit.
-pub fn calibrate(c: &Config, repeats: usize, noise: NoiseScene) -> Option<PowerLaw> {
-    pzt_probe::board::sim::calibrate(c.method, c.settings, noise, repeats, 900_000).ok()
+/// The unit `c` reads with, made as the product is calibrated: its air reference, then phantoms
+/// A–E × `repeats` readings under `noise` (a unit is calibrated with its own front end, as the
+/// paper calibrated its prototype) and the robust fit.
+pub fn calibrate(c: &Config, repeats: usize, noise: NoiseScene) -> Option<UnitProfile> {
+    crate::unit::simulated(c.method, &c.settings, noise, repeats, 900_000).ok()
 }
 
 /// Statistics of one config at one modulus and noise scene.
@@ -234,10 +216,11 @@ impl Cell {
     }
 }
 
-/// Run `seeds` readings of config `c` (calibrated by `cal`) at modulus `e` under `noise`.
+/// Run `seeds` readings of config `c` (with the unit's profile `unit`) at modulus `e` under
+/// `noise`.
 pub fn evaluate(
     c: &Config,
-    cal: &PowerLaw,
+    unit: &UnitProfile,
     e: f64,
     noise: NoiseScene,
     seeds: usize,
@@ -250,7 +233,7 @@ pub fn evaluate(
         seed0,
         c.method,
         c.settings,
-        cal,
+        unit,
         |_| {},
     )
     .ok()
@@ -263,7 +246,7 @@ pub fn evaluate(
     };
     let mut t = 0.0;
     for k in 0..seeds {
-        let Ok(r) = read(&scene, seed0 + k as u64, c.method, c.settings, cal, |_| {}) else {
+        let Ok(r) = read(&scene, seed0 + k as u64, c.method, c.settings, unit, |_| {}) else {
             continue;
         };
         t += r.probe_time.0 as f64 * 1e3;

@@ -3,12 +3,11 @@
 //! wrong number.
 
 use hal_sim::catalogue::Case;
-use hal_sim::{NoiseScene, Scene};
-use pzt_probe::board::sim::{calibrate_unit, read};
-use pzt_probe::calibration::{PowerLaw, QModel};
-use pzt_probe::measure::{AirReference, Method, Reading, Settings};
-use pzt_probe::sweep::SweepSettings;
-use pzt_probe::{Hz, Seconds, Status, Volts};
+use hal_sim::NoiseScene;
+use pzt_probe::board::sim::read;
+use pzt_probe::measure::{Method, Reading, Settings};
+use pzt_probe::profile::UnitProfile;
+use pzt_probe::Status;
 
 /// How one reading turned out.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
@@ -54,66 +53,35 @@ pub fn classify(case: &Case, r: &Reading) -> Outcome {
     }
 }
 
-/// The free-air reference the firmware stores: a fine sweep-G of the free probe (0.5 Hz steps
-/// over 220–245 Hz, 250 ms settling, 2 V drive) at bench noise.
-pub fn air_reference() -> Option<AirReference> {
-    let s = SweepSettings {
-        start: Hz(220.0),
-        stop: Hz(245.0),
-        step: Hz(0.5),
-        settle: Seconds(0.25),
-        integrate: Seconds(0.1),
-        drive: Volts(2.0),
-    };
-    let scene = Scene::free_air().with_noise(NoiseScene::Bench);
-    let r = read(
-        &scene,
-        77,
-        Method::SweepG,
-        &s,
-        &PowerLaw::paper_experiment(),
-        |_| {},
-    )
-    .ok()?;
-    Some(AirReference {
-        free_resonance: r.resonance?,
-        free_q: r.q?,
-    })
-}
-
-/// A unit calibrated for one method: settings, power law, Q(E) curve.
+/// A unit calibrated for one method: the method's settings and the unit's whole profile
+/// (calibration, Q model, air reference).
 pub struct Unit {
     /// The method's settings.
     pub settings: Settings,
-    /// Its calibration.
-    pub cal: PowerLaw,
-    /// The contact condition of the calibration (methods that measure Q).
-    pub q_model: Option<QModel>,
+    /// The unit's profile, made by the core's procedure.
+    pub profile: UnitProfile,
 }
 
-/// A method calibrated on A–E × `repeats` at bench noise with its default settings.
+/// A method's unit: the simulated unit's air reference, then A–E × `repeats` at bench noise
+/// with the method's default settings.
 pub fn calibrated(method: Method, repeats: usize) -> Option<Unit> {
     let settings = method.default_settings();
-    let (cal, q_model) =
-        calibrate_unit(method, settings, NoiseScene::Bench, repeats, 700_000).ok()?;
-    Some(Unit {
-        settings,
-        cal,
-        q_model,
-    })
+    let profile =
+        crate::unit::simulated(method, &settings, NoiseScene::Bench, repeats, 700_000).ok()?;
+    Some(Unit { settings, profile })
 }
 
-/// One reading of `case` with the contact and condition checks applied, as the firmware would.
-pub fn run_case(
-    case: &Case,
-    method: Method,
-    unit: &Unit,
-    air: Option<&AirReference>,
-    seed: u64,
-) -> Option<Reading> {
-    read(&case.scene, seed, method, unit.settings, &unit.cal, |_| {})
-        .ok()
-        .map(|r| r.check_contact(air).check_condition(unit.q_model.as_ref()))
+/// One reading of `case` through the one pipeline, as the firmware and `measure` take it.
+pub fn run_case(case: &Case, method: Method, unit: &Unit, seed: u64) -> Option<Reading> {
+    read(
+        &case.scene,
+        seed,
+        method,
+        unit.settings,
+        &unit.profile,
+        |_| {},
+    )
+    .ok()
 }
 
 /// What one method did over the catalogue: its readings counted by outcome.
@@ -174,19 +142,12 @@ impl Tally {
 pub const FIRST_SEED: u64 = 5000;
 
 /// `method` (calibrated as `unit`) through every case in `cases`, noise seeds
-/// `FIRST_SEED .. FIRST_SEED + seeds`, each reading checked against the stored air reference and
-/// the unit's contact condition as the firmware does.
-pub fn tally(
-    cases: &[Case],
-    method: Method,
-    unit: &Unit,
-    air: Option<&AirReference>,
-    seeds: u64,
-) -> Tally {
+/// `FIRST_SEED .. FIRST_SEED + seeds`, through the one pipeline.
+pub fn tally(cases: &[Case], method: Method, unit: &Unit, seeds: u64) -> Tally {
     let mut t = Tally::default();
     for case in cases {
         for seed in FIRST_SEED..FIRST_SEED + seeds {
-            if let Some(r) = run_case(case, method, unit, air, seed) {
+            if let Some(r) = run_case(case, method, unit, seed) {
                 t.add(case, &r);
             }
         }

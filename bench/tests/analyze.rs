@@ -8,7 +8,7 @@ use hal_sim::{phantoms, Scene};
 use probe_bench::capture::{self, CaptureError, DemodOptions, Layout, SweepShape};
 use probe_bench::cmd::analyze::{analysis_json, analyze, offline_method, Analysis};
 use probe_bench::gen;
-use pzt_probe::{Failure, Method, PowerLaw, Status};
+use pzt_probe::{Failure, Method, Status};
 use std::path::PathBuf;
 
 fn data(name: &str) -> PathBuf {
@@ -21,14 +21,15 @@ fn read(name: &str) -> String {
     std::fs::read_to_string(data(name)).unwrap_or_else(|e| panic!("{name}: {e}"))
 }
 
+/// The simulated unit's profile (air reference, Q model) with paper 003's curve, as
+/// `probe-bench analyze` reads a capture by default.
+fn unit(method: Method) -> pzt_probe::profile::UnitProfile {
+    probe_bench::cmd::analyze::profile(None, "paper-experiment", method).expect("unit profile")
+}
+
 fn run(name: &str, method: Method) -> Analysis {
-    analyze(
-        &read(name),
-        method,
-        &PowerLaw::paper_experiment(),
-        &DemodOptions::default(),
-    )
-    .unwrap_or_else(|e| panic!("{name}: {e}"))
+    analyze(&read(name), method, &unit(method), &DemodOptions::default())
+        .unwrap_or_else(|e| panic!("{name}: {e}"))
 }
 
 /// Inverse of paper 003 eq. 5, written out independently of `PowerLaw::invert`.
@@ -200,13 +201,7 @@ fn out_of_band_capture_is_not_ok() {
     let pts = gen::closed_form(&scene, 236.0, 290.0, 1.0, 0.0, 0);
     let text = capture::write_admittance_csv(&[], &pts);
     for m in [Method::SweepG, Method::Paper] {
-        let a = analyze(
-            &text,
-            m,
-            &PowerLaw::paper_experiment(),
-            &DemodOptions::default(),
-        )
-        .unwrap();
+        let a = analyze(&text, m, &unit(m), &DemodOptions::default()).unwrap();
         assert_ne!(a.reading.status, Status::Ok, "{m:?}");
         assert!(a.reading.modulus.is_none());
     }
@@ -319,7 +314,7 @@ fn continuous_sweep_reads_the_resonance() {
         let a = analyze(
             &text,
             Method::SweepG,
-            &PowerLaw::paper_experiment(),
+            &unit(Method::SweepG),
             &DemodOptions::default(),
         )
         .unwrap();

@@ -26,7 +26,7 @@ fn centre_error(spec: &ScanSpec, x: f64, y: f64) -> f64 {
 
 #[test]
 fn coin_scan_reads_the_papers_frequencies_and_finds_the_coin() {
-    let spec = ScanSpec::coin(1.5, -1.0, 2.0, bench_scene());
+    let spec = ScanSpec::coin(1.5, -1.0, 2.0, bench_scene()).unwrap();
     let res = scan(&spec, || {}).unwrap();
     assert!(res.points.len() > 100);
     assert!(res.points.iter().all(|p| p.reading.status == Status::Ok));
@@ -70,7 +70,7 @@ fn coin_scan_reads_the_papers_frequencies_and_finds_the_coin() {
 
 #[test]
 fn coin_elsewhere_is_found_where_it_is() {
-    let spec = ScanSpec::coin(-3.3, 2.6, 2.0, bench_scene());
+    let spec = ScanSpec::coin(-3.3, 2.6, 2.0, bench_scene()).unwrap();
     let res = scan(&spec, || {}).unwrap();
     let l = res.lump.expect("the coin is found");
     let err = centre_error(&spec, l.x_mm, l.y_mm);
@@ -85,7 +85,7 @@ fn coin_elsewhere_is_found_where_it_is() {
 #[test]
 fn ball_is_found_along_the_path() {
     for d in [0.0, 12.5, 20.0] {
-        let spec = ScanSpec::ball(d, 1.0, bench_scene());
+        let spec = ScanSpec::ball(d, 1.0, bench_scene()).unwrap();
         let res = scan(&spec, || {}).unwrap();
         let l = res
             .lump
@@ -104,7 +104,7 @@ fn ball_is_found_along_the_path() {
 #[test]
 fn no_lump_where_there_is_none() {
     // The coin sunk to 14 mm, on the table: the probe cannot feel it.
-    let mut spec = ScanSpec::coin(0.0, 0.0, 2.0, bench_scene());
+    let mut spec = ScanSpec::coin(0.0, 0.0, 2.0, bench_scene()).unwrap();
     spec.phantom.inclusion = Inclusion::Disc {
         x_m: 0.0,
         y_m: 0.0,

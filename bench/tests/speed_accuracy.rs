@@ -4,7 +4,7 @@
 //! reliable only below about 500 kPa in its noise).
 
 use hal_sim::NoiseScene;
-use probe_bench::pareto::{air_static, calibrate, crb_pct, evaluate, tau_ms, Config};
+use probe_bench::pareto::{calibrate, crb_pct, evaluate, tau_ms, Config};
 use pzt_probe::estimate::hold::HoldSettings;
 use pzt_probe::measure::{Method, Settings};
 use pzt_probe::sweep::SweepSettings;
@@ -25,7 +25,7 @@ fn hold(seed_burst_ms: f32, refine_ms: f32, hold_ms: f32) -> Config {
             seed_burst: Seconds(seed_burst_ms / 1000.0),
             refine: Seconds(refine_ms / 1000.0),
             hold: Seconds(hold_ms / 1000.0),
-            ..air_static()
+            ..pzt_probe::estimate::hold::HoldSettings::DEFAULT
         }),
     )
 }
@@ -56,7 +56,13 @@ fn hold_stays_within_three_times_the_cramer_rao_bound_from_10_to_100_tau() {
         assert_eq!(cell.ok, 20);
         let t = cell.time_ms / tau;
         assert!((lo_tau..=hi_tau).contains(&t), "{t} tau");
-        let crb = crb_pct(&cal, 500.0, NoiseScene::Bench, 5.0, cell.time_ms * 1e-3);
+        let crb = crb_pct(
+            &cal.calibration,
+            500.0,
+            NoiseScene::Bench,
+            5.0,
+            cell.time_ms * 1e-3,
+        );
         let ratio = cell.noise_rms_pct() / crb;
         assert!(
             ratio <= 3.0,
@@ -123,11 +129,7 @@ fn every_method_reports_the_scatter_it_has() {
         if m == Method::Auto {
             continue; // auto is fit here (covered); its fallback is sweep-g (covered)
         }
-        let settings = match m {
-            Method::Hold => Settings::Hold(air_static()),
-            m => m.default_settings(),
-        };
-        let c = config(m, settings);
+        let c = config(m, m.default_settings());
         for noise in [NoiseScene::Bench, NoiseScene::Paper] {
             let cal = calibrate(&c, 10, noise).expect("calibration");
             let cell = evaluate(&c, &cal, 500.0, noise, 20, 34_000);

@@ -7,7 +7,7 @@
 use hal_sim::catalogue::catalogue;
 use hal_sim::{NoiseScene, Scene};
 use probe_bench::stability::{
-    air_reference, calibrated, classify, run_case, statement, tally, Outcome, FIRST_SEED,
+    calibrated, classify, run_case, statement, tally, Outcome, FIRST_SEED,
 };
 use pzt_probe::{Failure, Method, Status};
 
@@ -15,11 +15,10 @@ use pzt_probe::{Failure, Method, Status};
 /// seeds per scene give about 300 ok readings, so 99 % allows at most 3 beyond 3 σ.
 #[test]
 fn the_default_strategy_is_within_three_sigma_in_99_percent_of_its_readings() {
-    let air = air_reference().expect("free-air reference");
     let unit = calibrated(Method::Auto, 10).expect("calibration");
     let cases = catalogue(NoiseScene::Bench);
     let seeds = 40;
-    let t = tally(&cases, Method::Auto, &unit, Some(&air), seeds);
+    let t = tally(&cases, Method::Auto, &unit, seeds);
     println!("{}", statement(Method::Auto, &t, cases.len(), seeds));
     assert_eq!(t.readings, cases.len() * seeds as usize);
     assert!(t.ok >= 100, "{t:?}");
@@ -32,16 +31,18 @@ fn the_default_strategy_is_within_three_sigma_in_99_percent_of_its_readings() {
 
 #[test]
 fn sweep_g_and_fit_never_report_a_silent_wrong_number_but_sweep_g_under_drift() {
-    let air = air_reference().expect("free-air reference");
-    // The free probe: 232.3 Hz and Q 40 in hal-sim.
-    assert!((air.free_resonance.0 - 232.3).abs() < 0.5 && (air.free_q / 40.0 - 1.0).abs() < 0.1);
     for m in [Method::SweepG, Method::Fit] {
         let unit = calibrated(m, 10).expect("calibration");
+        // The free probe: 232.3 Hz and Q 40 in hal-sim.
+        let air = unit.profile.air.expect("air reference");
+        assert!(
+            (air.free_resonance.0 - 232.3).abs() < 0.5 && (air.free_q / 40.0 - 1.0).abs() < 0.1
+        );
         let mut wrong_codes = 0;
         let mut readings = 0;
         for case in catalogue(NoiseScene::Bench) {
             for seed in FIRST_SEED..FIRST_SEED + 3 {
-                let r = run_case(&case, m, &unit, Some(&air), seed).expect("reading");
+                let r = run_case(&case, m, &unit, seed).expect("reading");
                 readings += 1;
                 let o = classify(&case, &r);
                 // A wrong failure code is a lost reading, not a wrong one; count it.
@@ -81,14 +82,13 @@ fn sweep_g_and_fit_never_report_a_silent_wrong_number_but_sweep_g_under_drift() 
 /// leave them within 3 σ), a lift-off between its stages as `contact_lost`.
 #[test]
 fn fit_names_interference_and_lost_contact() {
-    let air = air_reference().expect("free-air reference");
     let unit = calibrated(Method::Fit, 10).expect("calibration");
     let cases = catalogue(NoiseScene::Bench);
     let case = |n: &str| cases.iter().find(|c| c.name == n).expect(n);
     let mut interference = 0;
     for name in ["knocks", "mains-60"] {
         for seed in FIRST_SEED..FIRST_SEED + 5 {
-            let r = run_case(case(name), Method::Fit, &unit, Some(&air), seed).unwrap();
+            let r = run_case(case(name), Method::Fit, &unit, seed).unwrap();
             match r.status {
                 Status::Failed(Failure::Interference) => interference += 1,
                 _ => assert_eq!(classify(case(name), &r), Outcome::Correct, "{name}: {r:?}"),
@@ -98,16 +98,16 @@ fn fit_names_interference_and_lost_contact() {
     // mains-60 puts 240 Hz within a linewidth of the resonance: every reading sees it.
     assert!(interference >= 5, "{interference}");
     for seed in FIRST_SEED..FIRST_SEED + 5 {
-        let r = run_case(case("lift-off-0.4s"), Method::Fit, &unit, Some(&air), seed).unwrap();
+        let r = run_case(case("lift-off-0.4s"), Method::Fit, &unit, seed).unwrap();
         assert_eq!(r.status, Status::Failed(Failure::ContactLost), "{r:?}");
     }
 }
 
 #[test]
 fn contact_is_told_by_q_not_by_frequency() {
-    let air = air_reference().expect("free-air reference");
     let unit = calibrated(Method::SweepG, 10).expect("calibration");
-    let (s, cal) = (unit.settings, unit.cal);
+    let air = unit.profile.air.expect("air reference");
+    let (s, profile) = (unit.settings, unit.profile);
     // Tissue whose loaded resonance equals the free one (about 330 kPa in hal-sim).
     let mut e = 300.0;
     while Scene::on_modulus_kpa(e).resonance_hz() < air.free_resonance.0 as f64 {
@@ -115,20 +115,17 @@ fn contact_is_told_by_q_not_by_frequency() {
     }
     let scene = Scene::on_modulus_kpa(e).with_noise(NoiseScene::Bench);
     assert!((scene.resonance_hz() - air.free_resonance.0 as f64).abs() < 0.2);
-    let r = pzt_probe::board::sim::read(&scene, 9, Method::SweepG, s, &cal, |_| {})
-        .unwrap()
-        .check_contact(Some(&air));
+    let r = pzt_probe::board::sim::read(&scene, 9, Method::SweepG, s, &profile, |_| {}).unwrap();
     assert_eq!(r.status, Status::Ok, "{e} kPa in contact: {r:?}");
     let free = pzt_probe::board::sim::read(
         &Scene::free_air().with_noise(NoiseScene::Bench),
         9,
         Method::SweepG,
         s,
-        &cal,
+        &profile,
         |_| {},
     )
-    .unwrap()
-    .check_contact(Some(&air));
+    .unwrap();
     assert_eq!(free.status, Status::Failed(Failure::NoContact));
     assert!(free.modulus.is_none());
 }

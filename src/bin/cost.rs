@@ -89,8 +89,9 @@ mod harness {
     use pzt_probe::dsp::dds::frequency_hz;
     use pzt_probe::engine::{PointPlan, SampleEngine};
     use pzt_probe::measure::{Measurement, Procedure};
+    use pzt_probe::profile::UnitProfile;
     use pzt_probe::runner::BATCH;
-    use pzt_probe::{Failure, Method, PowerLaw, Reading, Seconds, Status};
+    use pzt_probe::{Failure, Method, Reading, Seconds, Status};
 
     /// Core clock the budget is stated for: the STM32G474 at 170 MHz.
     pub const CORE_HZ: u32 = 170_000_000;
@@ -225,7 +226,7 @@ mod harness {
     }
 
     /// One reading of `case`, counted into `cost`.
-    fn read(case: &Case, cal: &PowerLaw, cost: &mut Cost) -> Result<Reading, Stalled> {
+    fn read(case: &Case, unit: &UnitProfile, cost: &mut Cost) -> Result<Reading, Stalled> {
         let scene = Scene::on_modulus_kpa(case.e_kpa as f64).with_noise(NoiseScene::Bench);
         let mut stream = board::Stream::new(SimProbe::new(scene, SEED));
         let scale = stream.scale();
@@ -236,7 +237,7 @@ mod harness {
         let settings = method.default_settings();
         let start = engine.samples();
         let mut m = match cost.call(Call::New, || {
-            Procedure::new(method, &settings, &scale, start)
+            Procedure::new(method, &settings, &scale, start, unit)
         }) {
             Ok(m) => m,
             Err(_) => {
@@ -290,7 +291,7 @@ mod harness {
             }
         }
         engine.stop();
-        Ok(cost.call(Call::Finish, || m.finish(cal)))
+        Ok(cost.call(Call::Finish, || m.finish(unit)))
     }
 
     fn nan_or(v: Option<f32>) -> f32 {
@@ -298,9 +299,9 @@ mod harness {
     }
 
     /// Measure one case and log its line; true when it ended as expected.
-    fn measure(case: &Case, cal: &PowerLaw, fs: f32) -> bool {
+    fn measure(case: &Case, unit: &UnitProfile, fs: f32) -> bool {
         let mut cost = Cost::new();
-        let (reading, status) = match read(case, cal, &mut cost) {
+        let (reading, status) = match read(case, unit, &mut cost) {
             Ok(r) => (Some(r), r.status.code()),
             Err(Stalled) => (None, "stalled"),
         };
@@ -360,8 +361,11 @@ mod harness {
             BUDGET_PCT,
             board::ELAPSED_UNIT
         );
-        // The QEMU image's calibration (the store's fallback): only the status matters here.
-        let cal = PowerLaw::paper_experiment();
+        // The simulated unit's factory profile, as the QEMU image's store holds it.
+        let Some(unit) = pzt_probe::board::sim_factory::profile() else {
+            defmt::error!("factory record corrupt");
+            board::exit(false)
+        };
         let mut ok = true;
         for &e_kpa in MODULI_KPA.iter() {
             for method in Method::ALL {
@@ -370,7 +374,7 @@ mod harness {
                     e_kpa,
                     expect: Status::Ok.code(),
                 };
-                ok &= measure(&case, &cal, fs);
+                ok &= measure(&case, &unit, fs);
             }
         }
         let fallback = Case {
@@ -378,7 +382,7 @@ mod harness {
             e_kpa: FALLBACK_KPA,
             expect: Status::Failed(Failure::OutOfBand).code(),
         };
-        ok &= measure(&fallback, &cal, fs);
+        ok &= measure(&fallback, &unit, fs);
         defmt::info!("exit ok={=bool}", ok);
         board::exit(ok)
     }

@@ -45,6 +45,7 @@
 //! air f_hz=<f32> q=<f32>
 //! reference e_kpa=<f32> f_hz=<f32> f_sigma_hz=<f32> n=<u16>
 //! calibration source=<str> a=<f32> b=<f32> c=<f32> min_kpa=<f32> max_kpa=<f32>
+//! hint code=<str> message=<str>                           (warn; after a failed reading: what to do)
 //! rejected error=<str>                                     (warn)
 //! stalled tag=<u16>                                        (error)
 //! overrun late=<u32> ring=<u32> dropped=<u32>              (error; whenever a counter grew)
@@ -190,6 +191,7 @@ mod shared {
             f_hz: f32,
             q: f32,
         },
+        AirRefused(pzt_probe::Failure),
         Reference {
             e_kpa: f32,
             f_hz: f32,
@@ -198,6 +200,8 @@ mod shared {
         },
         Calibration(PowerLaw),
         Rejected(CommandError),
+        /// What the user can do about a failed reading.
+        Hint(pzt_probe::Failure),
         Refused(&'static str),
         Stalled {
             tag: u16,
@@ -241,12 +245,14 @@ mod app {
     use crate::shared::*;
     use core::sync::atomic::Ordering;
     use pzt_probe::command::{parse, Command, CommandError, LineBuffer};
-    use pzt_probe::dsp::dds::frequency_hz;
     use pzt_probe::engine::{PointRaw, SampleEngine};
     use pzt_probe::hal::FrontEndScale;
+    use pzt_probe::measure::DEFAULT_METHOD;
     use pzt_probe::measure::{Measurement, Procedure, Settings};
+    use pzt_probe::profile::{self, Reference, UnitProfile, AIR_SWEEP};
+    use pzt_probe::runner::window_budget_samples;
     use pzt_probe::runner::BATCH;
-    use pzt_probe::store::{AirReference, LoadSource, Store};
+    use pzt_probe::store::{LoadSource, Store};
     use pzt_probe::{Failure, Method, PowerLaw, Reading, Seconds};
     use rtic_monotonics::systick::prelude::*;
     use rtic_sync::channel::{Receiver, Sender};
@@ -263,6 +269,8 @@ mod app {
     const RX_CAP: usize = 64;
     /// Reference readings kept for a calibration fit.
     const MAX_REFERENCES: usize = 32;
+    /// Points of an air-reference sweep ([`AIR_SWEEP`]: 61).
+    const AIR_POINTS: usize = 64;
     /// The measurement task feeds the watchdog at least this often while it is alive (ms).
     const FEED_MS: u32 = 100;
 
@@ -459,31 +467,32 @@ mod app {
 
         /// One reading with `method` and `settings`, plan by plan through the interrupt: every
         /// window of a plan (one for a sweep point, several for a ring-down) is waited for with
-        /// a timeout and handed to the procedure.
+        /// the shared time-out rule ([`window_budget_samples`]) and handed to the procedure; the
+        /// reading ends in the one pipeline with the unit's profile. `on_point` sees every
+        /// admittance point.
         async fn reading(
             &mut self,
             method: Method,
             settings: &Settings,
-            cal: &PowerLaw,
+            unit: &UnitProfile,
+            mut on_point: impl FnMut(&pzt_probe::sweep::SweepPoint),
         ) -> Reading {
             let start = BATCHES.load(Ordering::Relaxed) as u64 * BATCH as u64;
-            let mut m = match Procedure::new(method, settings, &self.scale, start) {
+            let mut m = match Procedure::new(method, settings, &self.scale, start, unit) {
                 Ok(m) => m,
                 Err(_) => return Reading::failed(method, Failure::BadSettings, Seconds(0.0), 0),
             };
             let fs = self.scale.sample_rate.0;
-            let batch_s = BATCH as f32 / fs;
             let mut points: u16 = 0;
             while !m.is_complete() {
                 let Some(plan) = m.next_plan() else { break };
                 if self.plans.send(EngineCmd::Load(plan)).await.is_err() {
                     break;
                 }
-                // Budget of each window: settling, the window, a cycle to find the boundary,
-                // the two-batch pipeline and margin.
-                let f = frequency_hz(plan.ftw, fs as f64).max(1.0) as f32;
-                let window_s = plan.settle_samples as f32 / fs + (plan.cycles as f32 + 2.0) / f;
-                let budget_ms = ((window_s + 6.0 * batch_s) * 1000.0) as u32 + FEED_MS;
+                // The shared stall rule with the interrupt's pipeline (two batches) as the
+                // stream's latency, and a watchdog period of margin for the task's own delay.
+                let budget_s = window_budget_samples(&plan, fs as f64, 2) as f32 / fs;
+                let budget_ms = (budget_s * 1000.0) as u32 + FEED_MS;
                 for _ in 0..plan.windows.max(1) {
                     let got = loop {
                         match Mono::timeout_after(budget_ms.millis(), self.points.recv()).await {
@@ -502,6 +511,7 @@ mod app {
                     };
                     if let Some(p) = m.accept(&raw) {
                         points = points.saturating_add(1);
+                        on_point(&p);
                         self.report(Report::Point {
                             tag: plan.tag,
                             point: p,
@@ -511,7 +521,7 @@ mod app {
                 }
             }
             let _ = self.plans.send(EngineCmd::Stop).await;
-            m.finish(cal)
+            m.finish(unit)
         }
     }
 
@@ -528,12 +538,13 @@ mod app {
     ) {
         let store = cx.local.store;
         let loaded = store.load();
+        // The unit profile: calibration, contact condition, air reference.
         let mut record = loaded.record;
         let mut fallback = loaded.is_fallback();
         let _ = reports.send(Report::Loaded(loaded)).await;
-        // The default strategy: fit, falling back to sweep-G.
-        let mut active = Active::of(Method::Auto);
-        let mut refs: heapless::Vec<(f64, f64, f64), MAX_REFERENCES> = heapless::Vec::new();
+        // The default strategy (the bench's too): fit, falling back to sweep-G.
+        let mut active = Active::of(DEFAULT_METHOD);
+        let mut refs: heapless::Vec<Reference, MAX_REFERENCES> = heapless::Vec::new();
         let mut rig = Rig {
             plans: &mut plans,
             points: &mut points,
@@ -559,12 +570,15 @@ mod app {
             rig.watchdog.feed();
             let ok = match req {
                 Command::Measure => {
-                    // Contact is checked against the stored air reference (Q and resonance).
+                    // Every check (air reference, contact, range, contact condition) is in the
+                    // pipeline the reading ends in.
                     let r = rig
-                        .reading(active.method, &active.settings, &record.calibration)
-                        .await
-                        .check_contact(record.air.as_ref());
+                        .reading(active.method, &active.settings, &record, |_| {})
+                        .await;
                     rig.report(Report::Reading(r)).await;
+                    if let pzt_probe::Status::Failed(f) = r.status {
+                        rig.report(Report::Hint(f)).await;
+                    }
                     rig.report(Report::Counters).await;
                     r.status.is_ok()
                 }
@@ -578,7 +592,8 @@ mod app {
                     // Parsed and checked against the board; that they are settings of the
                     // active method is checked here, by the method's own validation.
                     // (The procedure is dropped at once: it must not live across an await.)
-                    let checked = Procedure::new(active.method, &s, &rig.scale, 0).map(|_| ());
+                    let checked =
+                        Procedure::new(active.method, &s, &rig.scale, 0, &record).map(|_| ());
                     match checked {
                         Ok(()) => {
                             active.settings = s;
@@ -600,71 +615,70 @@ mod app {
                     true
                 }
                 Command::Air => {
-                    // Sweep-G measures Q: with the active sweep when sweep settings are active
-                    // (a fine sweep over the free resonance), else its default sweep. The
-                    // calibration does not matter here.
-                    let sweep = match active.settings {
-                        Settings::Sweep(s) => s,
-                        _ => Method::SweepG.default_sweep(),
-                    };
+                    // The one air-reference procedure: a sweep of the free probe and a BVD
+                    // fit of its points (profile::air_from_points), which refuses a probe that
+                    // touches something.
+                    let mut pts: heapless::Vec<pzt_probe::sweep::SweepPoint, AIR_POINTS> =
+                        heapless::Vec::new();
                     let r = rig
-                        .reading(Method::SweepG, &Settings::Sweep(sweep), &record.calibration)
+                        .reading(Method::SweepG, &Settings::Sweep(AIR_SWEEP), &record, |p| {
+                            let _ = pts.push(*p);
+                        })
                         .await;
-                    rig.report(Report::Reading(r)).await;
-                    match (r.resonance, r.q) {
-                        (Some(f), Some(q)) => {
-                            let air = AirReference {
-                                free_resonance: f,
-                                free_q: q,
-                            };
-                            if air.is_valid() {
-                                record.air = Some(air);
-                                rig.report(Report::Air { f_hz: f.0, q }).await;
-                                true
-                            } else {
-                                rig.report(Report::Refused("air reference not valid")).await;
-                                false
-                            }
+                    let air = match r.status {
+                        pzt_probe::Status::Failed(Failure::DriveFault | Failure::BadSettings) => {
+                            Err(Failure::DriveFault)
                         }
-                        _ => {
-                            rig.report(Report::Refused("no resonance in air")).await;
+                        _ => profile::air_from_points(&pts),
+                    };
+                    match air {
+                        Ok(air) => {
+                            record.air = Some(air);
+                            rig.report(Report::Air {
+                                f_hz: air.free_resonance.0,
+                                q: air.free_q,
+                            })
+                            .await;
+                            true
+                        }
+                        Err(f) => {
+                            rig.report(Report::AirRefused(f)).await;
                             false
                         }
                     }
                 }
                 Command::CalibrateAdd(e) => {
                     let r = rig
-                        .reading(active.method, &active.settings, &record.calibration)
+                        .reading(active.method, &active.settings, &record, |_| {})
                         .await;
                     rig.report(Report::Reading(r)).await;
-                    match (r.resonance, r.resonance_sigma) {
-                        (Some(f), Some(s))
-                            if refs
-                                .push((e.0 as f64, f.0 as f64, (s.0 as f64).max(1e-4)))
-                                .is_ok() =>
-                        {
+                    match Reference::of(e, &r) {
+                        Some(x) if refs.push(x).is_ok() => {
                             rig.report(Report::Reference {
                                 e_kpa: e.0,
-                                f_hz: f.0,
-                                f_sigma_hz: s.0,
+                                f_hz: x.resonance_hz as f32,
+                                f_sigma_hz: x.sigma_hz as f32,
                                 n: refs.len() as u16,
                             })
                             .await;
                             true
                         }
-                        (Some(_), Some(_)) => {
+                        Some(_) => {
                             rig.report(Report::Refused("reference list full")).await;
                             false
                         }
-                        _ => {
+                        None => {
                             rig.report(Report::Refused("no resonance")).await;
                             false
                         }
                     }
                 }
-                Command::CalibrateFit => match PowerLaw::fit(&refs) {
-                    Ok(cal) => {
+                // The one calibration procedure: robust power-law fit and the Q(E) contact
+                // condition of the same readings.
+                Command::CalibrateFit => match profile::calibrate(&refs) {
+                    Ok((cal, q_model)) => {
                         record.calibration = cal;
+                        record.q_model = Some(q_model);
                         fallback = false;
                         rig.report(Report::Calibration(cal)).await;
                         true
@@ -889,6 +903,10 @@ mod app {
                     r.method.name()
                 ),
                 Report::Air { f_hz, q } => defmt::info!("air f_hz={=f32} q={=f32}", f_hz, q),
+                Report::AirRefused(f) => defmt::warn!(
+                    "rejected error={=str}",
+                    f.message()
+                ),
                 Report::Reference {
                     e_kpa,
                     f_hz,
@@ -911,6 +929,11 @@ mod app {
                     c.max_kpa as f32
                 ),
                 Report::Rejected(e) => defmt::warn!("rejected error={=str}", e.message()),
+                Report::Hint(f) => defmt::warn!(
+                    "hint code={=str} message={=str}",
+                    f.code(),
+                    f.message()
+                ),
                 Report::Refused(why) => defmt::warn!("rejected error={=str}", why),
                 Report::Stalled { tag } => defmt::error!("stalled tag={=u16}", tag),
                 Report::Counters => defmt::info!(

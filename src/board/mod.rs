@@ -2,6 +2,8 @@
 
 #[cfg(feature = "sim")]
 pub mod sim;
+#[cfg(feature = "sim")]
+pub mod sim_factory;
 
 #[cfg(all(target_os = "none", feature = "qemu"))]
 pub mod qemu;

@@ -119,12 +119,22 @@ pub struct Parts {
     pub uart: Uart,
 }
 
-/// Set the board up: the simulated probe on [`scene`]. Call once, from `init`.
+/// Set the board up: the simulated probe on [`scene`], and its flash as the factory left it —
+/// the unit's profile ([`super::sim_factory::RECORD`]) programmed into the store's first slot.
+/// Call once, from `init`.
 pub fn init(_core: &mut cortex_m::Peripherals) -> Parts {
+    let mut flash = StoreFlash::new();
+    // The simulated flash is erased at boot and the record fits its first sector: the factory
+    // programming cannot fail; if it did, the store would load its fallback and say so.
+    let _ = embedded_storage::nor_flash::NorFlash::write(
+        &mut flash,
+        STORE_BASE,
+        &super::sim_factory::RECORD,
+    );
     Parts {
         stream: Stream::new(SimProbe::new(scene(), 1)),
         watchdog: Watchdog,
-        flash: StoreFlash::new(),
+        flash,
         uart: Uart::new(),
     }
 }

@@ -62,13 +62,14 @@ impl SampleStream for SimBoard {
     }
 }
 
-use crate::calibration::{FitError, PowerLaw, QModel};
+use crate::calibration::FitError;
 use crate::engine::SampleEngine;
 use crate::measure::{Method, Procedure, Reading, Settings};
+use crate::profile::{air_from_points, calibrate, AirReference, Reference, UnitProfile};
 use crate::runner::{run_sweep, RunError};
 use crate::status::Failure;
-use crate::sweep::{SettingsError, SweepPoint, SweepSettings};
-use crate::units::{Farads, Seconds, Siemens, Volts};
+use crate::sweep::{SettingsError, SweepPoint};
+use crate::units::KPa;
 use hal_sim::{NoiseScene, Phantom, Scene};
 
 /// Why a simulated reading could not run.
@@ -80,27 +81,27 @@ pub enum SimError {
     Run(RunError),
     /// The calibration fit failed.
     Fit(FitError),
-    /// The air reference found no resonance to fit.
+    /// The air reference could not be taken.
     Air(Failure),
 }
 
-/// One reading of `scene` (noise stream `seed`) with `method` and `settings`, mapped through
-/// `cal`; `on_point` sees every measured point.
+/// One reading of `scene` (noise stream `seed`) with `method` and `settings`, concluded with
+/// the unit's profile `unit` through the one pipeline; `on_point` sees every measured point.
 pub fn read(
     scene: &Scene,
     seed: u64,
     method: Method,
     settings: impl Into<Settings>,
-    cal: &PowerLaw,
+    unit: &UnitProfile,
     on_point: impl FnMut(&SweepPoint),
 ) -> Result<Reading, SimError> {
     let mut board = SimBoard::new(SimProbe::new(*scene, seed));
     let mut engine = SampleEngine::new();
     let scale = board.scale();
     let settings: Settings = settings.into();
-    let mut m =
-        Procedure::new(method, &settings, &scale, engine.samples()).map_err(SimError::Settings)?;
-    run_sweep(&mut board, &mut engine, &mut m, cal, on_point).map_err(SimError::Run)
+    let mut m = Procedure::new(method, &settings, &scale, engine.samples(), unit)
+        .map_err(SimError::Settings)?;
+    run_sweep(&mut board, &mut engine, &mut m, unit, on_point).map_err(SimError::Run)
 }
 
 /// The reference phantoms a unit is calibrated on (paper 003 samples A–E).
@@ -112,116 +113,122 @@ pub const CALIBRATION_PHANTOMS: [Phantom; 5] = [
     hal_sim::phantoms::E,
 ];
 
-/// Most repeats per phantom [`calibrate`] takes.
+/// Most repeats per phantom [`calibrate_unit`] takes.
 pub const MAX_REPEATS: usize = 25;
 
-/// Calibrate the simulated unit as the paper calibrated its prototype: `repeats` readings of
-/// each of the phantoms A–E with `method` and `settings` under `noise`, noise seeds
-/// `seed0, seed0 + 1, ...`, and a weighted least-squares fit of `f = a + b E^c` to every
-/// resonance (weights from each reading's own uncertainty). Readings without a resonance are
-/// left out.
-pub fn calibrate(
+/// Noise stream of the simulated unit's air reference.
+pub const AIR_SEED: u64 = 77;
+
+/// The whole profile of the simulated unit, as a user of the real instrument makes it: the air
+/// reference in free air ([`air_reference`]), then [`calibrate_unit_with`] on A–E × `repeats`
+/// with `method` and `settings` under `noise`. `on_reading` is called after each reference
+/// reading (for progress).
+pub fn unit_profile_with(
     method: Method,
     settings: impl Into<Settings>,
     noise: NoiseScene,
     repeats: usize,
     seed0: u64,
-) -> Result<PowerLaw, SimError> {
-    calibrate_unit(method, settings, noise, repeats, seed0).map(|(law, _)| law)
+    on_reading: impl FnMut(),
+) -> Result<UnitProfile, SimError> {
+    let hardware = Scene::free_air();
+    let air = air_reference(&hardware, noise, AIR_SEED)?;
+    calibrate_unit_with(air, method, settings, noise, repeats, seed0, on_reading)
 }
 
-/// [`calibrate`], and also the unit's Q(E) curve from the same reference readings (for methods
-/// that measure Q; `None` otherwise): the contact condition the calibration holds for.
-pub fn calibrate_unit(
+/// [`unit_profile_with`] without progress.
+pub fn unit_profile(
     method: Method,
     settings: impl Into<Settings>,
     noise: NoiseScene,
     repeats: usize,
     seed0: u64,
-) -> Result<(PowerLaw, Option<QModel>), SimError> {
-    calibrate_unit_with(method, settings, noise, repeats, seed0, || {})
+) -> Result<UnitProfile, SimError> {
+    unit_profile_with(method, settings, noise, repeats, seed0, || {})
 }
 
-/// [`calibrate_unit`], calling `on_reading` after each reference reading (for progress).
+/// Calibrate the simulated unit whose air reference is `air` as the paper calibrated its
+/// prototype: `repeats` readings of each of the phantoms A–E with `method` and `settings`
+/// under `noise`, noise seeds `seed0, seed0 + 1, ...`, and the one calibration procedure
+/// ([`calibrate`]: robust weighted fit of `f = a + b E^c`, and the Q(E) contact condition).
+/// Readings without a resonance or Q are left out.
 pub fn calibrate_unit_with(
+    air: AirReference,
     method: Method,
     settings: impl Into<Settings>,
     noise: NoiseScene,
     repeats: usize,
     seed0: u64,
     mut on_reading: impl FnMut(),
-) -> Result<(PowerLaw, Option<QModel>), SimError> {
+) -> Result<UnitProfile, SimError> {
     let repeats = repeats.clamp(1, MAX_REPEATS);
     let settings: Settings = settings.into();
-    let mut data = [(0.0f64, 0.0f64, 0.0f64); 5 * MAX_REPEATS];
-    let mut qs = [(0.0f64, 0.0f64); 5 * MAX_REPEATS];
-    let mut nq = 0;
+    let mut refs = [Reference {
+        modulus_kpa: 0.0,
+        resonance_hz: 0.0,
+        sigma_hz: 0.0,
+        q: 0.0,
+    }; 5 * MAX_REPEATS];
     let mut n = 0;
-    // Any curve will do for the reference readings: only their resonance is used.
-    let cal = PowerLaw::paper_experiment();
+    // Before the fit the unit has its air reference and no calibration: the pipeline refuses
+    // the modulus (`uncalibrated`) and keeps the resonance and Q the fit needs.
+    let uncalibrated = UnitProfile {
+        air: Some(air),
+        ..UnitProfile::fallback()
+    };
     for (pi, p) in CALIBRATION_PHANTOMS.iter().enumerate() {
         let scene = Scene::on_phantom(p).with_noise(noise);
         for r in 0..repeats {
             let seed = seed0 + (pi * MAX_REPEATS + r) as u64;
-            let reading = read(&scene, seed, method, settings, &cal, |_| {})?;
-            if let (Some(f), Some(s)) = (reading.resonance, reading.resonance_sigma) {
-                data[n] = (p.modulus_kpa, f.0 as f64, (s.0 as f64).max(1e-4));
+            let reading = read(&scene, seed, method, settings, &uncalibrated, |_| {})?;
+            if let Some(x) = Reference::of(KPa(p.modulus_kpa as f32), &reading) {
+                refs[n] = Reference {
+                    modulus_kpa: p.modulus_kpa,
+                    ..x
+                };
                 n += 1;
-                if let Some(q) = reading.q {
-                    qs[nq] = (p.modulus_kpa, q as f64);
-                    nq += 1;
-                }
             }
             on_reading();
         }
     }
-    let law = PowerLaw::fit_robust(&mut data[..n]).map_err(SimError::Fit)?;
-    Ok((law, QModel::fit(&qs[..nq])))
+    let (calibration, q_model) = calibrate(&refs[..n]).map_err(SimError::Fit)?;
+    Ok(UnitProfile {
+        calibration,
+        q_model: Some(q_model),
+        air: Some(air),
+    })
 }
 
-/// The air reference of a simulated unit, as the firmware's air-reference command takes it: a
-/// stepped sweep of the free probe (170–290 Hz in 2 Hz steps, 50 ms settle, 100 ms integration,
-/// 5 V; 9.2 s of probe time) and a Butterworth–Van Dyke fit of its admittance, which gives the
-/// free resonance and Q and the static admittance `C0`, `G0` that
-/// [`HoldSettings`](crate::estimate::hold::HoldSettings) needs.
-/// `hardware` is the unit (its PZT and front end; its tissue is ignored), `seed` the noise stream.
+/// The air reference of a simulated unit, taken as the firmware's `air` command takes it: a
+/// sweep of the free probe ([`crate::profile::AIR_SWEEP`], 9.2 s of probe time) and
+/// [`air_from_points`]. `hardware` is the unit (its PZT and front end; its tissue is ignored),
+/// `seed` the noise stream.
 pub fn air_reference(
     hardware: &Scene,
     noise: NoiseScene,
     seed: u64,
-) -> Result<(crate::store::AirReference, Farads, Siemens), SimError> {
+) -> Result<AirReference, SimError> {
     let scene = Scene {
         tissue: None,
         ..*hardware
     }
     .with_noise(noise);
-    let sweep = SweepSettings {
-        start: Hz(170.0),
-        stop: Hz(290.0),
-        step: Hz(2.0),
-        settle: Seconds(0.05),
-        integrate: Seconds(0.1),
-        drive: Volts(5.0),
-    };
+    air_reference_on(&scene, seed)
+}
+
+/// The air-reference procedure on `scene` as it is (a user may take it touching something:
+/// [`air_from_points`] then refuses it).
+pub fn air_reference_on(scene: &Scene, seed: u64) -> Result<AirReference, SimError> {
     let mut points: heapless::Vec<SweepPoint, 64> = heapless::Vec::new();
     read(
-        &scene,
+        scene,
         seed,
         Method::SweepG,
-        &sweep,
-        &PowerLaw::paper_experiment(),
+        &crate::profile::AIR_SWEEP,
+        &UnitProfile::fallback(),
         |p| {
             let _ = points.push(*p);
         },
     )?;
-    let i =
-        crate::estimate::argmax(&points, |p| p.g_s).ok_or(SimError::Air(Failure::NoResonance))?;
-    let b = crate::estimate::fit::fit_bvd(&points, points[i].freq.0 as f64, 30.0)
-        .map_err(SimError::Air)?;
-    let air = crate::store::AirReference {
-        free_resonance: Hz(b.f0 as f32),
-        free_q: b.q as f32,
-    };
-    let c0 = b.b0 / (2.0 * core::f64::consts::PI * b.f_ref);
-    Ok((air, Farads(c0 as f32), Siemens(b.g0 as f32)))
+    air_from_points(&points).map_err(SimError::Air)
 }

@@ -86,10 +86,15 @@ pub fn estimate(points: &[SweepPoint]) -> Result<Estimate, Failure> {
     if !sigma.is_finite() || !f0.is_finite() || delta.abs() > 1.0 || sigma_vertex > step {
         return Err(Failure::LowSnr);
     }
+    // The dip alone has no width to judge contact by: the quality factor comes from the
+    // conductance peak of the same points (sweep-G's fit), and a sweep whose conductance peak
+    // is not resolved (out of band, no peak) is no reading either — a |Z| dip without a
+    // motional peak under it is the static branch's curvature, not a resonance.
+    let q = super::conductance::estimate(points)?.q;
     Ok(Estimate {
         resonance: Hz(f0 as f32),
         sigma: Hz(sigma as f32),
-        q: None,
+        q,
         points_used: 3,
     })
 }

@@ -2,13 +2,14 @@
 //! firmware's own estimator and calibration.
 #![allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > y)` also rejects NaN, deliberately
 
-use crate::calfile::{self, CalFile};
+use crate::calfile;
 use crate::capture::{self, Capture, CaptureError, DemodOptions, Layout, SweepShape};
 use crate::{plot, report};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use pzt_probe::measure::Reading;
-use pzt_probe::{Failure, Method, PowerLaw, Seconds, Status};
+use pzt_probe::profile::UnitProfile;
+use pzt_probe::{Failure, Method, Seconds, Status};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
@@ -24,10 +25,14 @@ pub struct AnalyzeArgs {
     /// refused.
     #[arg(long, default_value = "sweep-g")]
     pub method: String,
-    /// Calibration from resonance (Hz) to modulus (kPa): `paper-experiment` (paper 003 eq. 5),
-    /// `paper-simulation` (eq. 4), or a JSON file written by `probe-bench calibrate`.
+    /// Calibration curve from resonance (Hz) to modulus (kPa): `paper-experiment` (paper 003
+    /// eq. 5), `paper-simulation` (eq. 4), or `unit` (the profile's own curve).
     #[arg(long, default_value = "paper-experiment")]
     pub calibration: String,
+    /// Unit profile of the probe that made the capture (`probe-bench calibrate --out`): its
+    /// air reference and contact condition check the reading. Default: the simulated unit's.
+    #[arg(long)]
+    pub profile: Option<PathBuf>,
     /// Print one JSON object instead of the report.
     #[arg(long)]
     pub json: bool,
@@ -81,11 +86,11 @@ pub struct Analysis {
     pub reading: Reading,
 }
 
-/// Analyse capture text with `method` and `cal`.
+/// Analyse capture text with `method` and the unit's profile `unit`.
 pub fn analyze(
     text: &str,
     method: Method,
-    cal: &PowerLaw,
+    unit: &UnitProfile,
     opts: &DemodOptions,
 ) -> Result<Analysis, CaptureError> {
     let capture = capture::parse(text, min_points(method), opts)?;
@@ -103,16 +108,23 @@ pub fn analyze(
         _ => Seconds(0.0),
     };
     let n = pts.len().min(u16::MAX as usize) as u16;
-    let reading = Reading::from_estimate(method, est, cal, probe_time, n);
+    let reading = pzt_probe::pipeline::conclude(method, est, unit, probe_time, n);
     Ok(Analysis { capture, reading })
 }
 
-/// The calibration called `name`: built in or a file.
-pub fn calibration(name: &str) -> Result<PowerLaw> {
-    match calfile::builtin(name) {
-        Some(p) => Ok(p),
-        None => CalFile::load(Path::new(name)),
-    }
+/// The profile `analyze` reads a capture with: the file given, else the simulated unit's
+/// (calibrated with `method` on A–E × 20 at bench noise), its curve replaced by a built-in
+/// one when `calibration` names one.
+pub fn profile(profile: Option<&Path>, calibration: &str, method: Method) -> Result<UnitProfile> {
+    calfile::resolve(profile, calibration, || {
+        crate::unit::simulated(
+            method,
+            &method.default_settings(),
+            hal_sim::NoiseScene::Bench,
+            20,
+            1000,
+        )
+    })
 }
 
 /// The JSON object of an analysis: the reading's fields plus the capture's.
@@ -154,7 +166,7 @@ pub fn analysis_json(a: &Analysis, file: &str) -> Value {
 /// Run the subcommand.
 pub fn run(a: AnalyzeArgs) -> Result<()> {
     let method = offline_method(&a.method)?;
-    let cal = calibration(&a.calibration)?;
+    let unit = profile(a.profile.as_deref(), &a.calibration, method)?;
     if a.cycles_per_window == 0 || a.cycles_per_window > 1000 {
         bail!("--cycles-per-window must be 1 to 1000");
     }
@@ -169,7 +181,7 @@ pub fn run(a: AnalyzeArgs) -> Result<()> {
     };
     let text = std::fs::read_to_string(&a.file)
         .with_context(|| format!("cannot read {}", a.file.display()))?;
-    let an = analyze(&text, method, &cal, &opts)
+    let an = analyze(&text, method, &unit, &opts)
         .map_err(|e| anyhow::anyhow!("{}: {e}", a.file.display()))?;
     let c = &an.capture;
     if a.json {
@@ -209,7 +221,7 @@ pub fn run(a: AnalyzeArgs) -> Result<()> {
             "  method {}, calibration {}: {}",
             method.name(),
             a.calibration,
-            calfile::describe(&cal)
+            calfile::describe_profile(&unit)
         );
         println!("{}", report::reading_line(&an.reading));
     }

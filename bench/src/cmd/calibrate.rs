@@ -1,14 +1,14 @@
 //! `probe-bench calibrate`: calibrate the simulated unit on phantoms A–E.
 
 use super::{progress, MethodArgs};
-use crate::calfile::{self, CalFile};
+use crate::calfile::{self, ProfileFile};
 use crate::scene::parse_noise;
 use anyhow::{bail, Result};
 use clap::Args;
 use hal_sim::NoiseScene;
 use pzt_probe::board::sim::{self as simboard, CALIBRATION_PHANTOMS};
-use pzt_probe::calibration::PowerLaw;
 use pzt_probe::measure::{Procedure, Settings};
+use pzt_probe::profile::UnitProfile;
 use pzt_probe::Method;
 use std::path::PathBuf;
 
@@ -22,29 +22,33 @@ pub struct CalibrateArgs {
     /// First noise seed.
     #[arg(long, default_value_t = 1000)]
     pub seed: u64,
-    /// Output calibration file (JSON).
+    /// Output unit profile (JSON): calibration, Q model, air reference.
     #[arg(long)]
     pub out: PathBuf,
+    /// Also write the profile as the firmware store's record, a Rust source for the simulated
+    /// unit's factory flash (`src/board/sim_factory.rs`, checked by `tests/factory_profile.rs`).
+    #[arg(long)]
+    pub firmware_record: Option<PathBuf>,
 }
 
-/// Calibrate the simulated unit on A–E with `method` and `settings` under `noise`, with a
-/// progress bar (the calibration itself is `board::sim::calibrate_unit_with`).
-pub fn calibrate_unit(
+/// The simulated unit's profile — air reference, then A–E × `repeats` with `method` and
+/// `settings` under `noise` — with a progress bar (the procedure is
+/// `board::sim::unit_profile_with`).
+pub fn unit_profile(
     method: Method,
     settings: &Settings,
     noise: NoiseScene,
     repeats: usize,
     seed: u64,
-) -> Result<PowerLaw> {
+) -> Result<UnitProfile> {
     let repeats = repeats.clamp(1, simboard::MAX_REPEATS);
     let pb = progress(
         (CALIBRATION_PHANTOMS.len() * repeats) as u64,
         "calibrating on A–E",
     );
-    let r = simboard::calibrate_unit_with(method, *settings, noise, repeats, seed, || pb.inc(1));
+    let r = simboard::unit_profile_with(method, *settings, noise, repeats, seed, || pb.inc(1));
     pb.finish_and_clear();
-    r.map(|(law, _)| law)
-        .map_err(|e| anyhow::anyhow!("calibration failed: {e:?}"))
+    r.map_err(|e| anyhow::anyhow!("calibration failed: {e:?}"))
 }
 
 /// Run the subcommand.
@@ -57,19 +61,70 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
         &settings,
         &simboard::scale_of(&hal_sim::FrontEnd::default()),
         0,
+        &UnitProfile::fallback(),
     )
     .map_err(|e| anyhow::anyhow!("bad settings: {e}"))?;
     if a.repeats == 0 || a.repeats > simboard::MAX_REPEATS {
         bail!("--repeats must be 1 to {}", simboard::MAX_REPEATS);
     }
-    let law = calibrate_unit(method, &settings, noise, a.repeats, a.seed)?;
-    CalFile::from_law(&law, Some(method.name())).save(&a.out)?;
+    let profile = unit_profile(method, &settings, noise, a.repeats, a.seed)?;
+    let taken = format!(
+        "simulated unit: air reference (sweep 170-290 Hz, noise seed {}), then A-E x {} with {} (noise {}, seeds from {})",
+        simboard::AIR_SEED,
+        a.repeats,
+        method.name(),
+        a.m.noise,
+        a.seed
+    );
+    ProfileFile::from_profile(&profile, Some(method.name()), taken).save(&a.out)?;
     println!(
         "calibrated on A–E × {} with {}: {}",
         a.repeats,
         method.name(),
-        calfile::describe(&law)
+        calfile::describe_profile(&profile)
     );
     println!("written to {}", a.out.display());
+    if let Some(path) = &a.firmware_record {
+        std::fs::write(path, firmware_record(&profile, &taken_cmd(&a, method)))?;
+        println!("firmware record written to {}", path.display());
+    }
     Ok(())
+}
+
+/// The command line that makes the record, for the generated file's header.
+fn taken_cmd(a: &CalibrateArgs, method: Method) -> String {
+    format!(
+        "cargo run --release -p probe-bench -- calibrate --method {} --noise {} --repeats {} --seed {} --out unit.json --firmware-record src/board/sim_factory.rs",
+        method.name(),
+        a.m.noise,
+        a.repeats,
+        a.seed
+    )
+}
+
+/// The Rust source of the simulated unit's factory record: `profile` encoded as the store
+/// writes it (sequence number 1).
+pub fn firmware_record(profile: &UnitProfile, cmd: &str) -> String {
+    let bytes = pzt_probe::store::encode(profile, 1);
+    let mut body = String::new();
+    for chunk in bytes.chunks(16) {
+        let row: Vec<String> = chunk.iter().map(|b| format!("0x{b:02x}")).collect();
+        body.push_str(&format!("    {},\n", row.join(", ")));
+    }
+    format!(
+        "//! The simulated unit's factory flash: its unit profile as the store's record (sequence 1),\n\
+         //! made by the unit's own procedure (air reference, then A–E) and programmed by the QEMU\n\
+         //! board at power-on. Generated — do not edit; regenerate with\n\
+         //! `{cmd}`.\n\
+         //! `tests/factory_profile.rs` checks it is current.\n\
+         \n\
+         use crate::profile::UnitProfile;\n\
+         use crate::store::{{decode, RECORD_LEN}};\n\
+         \n\
+         /// The record bytes.\n\
+         pub const RECORD: [u8; RECORD_LEN] = [\n{body}];\n\
+         \n\
+         /// The profile the record holds (`None` only if the record were corrupt).\n\
+         pub fn profile() -> Option<UnitProfile> {{\n    decode(&RECORD).map(|(_, p)| p)\n}}\n"
+    )
 }

@@ -1,14 +1,15 @@
 //! `probe-bench measure`: one or more readings on the simulated probe.
 
-use super::calibrate::calibrate_unit;
+use super::calibrate::unit_profile;
 use super::{progress, MethodArgs};
-use crate::calfile::{self, CalFile};
+use crate::calfile;
 use crate::scene::{layer_names, noise_name, parse_noise, Target};
 use crate::{plot, report};
 use anyhow::{bail, Result};
 use clap::Args;
 use pzt_probe::board::sim as simboard;
 use pzt_probe::measure::{Procedure, Settings};
+use pzt_probe::profile::UnitProfile;
 use pzt_probe::sweep::SweepPoint;
 use std::path::PathBuf;
 
@@ -34,9 +35,13 @@ pub struct MeasureArgs {
     pub repeat: u32,
     #[command(flatten)]
     pub m: MethodArgs,
-    /// Calibration: `unit` (fit the simulated unit on A–E × 20 with the same method, settings
-    /// and noise first), `paper-experiment` (eq. 5), `paper-simulation` (eq. 4), or a file
-    /// written by `probe-bench calibrate`.
+    /// Unit profile file written by `probe-bench calibrate --out` (calibration, Q model, air
+    /// reference). Default: the simulated unit's own, made first (its air reference, then A–E
+    /// × 20 with the same method, settings and noise).
+    #[arg(long)]
+    pub profile: Option<PathBuf>,
+    /// Calibration curve: `unit` (the profile's), `paper-experiment` (eq. 5) or
+    /// `paper-simulation` (eq. 4) in place of the profile's curve.
     #[arg(long, default_value = "unit")]
     pub calibration: String,
     /// Print one JSON object per reading instead of the bench log.
@@ -62,15 +67,11 @@ pub fn run(a: MeasureArgs) -> Result<()> {
     // Validate the settings before any work (the firmware does the same).
     let scene = target.scene().with_noise(noise).with_preload_n(a.preload_n);
     let scale = simboard::scale_of(&scene.front_end);
-    Procedure::new(method, &settings, &scale, 0)
+    Procedure::new(method, &settings, &scale, 0, &UnitProfile::fallback())
         .map_err(|e| anyhow::anyhow!("bad settings: {e}"))?;
-    let cal = match a.calibration.as_str() {
-        "unit" => calibrate_unit(method, &settings, noise, 20, 1000)?,
-        name => match calfile::builtin(name) {
-            Some(p) => p,
-            None => CalFile::load(std::path::Path::new(name))?,
-        },
-    };
+    let unit = calfile::resolve(a.profile.as_deref(), &a.calibration, || {
+        unit_profile(method, &settings, noise, 20, 1000)
+    })?;
     if !a.json {
         println!(
             "probe-bench measure: simulated probe on {}",
@@ -88,13 +89,13 @@ pub fn run(a: MeasureArgs) -> Result<()> {
             scene.q()
         );
         println!(
-            "  calibration {}: {}",
-            if a.calibration == "unit" {
-                "unit (fitted on A–E × 20)"
-            } else {
-                &a.calibration
+            "  unit profile {}: {}",
+            match (&a.profile, a.calibration.as_str()) {
+                (Some(p), _) => p.display().to_string(),
+                (None, "unit") => "of the simulated unit (air reference, A–E × 20)".to_owned(),
+                (None, c) => c.to_owned(),
             },
-            calfile::describe(&cal)
+            calfile::describe_profile(&unit)
         );
         println!(
             "  method {}: {}",
@@ -108,7 +109,7 @@ pub fn run(a: MeasureArgs) -> Result<()> {
     let mut first_resonance = None;
     for k in 0..a.repeat {
         let mut pts = Vec::new();
-        let reading = simboard::read(&scene, a.seed + k as u64, method, settings, &cal, |p| {
+        let reading = simboard::read(&scene, a.seed + k as u64, method, settings, &unit, |p| {
             if k == 0 {
                 pts.push(*p)
             }

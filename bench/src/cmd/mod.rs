@@ -19,11 +19,12 @@ use pzt_probe::{Hz, Method, Seconds, Volts};
 
 #[derive(Args, Clone)]
 pub struct MethodArgs {
-    /// Resonance method: `paper` (|Z| minimum, 200–300 Hz in 1 Hz steps), `sweep-g`
-    /// (conductance maximum), `adaptive`, `fit`, `track` or `ringdown` (see docs/methods.md).
+    /// Resonance method: `auto` (the default, as in the firmware: fit, falling back to
+    /// sweep-g), `paper` (|Z| minimum, 200–300 Hz in 1 Hz steps), `sweep-g` (conductance
+    /// maximum), `adaptive`, `fit`, `track`, `ringdown` or `hold` (see docs/methods.md).
     /// For the two-stage methods `--start-hz/--stop-hz` set the band, `--settle-s` the coarse
-    /// settling and `--integrate-s` the integration per point; for ringdown the band.
-    #[arg(long, default_value = "sweep-g")]
+    /// settling and `--integrate-s` the integration per point; for ringdown and hold the band.
+    #[arg(long, default_value = pzt_probe::measure::DEFAULT_METHOD.name())]
     pub method: String,
     /// Sweep start frequency, Hz (default: the method's).
     #[arg(long)]
@@ -92,8 +93,8 @@ impl MethodArgs {
                 Settings::Ringdown(s)
             }
             Settings::Hold(_) => {
-                // The simulated unit's own static admittance, from its air reference.
-                let mut s = crate::pareto::air_static();
+                // The static admittance comes from the unit profile's air reference.
+                let mut s = pzt_probe::estimate::hold::HoldSettings::DEFAULT;
                 s.band_start = self.start_hz.map(Hz).unwrap_or(s.band_start);
                 s.band_stop = self.stop_hz.map(Hz).unwrap_or(s.band_stop);
                 s.seed = Hz(0.5 * (s.band_start.0 + s.band_stop.0));

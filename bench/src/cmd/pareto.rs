@@ -8,6 +8,7 @@ use clap::Args;
 use hal_sim::NoiseScene;
 use plotters::prelude::*;
 use pzt_probe::calibration::PowerLaw;
+use pzt_probe::profile::UnitProfile;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::Mutex;
@@ -51,7 +52,7 @@ pub fn run(a: ParetoArgs) -> Result<()> {
     let total = cfgs.len() * noises.len() * (1 + MODULI.len());
     let pb = progress(total as u64, "pareto");
     let rows = Mutex::new(Vec::new());
-    let cals: Mutex<Vec<Option<PowerLaw>>> = Mutex::new(vec![None; cfgs.len()]);
+    let cals: Mutex<Vec<Option<UnitProfile>>> = Mutex::new(vec![None; cfgs.len()]);
     let next = Mutex::new(0usize);
     std::thread::scope(|s| {
         for _ in 0..std::thread::available_parallelism().map_or(2, |n| n.get()) {
@@ -70,7 +71,8 @@ pub fn run(a: ParetoArgs) -> Result<()> {
                         for (k, e) in MODULI.iter().enumerate() {
                             let seed0 = 10_000 * (k as u64 + 1);
                             let cell = evaluate(c, &cal, *e, noise, a.seeds, seed0);
-                            let crb = crb_pct(&cal, *e, noise, 5.0, cell.time_ms * 1e-3);
+                            let crb =
+                                crb_pct(&cal.calibration, *e, noise, 5.0, cell.time_ms * 1e-3);
                             rows.lock().unwrap().push(Row {
                                 c: i,
                                 noise,
@@ -184,7 +186,7 @@ fn chart(
     path: &std::path::Path,
     cfgs: &[Config],
     rows: &[Row],
-    cals: &[Option<PowerLaw>],
+    cals: &[Option<UnitProfile>],
     noise: NoiseScene,
 ) -> Result<()> {
     let pts: Vec<(usize, f64, f64, f64)> = (0..cfgs.len())
@@ -207,8 +209,7 @@ fn chart(
         .iter()
         .flatten()
         .next()
-        .copied()
-        .unwrap_or_else(PowerLaw::paper_experiment);
+        .map_or_else(PowerLaw::paper_experiment, |u| u.calibration);
     let crb: Vec<(f64, f64)> = (0..60)
         .map(|k| {
             let t = 10f64.powf(1.0 + 3.6 * k as f64 / 59.0);
@@ -327,7 +328,7 @@ where
     Ok(())
 }
 
-fn summary(cfgs: &[Config], rows: &[Row], cals: &[Option<PowerLaw>]) -> String {
+fn summary(cfgs: &[Config], rows: &[Row], cals: &[Option<UnitProfile>]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,

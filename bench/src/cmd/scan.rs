@@ -20,7 +20,8 @@ use hal_sim::lump::{self, Inclusion, LumpPhantom};
 use hal_sim::Scene;
 use plotters::prelude::*;
 use pzt_probe::board::sim as simboard;
-use pzt_probe::measure::Reading;
+use pzt_probe::measure::{Reading, Settings};
+use pzt_probe::profile::UnitProfile;
 use pzt_probe::sweep::SweepSettings;
 use pzt_probe::{Method, PowerLaw, Status};
 use serde_json::{json, Value};
@@ -59,10 +60,14 @@ pub struct ScanArgs {
     /// Front-end noise: `quiet`, `paper`, `bench`, or a current-noise density in A/sqrt(Hz).
     #[arg(long, default_value = "bench")]
     pub noise: String,
-    /// Calibration from resonance (Hz) to modulus (kPa): `paper-experiment` (eq. 5),
-    /// `paper-simulation` (eq. 4) or a calibration file.
+    /// Calibration curve from resonance (Hz) to modulus (kPa): `paper-experiment` (eq. 5, by
+    /// which paper 003 mapped its coin sample), `paper-simulation` (eq. 4) or `unit` (the
+    /// profile's own curve).
     #[arg(long, default_value = "paper-experiment")]
     pub calibration: String,
+    /// Unit profile file (`probe-bench calibrate --out`). Default: the simulated unit's.
+    #[arg(long)]
+    pub profile: Option<PathBuf>,
     /// Seed of the simulated noise (grid point k uses seed + k).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -93,10 +98,26 @@ pub struct ScanSpec {
     pub method: Method,
     /// Sweep.
     pub settings: SweepSettings,
-    /// Calibration.
-    pub cal: PowerLaw,
+    /// The unit's profile (calibration, Q model, air reference).
+    pub unit: UnitProfile,
     /// Noise seed of the first grid point.
     pub seed: u64,
+}
+
+/// The scans' default profile: the simulated unit's (air reference, Q model) calibrated with
+/// sweep-G under the scan's noise, with paper 003's experimental curve (eq. 5), by which the
+/// paper mapped its coin sample.
+fn default_unit(base: &Scene) -> Result<UnitProfile> {
+    let m = Method::SweepG;
+    let mut unit = crate::unit::simulated(
+        m,
+        &Settings::Sweep(m.default_sweep()),
+        hal_sim::NoiseScene::Density(base.front_end.current_noise_a_rthz),
+        20,
+        1000,
+    )?;
+    unit.calibration = PowerLaw::paper_experiment();
+    Ok(unit)
 }
 
 /// The grid from `lo` to `hi` (inclusive) in steps of `step`.
@@ -108,9 +129,9 @@ fn axis(lo: f64, hi: f64, step: f64) -> Vec<f64> {
 impl ScanSpec {
     /// The default scan of paper 003's coin sample with the coin at `(x, y)` mm: the disc on a
     /// grid of `step_mm`, 1.5 mm clear of its rim.
-    pub fn coin(x_mm: f64, y_mm: f64, step_mm: f64, base: Scene) -> Self {
+    pub fn coin(x_mm: f64, y_mm: f64, step_mm: f64, base: Scene) -> Result<Self> {
         let half = (14.0 / step_mm).floor() * step_mm;
-        Self {
+        Ok(Self {
             phantom: lump::paper003_coin(x_mm, y_mm),
             xs_mm: axis(-half, half, step_mm),
             ys_mm: axis(-half, half, step_mm),
@@ -119,15 +140,15 @@ impl ScanSpec {
             base,
             method: Method::SweepG,
             settings: Method::SweepG.default_sweep(),
-            cal: PowerLaw::paper_experiment(),
+            unit: default_unit(&base)?,
             seed: 0,
-        }
+        })
     }
     /// The default scan of paper 002's ball at `d_mm` along the path: a strip 4 mm past either
     /// end of the 0–20 mm path and ±6 mm across it.
-    pub fn ball(d_mm: f64, step_mm: f64, base: Scene) -> Self {
+    pub fn ball(d_mm: f64, step_mm: f64, base: Scene) -> Result<Self> {
         let across = (6.0 / step_mm).floor() * step_mm;
-        Self {
+        Ok(Self {
             phantom: lump::paper002_ball(d_mm),
             xs_mm: axis(-4.0, 24.0, step_mm),
             ys_mm: axis(-across, across, step_mm),
@@ -136,9 +157,9 @@ impl ScanSpec {
             base,
             method: Method::SweepG,
             settings: Method::SweepG.default_sweep(),
-            cal: PowerLaw::paper_experiment(),
+            unit: default_unit(&base)?,
             seed: 0,
-        }
+        })
     }
     /// Grid points on the phantom, row by row.
     pub fn grid(&self) -> Vec<(usize, usize)> {
@@ -216,7 +237,7 @@ pub fn scan(spec: &ScanSpec, mut tick: impl FnMut()) -> Result<ScanResult> {
             spec.seed.wrapping_add(k as u64),
             spec.method,
             &spec.settings,
-            &spec.cal,
+            &spec.unit,
             |_| {},
         )
         .map_err(|e| anyhow!("reading at ({x}, {y}) mm failed: {e:?}"))?;
@@ -357,10 +378,6 @@ pub fn run(a: ScanArgs) -> Result<()> {
     let base = Scene::free_air()
         .with_noise(noise)
         .with_preload_n(a.preload_n);
-    let cal = match calfile::builtin(&a.calibration) {
-        Some(p) => p,
-        None => calfile::CalFile::load(Path::new(&a.calibration))?,
-    };
     let mut spec = match a.scene {
         ScanScene::Coin => {
             let step = a.step_mm.unwrap_or(2.0);
@@ -369,7 +386,7 @@ pub fn run(a: ScanArgs) -> Result<()> {
             if !(x.is_finite() && y.is_finite() && x.hypot(y) <= 5.5) {
                 bail!("the 19 mm coin must lie inside the 30 mm disc: its centre within 5.5 mm of the disc's");
             }
-            ScanSpec::coin(x, y, step, base)
+            ScanSpec::coin(x, y, step, base)?
         }
         ScanScene::Ball => {
             let step = a.step_mm.unwrap_or(1.0);
@@ -377,12 +394,17 @@ pub fn run(a: ScanArgs) -> Result<()> {
             if !(a.ball_d_mm.is_finite() && (0.0..=20.0).contains(&a.ball_d_mm)) {
                 bail!("--ball-d-mm must be 0 to 20 mm (paper 002's path)");
             }
-            ScanSpec::ball(a.ball_d_mm, step, base)
+            ScanSpec::ball(a.ball_d_mm, step, base)?
         }
     };
     spec.method = method;
     spec.settings = method.default_sweep();
-    spec.cal = cal;
+    spec.unit = calfile::resolve(a.profile.as_deref(), &a.calibration, || {
+        let s = Settings::Sweep(method.default_sweep());
+        let mut u = crate::unit::simulated(method, &s, noise, 20, 1000)?;
+        u.calibration = PowerLaw::paper_experiment();
+        Ok(u)
+    })?;
     spec.seed = a.seed;
     let n = spec.grid().len();
     let pb = (!a.json).then(|| progress(n as u64, "scanning"));
@@ -690,7 +712,11 @@ where
     // Modulus at the bar's ends by the scan's calibration.
     let span = fmax - fmin;
     for (f, anchor) in [(fmin, fmin + 0.04 * span), (fmax, fmax - 0.005 * span)] {
-        if let Ok(m) = spec.cal.invert(pzt_probe::Hz(f as f32), pzt_probe::Hz(0.0)) {
+        if let Ok(m) = spec
+            .unit
+            .calibration
+            .invert(pzt_probe::Hz(f as f32), pzt_probe::Hz(0.0))
+        {
             bar.draw_series(std::iter::once(Text::new(
                 format!("{:.0} kPa", m.value.0),
                 (0.05, anchor),

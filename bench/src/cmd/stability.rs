@@ -2,9 +2,7 @@
 
 use super::progress;
 use crate::plot::with_backend;
-use crate::stability::{
-    air_reference, calibrated, classify, run_case, statement, tally, FIRST_SEED,
-};
+use crate::stability::{calibrated, classify, run_case, statement, tally, FIRST_SEED};
 use anyhow::{anyhow, Result};
 use clap::Args;
 use hal_sim::catalogue::catalogue;
@@ -53,7 +51,6 @@ impl Cell {
 /// Run the subcommand.
 pub fn run(a: StabilityArgs) -> Result<()> {
     let cases = catalogue(NoiseScene::Bench);
-    let air = air_reference().ok_or_else(|| anyhow!("the free-air reference reading failed"))?;
     let pb = progress((Method::ALL.len() * cases.len()) as u64, "stability");
     let mut grid: Vec<Vec<Cell>> = Vec::new();
     let mut auto_unit = None;
@@ -71,7 +68,7 @@ pub fn run(a: StabilityArgs) -> Result<()> {
                 worst_err_sigma: 0.0,
             };
             for seed in 0..a.seeds {
-                let Some(r) = run_case(case, m, &unit, Some(&air), FIRST_SEED + seed) else {
+                let Some(r) = run_case(case, m, &unit, FIRST_SEED + seed) else {
                     continue;
                 };
                 let o = classify(case, &r);
@@ -160,7 +157,7 @@ pub fn run(a: StabilityArgs) -> Result<()> {
     );
     // The default strategy over more seeds: the statement.
     let unit = auto_unit.ok_or_else(|| anyhow!("auto was not calibrated"))?;
-    let t = tally(&cases, Method::Auto, &unit, Some(&air), a.auto_seeds);
+    let t = tally(&cases, Method::Auto, &unit, a.auto_seeds);
     let _ = writeln!(
         md,
         "\nDefault strategy — {}",

@@ -1,0 +1,44 @@
+//! The simulated unit's profile for the bench's studies and commands: made once per method,
+//! settings, noise and seeds through the core's own procedure
+//! (`pzt_probe::board::sim::unit_profile`: the air reference, then A–E × repeats), and kept
+//! for the rest of the process so that a command or a test suite that reads many scenes
+//! calibrates once.
+
+use anyhow::{anyhow, Result};
+use hal_sim::NoiseScene;
+use pzt_probe::board::sim as simboard;
+use pzt_probe::measure::{Method, Settings};
+use pzt_probe::profile::UnitProfile;
+use std::collections::HashMap;
+use std::sync::{Mutex, OnceLock};
+
+type Key = (String, String, u64, usize, u64);
+
+/// The simulated unit's profile calibrated with `method` and `settings` under `noise` on A–E ×
+/// `repeats` (noise seeds from `seed0`).
+pub fn simulated(
+    method: Method,
+    settings: &Settings,
+    noise: NoiseScene,
+    repeats: usize,
+    seed0: u64,
+) -> Result<UnitProfile> {
+    static CACHE: OnceLock<Mutex<HashMap<Key, UnitProfile>>> = OnceLock::new();
+    let key: Key = (
+        method.name().to_owned(),
+        format!("{settings:?}"),
+        noise.density_a_rthz().to_bits(),
+        repeats,
+        seed0,
+    );
+    let cache = CACHE.get_or_init(|| Mutex::new(HashMap::new()));
+    if let Some(p) = cache.lock().ok().and_then(|c| c.get(&key).copied()) {
+        return Ok(p);
+    }
+    let p = simboard::unit_profile(method, *settings, noise, repeats, seed0)
+        .map_err(|e| anyhow!("the simulated unit's profile failed: {e:?}"))?;
+    if let Ok(mut c) = cache.lock() {
+        c.insert(key, p);
+    }
+    Ok(p)
+}

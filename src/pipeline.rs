@@ -1,0 +1,88 @@
+//! One reading, from an estimate to the number a user gets: the only way to a modulus.
+//!
+//! ```text
+//! estimate ─▶ air reference present? ─▶ Q measured? ─▶ contact (against the air reference)
+//!          ─▶ calibration with range check ─▶ contact condition (Q against the Q model)
+//!          ─▶ repeatability small enough to tell tissue apart ─▶ Reading
+//! ```
+//!
+//! Every caller — the firmware's measurement task, `probe-bench measure`, `scan`, `analyze`,
+//! `calibrate`, the stability map and the speed chart — ends its readings here with the unit's
+//! [`UnitProfile`]; there are no optional after-steps. A check that cannot be made (no air
+//! reference, no Q model, no Q) is a failure with its own code, never a skipped check.
+
+use crate::estimate::Estimate;
+use crate::measure::{Method, Reading};
+use crate::profile::UnitProfile;
+use crate::status::{Failure, Status};
+use crate::units::Seconds;
+
+/// Largest relative repeatability uncertainty of a modulus that is still a reading. The
+/// phantoms a user tells apart differ by 50 % or more (paper 003's A–E: 157–2465 kPa) and a
+/// lump by 60 % (151.8 against 246.3 kPa); a reading whose own scatter is a tenth of its value
+/// cannot place tissue on that scale, whatever its mean. The default methods read 0.01–0.3 %
+/// in the bench noise and below 1 % in the paper's (`docs/speed-accuracy.md`).
+pub const MAX_RELATIVE_REPEATABILITY: f32 = 0.10;
+
+/// Conclude a reading by `method` from its estimate with the unit's profile.
+pub fn conclude(
+    method: Method,
+    est: Result<Estimate, Failure>,
+    unit: &UnitProfile,
+    probe_time: Seconds,
+    points: u16,
+) -> Reading {
+    let fail = |f| Reading::failed(method, f, probe_time, points);
+    let est = match est {
+        Ok(e) => e,
+        Err(f) => return fail(f),
+    };
+    let mut r = Reading {
+        status: Status::Ok,
+        method,
+        resonance: Some(est.resonance),
+        resonance_sigma: Some(est.sigma),
+        modulus: None,
+        modulus_sigma: None,
+        modulus_sigma_repeat: None,
+        q: est.q,
+        probe_time,
+        points,
+    };
+    let Some(air) = unit.air else {
+        r.status = Status::Failed(Failure::NoAirReference);
+        return r;
+    };
+    // Without a Q, contact cannot be told from no contact: the peak's width is not resolved.
+    let Some(q) = est.q.filter(|q| q.is_finite() && *q > 0.0) else {
+        r.status = Status::Failed(Failure::LowSnr);
+        return r;
+    };
+    if air.looks_free(est.resonance, q) {
+        r.status = Status::Failed(Failure::NoContact);
+        return r;
+    }
+    let m = match unit.calibration.invert(est.resonance, est.sigma) {
+        Ok(m) => m,
+        Err(f) => {
+            r.status = Status::Failed(f);
+            return r;
+        }
+    };
+    let Some(q_model) = unit.q_model else {
+        r.status = Status::Failed(Failure::Uncalibrated);
+        return r;
+    };
+    if !q_model.holds(m.value.0 as f64, q as f64) {
+        r.status = Status::Failed(Failure::BadContact);
+        return r;
+    }
+    if !(m.sigma_repeat.0 <= MAX_RELATIVE_REPEATABILITY * m.value.0) {
+        r.status = Status::Failed(Failure::LowSnr);
+        return r;
+    }
+    r.modulus = Some(m.value);
+    r.modulus_sigma = Some(m.sigma);
+    r.modulus_sigma_repeat = Some(m.sigma_repeat);
+    r
+}

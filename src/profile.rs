@@ -1,0 +1,191 @@
+//! The unit profile: everything one probe unit needs to read correctly, and the one procedure
+//! that takes its air reference.
+//!
+//! A reading is only as good as the unit data behind it: the calibration curve (with its
+//! covariance and valid span), the contact condition the curve holds for (the [`QModel`]), and
+//! the air reference — the free probe's resonance and Q, which tell contact from no contact,
+//! and its static admittance `G0 + j2πfC0`, which `hold` subtracts. All of it lives in one
+//! [`UnitProfile`]; the firmware keeps it in flash ([`crate::store`]), the bench in a file, and
+//! every reading goes through [`crate::pipeline`] with it.
+
+use crate::calibration::{PowerLaw, QModel};
+use crate::estimate::fit::fit_bvd;
+use crate::status::Failure;
+use crate::sweep::{SweepPoint, SweepSettings};
+use crate::units::{Farads, Hz, Seconds, Siemens, Volts};
+
+/// A reading whose Q exceeds this fraction of the free Q may be free air.
+pub const NO_CONTACT_Q_FRACTION: f32 = 0.6;
+/// ... if its resonance is also this close to the free one.
+pub const NO_CONTACT_SPAN_HZ: f32 = 5.0;
+/// Lowest Q an air reference may have. The free probe rings with Q ≈ 40 (paper 003's plate,
+/// `hal-sim`'s free Q); any tissue damps the mode to Q 5–15 at the nominal preload and a light
+/// touch to 20–26 (`docs/physics.md`). An "air reference" below this was taken touching
+/// something and would make every later contact check wrong.
+pub const MIN_AIR_Q: f32 = 30.0;
+
+/// The free probe in air: what "no contact" looks like, and the static admittance of the PZT.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct AirReference {
+    /// Resonance in air.
+    pub free_resonance: Hz,
+    /// Quality factor in air.
+    pub free_q: f32,
+    /// Static (clamped) capacitance `C0` of the PZT and its wiring.
+    pub static_capacitance: Farads,
+    /// Static conductance `G0` (dielectric loss, leakage).
+    pub static_conductance: Siemens,
+}
+
+impl AirReference {
+    /// True when every value is finite, the resonance and Q positive, `C0` within 0–100 nF and
+    /// `G0` within ±1 mS (the ranges `hold` accepts).
+    pub fn is_valid(&self) -> bool {
+        self.free_resonance.0.is_finite()
+            && self.free_resonance.0 > 0.0
+            && self.free_q.is_finite()
+            && self.free_q > 0.0
+            && (0.0..=100e-9).contains(&self.static_capacitance.0)
+            && (-1e-3..=1e-3).contains(&self.static_conductance.0)
+    }
+
+    /// True when `(f, q)` looks like the free probe.
+    ///
+    /// Frequency alone cannot tell: near 330 kPa the loaded resonance equals the free one. The
+    /// quality factor can: tissue damps the mode, while the free probe rings with Q ≈ 40. A
+    /// reading looks free when its Q exceeds [`NO_CONTACT_Q_FRACTION`] of the free Q *and* its
+    /// resonance lies within [`NO_CONTACT_SPAN_HZ`] of the free one (a rigid contact also
+    /// rings well, but far above).
+    pub fn looks_free(&self, f: Hz, q: f32) -> bool {
+        q > NO_CONTACT_Q_FRACTION * self.free_q
+            && libm::fabsf(f.0 - self.free_resonance.0) < NO_CONTACT_SPAN_HZ
+    }
+}
+
+/// The stepped sweep an air reference is taken with: 170–290 Hz in 2 Hz steps (the free
+/// resonance and the whole band readings use), 50 ms settling, 100 ms integration, 5 V
+/// (9.2 s of probe time). Its points go to [`air_from_points`].
+pub const AIR_SWEEP: SweepSettings = SweepSettings {
+    start: Hz(170.0),
+    stop: Hz(290.0),
+    step: Hz(2.0),
+    settle: Seconds(0.05),
+    integrate: Seconds(0.1),
+    drive: Volts(5.0),
+};
+
+/// The air reference from the points of a sweep of the free probe ([`AIR_SWEEP`]): a
+/// Butterworth–Van Dyke fit of the admittance gives the free resonance and Q and the static
+/// admittance. Fails with the fit's code, or `bad_contact` when the Q is too low for a free
+/// probe ([`MIN_AIR_Q`]: something touches the tip).
+pub fn air_from_points(points: &[SweepPoint]) -> Result<AirReference, Failure> {
+    let i = crate::estimate::argmax(points, |p| p.g_s).ok_or(Failure::NoResonance)?;
+    let b = fit_bvd(points, points[i].freq.0 as f64, 30.0)?;
+    let air = AirReference {
+        free_resonance: Hz(b.f0 as f32),
+        free_q: b.q as f32,
+        static_capacitance: Farads((b.b0 / (2.0 * core::f64::consts::PI * b.f_ref)) as f32),
+        static_conductance: Siemens(b.g0 as f32),
+    };
+    if !air.is_valid() {
+        return Err(Failure::NoResonance);
+    }
+    if !(air.free_q >= MIN_AIR_Q) {
+        return Err(Failure::BadContact);
+    }
+    Ok(air)
+}
+
+/// Everything one unit needs to turn a resonance into a trustworthy modulus.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct UnitProfile {
+    /// Calibration curve of this unit, with covariance and valid span.
+    pub calibration: PowerLaw,
+    /// The contact condition of the calibration: Q against modulus on the reference phantoms.
+    /// Without it no reading is given (`uncalibrated`).
+    pub q_model: Option<QModel>,
+    /// Air reference, once taken. Without it no reading is given (`no_air_reference`).
+    pub air: Option<AirReference>,
+}
+
+impl UnitProfile {
+    /// The profile of a unit that was never calibrated: the paper's experimental curve, no
+    /// contact condition, no air reference. Readings with it are refused until an air reference
+    /// is taken and the unit is calibrated.
+    pub fn fallback() -> Self {
+        Self {
+            calibration: PowerLaw::paper_experiment(),
+            q_model: None,
+            air: None,
+        }
+    }
+
+    /// True when the profile may be stored and used (valid curve, finite covariance, finite
+    /// contact condition and valid air reference where present).
+    pub fn is_valid(&self) -> bool {
+        self.calibration.is_valid()
+            && self.calibration.cov.iter().flatten().all(|v| v.is_finite())
+            && self.calibration.model_sigma_hz.is_finite()
+            && self.calibration.model_sigma_hz >= 0.0
+            && self
+                .q_model
+                .is_none_or(|m| m.q0.is_finite() && m.q1.is_finite())
+            && self.air.is_none_or(|a| a.is_valid())
+    }
+}
+
+/// One reference reading for a calibration: a phantom of known modulus and what the unit read
+/// on it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Reference {
+    /// The phantom's modulus, kPa.
+    pub modulus_kpa: f64,
+    /// The resonance read on it, Hz.
+    pub resonance_hz: f64,
+    /// Its standard uncertainty, Hz.
+    pub sigma_hz: f64,
+    /// Its quality factor.
+    pub q: f64,
+}
+
+impl Reference {
+    /// The reference a reading on a phantom of `modulus` gives, when it has a resonance with
+    /// its uncertainty and a Q (its status does not matter: the uncalibrated unit refuses the
+    /// modulus, not the resonance).
+    pub fn of(modulus: crate::units::KPa, r: &crate::measure::Reading) -> Option<Reference> {
+        match (r.resonance, r.resonance_sigma, r.q) {
+            (Some(f), Some(s), Some(q)) if f.0.is_finite() && s.0.is_finite() && q > 0.0 => {
+                Some(Reference {
+                    modulus_kpa: modulus.0 as f64,
+                    resonance_hz: f.0 as f64,
+                    sigma_hz: (s.0 as f64).max(1e-4),
+                    q: q as f64,
+                })
+            }
+            _ => None,
+        }
+    }
+}
+
+/// Most reference readings one calibration takes.
+pub const MAX_REFERENCES: usize = 128;
+
+/// Calibrate a unit from its reference readings: the robust weighted fit of `f = a + b E^c`
+/// ([`PowerLaw::fit_robust`]) and the contact condition `Q(E)` ([`QModel::fit`]) of the same
+/// readings. The one calibration procedure of the firmware's `calibrate fit` and the bench's
+/// `calibrate`. Uses the first [`MAX_REFERENCES`] readings.
+pub fn calibrate(refs: &[Reference]) -> Result<(PowerLaw, QModel), crate::calibration::FitError> {
+    let n = refs.len().min(MAX_REFERENCES);
+    let mut fq = [(0.0f64, 0.0f64, 0.0f64); MAX_REFERENCES];
+    let mut eq = [(0.0f64, 0.0f64); MAX_REFERENCES];
+    for ((d, q), r) in fq.iter_mut().zip(eq.iter_mut()).zip(refs) {
+        *d = (r.modulus_kpa, r.resonance_hz, r.sigma_hz);
+        *q = (r.modulus_kpa, r.q);
+    }
+    let law = PowerLaw::fit_robust(&mut fq[..n])?;
+    let q_model = QModel::fit(&eq[..n]).ok_or(crate::calibration::FitError::TooFewPoints)?;
+    Ok((law, q_model))
+}
