@@ -122,7 +122,7 @@ fn bad_geometry_is_refused() {
     );
     // A program word that does not divide the record.
     assert_eq!(
-        Store::new(SimFlash::<4096, 2048, 64>::new(), 0).err(),
+        Store::new(SimFlash::<4096, 2048, 128>::new(), 0).err(),
         Some(StoreError::Geometry)
     );
     // Small sectors: a slot spans several.
