@@ -1,6 +1,5 @@
 //! `probe-bench measure`: one or more readings on the simulated probe.
 
-use super::calibrate::unit_profile;
 use super::{progress, MethodArgs};
 use crate::calfile;
 use crate::scene::{layer_names, noise_name, parse_noise, Target};
@@ -69,8 +68,18 @@ pub fn run(a: MeasureArgs) -> Result<()> {
     let scale = simboard::scale_of(&scene.front_end);
     Procedure::new(method, &settings, &scale, 0, &UnitProfile::fallback())
         .map_err(|e| anyhow::anyhow!("bad settings: {e}"))?;
+    // The simulated unit's profile is made as a unit's profile is made once: with the
+    // method's own default settings at bench noise, whatever this reading's settings and noise
+    // (a reading with a band that misses the resonance, or in heavy noise, must fail as a
+    // reading, not as a calibration).
     let unit = calfile::resolve(a.profile.as_deref(), &a.calibration, || {
-        unit_profile(method, &settings, noise, 20, 1000)
+        crate::unit::simulated(
+            method,
+            &method.default_settings(),
+            hal_sim::NoiseScene::Bench,
+            20,
+            1000,
+        )
     })?;
     if !a.json {
         println!(
@@ -92,7 +101,9 @@ pub fn run(a: MeasureArgs) -> Result<()> {
             "  unit profile {}: {}",
             match (&a.profile, a.calibration.as_str()) {
                 (Some(p), _) => p.display().to_string(),
-                (None, "unit") => "of the simulated unit (air reference, A–E × 20)".to_owned(),
+                (None, "unit") =>
+                    "of the simulated unit (air reference, A–E × 20, default settings, bench noise)"
+                        .to_owned(),
                 (None, c) => c.to_owned(),
             },
             calfile::describe_profile(&unit)

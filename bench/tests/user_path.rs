@@ -1,0 +1,71 @@
+//! The main job as a user runs it (`probe-bench measure --json`): scenes where no number is due
+//! end in a failure code, never in `ok`; the paper's phantoms at the nominal 30 mN read within
+//! 3 % of their modulus; the help lists every method and the firmware's default.
+
+mod common;
+
+use common::{bin, run_json, run_ok};
+use pzt_probe::measure::DEFAULT_METHOD;
+use pzt_probe::Method;
+
+fn measure(args: &[&str]) -> serde_json::Value {
+    run_json(bin().arg("measure").args(args).arg("--json"))
+}
+
+#[test]
+fn no_number_where_none_is_due() {
+    // Free air, a 2 mN touch (the resonance rises toward the free one: 237.7 Hz, Q 26), a
+    // 100 mN press (Q 5.6), silicones far below the calibrated range (8 and 29 kPa), and
+    // stiffer than the range (6 MPa): for the default and the paper's baseline.
+    let scenes: &[&[&str]] = &[
+        &["--free-air"],
+        &["--phantom", "B", "--preload-n", "0.002"],
+        &["--phantom", "B", "--preload-n", "0.1"],
+        &["--phantom", "ecoflex-00-10"],
+        &["--phantom", "ecoflex-00-30"],
+        &["--modulus-kpa", "6000"],
+    ];
+    for method in ["auto", "paper"] {
+        for s in scenes {
+            let mut args = s.to_vec();
+            args.extend(["--method", method]);
+            let r = measure(&args);
+            assert_ne!(r["status"], "ok", "{method} {s:?}: {r}");
+            assert!(r["modulus_kpa"].is_null(), "{method} {s:?}: {r}");
+            assert!(r["message"].as_str().is_some_and(|m| m.len() > 10), "{r}");
+        }
+    }
+    assert_eq!(measure(&["--free-air"])["status"], "no_contact");
+}
+
+#[test]
+fn the_papers_phantoms_read_within_3_percent() {
+    for (p, truth) in [("A", 157.5), ("B", 279.0), ("E", 2465.0)] {
+        let r = measure(&["--phantom", p]);
+        assert_eq!(r["status"], "ok", "{p}: {r}");
+        let e = r["modulus_kpa"].as_f64().unwrap();
+        assert!((e / truth - 1.0).abs() <= 0.03, "{p}: {e} kPa vs {truth}");
+        assert_eq!(r["method"], "fit", "auto's first method");
+        // Phantom B is read in well under a second of probe time.
+        if p == "B" {
+            assert!(r["probe_time_ms"].as_f64().unwrap() < 1000.0, "{r}");
+        }
+    }
+}
+
+#[test]
+fn help_lists_every_method_and_the_firmwares_default() {
+    let out = run_ok(bin().args(["measure", "--help"]));
+    let help = String::from_utf8_lossy(&out.stdout);
+    for m in Method::ALL {
+        assert!(
+            help.contains(&format!("`{}`", m.name())),
+            "{} missing",
+            m.name()
+        );
+    }
+    assert!(
+        help.contains(&format!("[default: {}]", DEFAULT_METHOD.name())),
+        "{help}"
+    );
+}
