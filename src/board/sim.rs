@@ -66,7 +66,7 @@ use crate::calibration::FitError;
 use crate::engine::SampleEngine;
 use crate::measure::{Method, Procedure, Reading, Settings};
 use crate::profile::{air_from_points, calibrate, AirReference, Reference, UnitProfile};
-use crate::runner::{run_sweep, RunError};
+use crate::runner::{run_reading, RunError};
 use crate::status::Failure;
 use crate::sweep::{SettingsError, SweepPoint};
 use crate::units::KPa;
@@ -97,11 +97,10 @@ pub fn read(
 ) -> Result<Reading, SimError> {
     let mut board = SimBoard::new(SimProbe::new(*scene, seed));
     let mut engine = SampleEngine::new();
-    let scale = board.scale();
     let settings: Settings = settings.into();
-    let mut m = Procedure::new(method, &settings, &scale, engine.samples(), unit)
-        .map_err(SimError::Settings)?;
-    run_sweep(&mut board, &mut engine, &mut m, unit, on_point).map_err(SimError::Run)
+    // Settings errors are the caller's to see, not a failed reading.
+    Procedure::new(method, &settings, &board.scale(), 0, unit).map_err(SimError::Settings)?;
+    run_reading(&mut board, &mut engine, method, &settings, unit, on_point).map_err(SimError::Run)
 }
 
 /// The reference phantoms a unit is calibrated on (paper 003 samples A–E).

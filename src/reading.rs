@@ -1,0 +1,166 @@
+//! The one reading driver: a [`Procedure`] run plan by plan against a [`PointSource`], every
+//! window of a plan waited for under one stall rule, ended in the one pipeline.
+//!
+//! The firmware's measurement task (plans and points through channels to the sample
+//! interrupt), the host ([`SyncSource`]: engine and stream in one loop, for `probe-bench` and
+//! the tests) and the QEMU cost image all take readings through [`read`].
+
+use crate::engine::{PointPlan, PointRaw, SampleEngine};
+use crate::hal::{AdcFrame, FrontEndScale, SampleStream, StreamError};
+use crate::measure::{Measurement, Method, Procedure, Reading, Settings};
+use crate::profile::UnitProfile;
+use crate::status::Failure;
+use crate::sweep::SweepPoint;
+use crate::units::{DacCode, Seconds};
+
+/// Samples per batch (one DMA half-buffer on the STM32: 5 ms at 10 kHz).
+pub const BATCH: usize = 50;
+
+/// The stall rule: samples a window of `plan` may take before it counts as lost — its
+/// settling, its cycles and two more (to find the window's boundary), and the stream's
+/// pipeline of `latency_batches` plus two batches of margin.
+pub fn window_budget_samples(plan: &PointPlan, fs: f64, latency_batches: usize) -> u64 {
+    let f = crate::dsp::dds::frequency_hz(plan.ftw, fs).max(1.0);
+    let period = fs / f;
+    plan.settle_samples as u64
+        + ((plan.cycles as f64 + 2.0) * period) as u64
+        + (BATCH * (latency_batches + 2)) as u64
+}
+
+/// Where a reading's points come from: the sample engine behind the board's streams.
+#[allow(async_fn_in_trait)] // used with concrete types only, in one task at a time
+pub trait PointSource {
+    /// The converters' scale (sample rate, volts and amps per code).
+    fn scale(&self) -> FrontEndScale;
+    /// Batches between a DAC batch and the ADC batch that sees it.
+    fn latency_batches(&self) -> usize;
+    /// The engine's sample count now (the reading's time base).
+    fn now_sample(&self) -> u64;
+    /// Hand `plan` to the engine; false when the engine can no longer be reached.
+    async fn load(&mut self, plan: PointPlan) -> bool;
+    /// The next finished window of `plan`, or `None` when none came within `budget`
+    /// samples (stalled) or the source failed.
+    async fn next(&mut self, plan: &PointPlan, budget: u64) -> Option<PointRaw>;
+    /// Stop the drive.
+    async fn stop(&mut self);
+}
+
+/// Why a reading stopped before its procedure ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stop {
+    /// A window did not arrive within its budget: the plan's tag.
+    Stalled(u16),
+}
+
+/// One reading with `method` and `settings`, ended in the pipeline with `unit`. `on_point`
+/// sees every admittance point with its plan's tag. A stall ends the reading as `drive_fault`
+/// (and `on_stop` hears of it); settings the method refuses as `bad_settings`.
+pub async fn read<S: PointSource>(
+    src: &mut S,
+    method: Method,
+    settings: &Settings,
+    unit: &UnitProfile,
+    mut on_point: impl FnMut(u16, &SweepPoint),
+    mut on_stop: impl FnMut(Stop),
+) -> Reading {
+    let scale = src.scale();
+    let fs = scale.sample_rate.0 as f64;
+    let start = src.now_sample();
+    let elapsed = |src: &S| Seconds(src.now_sample().saturating_sub(start) as f32 / fs as f32);
+    let Ok(mut m) = Procedure::new(method, settings, &scale, start, unit) else {
+        return Reading::failed(method, Failure::BadSettings, Seconds(0.0), 0);
+    };
+    let mut points: u16 = 0;
+    while !m.is_complete() {
+        let Some(plan) = m.next_plan() else { break };
+        if !src.load(plan).await {
+            break;
+        }
+        let budget = window_budget_samples(&plan, fs, src.latency_batches());
+        for _ in 0..plan.windows.max(1) {
+            let Some(raw) = src.next(&plan, budget).await else {
+                src.stop().await;
+                on_stop(Stop::Stalled(plan.tag));
+                return Reading::failed(method, Failure::DriveFault, elapsed(src), points);
+            };
+            if let Some(p) = m.accept(&raw) {
+                points = points.saturating_add(1);
+                on_point(plan.tag, &p);
+            }
+        }
+    }
+    src.stop().await;
+    m.finish(unit)
+}
+
+/// Run a future that never waits (every [`PointSource`] call of a [`SyncSource`] completes at
+/// once) to its end: the host's and single-threaded images' way to call [`read`].
+pub fn block_on<F: core::future::Future>(f: F) -> F::Output {
+    let mut f = core::pin::pin!(f);
+    let mut cx = core::task::Context::from_waker(core::task::Waker::noop());
+    loop {
+        if let core::task::Poll::Ready(v) = f.as_mut().poll(&mut cx) {
+            return v;
+        }
+    }
+}
+
+/// A [`PointSource`] that runs the engine and a [`SampleStream`] in one loop: batch by batch,
+/// generate, exchange, demodulate.
+pub struct SyncSource<'a, S> {
+    /// The stream.
+    pub stream: &'a mut S,
+    /// The sample engine.
+    pub engine: &'a mut SampleEngine,
+    /// The first error the stream reported.
+    pub error: Option<StreamError>,
+}
+
+impl<'a, S: SampleStream> SyncSource<'a, S> {
+    /// Wrap `stream` and `engine`.
+    pub fn new(stream: &'a mut S, engine: &'a mut SampleEngine) -> Self {
+        Self {
+            stream,
+            engine,
+            error: None,
+        }
+    }
+}
+
+impl<S: SampleStream> PointSource for SyncSource<'_, S> {
+    fn scale(&self) -> FrontEndScale {
+        self.stream.scale()
+    }
+    fn latency_batches(&self) -> usize {
+        self.stream.latency_batches()
+    }
+    fn now_sample(&self) -> u64 {
+        self.engine.samples()
+    }
+    async fn load(&mut self, plan: PointPlan) -> bool {
+        self.engine.load(plan);
+        self.error.is_none()
+    }
+    async fn next(&mut self, plan: &PointPlan, budget: u64) -> Option<PointRaw> {
+        let mut dac = [DacCode::MID; BATCH];
+        let mut adc = [AdcFrame::default(); BATCH];
+        let mut used = 0u64;
+        while used <= budget {
+            self.engine.generate(&mut dac);
+            if let Err(e) = self.stream.exchange(&dac, &mut adc) {
+                self.error = Some(e);
+                return None;
+            }
+            used += BATCH as u64;
+            if let Some(raw) = self.engine.demodulate(&adc) {
+                if raw.plan == *plan {
+                    return Some(raw);
+                }
+            }
+        }
+        None
+    }
+    async fn stop(&mut self) {
+        self.engine.stop();
+    }
+}

@@ -1,0 +1,324 @@
+//! The session: what the probe does with each host command, independent of the board.
+//!
+//! It owns the unit's [`UnitProfile`] (loaded from the store at boot), the active method and
+//! settings, and the reference readings of a calibration in progress. Each [`Command`] is
+//! served by [`Session::handle`] through an [`Io`]: the board's point source (readings go
+//! through the one driver, [`crate::reading::read`], and end in the one pipeline), the store,
+//! and the sink of [`Event`]s (the firmware's defmt log; the host tests' list). The RTIC
+//! application only binds these to its channels; the host tests drive the same code on the
+//! simulated probe.
+
+use crate::calibration::PowerLaw;
+use crate::command::{Command, CommandError};
+use crate::measure::{Method, Procedure, Reading, Settings, DEFAULT_METHOD};
+use crate::profile::{self, AirReference, Reference, UnitProfile, AIR_SWEEP};
+use crate::reading::{read, PointSource, Stop};
+use crate::status::{Failure, Status};
+use crate::store::{Loaded, Saved, StoreError};
+use crate::sweep::SweepPoint;
+use crate::units::KPa;
+
+/// Reference readings kept for a calibration fit.
+pub const MAX_REFERENCES: usize = 32;
+/// Points of an air-reference sweep ([`AIR_SWEEP`]: 61).
+pub const AIR_POINTS: usize = 64;
+
+/// What the session tells the outside world (the firmware logs each as one defmt line).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Event {
+    /// The active method and its settings.
+    Settings(Method, Settings),
+    /// An admittance point of the reading in progress, with its plan's tag.
+    Point {
+        /// Plan tag.
+        tag: u16,
+        /// The point.
+        point: SweepPoint,
+    },
+    /// A reading ended.
+    Reading(Reading),
+    /// What the user can do about the failed reading just reported.
+    Hint(Failure),
+    /// A window did not arrive in time (plan tag).
+    Stalled(u16),
+    /// The air reference was taken.
+    Air(AirReference),
+    /// A reference reading was added: its modulus, resonance, and the count so far.
+    Reference {
+        /// The reference's modulus.
+        modulus: KPa,
+        /// What the unit read on it.
+        reference: Reference,
+        /// References held.
+        n: u16,
+    },
+    /// A new calibration is in use.
+    Calibration(PowerLaw),
+    /// The profile was stored.
+    Saved(Saved),
+    /// Storing failed.
+    StoreFailed(StoreError),
+    /// A command was refused, with why.
+    Refused(Refusal),
+    /// The session's state.
+    Status {
+        /// Active method.
+        method: Method,
+        /// Calibration in use.
+        calibration: PowerLaw,
+        /// The store held no valid profile at boot and none was stored since.
+        fallback: bool,
+        /// An air reference is held.
+        air: bool,
+        /// A contact condition (Q model) is held.
+        q_model: bool,
+        /// Reference readings held.
+        references: u16,
+    },
+}
+
+/// Why a command was refused.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Refusal {
+    /// The settings do not suit the active method.
+    Settings(CommandError),
+    /// The air reference could not be taken (code of the failure).
+    Air(Failure),
+    /// The reference reading has no resonance with Q.
+    NoResonance,
+    /// [`MAX_REFERENCES`] are held already.
+    ReferencesFull,
+    /// The calibration fit failed.
+    Fit,
+}
+
+impl Refusal {
+    /// One line for a human.
+    pub fn message(self) -> &'static str {
+        match self {
+            Refusal::Settings(e) => e.message(),
+            Refusal::Air(f) => f.message(),
+            Refusal::NoResonance => "no resonance in the reference reading",
+            Refusal::ReferencesFull => "reference list full: fit or clear",
+            Refusal::Fit => "calibration fit failed: add references over a wider range",
+        }
+    }
+}
+
+/// What a session needs from its board.
+#[allow(async_fn_in_trait)] // used with concrete types only, in one task at a time
+pub trait Io: PointSource {
+    /// Tell the outside world.
+    async fn emit(&mut self, e: Event);
+    /// Store the profile power-loss safe.
+    fn save(&mut self, p: &UnitProfile) -> Result<Saved, StoreError>;
+}
+
+/// The probe's session state.
+#[derive(Clone, Debug)]
+pub struct Session {
+    profile: UnitProfile,
+    fallback: bool,
+    method: Method,
+    settings: Settings,
+    refs: heapless::Vec<Reference, MAX_REFERENCES>,
+}
+
+impl Session {
+    /// A session on what the store loaded, with the default method.
+    pub fn new(loaded: &Loaded) -> Self {
+        Self {
+            profile: loaded.record,
+            fallback: loaded.is_fallback(),
+            method: DEFAULT_METHOD,
+            settings: DEFAULT_METHOD.default_settings(),
+            refs: heapless::Vec::new(),
+        }
+    }
+
+    /// The unit's profile in use.
+    pub fn profile(&self) -> &UnitProfile {
+        &self.profile
+    }
+
+    /// The active method.
+    pub fn method(&self) -> Method {
+        self.method
+    }
+
+    /// Serve one command; true when it succeeded (a reading: when it is `ok`).
+    pub async fn handle<I: Io>(&mut self, cmd: Command, io: &mut I) -> bool {
+        match cmd {
+            Command::Measure => {
+                let r = self.reading(io, self.method, self.settings).await;
+                io.emit(Event::Reading(r)).await;
+                if let Status::Failed(f) = r.status {
+                    io.emit(Event::Hint(f)).await;
+                }
+                r.status.is_ok()
+            }
+            Command::Method(m) => {
+                self.method = m;
+                self.settings = m.default_settings();
+                io.emit(Event::Settings(self.method, self.settings)).await;
+                true
+            }
+            Command::Settings(s) => {
+                // Parsed and checked against the board by the parser; that they suit the
+                // active method, by the method's own validation.
+                match Procedure::new(self.method, &s, &io.scale(), 0, &self.profile) {
+                    Ok(_) => {
+                        self.settings = s;
+                        io.emit(Event::Settings(self.method, self.settings)).await;
+                        true
+                    }
+                    Err(e) => {
+                        let why = Refusal::Settings(CommandError::Settings(e));
+                        io.emit(Event::Refused(why)).await;
+                        false
+                    }
+                }
+            }
+            Command::SettingsDefault => {
+                self.settings = self.method.default_settings();
+                io.emit(Event::Settings(self.method, self.settings)).await;
+                true
+            }
+            Command::Air => self.air(io).await,
+            Command::CalibrateAdd(e) => self.calibrate_add(io, e).await,
+            Command::CalibrateFit => match profile::calibrate(&self.refs) {
+                Ok((cal, q_model)) => {
+                    self.profile.calibration = cal;
+                    self.profile.q_model = Some(q_model);
+                    io.emit(Event::Calibration(cal)).await;
+                    true
+                }
+                Err(_) => {
+                    io.emit(Event::Refused(Refusal::Fit)).await;
+                    false
+                }
+            },
+            Command::CalibrateClear => {
+                self.refs.clear();
+                true
+            }
+            Command::CalibratePaper => {
+                self.profile.calibration = PowerLaw::paper_experiment();
+                io.emit(Event::Calibration(self.profile.calibration)).await;
+                true
+            }
+            Command::Store => match io.save(&self.profile) {
+                Ok(s) => {
+                    self.fallback = false;
+                    io.emit(Event::Saved(s)).await;
+                    true
+                }
+                Err(e) => {
+                    io.emit(Event::StoreFailed(e)).await;
+                    false
+                }
+            },
+            Command::Status => {
+                io.emit(Event::Status {
+                    method: self.method,
+                    calibration: self.profile.calibration,
+                    fallback: self.fallback,
+                    air: self.profile.air.is_some(),
+                    q_model: self.profile.q_model.is_some(),
+                    references: self.refs.len() as u16,
+                })
+                .await;
+                true
+            }
+        }
+    }
+
+    /// One reading through the one driver with the session's profile, its points and any
+    /// stall emitted as events.
+    async fn reading<I: Io>(&self, io: &mut I, method: Method, settings: Settings) -> Reading {
+        self.reading_with(io, method, settings, |_| {}).await
+    }
+
+    async fn reading_with<I: Io>(
+        &self,
+        io: &mut I,
+        method: Method,
+        settings: Settings,
+        mut keep: impl FnMut(&SweepPoint),
+    ) -> Reading {
+        // Points and stalls are collected during the reading and emitted after it: the
+        // driver borrows the board for the whole reading. The point log of one reading is
+        // bounded by the largest sweep the settings allow.
+        let mut points: heapless::Vec<(u16, SweepPoint), { crate::sweep::MAX_POINTS }> =
+            heapless::Vec::new();
+        let mut stalled = None;
+        let r = read(
+            io,
+            method,
+            &settings,
+            &self.profile,
+            |tag, p| {
+                keep(p);
+                let _ = points.push((tag, *p));
+            },
+            |Stop::Stalled(tag)| stalled = Some(tag),
+        )
+        .await;
+        for (tag, point) in points {
+            io.emit(Event::Point { tag, point }).await;
+        }
+        if let Some(tag) = stalled {
+            io.emit(Event::Stalled(tag)).await;
+        }
+        r
+    }
+
+    /// The one air-reference procedure: a sweep of the free probe and a BVD fit of its points
+    /// ([`profile::air_from_points`], which refuses a probe that touches something).
+    async fn air<I: Io>(&mut self, io: &mut I) -> bool {
+        let mut pts: heapless::Vec<SweepPoint, AIR_POINTS> = heapless::Vec::new();
+        let r = self
+            .reading_with(io, Method::SweepG, Settings::Sweep(AIR_SWEEP), |p| {
+                let _ = pts.push(*p);
+            })
+            .await;
+        let air = match r.status {
+            Status::Failed(f @ (Failure::DriveFault | Failure::BadSettings)) => Err(f),
+            _ => profile::air_from_points(&pts),
+        };
+        match air {
+            Ok(a) => {
+                self.profile.air = Some(a);
+                io.emit(Event::Air(a)).await;
+                true
+            }
+            Err(f) => {
+                io.emit(Event::Refused(Refusal::Air(f))).await;
+                false
+            }
+        }
+    }
+
+    /// A reference reading on a phantom of modulus `e` for the calibration fit.
+    async fn calibrate_add<I: Io>(&mut self, io: &mut I, e: KPa) -> bool {
+        let r = self.reading(io, self.method, self.settings).await;
+        io.emit(Event::Reading(r)).await;
+        let why = match Reference::of(e, &r) {
+            Some(x) => match self.refs.push(x) {
+                Ok(()) => {
+                    io.emit(Event::Reference {
+                        modulus: e,
+                        reference: x,
+                        n: self.refs.len() as u16,
+                    })
+                    .await;
+                    return true;
+                }
+                Err(_) => Refusal::ReferencesFull,
+            },
+            None => Refusal::NoResonance,
+        };
+        io.emit(Event::Refused(why)).await;
+        false
+    }
+}

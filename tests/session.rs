@@ -1,0 +1,217 @@
+//! The session on the simulated probe, through the command parser, as a user drives the
+//! firmware: a fresh unit refuses to read; `air` in free air, `calibrate add` on phantoms A–E,
+//! `calibrate fit`, `store`; after a reboot (a new session on what the store loads) phantom B
+//! reads within 3 % of its modulus; `air` while touching tissue is refused; a method switch
+//! applies; free air reads `no_contact`.
+//!
+//! References: the phantoms' moduli (paper 003's samples, the scene's ground truth).
+
+use hal_sim::flash::SimFlash;
+use hal_sim::{phantoms, NoiseScene, Phantom, Scene, SimProbe};
+use pzt_probe::board::sim::SimBoard;
+use pzt_probe::command::parse;
+use pzt_probe::engine::{PointPlan, PointRaw, SampleEngine};
+use pzt_probe::hal::{FrontEndScale, SampleStream};
+use pzt_probe::reading::{block_on, PointSource, SyncSource};
+use pzt_probe::session::{Event, Io, Refusal, Session};
+use pzt_probe::store::{Saved, Store, StoreError};
+use pzt_probe::{Failure, Method, Status, UnitProfile};
+
+type Flash = SimFlash<4096, 2048, 8>;
+
+/// The simulated board: probe, engine, store, and the events seen.
+struct SimIo {
+    board: SimBoard,
+    engine: SampleEngine,
+    store: Store<Flash>,
+    events: Vec<Event>,
+}
+
+impl SimIo {
+    fn new(flash: Flash) -> Self {
+        let scene = Scene::free_air().with_noise(NoiseScene::Bench);
+        Self {
+            board: SimBoard::new(SimProbe::new(scene, 11)),
+            engine: SampleEngine::new(),
+            store: Store::new(flash, 0).expect("store geometry"),
+            events: Vec::new(),
+        }
+    }
+    fn put_on(&mut self, scene: Scene) {
+        self.board
+            .probe
+            .set_scene(scene.with_noise(NoiseScene::Bench));
+    }
+    fn source(&mut self) -> SyncSource<'_, SimBoard> {
+        SyncSource::new(&mut self.board, &mut self.engine)
+    }
+}
+
+impl PointSource for SimIo {
+    fn scale(&self) -> FrontEndScale {
+        self.board.scale()
+    }
+    fn latency_batches(&self) -> usize {
+        0
+    }
+    fn now_sample(&self) -> u64 {
+        self.engine.samples()
+    }
+    async fn load(&mut self, plan: PointPlan) -> bool {
+        self.source().load(plan).await
+    }
+    async fn next(&mut self, plan: &PointPlan, budget: u64) -> Option<PointRaw> {
+        self.source().next(plan, budget).await
+    }
+    async fn stop(&mut self) {
+        self.source().stop().await
+    }
+}
+
+impl Io for SimIo {
+    async fn emit(&mut self, e: Event) {
+        self.events.push(e);
+    }
+    fn save(&mut self, p: &UnitProfile) -> Result<Saved, StoreError> {
+        self.store.save(p)
+    }
+}
+
+/// Serve `line` through the parser and the session.
+fn send(s: &mut Session, io: &mut SimIo, line: &str) -> bool {
+    let cmd = parse(line.as_bytes(), &io.scale()).unwrap_or_else(|e| panic!("{line}: {e:?}"));
+    block_on(s.handle(cmd, io))
+}
+
+fn last_reading(io: &SimIo) -> pzt_probe::Reading {
+    io.events
+        .iter()
+        .rev()
+        .find_map(|e| match e {
+            Event::Reading(r) => Some(*r),
+            _ => None,
+        })
+        .expect("a reading")
+}
+
+fn boot(io: &mut SimIo) -> Session {
+    Session::new(&io.store.load())
+}
+
+const CAL: [Phantom; 5] = [
+    phantoms::A,
+    phantoms::B,
+    phantoms::C,
+    phantoms::D,
+    phantoms::E,
+];
+
+#[test]
+fn a_user_session_from_fresh_unit_to_stored_profile_and_back() {
+    let mut io = SimIo::new(Flash::new());
+    let mut s = boot(&mut io);
+    assert!(s.profile().air.is_none() && s.profile().q_model.is_none());
+
+    // A fresh unit on tissue: no air reference, no number — and the hint says what to do.
+    io.put_on(Scene::on_phantom(&phantoms::B));
+    assert!(!send(&mut s, &mut io, "measure"));
+    let r = last_reading(&io);
+    assert_eq!(r.status, Status::Failed(Failure::NoAirReference), "{r:?}");
+    assert!(r.modulus.is_none());
+    assert_eq!(
+        io.events.last(),
+        Some(&Event::Hint(Failure::NoAirReference))
+    );
+
+    // The air reference taken touching the tissue is refused (Q far below a free probe's).
+    assert!(!send(&mut s, &mut io, "air"));
+    assert!(
+        matches!(io.events.last(), Some(Event::Refused(Refusal::Air(_)))),
+        "{:?}",
+        io.events.last()
+    );
+    assert!(s.profile().air.is_none());
+
+    // In free air it is taken: the free probe (232.3 Hz, Q 40 in hal-sim).
+    io.put_on(Scene::free_air());
+    assert!(send(&mut s, &mut io, "air"));
+    let air = s.profile().air.expect("air reference");
+    assert!((air.free_resonance.0 - 232.3).abs() < 0.1, "{air:?}");
+    assert!((air.free_q / 40.0 - 1.0).abs() < 0.05, "{air:?}");
+
+    // Still uncalibrated: the resonance is read, the modulus refused.
+    io.put_on(Scene::on_phantom(&phantoms::B));
+    assert!(!send(&mut s, &mut io, "measure"));
+    assert_eq!(
+        last_reading(&io).status,
+        Status::Failed(Failure::Uncalibrated)
+    );
+
+    // Calibrate on A–E, three readings each, with the default method.
+    for p in CAL {
+        io.put_on(Scene::on_phantom(&p));
+        for _ in 0..3 {
+            assert!(
+                send(&mut s, &mut io, &format!("calibrate add {}", p.modulus_kpa)),
+                "{}: {:?}",
+                p.name,
+                io.events.last()
+            );
+        }
+    }
+    assert!(send(&mut s, &mut io, "calibrate fit"));
+    assert!(s.profile().q_model.is_some());
+    assert!(send(&mut s, &mut io, "store"));
+    assert!(matches!(io.events.last(), Some(Event::Saved(_))));
+
+    // Reboot: a new session on what the store loads.
+    let mut s = boot(&mut io);
+    assert!(s.profile().air.is_some() && s.profile().q_model.is_some());
+    io.put_on(Scene::on_phantom(&phantoms::B));
+    assert!(send(&mut s, &mut io, "measure"), "{:?}", last_reading(&io));
+    let r = last_reading(&io);
+    let e = r.modulus.expect("modulus").0 as f64;
+    assert!((e / 279.0 - 1.0).abs() <= 0.03, "{e} kPa");
+    assert_eq!(r.method, Method::Fit, "auto's first method");
+
+    // A method switch applies to the next reading.
+    assert!(send(&mut s, &mut io, "method sweep-g"));
+    assert!(send(&mut s, &mut io, "measure"));
+    assert_eq!(last_reading(&io).method, Method::SweepG);
+    assert!(matches!(
+        io.events.iter().rev().nth(1),
+        Some(Event::Point { .. })
+    ));
+
+    // Lifted into free air: no contact, not a number.
+    assert!(send(&mut s, &mut io, "method auto"));
+    io.put_on(Scene::free_air());
+    assert!(!send(&mut s, &mut io, "measure"));
+    assert_eq!(last_reading(&io).status, Status::Failed(Failure::NoContact));
+}
+
+#[test]
+fn settings_that_do_not_suit_the_method_are_refused() {
+    let mut io = SimIo::new(Flash::new());
+    let mut s = boot(&mut io);
+    // auto takes two-stage settings; a stepped sweep is refused and the settings stay.
+    assert!(!send(&mut s, &mut io, "sweep 200 260 2 0.02 0.03 5"));
+    assert!(matches!(
+        io.events.last(),
+        Some(Event::Refused(Refusal::Settings(_)))
+    ));
+    assert!(send(&mut s, &mut io, "status"));
+    match io.events.last() {
+        Some(Event::Status {
+            method,
+            fallback,
+            air,
+            q_model,
+            ..
+        }) => {
+            assert_eq!(*method, Method::Auto);
+            assert!(*fallback && !*air && !*q_model);
+        }
+        e => panic!("{e:?}"),
+    }
+}
