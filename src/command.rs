@@ -28,13 +28,7 @@
 //! | `calibrate paper` | use the paper's published calibration |
 //! | `store` | write calibration and air reference to flash |
 //! | `status` | report settings, calibration and counters |
-//!
-//! Without the cargo feature `all-methods` (the STM32 image) the methods adaptive, track,
-//! ring-down and hold are left out: `method` with one of their names
-//! ([`Method::NOT_IN_IMAGE`]) and the `ringdown` line give [`CommandError::NotInImage`] ("method
-//! not in this image"), and `staged` settings are checked for fit and auto only.
 
-#[cfg(feature = "all-methods")]
 use crate::estimate::ringdown::RingdownSettings;
 use crate::estimate::staged::{Refine, StagedSettings};
 use crate::hal::FrontEndScale;
@@ -100,9 +94,6 @@ pub enum CommandError {
     BadNumber,
     /// `method` names no method.
     UnknownMethod,
-    /// A method (or its settings) that this image leaves out (feature `all-methods` off:
-    /// ring-down and hold in the STM32 image, [`Method::NOT_IN_IMAGE`]).
-    NotInImage,
     /// `calibrate` with an unknown sub-command.
     UnknownSubcommand,
     /// A number outside its range (reference modulus, a count that is not a whole number
@@ -123,13 +114,9 @@ impl CommandError {
             CommandError::MissingArgument => "missing argument",
             CommandError::TooManyArguments => "too many arguments",
             CommandError::BadNumber => "not a finite number",
-            #[cfg(feature = "all-methods")]
             CommandError::UnknownMethod => {
-                "unknown method (auto, fit, sweep-g, paper, adaptive, track, ringdown)"
+                "unknown method (auto, fit, sweep-g, paper, adaptive, track, ringdown, hold)"
             }
-            #[cfg(not(feature = "all-methods"))]
-            CommandError::UnknownMethod => "unknown method (auto, fit, sweep-g, paper)",
-            CommandError::NotInImage => "method not in this image",
             CommandError::UnknownSubcommand => {
                 "unknown calibrate sub-command (add, fit, clear, paper)"
             }
@@ -292,11 +279,9 @@ pub fn parse(line: &[u8], scale: &FrontEndScale) -> Result<Command, CommandError
         "method" => {
             arity(1)?;
             let name = args.first().copied().unwrap_or_default();
-            match Method::from_name(name) {
-                Some(m) => Ok(Command::Method(m)),
-                None if Method::NOT_IN_IMAGE.contains(&name) => Err(CommandError::NotInImage),
-                None => Err(CommandError::UnknownMethod),
-            }
+            Method::from_name(name)
+                .map(Command::Method)
+                .ok_or(CommandError::UnknownMethod)
         }
         "sweep" => {
             if args.first() == Some(&"default") {
@@ -343,9 +328,6 @@ pub fn parse(line: &[u8], scale: &FrontEndScale) -> Result<Command, CommandError
             any.map_err(CommandError::Settings)?;
             Ok(Command::Settings(Settings::Staged(s)))
         }
-        #[cfg(not(feature = "all-methods"))]
-        "ringdown" => Err(CommandError::NotInImage),
-        #[cfg(feature = "all-methods")]
         "ringdown" => {
             arity(8)?;
             let [start, stop, seed, burst, ring, stages, window_cycles, drive] = numbers(args)?;
@@ -486,49 +468,45 @@ mod tests {
                 drive: Volts(5.0),
             })))
         );
-        // (Every refinement and ring-down exist only with `all-methods`.)
-        #[cfg(feature = "all-methods")]
-        {
-            // The defaults of the two-stage and ring-down methods, spelled out, parse back to
-            // themselves.
-            for r in [Refine::Conductance, Refine::Bvd, Refine::Track] {
-                let s = StagedSettings::default_for(r);
-                let line = std::format!(
-                    "staged {} {} {} {} {} {} {} {} {}",
-                    s.band_start.0,
-                    s.band_stop.0,
-                    s.coarse_points,
-                    s.coarse_settle.0,
-                    s.integrate.0,
-                    s.refine_points,
-                    s.refine_span,
-                    s.settle_tau,
-                    s.drive.0
-                );
-                assert_eq!(
-                    p(&line),
-                    Ok(Command::Settings(Settings::Staged(s))),
-                    "{line}"
-                );
-            }
-            let s = RingdownSettings::DEFAULT;
+        // The defaults of the two-stage and ring-down methods, spelled out, parse back to
+        // themselves.
+        for r in [Refine::Conductance, Refine::Bvd, Refine::Track] {
+            let s = StagedSettings::default_for(r);
             let line = std::format!(
-                "ringdown {} {} {} {} {} {} {} {}",
+                "staged {} {} {} {} {} {} {} {} {}",
                 s.band_start.0,
                 s.band_stop.0,
-                s.seed.0,
-                s.burst.0,
-                s.ring.0,
-                s.stages,
-                s.window_cycles,
+                s.coarse_points,
+                s.coarse_settle.0,
+                s.integrate.0,
+                s.refine_points,
+                s.refine_span,
+                s.settle_tau,
                 s.drive.0
             );
-            assert_eq!(p(&line), Ok(Command::Settings(Settings::Ringdown(s))));
-            // Settings valid for one two-stage refinement only: adaptive's three coarse points,
-            // track's zero span.
-            assert!(p("staged 170 290 3 0.02 0.02 5 0.8 3 5").is_ok());
-            assert!(p("staged 170 290 6 0.02 0.02 8 0 2 5").is_ok());
+            assert_eq!(
+                p(&line),
+                Ok(Command::Settings(Settings::Staged(s))),
+                "{line}"
+            );
         }
+        let s = RingdownSettings::DEFAULT;
+        let line = std::format!(
+            "ringdown {} {} {} {} {} {} {} {}",
+            s.band_start.0,
+            s.band_stop.0,
+            s.seed.0,
+            s.burst.0,
+            s.ring.0,
+            s.stages,
+            s.window_cycles,
+            s.drive.0
+        );
+        assert_eq!(p(&line), Ok(Command::Settings(Settings::Ringdown(s))));
+        // Settings valid for one two-stage refinement only: adaptive's three coarse points,
+        // track's zero span.
+        assert!(p("staged 170 290 3 0.02 0.02 5 0.8 3 5").is_ok());
+        assert!(p("staged 170 290 6 0.02 0.02 8 0 2 5").is_ok());
         assert_eq!(
             p("calibrate add 279"),
             Ok(Command::CalibrateAdd(KPa(279.0)))
@@ -610,22 +588,19 @@ mod tests {
             p("staged 170 290 6 0.02 0.02 5 0.8 3 500"),
             Err(Settings(SettingsError::DriveOutOfRange))
         );
-        #[cfg(feature = "all-methods")]
-        {
-            assert_eq!(
-                p("ringdown 170 290 230 0.04 0.04 2 2"),
-                Err(MissingArgument)
-            );
-            assert_eq!(
-                p("ringdown 170 290 230 0.04 0.04 5 2 5"),
-                Err(Settings(SettingsError::KnobOutOfRange))
-            );
-            assert_eq!(p("ringdown 170 290 230 0.04 0.04 2 2.5 5"), Err(OutOfRange));
-            assert_eq!(
-                p("ringdown 170 290 9000 0.04 0.04 2 2 5"),
-                Err(Settings(SettingsError::AboveNyquist))
-            );
-        }
+        assert_eq!(
+            p("ringdown 170 290 230 0.04 0.04 2 2"),
+            Err(MissingArgument)
+        );
+        assert_eq!(
+            p("ringdown 170 290 230 0.04 0.04 5 2 5"),
+            Err(Settings(SettingsError::KnobOutOfRange))
+        );
+        assert_eq!(p("ringdown 170 290 230 0.04 0.04 2 2.5 5"), Err(OutOfRange));
+        assert_eq!(
+            p("ringdown 170 290 9000 0.04 0.04 2 2 5"),
+            Err(Settings(SettingsError::AboveNyquist))
+        );
         assert_eq!(p("calibrate"), Err(MissingArgument));
         assert_eq!(p("calibrate add"), Err(MissingArgument));
         assert_eq!(p("calibrate add 0"), Err(OutOfRange));
@@ -656,20 +631,14 @@ mod tests {
     }
 
     #[test]
-    fn methods_not_in_the_image() {
-        let p = |s: &str| parse(s.as_bytes(), &scale());
-        for name in Method::NOT_IN_IMAGE {
-            assert_eq!(
-                p(&std::format!("method {name}")),
-                Err(CommandError::NotInImage)
-            );
-            assert!(Method::from_name(name).is_none());
+    fn every_method_is_named_in_the_unknown_method_message() {
+        // One method set everywhere: the STM32 image parses every method too, and the error
+        // for an unknown one lists them all.
+        let msg = CommandError::UnknownMethod.message();
+        for m in Method::ALL {
+            assert!(msg.contains(m.name()), "{msg} lacks {}", m.name());
         }
-        #[cfg(not(feature = "all-methods"))]
-        assert_eq!(
-            p("ringdown 170 290 230 0.04 0.04 2 2 5"),
-            Err(CommandError::NotInImage)
-        );
+        let p = |s: &str| parse(s.as_bytes(), &scale());
         assert_eq!(p("method fft"), Err(CommandError::UnknownMethod));
     }
 

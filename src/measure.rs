@@ -6,9 +6,7 @@
 //! [`PointRaw`], and at the end estimates the resonance and maps it through the calibration.
 
 use crate::engine::{PointPlan, PointRaw};
-#[cfg(feature = "all-methods")]
 use crate::estimate::hold::{Hold, HoldSettings};
-#[cfg(feature = "all-methods")]
 use crate::estimate::ringdown::{Ringdown, RingdownSettings};
 use crate::estimate::staged::{Refine, Staged, StagedSettings};
 use crate::estimate::{self, Estimate};
@@ -24,9 +22,7 @@ use heapless::Vec;
 
 /// Resonance estimation method.
 ///
-/// Adaptive, track, ring-down and hold exist only with the cargo feature `all-methods` (on for
-/// the host builds and the QEMU images, off for the STM32 image, whose 64 KiB of flash they do
-/// not fit: `docs/firmware.md`); [`Method::NOT_IN_IMAGE`] names what a build leaves out.
+/// Every build (host, QEMU and STM32 images) carries every method.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Method {
@@ -35,18 +31,14 @@ pub enum Method {
     /// Stepped sweep, conductance maximum with a weighted `1/G` fit.
     SweepG,
     /// Coarse sweep, then refine points around the peak settled from the estimated Q.
-    #[cfg(feature = "all-methods")]
     Adaptive,
     /// A few points, Butterworth–Van Dyke fit of the complex admittance.
     Fit,
     /// Phase tracking onto the resonance after a coarse fit.
-    #[cfg(feature = "all-methods")]
     Track,
     /// Burst, hold the drive, fit the free decay.
-    #[cfg(feature = "all-methods")]
     Ringdown,
     /// Seed with a ring-down, then hold the drive on the resonance and fit its response.
-    #[cfg(feature = "all-methods")]
     Hold,
     /// The default strategy: fit (0.7 s), falling back to sweep-G (6 s) when fit finds no
     /// trustworthy resonance; the reading names the method that produced it.
@@ -62,10 +54,8 @@ pub enum Settings {
     /// adaptive, fit, track.
     Staged(StagedSettings),
     /// ringdown.
-    #[cfg(feature = "all-methods")]
     Ringdown(RingdownSettings),
     /// hold.
-    #[cfg(feature = "all-methods")]
     Hold(HoldSettings),
 }
 
@@ -82,13 +72,11 @@ impl From<&StagedSettings> for Settings {
         Settings::Staged(*s)
     }
 }
-#[cfg(feature = "all-methods")]
 impl From<&RingdownSettings> for Settings {
     fn from(s: &RingdownSettings) -> Self {
         Settings::Ringdown(*s)
     }
 }
-#[cfg(feature = "all-methods")]
 impl From<&HoldSettings> for Settings {
     fn from(s: &HoldSettings) -> Self {
         Settings::Hold(*s)
@@ -101,8 +89,7 @@ impl From<&Settings> for Settings {
 }
 
 impl Method {
-    /// Every method of this build.
-    #[cfg(feature = "all-methods")]
+    /// Every method.
     pub const ALL: [Method; 8] = [
         Method::Paper,
         Method::SweepG,
@@ -113,32 +100,16 @@ impl Method {
         Method::Hold,
         Method::Auto,
     ];
-    /// Every method of this build.
-    #[cfg(not(feature = "all-methods"))]
-    pub const ALL: [Method; 4] = [Method::Paper, Method::SweepG, Method::Fit, Method::Auto];
-
-    /// Names of the methods this build leaves out (feature `all-methods` off): a command that
-    /// asks for one gets "not in this image" rather than "unknown method".
-    #[cfg(feature = "all-methods")]
-    pub const NOT_IN_IMAGE: [&'static str; 0] = [];
-    /// Names of the methods this build leaves out (feature `all-methods` off): a command that
-    /// asks for one gets "not in this image" rather than "unknown method".
-    #[cfg(not(feature = "all-methods"))]
-    pub const NOT_IN_IMAGE: [&'static str; 4] = ["adaptive", "track", "ringdown", "hold"];
 
     /// Stable name.
     pub const fn name(self) -> &'static str {
         match self {
             Method::Paper => "paper",
             Method::SweepG => "sweep-g",
-            #[cfg(feature = "all-methods")]
             Method::Adaptive => "adaptive",
             Method::Fit => "fit",
-            #[cfg(feature = "all-methods")]
             Method::Track => "track",
-            #[cfg(feature = "all-methods")]
             Method::Ringdown => "ringdown",
-            #[cfg(feature = "all-methods")]
             Method::Hold => "hold",
             Method::Auto => "auto",
         }
@@ -154,16 +125,12 @@ impl Method {
     pub const fn default_settings(self) -> Settings {
         match self {
             Method::Paper | Method::SweepG => Settings::Sweep(self.default_sweep()),
-            #[cfg(feature = "all-methods")]
             Method::Adaptive => Settings::Staged(StagedSettings::default_for(Refine::Conductance)),
             Method::Fit | Method::Auto => {
                 Settings::Staged(StagedSettings::default_for(Refine::Bvd))
             }
-            #[cfg(feature = "all-methods")]
             Method::Track => Settings::Staged(StagedSettings::default_for(Refine::Track)),
-            #[cfg(feature = "all-methods")]
             Method::Ringdown => Settings::Ringdown(RingdownSettings::DEFAULT),
-            #[cfg(feature = "all-methods")]
             Method::Hold => Settings::Hold(HoldSettings::DEFAULT),
         }
     }
@@ -213,7 +180,6 @@ impl Method {
                 let f = points[i].freq.0 as f64;
                 estimate::fit::estimate(points, f, 10.0)
             }
-            #[cfg(feature = "all-methods")]
             _ => Err(Failure::BadSettings),
         }
     }
@@ -411,9 +377,7 @@ impl Measurement for SweepMeasurement {
 enum Inner {
     Sweep(SweepMeasurement),
     Staged(Staged),
-    #[cfg(feature = "all-methods")]
     Ringdown(Ringdown),
-    #[cfg(feature = "all-methods")]
     Hold(Hold),
     Auto {
         first: Staged,
@@ -455,9 +419,7 @@ impl Procedure {
         now_sample: u64,
         unit: &UnitProfile,
     ) -> Result<Self, SettingsError> {
-        #[cfg(feature = "all-methods")]
         let with_air;
-        #[cfg(feature = "all-methods")]
         let settings = match (settings, unit.air) {
             (Settings::Hold(h), Some(air)) => {
                 with_air = Settings::Hold(HoldSettings {
@@ -469,24 +431,18 @@ impl Procedure {
             }
             _ => settings,
         };
-        #[cfg(not(feature = "all-methods"))]
-        let _ = unit;
         let inner = match (method, settings) {
             (Method::Paper | Method::SweepG, Settings::Sweep(s)) => {
                 Inner::Sweep(SweepMeasurement::new(method, s, scale, now_sample)?)
             }
-            #[cfg(feature = "all-methods")]
             (Method::Adaptive, Settings::Staged(s)) => {
                 Inner::Staged(s.validate(Refine::Conductance, scale)?)
             }
             (Method::Fit, Settings::Staged(s)) => Inner::Staged(s.validate(Refine::Bvd, scale)?),
-            #[cfg(feature = "all-methods")]
             (Method::Track, Settings::Staged(s)) => {
                 Inner::Staged(s.validate(Refine::Track, scale)?)
             }
-            #[cfg(feature = "all-methods")]
             (Method::Ringdown, Settings::Ringdown(s)) => Inner::Ringdown(s.validate(scale)?),
-            #[cfg(feature = "all-methods")]
             (Method::Hold, Settings::Hold(s)) => Inner::Hold(s.validate(scale)?),
             (Method::Auto, Settings::Staged(s)) => {
                 // Validate the fallback now too: the interrupt must never see bad settings.
@@ -524,9 +480,7 @@ impl Measurement for Procedure {
         match &mut self.inner {
             Inner::Sweep(m) => m.next_plan(),
             Inner::Staged(m) => m.next_plan(&self.scale),
-            #[cfg(feature = "all-methods")]
             Inner::Ringdown(m) => m.next_plan(),
-            #[cfg(feature = "all-methods")]
             Inner::Hold(m) => m.next_plan(),
             Inner::Auto {
                 first,
@@ -553,12 +507,10 @@ impl Measurement for Procedure {
         match &mut self.inner {
             Inner::Sweep(m) => m.accept(raw),
             Inner::Staged(m) => m.accept(raw, &self.scale),
-            #[cfg(feature = "all-methods")]
             Inner::Ringdown(m) => {
                 m.accept(raw, &self.scale);
                 None
             }
-            #[cfg(feature = "all-methods")]
             Inner::Hold(m) => {
                 m.accept(raw, &self.scale);
                 None
@@ -584,9 +536,7 @@ impl Measurement for Procedure {
         match &self.inner {
             Inner::Sweep(m) => m.is_complete(),
             Inner::Staged(m) => m.is_complete(),
-            #[cfg(feature = "all-methods")]
             Inner::Ringdown(m) => m.is_complete(),
-            #[cfg(feature = "all-methods")]
             Inner::Hold(m) => m.is_complete(),
             Inner::Auto {
                 first_result,
@@ -604,9 +554,7 @@ impl Measurement for Procedure {
         let (method, est, points) = match &self.inner {
             Inner::Sweep(m) => (self.method, m.estimate(), m.points().len() as u16),
             Inner::Staged(m) => (self.method, m.estimate(), m.len() as u16),
-            #[cfg(feature = "all-methods")]
             Inner::Ringdown(m) => (self.method, m.estimate(), self.windows),
-            #[cfg(feature = "all-methods")]
             Inner::Hold(m) => (self.method, m.estimate(), self.windows),
             Inner::Auto {
                 first,

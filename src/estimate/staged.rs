@@ -43,15 +43,6 @@ pub enum Refine {
     Track,
 }
 
-impl Refine {
-    /// True for the refinements this build runs: all three with the cargo feature
-    /// `all-methods`; only the BVD fit (fit, auto) without it (the STM32 image, which leaves out
-    /// adaptive and track for flash).
-    pub const fn in_image(self) -> bool {
-        cfg!(feature = "all-methods") || matches!(self, Refine::Bvd)
-    }
-}
-
 /// Settings of the two-stage methods.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -118,11 +109,8 @@ impl StagedSettings {
         }
     }
 
-    /// Validate for a board (`wrong_method` for a refinement this build leaves out).
+    /// Validate for a board.
     pub fn validate(&self, r: Refine, scale: &FrontEndScale) -> Result<Staged, SettingsError> {
-        if !r.in_image() {
-            return Err(SettingsError::WrongMethod);
-        }
         check_frequency(self.band_start.0, scale)?;
         check_frequency(self.band_stop.0, scale)?;
         if !(self.band_stop.0 > self.band_start.0) {
@@ -192,14 +180,9 @@ pub struct Staged {
 }
 
 impl Staged {
-    /// The refinement, a constant where the build runs only one (so the others' code is left
-    /// out of the image).
+    /// The refinement.
     fn refine(&self) -> Refine {
-        if cfg!(feature = "all-methods") {
-            self.r
-        } else {
-            Refine::Bvd
-        }
+        self.r
     }
 
     /// The next plan, or `None` when done (or waiting for a point).
