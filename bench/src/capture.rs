@@ -46,7 +46,7 @@
 //! `σ_Y² = (σ_I² + |Y|² σ_V²) / |V|²`, the same propagation as the firmware's integer lock-in.
 #![allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > y)` also rejects NaN, deliberately
 
-use pzt_probe::linalg::Lsq3;
+use pzt_probe::linalg::{damped_solve, Lsq3};
 use pzt_probe::sweep::SweepPoint;
 use pzt_probe::Hz;
 use std::f64::consts::PI;
@@ -610,37 +610,23 @@ pub fn noise_sigma(fy: &[(f64, f64, f64)]) -> f64 {
     (rss / dof as f64).sqrt().max(floor)
 }
 
-/// Residual sum of squares of a least-squares cubic through `(x, y)`.
+/// Residual sum of squares of a least-squares cubic through `(x, y)`: the normal equations
+/// solved by the core's Cholesky solver ([`damped_solve`] without damping), as every fit of the
+/// firmware is.
 fn cubic_rss(x: &[f64], y: &[f64]) -> Option<f64> {
-    let mut a = [[0.0f64; 5]; 4];
+    let mut ata = [[0.0f64; 4]; 4];
+    let mut aty = [0.0f64; 4];
     let scale = y.iter().map(|v| v.abs()).fold(0.0, f64::max).max(1e-300);
     for (&xi, &yi) in x.iter().zip(y) {
         let b = [1.0, xi, xi * xi, xi * xi * xi];
-        for r in 0..4 {
-            for c in 0..4 {
-                a[r][c] += b[r] * b[c];
+        for (r, row) in ata.iter_mut().enumerate() {
+            for (c, v) in row.iter_mut().enumerate() {
+                *v += b[r] * b[c];
             }
-            a[r][4] += b[r] * yi / scale;
+            aty[r] += b[r] * yi / scale;
         }
     }
-    // Gaussian elimination with partial pivoting.
-    for col in 0..4 {
-        let piv = (col..4).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
-        if !(a[piv][col].abs() > 1e-12) {
-            return None;
-        }
-        a.swap(col, piv);
-        let pivot = a[col];
-        for (r, row) in a.iter_mut().enumerate() {
-            if r != col {
-                let k = row[col] / pivot[col];
-                for (x, p) in row.iter_mut().zip(pivot).skip(col) {
-                    *x -= k * p;
-                }
-            }
-        }
-    }
-    let p: Vec<f64> = (0..4).map(|r| a[r][4] / a[r][r]).collect();
+    let p = damped_solve(&ata, &aty, 0.0)?;
     let rss = x
         .iter()
         .zip(y)
