@@ -504,15 +504,50 @@ fn every_error_message_names_its_line() {
     }
 }
 
+/// `auto` reads every layout with the BVD fit (a DAQ capture after demodulation) and falls back
+/// to sweep-G on the same points when the fit finds no resonance, as the firmware's `auto`
+/// does; the reading names the estimator that made it.
+#[test]
+fn auto_fits_every_layout_and_falls_back_to_sweep_g() {
+    for (name, layout) in [
+        ("bvd_300kpa_y.csv", Layout::Admittance),
+        ("bvd_1000kpa_z.csv", Layout::Impedance),
+        ("sim_time_stepped_phantom_b.csv", Layout::TimeDomain),
+    ] {
+        let a = run(name, Method::Auto);
+        assert_eq!(a.capture.layout, layout, "{name}");
+        assert_eq!(a.reading.method, Method::Fit, "{name}");
+        assert_eq!(a.reading.status, Status::Ok, "{name}");
+        // The same estimate as asking for the fit.
+        assert_eq!(
+            a.reading.resonance,
+            run(name, Method::Fit).reading.resonance
+        );
+    }
+    // No resonance: the fit fails, sweep-G on the same points says why.
+    let a = run("bvd_capacitor_only_y.csv", Method::Auto);
+    assert_eq!(a.reading.method, Method::SweepG);
+    assert_eq!(a.reading.status, Status::Failed(Failure::NoResonance));
+    let a = run("bvd_1000kpa_below_band_y.csv", Method::Auto);
+    assert_ne!(a.reading.status, Status::Ok);
+    assert!(a.reading.modulus.is_none());
+}
+
 #[test]
 fn methods_for_captures() {
     for m in Method::ALL {
         let r = offline_method(m.name());
-        assert_eq!(r.is_ok(), m.works_on_points(), "{}", m.name());
+        assert_eq!(
+            r.is_ok(),
+            m.works_on_points() || m == Method::Auto,
+            "{}",
+            m.name()
+        );
         if let Err(e) = r {
             assert!(e.to_string().contains("steers the drive"), "{e}");
         }
     }
+    assert_eq!(offline_method("auto").unwrap(), Method::Auto);
     assert!(offline_method("sweep-g").is_ok());
     assert!(offline_method("paper").is_ok());
     let e = offline_method("nonsense").unwrap_err().to_string();
@@ -532,7 +567,19 @@ fn cli_json_plot_and_errors() {
             .arg(data("bvd_300kpa_y.csv")),
     );
     assert_eq!(j["status"], "ok");
+    // The default is auto, which reads an analyser sweep with the BVD fit.
+    assert_eq!(j["method"], "fit");
     assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
+    // Every estimator stays selectable.
+    for m in ["paper", "sweep-g", "fit", "auto"] {
+        let j = run_json(
+            bin()
+                .args(["analyze", "--json", "--method", m])
+                .arg(heavy_c0_path("hc0_300kpa_r10_y.csv")),
+        );
+        assert_eq!(j["method"], if m == "auto" { "fit" } else { m }, "{m}");
+        assert!(j["resonance_hz"].as_f64().is_some(), "{m}");
+    }
     run_ok(
         bin()
             .args(["analyze", "--method", "paper", "--plot"])
@@ -552,4 +599,257 @@ fn cli_json_plot_and_errors() {
     assert_eq!(j["status"], "no_resonance");
     assert!(j["modulus_kpa"].is_null());
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Heavy-C0 analyser sweeps against an independent least-squares BVD fit (scipy).
+//
+// The sweeps are made here, not by `probe_bench::gen` or the core: the closed-form admittance
+// of a Butterworth–Van Dyke circuit in its physical parameters (R0 ‖ C0 beside R1–L1–C1 in
+// series), in f64, plus seeded Gaussian noise from this file's own generator. C0 is 10–30 times
+// the motional peak conductance at the resonance (the motional current a tenth to a thirtieth of
+// the capacitive one), and a parallel conductance G0 of 0.3–1 times it. The committed files in
+// `tests/data/heavy_c0/` are this generator's output (checked byte for byte; rewrite them with
+// `HEAVY_C0_WRITE=1 cargo test -p probe-bench --test analyze heavy_c0`), and
+// `tests/data/heavy_c0/scipy_bvd_fit.csv` is the scipy fit of each
+// (`python3 bench/tests/bvd_reference.py tests/data/heavy_c0 > tests/data/heavy_c0/scipy_bvd_fit.csv`).
+
+/// One heavy-C0 sweep: true resonance `f0` (Hz), quality `q`, motional peak conductance `g`
+/// (S), `ratio` = ω0 C0 / g, `g0_rel` = G0 / g, white noise per component `noise_rel` × ω0 C0,
+/// band and step (Hz), impedance or admittance layout, noise seed.
+struct HeavyC0 {
+    name: &'static str,
+    f0: f64,
+    q: f64,
+    g: f64,
+    ratio: f64,
+    g0_rel: f64,
+    noise_rel: f64,
+    band: (f64, f64, f64),
+    impedance: bool,
+    seed: u64,
+}
+
+/// Resonances and Q of the simulated unit on 150–1000 kPa (so that the readings pass the unit's
+/// contact and Q checks), written out as numbers.
+const HEAVY_C0: [HeavyC0; 5] = [
+    HeavyC0 {
+        name: "hc0_300kpa_r10_y.csv",
+        f0: 230.0195,
+        q: 10.016,
+        g: 1.53e-7,
+        ratio: 10.0,
+        g0_rel: 0.3,
+        noise_rel: 3e-4,
+        band: (180.0, 280.0, 1.0),
+        impedance: false,
+        seed: 1,
+    },
+    HeavyC0 {
+        name: "hc0_200kpa_r20_z.csv",
+        f0: 216.1712,
+        q: 9.924,
+        g: 1.45e-7,
+        ratio: 20.0,
+        g0_rel: 1.0,
+        noise_rel: 2e-4,
+        band: (170.0, 270.0, 1.0),
+        impedance: true,
+        seed: 2,
+    },
+    HeavyC0 {
+        name: "hc0_500kpa_r30_y.csv",
+        f0: 241.9419,
+        q: 10.414,
+        g: 1.63e-7,
+        ratio: 30.0,
+        g0_rel: 0.5,
+        noise_rel: 2e-4,
+        band: (190.0, 290.0, 1.0),
+        impedance: false,
+        seed: 3,
+    },
+    HeavyC0 {
+        name: "hc0_1000kpa_r25_z.csv",
+        f0: 251.4022,
+        q: 11.282,
+        g: 1.78e-7,
+        ratio: 25.0,
+        g0_rel: 0.7,
+        noise_rel: 1e-4,
+        band: (220.0, 285.0, 0.5),
+        impedance: true,
+        seed: 4,
+    },
+    HeavyC0 {
+        name: "hc0_150kpa_r15_y.csv",
+        f0: 203.7121,
+        q: 10.013,
+        g: 1.40e-7,
+        ratio: 15.0,
+        g0_rel: 0.5,
+        noise_rel: 5e-4,
+        band: (170.0, 290.0, 2.0),
+        impedance: false,
+        seed: 5,
+    },
+];
+
+/// SplitMix64 with Box–Muller normals: this file's own noise.
+struct Normal(u64);
+
+impl Normal {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+    /// Uniform on (0, 1].
+    fn uniform(&mut self) -> f64 {
+        ((self.next_u64() >> 11) + 1) as f64 / (1u64 << 53) as f64
+    }
+    fn pair(&mut self) -> (f64, f64) {
+        let r = (-2.0 * self.uniform().ln()).sqrt();
+        let t = 2.0 * std::f64::consts::PI * self.uniform();
+        (r * t.cos(), r * t.sin())
+    }
+}
+
+impl HeavyC0 {
+    /// `Y = G0 + jωC0 + 1 / (R1 + jωL1 + 1/(jωC1))` in f64.
+    fn admittance(&self, f: f64) -> (f64, f64) {
+        let w0 = 2.0 * std::f64::consts::PI * self.f0;
+        let r1 = 1.0 / self.g;
+        let l1 = self.q * r1 / w0;
+        let c1 = 1.0 / (w0 * w0 * l1);
+        let c0 = self.ratio * self.g / w0;
+        let g0 = self.g0_rel * self.g;
+        let w = 2.0 * std::f64::consts::PI * f;
+        // 1 / (a + jb) = (a - jb) / (a² + b²)
+        let (a, b) = (r1, w * l1 - 1.0 / (w * c1));
+        let d = a * a + b * b;
+        (g0 + a / d, w * c0 - b / d)
+    }
+
+    fn csv(&self) -> String {
+        let w0 = 2.0 * std::f64::consts::PI * self.f0;
+        let sigma = self.noise_rel * self.ratio * self.g;
+        let mut rng = Normal(self.seed);
+        let (f_lo, f_hi, step) = self.band;
+        let n = ((f_hi - f_lo) / step).round() as usize + 1;
+        let mut s = format!(
+            "# heavy-C0 BVD sweep (bench/tests/analyze.rs): f0 {} Hz, Q {}, g {:e} S, C0 {:e} F \
+             (w0 C0 / g = {}), G0 {:e} S, white noise {:e} S per component, seed {}\n",
+            self.f0,
+            self.q,
+            self.g,
+            self.ratio * self.g / w0,
+            self.ratio,
+            self.g0_rel * self.g,
+            sigma,
+            self.seed
+        );
+        s += if self.impedance {
+            "freq_hz,z_mag_ohm,z_phase_deg\n"
+        } else {
+            "freq_hz,y_re_s,y_im_s\n"
+        };
+        for k in 0..n {
+            let f = f_lo + k as f64 * step;
+            let (g, b) = self.admittance(f);
+            let (ng, nb) = rng.pair();
+            let (g, b) = (g + sigma * ng, b + sigma * nb);
+            if self.impedance {
+                let d = g * g + b * b;
+                // Z = 1/Y = (G - jB) / |Y|²
+                let (zr, zi) = (g / d, -b / d);
+                s += &format!(
+                    "{f},{:.10e},{:.10}\n",
+                    zr.hypot(zi),
+                    zi.atan2(zr).to_degrees()
+                );
+            } else {
+                s += &format!("{f},{g:.10e},{b:.10e}\n");
+            }
+        }
+        s
+    }
+}
+
+fn heavy_c0_path(name: &str) -> PathBuf {
+    data(&format!("heavy_c0/{name}"))
+}
+
+/// The committed heavy-C0 captures are exactly this file's generator output.
+#[test]
+fn heavy_c0_fixtures_are_the_generator_output() {
+    let write = std::env::var_os("HEAVY_C0_WRITE").is_some();
+    for c in &HEAVY_C0 {
+        let text = c.csv();
+        let path = heavy_c0_path(c.name);
+        if write {
+            std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+            std::fs::write(&path, &text).unwrap();
+        }
+        let committed = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path:?}: {e}"));
+        assert_eq!(committed, text, "{}", c.name);
+    }
+}
+
+/// `probe-bench analyze`'s default (`auto`: the BVD fit for analyser sweeps) reads every
+/// heavy-C0 sweep's resonance within twice the error of scipy's least-squares BVD fit of the
+/// same file, as a valid reading (the unit profile's checks pass); sweep-G, whose `1/G` model
+/// has no `G0`, is printed beside it.
+#[test]
+fn heavy_c0_auto_is_within_twice_the_scipy_fit() {
+    let fixture = std::fs::read_to_string(heavy_c0_path("scipy_bvd_fit.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = fixture
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with("file,"))
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), HEAVY_C0.len(), "one scipy fit per capture");
+    let unit = unit(Method::Auto);
+    for c in &HEAVY_C0 {
+        let row = rows
+            .iter()
+            .find(|r| r[0] == c.name)
+            .unwrap_or_else(|| panic!("{}: no scipy fit in the fixture", c.name));
+        let truth: f64 = row[1].parse().unwrap();
+        let f_scipy: f64 = row[2].parse().unwrap();
+        assert_eq!(truth, c.f0, "{}", c.name);
+        let text = std::fs::read_to_string(heavy_c0_path(c.name)).unwrap();
+        let a = analyze(&text, Method::Auto, &unit, &DemodOptions::default()).unwrap();
+        let r = a.reading;
+        assert_eq!(r.method, Method::Fit, "{}", c.name);
+        assert_eq!(r.status, Status::Ok, "{}", c.name);
+        let f = r.resonance.unwrap().0 as f64;
+        let err = (f - truth).abs();
+        let err_scipy = (f_scipy - truth).abs();
+        let sweep_g = Method::SweepG
+            .estimate(&a.capture.points)
+            .map(|e| e.resonance.0 as f64 - truth);
+        eprintln!(
+            "{}: auto (fit) {f:.5} Hz, error {:+.5} Hz; scipy {f_scipy:.5} Hz, error {:+.5} Hz; \
+             |auto - scipy| {:.6} Hz; sweep-G error {sweep_g:+.4?} Hz; σ {:.4} Hz",
+            c.name,
+            f - truth,
+            f_scipy - truth,
+            (f - f_scipy).abs(),
+            r.resonance_sigma.unwrap().0
+        );
+        assert!(
+            err <= 2.0 * err_scipy,
+            "{}: error {err} Hz against scipy's {err_scipy} Hz",
+            c.name
+        );
+        // The same least-squares minimum: measured within 8 µHz (half an f32 step at 250 Hz).
+        assert!(
+            (f - f_scipy).abs() < 2e-5,
+            "{}: {f} vs scipy {f_scipy}",
+            c.name
+        );
+    }
 }

@@ -7,8 +7,10 @@ use crate::capture::{self, Capture, CaptureError, DemodOptions, Layout, SweepSha
 use crate::{plot, report};
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use pzt_probe::estimate::Estimate;
 use pzt_probe::measure::Reading;
 use pzt_probe::profile::UnitProfile;
+use pzt_probe::sweep::SweepPoint;
 use pzt_probe::{Failure, Method, Seconds, Status};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
@@ -19,11 +21,13 @@ pub struct AnalyzeArgs {
     /// (Hz, ohm, degrees), `freq_hz,y_re_s,y_im_s` (Hz, siemens) or
     /// `t_s,drive_hz,v_drive_v,i_sense_a` (s, Hz, volts, amperes; stepped or continuous sweep).
     pub file: PathBuf,
-    /// Resonance method: any estimator that works on measured frequency points (`sweep-g`:
-    /// conductance maximum; `paper`: |Z| minimum; `fit`: Butterworth–Van Dyke fit of the complex
-    /// admittance). Methods that steer the drive while measuring (adaptive, track, ringdown) are
-    /// refused.
-    #[arg(long, default_value = "sweep-g")]
+    /// Resonance method: `auto` (the best estimator for the capture's layout: the
+    /// Butterworth–Van Dyke fit of the complex admittance for analyser sweeps and for the
+    /// demodulated points of DAQ captures, sweep-G on the same points when the fit finds no
+    /// trustworthy resonance), or any estimator that works on measured frequency points
+    /// (`fit`; `sweep-g`: conductance maximum; `paper`: |Z| minimum). Methods that steer the
+    /// drive while measuring (adaptive, track, ringdown, hold) are refused.
+    #[arg(long, default_value = "auto")]
     pub method: String,
     /// Calibration curve from resonance (Hz) to modulus (kPa): `paper-experiment` (paper 003
     /// eq. 5), `paper-simulation` (eq. 4), or `unit` (the profile's own curve).
@@ -49,12 +53,13 @@ pub struct AnalyzeArgs {
 }
 
 /// The method called `name`, if it can analyse recorded frequency points
-/// ([`Method::works_on_points`]); methods that steer the drive while they measure (they choose
-/// their next frequency from the last answer, track a phase or watch a ring-down) are refused.
+/// ([`Method::works_on_points`], or `auto`: [`auto_method`] per capture); methods that steer
+/// the drive while they measure (they choose their next frequency from the last answer, track a
+/// phase or watch a ring-down) are refused.
 pub fn offline_method(name: &str) -> Result<Method> {
     let offline: Vec<&str> = Method::ALL
         .iter()
-        .filter(|m| m.works_on_points())
+        .filter(|m| m.works_on_points() || **m == Method::Auto)
         .map(|m| m.name())
         .collect();
     let Some(m) = Method::from_name(name) else {
@@ -63,7 +68,7 @@ pub fn offline_method(name: &str) -> Result<Method> {
             offline.join(", ")
         );
     };
-    if !m.works_on_points() {
+    if !m.works_on_points() && m != Method::Auto {
         bail!(
             "method `{name}` steers the drive while it measures and cannot analyse a recorded capture (use one of: {})",
             offline.join(", ")
@@ -77,6 +82,38 @@ pub fn min_points(_method: Method) -> usize {
     3
 }
 
+/// The estimator `auto` reads a capture of `layout` with. Every layout carries the complex
+/// admittance at each point (an analyser's directly, a DAQ's after demodulation), so the
+/// Butterworth–Van Dyke fit applies to all: it models the static capacitance and conductance
+/// (`pzt_probe::estimate::fit`), which bias the conductance peak's `1/G` fit (sweep-G) and the
+/// |Z| dip (paper) when `C0` is large (`docs/bench.md`, heavy-C0 sweeps).
+pub const fn auto_method(layout: Layout) -> Method {
+    match layout {
+        Layout::Impedance | Layout::Admittance | Layout::TimeDomain => Method::Fit,
+    }
+}
+
+/// Failures of `auto`'s fit after which sweep-G reads the same points, as the firmware's
+/// `auto` falls back to a sweep-G sweep (`pzt_probe::measure`): the resonance missed or not
+/// resolved.
+fn fit_failure_retryable(f: Failure) -> bool {
+    matches!(
+        f,
+        Failure::NoResonance | Failure::LowSnr | Failure::OutOfBand | Failure::NotLocked
+    )
+}
+
+/// `method`'s estimate of `pts`, refused outside the measured band.
+fn estimate_in_band(method: Method, pts: &[SweepPoint]) -> Result<Estimate, Failure> {
+    let est = method.estimate(pts)?;
+    // Belt and braces: an estimate outside the measured band is never a reading.
+    let f = est.resonance.0;
+    match (pts.first(), pts.last()) {
+        (Some(first), Some(last)) if f > first.freq.0 && f < last.freq.0 => Ok(est),
+        _ => Err(Failure::OutOfBand),
+    }
+}
+
 /// A capture and the reading the firmware's estimator and calibration make of it.
 #[derive(Clone, Debug)]
 pub struct Analysis {
@@ -86,7 +123,9 @@ pub struct Analysis {
     pub reading: Reading,
 }
 
-/// Analyse capture text with `method` and the unit's profile `unit`.
+/// Analyse capture text with `method` (`auto`: [`auto_method`] for the capture's layout, then
+/// sweep-G when the fit fails as the firmware's `auto` retries) and the unit's profile `unit`.
+/// The reading names the estimator that made it.
 pub fn analyze(
     text: &str,
     method: Method,
@@ -95,14 +134,17 @@ pub fn analyze(
 ) -> Result<Analysis, CaptureError> {
     let capture = capture::parse(text, min_points(method), opts)?;
     let pts = &capture.points;
-    let mut est = method.estimate(pts);
-    // Belt and braces: an estimate outside the measured band is never a reading.
-    if let (Ok(e), Some(first), Some(last)) = (&est, pts.first(), pts.last()) {
-        let f = e.resonance.0;
-        if !(f > first.freq.0 && f < last.freq.0) {
-            est = Err(Failure::OutOfBand);
+    let (method, est) = if method == Method::Auto {
+        let first = auto_method(capture.layout);
+        match estimate_in_band(first, pts) {
+            Err(f) if fit_failure_retryable(f) => {
+                (Method::SweepG, estimate_in_band(Method::SweepG, pts))
+            }
+            est => (first, est),
         }
-    }
+    } else {
+        (method, estimate_in_band(method, pts))
+    };
     let probe_time = match (capture.sample_rate_hz, capture.layout) {
         (Some(fs), Layout::TimeDomain) => Seconds(capture.rows as f32 / fs as f32),
         _ => Seconds(0.0),
@@ -113,8 +155,8 @@ pub fn analyze(
 }
 
 /// The profile `analyze` reads a capture with: the file given, else the simulated unit's
-/// (calibrated with `method` on A–E × 20 at bench noise), its curve replaced by a built-in
-/// one when `calibration` names one.
+/// (calibrated with `method` on A–E × 20 at bench noise; `auto` as the firmware's default), its
+/// curve replaced by a built-in one when `calibration` names one.
 pub fn profile(profile: Option<&Path>, calibration: &str, method: Method) -> Result<UnitProfile> {
     calfile::resolve(profile, calibration, || {
         crate::unit::simulated(
@@ -219,7 +261,11 @@ pub fn run(a: AnalyzeArgs) -> Result<()> {
         }
         println!(
             "  method {}, calibration {}: {}",
-            method.name(),
+            if method == Method::Auto {
+                format!("auto → {}", an.reading.method.name())
+            } else {
+                method.name().to_owned()
+            },
             a.calibration,
             calfile::describe_profile(&unit)
         );
@@ -232,7 +278,7 @@ pub fn run(a: AnalyzeArgs) -> Result<()> {
                 .file_name()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_default(),
-            method.name(),
+            an.reading.method.name(),
             match an.reading.status {
                 Status::Ok => "ok".to_owned(),
                 Status::Failed(f) => f.code().to_owned(),
