@@ -23,6 +23,8 @@ pub mod engine;
 pub mod estimate;
 pub mod hal;
 pub mod linalg;
+#[cfg(feature = "defmt")]
+pub mod log;
 pub mod measure;
 pub mod pipeline;
 pub mod profile;

@@ -2,7 +2,8 @@
 //! and the readings and sweeps they describe.
 //!
 //! The firmware logs one defmt message per event with structured values (`key={=f32}` …); the
-//! formats are listed in the crate docs of `src/bin/probe.rs` and repeated here in
+//! formats are listed in the crate docs of `src/bin/probe.rs` (logged there and in
+//! `src/log.rs`) and repeated here in
 //! [`TEMPLATES`] (a test checks the two sets are identical, so a change on one side fails the
 //! build's tests). The decoder (`defmt-print`, `probe-rs run`, or `scripts/qemu-run`) prints
 //! each message as text in a configurable frame, e.g. `INFO  point tag=3 f_hz=204.0 …`,
@@ -28,7 +29,7 @@ pub const TEMPLATES: &[&str] = &[
     "store error={=str}",
     "settings method={=str} start_hz={=f32} stop_hz={=f32} step_hz={=f32} settle_s={=f32} integrate_s={=f32} drive_v={=f32}",
     "point tag={=u16} f_hz={=f32} g_s={=f32} b_s={=f32} sigma_s={=f32}",
-    "reading status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str}",
+    "reading status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} e_repeat_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str}",
     "air f_hz={=f32} q={=f32}",
     "reference e_kpa={=f32} f_hz={=f32} f_sigma_hz={=f32} n={=u16}",
     "calibration source={=str} a={=f32} b={=f32} c={=f32} min_kpa={=f32} max_kpa={=f32}",
@@ -37,7 +38,7 @@ pub const TEMPLATES: &[&str] = &[
     "stalled tag={=u16}",
     "overrun late={=u32} ring={=u32} dropped={=u32}",
     "counters batches={=u32} late={=u32} ring={=u32} dropped={=u32} isr_mean={=u32} isr_max={=u32} unit={=str}",
-    "status method={=str} calibration={=str} fallback={=bool} air={=bool} references={=u16}",
+    "status method={=str} calibration={=str} fallback={=bool} air={=bool} q_model={=bool} references={=u16}",
     "exit ok={=bool}",
 ];
 
@@ -494,6 +495,8 @@ pub struct LoggedReading {
     pub e_kpa: Option<f32>,
     /// Its standard uncertainty, kPa.
     pub e_sigma_kpa: Option<f32>,
+    /// Its repeatability part, kPa.
+    pub e_repeat_kpa: Option<f32>,
     /// Quality factor.
     pub q: Option<f32>,
     /// Probe time, s.
@@ -534,6 +537,30 @@ pub struct Session {
     pub other_lines: usize,
     /// Lines that looked like a message but did not parse.
     pub errors: Vec<LogError>,
+}
+
+impl LoggedReading {
+    /// The reading the firmware logged, as the core's [`pzt_probe::Reading`] (so that it prints
+    /// through the same JSON as a host reading); `None` when its status or method is unknown.
+    pub fn to_reading(&self) -> Option<pzt_probe::Reading> {
+        use pzt_probe::units::{Hz, KPa, Seconds};
+        let status = match self.status.as_str() {
+            "ok" => pzt_probe::Status::Ok,
+            code => pzt_probe::Status::Failed(pzt_probe::Failure::from_code(code)?),
+        };
+        Some(pzt_probe::Reading {
+            status,
+            method: pzt_probe::Method::from_name(&self.method)?,
+            resonance: self.f_hz.map(Hz),
+            resonance_sigma: self.f_sigma_hz.map(Hz),
+            modulus: self.e_kpa.map(KPa),
+            modulus_sigma: self.e_sigma_kpa.map(KPa),
+            modulus_sigma_repeat: self.e_repeat_kpa.map(KPa),
+            q: self.q,
+            probe_time: Seconds(self.probe_time_s.unwrap_or(f32::NAN)),
+            points: self.points.min(u16::MAX as u32) as u16,
+        })
+    }
 }
 
 /// Parse a whole decoded log.
@@ -608,6 +635,7 @@ pub fn parse_log(text: &str) -> Session {
                     f_sigma_hz: m.f32("f_sigma_hz"),
                     e_kpa: m.f32("e_kpa"),
                     e_sigma_kpa: m.f32("e_sigma_kpa"),
+                    e_repeat_kpa: m.f32("e_repeat_kpa"),
                     q: m.f32("q"),
                     probe_time_s: m.f32("probe_time_s"),
                     points: m.uint("points").unwrap_or(0),

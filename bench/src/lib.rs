@@ -10,6 +10,7 @@ pub mod defmt_log;
 pub mod gen;
 pub mod pareto;
 pub mod plot;
+pub mod qemu;
 pub mod report;
 pub mod scene;
 pub mod stability;

@@ -7,7 +7,7 @@ use common::{bin, run_fails_one_line, run_ok};
 
 use probe_bench::defmt_log::{self, compile, parse_line, render, Piece, Ty, Value, TEMPLATES};
 use pzt_probe::sweep::SweepPoint;
-use pzt_probe::{Hz, Method, PowerLaw};
+use pzt_probe::{Hz, Method};
 use std::collections::BTreeSet;
 use std::path::PathBuf;
 
@@ -17,7 +17,10 @@ fn root() -> PathBuf {
 
 /// Every format string passed to `defmt::{trace,debug,info,warn,error}!` in the firmware.
 fn firmware_formats() -> BTreeSet<String> {
-    let src = std::fs::read_to_string(root().join("src/bin/probe.rs")).expect("src/bin/probe.rs");
+    // The RTIC application and the library's log module (src/log.rs) both log.
+    let src = ["src/bin/probe.rs", "src/log.rs"]
+        .map(|f| std::fs::read_to_string(root().join(f)).expect(f))
+        .join("\n");
     let mut out = BTreeSet::new();
     for mac in ["trace!(", "debug!(", "info!(", "warn!(", "error!("] {
         let pat = format!("defmt::{mac}");
@@ -138,9 +141,9 @@ fn firmware_lines_round_trip_through_the_parser() {
 
 #[test]
 fn qemu_log_reconstructs_the_firmwares_reading() {
-    let text = std::fs::read_to_string(root().join("tests/data/log/qemu_sweep_g.log")).unwrap();
+    let text = std::fs::read_to_string(root().join("tests/data/log/qemu_session.log")).unwrap();
     let located =
-        std::fs::read_to_string(root().join("tests/data/log/qemu_sweep_g_located.log")).unwrap();
+        std::fs::read_to_string(root().join("tests/data/log/qemu_session_located.log")).unwrap();
     let s = defmt_log::parse_log(&text);
     assert_eq!(s, {
         let mut l = defmt_log::parse_log(&located);
@@ -149,13 +152,16 @@ fn qemu_log_reconstructs_the_firmwares_reading() {
         l
     });
     assert!(s.errors.is_empty(), "{:?}", s.errors);
-    assert_eq!(s.readings.len(), 1);
-    assert_eq!(s.sweeps.len(), 1);
-    let r = &s.readings[0];
-    let w = &s.sweeps[0];
+    // The built-in script: a reading by the default method (auto, whose fit read it), then one
+    // by sweep-G over a sweep of the script's own.
+    assert_eq!(s.readings.len(), 2);
+    assert_eq!(s.sweeps.len(), 2);
+    assert_eq!(s.readings[0].method, "fit");
+    let r = &s.readings[1];
+    let w = &s.sweeps[1];
     assert_eq!(r.status, "ok");
     assert_eq!(r.method, "sweep-g");
-    assert_eq!(w.reading, Some(0));
+    assert_eq!(w.reading, Some(1));
     assert_eq!(r.points as usize, w.points.len());
     assert!(w
         .points
@@ -189,8 +195,11 @@ fn qemu_log_reconstructs_the_firmwares_reading() {
         est.resonance.0
     );
     assert!((est.sigma.0 / r.f_sigma_hz.unwrap() - 1.0).abs() < 1e-3);
-    // And paper eq. 5 maps it to the logged modulus.
-    let m = PowerLaw::paper_experiment().invert(Hz(f), Hz(0.0)).unwrap();
+    // And the image's calibration (its factory profile) maps it to the logged modulus.
+    let cal = pzt_probe::board::sim_factory::profile()
+        .expect("factory record")
+        .calibration;
+    let m = cal.invert(Hz(f), Hz(0.0)).unwrap();
     assert!((m.value.0 / r.e_kpa.unwrap() - 1.0).abs() < 1e-4);
 }
 
@@ -213,6 +222,7 @@ fn readings_sweeps_and_events_of_a_longer_log() {
             Value::F32(if f.is_nan() { f32::NAN } else { 0.05 }),
             Value::F32(if status == "ok" { 280.0 } else { f32::NAN }),
             Value::F32(if status == "ok" { 5.0 } else { f32::NAN }),
+            Value::F32(if status == "ok" { 0.5 } else { f32::NAN }),
             Value::F32(10.0),
             Value::F32(1.2),
             Value::Uint(n),
@@ -269,14 +279,14 @@ fn readings_sweeps_and_events_of_a_longer_log() {
 #[test]
 fn cli_table_stdin_plot_and_errors() {
     use std::io::Write;
-    let log = root().join("tests/data/log/qemu_sweep_g.log");
+    let log = root().join("tests/data/log/qemu_session.log");
     let dir = std::env::temp_dir().join(format!("probe-bench-log-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let svg = dir.join("log.svg");
     let out = run_ok(bin().arg("log").arg(&log).arg("--plot").arg(&svg));
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
-        stdout.contains("227.968 ± 0.041") && stdout.contains("282.9 ± 5.5"),
+        stdout.contains("227.976 ± 0.042") && stdout.contains("279.2 ± 1.9"),
         "{stdout}"
     );
     assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
@@ -297,7 +307,7 @@ fn cli_table_stdin_plot_and_errors() {
     assert!(out.status.success());
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(j["readings"][0]["status"], "ok");
-    assert_eq!(j["sweeps"][0]["points"].as_array().unwrap().len(), 31);
+    assert_eq!(j["sweeps"][1]["points"].as_array().unwrap().len(), 31);
     // Not a firmware log: one line, non-zero exit.
     run_fails_one_line(
         bin()

@@ -41,7 +41,7 @@
 //! store error=<str>                                        (error)
 //! settings method=<str> start_hz=<f32> stop_hz=<f32> step_hz=<f32> settle_s=<f32> integrate_s=<f32> drive_v=<f32>
 //! point tag=<u16> f_hz=<f32> g_s=<f32> b_s=<f32> sigma_s=<f32>
-//! reading status=<str> f_hz=<f32> f_sigma_hz=<f32> e_kpa=<f32> e_sigma_kpa=<f32> q=<f32> probe_time_s=<f32> points=<u16> method=<str>
+//! reading status=<str> f_hz=<f32> f_sigma_hz=<f32> e_kpa=<f32> e_sigma_kpa=<f32> e_repeat_kpa=<f32> q=<f32> probe_time_s=<f32> points=<u16> method=<str>
 //! air f_hz=<f32> q=<f32>
 //! reference e_kpa=<f32> f_hz=<f32> f_sigma_hz=<f32> n=<u16>
 //! calibration source=<str> a=<f32> b=<f32> c=<f32> min_kpa=<f32> max_kpa=<f32>
@@ -50,7 +50,7 @@
 //! stalled tag=<u16>                                        (error)
 //! overrun late=<u32> ring=<u32> dropped=<u32>              (error; whenever a counter grew)
 //! counters batches=<u32> late=<u32> ring=<u32> dropped=<u32> isr_mean=<u32> isr_max=<u32> unit=<str>
-//! status method=<str> calibration=<str> fallback=<bool> air=<bool> references=<u16>
+//! status method=<str> calibration=<str> fallback=<bool> air=<bool> q_model=<bool> references=<u16>
 //! exit ok=<bool>                                           (QEMU script end)
 //! ```
 //!
@@ -125,10 +125,8 @@ mod shared {
     use core::sync::atomic::{AtomicU32, Ordering};
     use pzt_probe::command::CommandError;
     use pzt_probe::engine::PointPlan;
-    use pzt_probe::measure::Settings;
-    use pzt_probe::store::{Loaded, SlotState, StoreError};
-    use pzt_probe::sweep::SweepPoint;
-    use pzt_probe::{Method, PowerLaw, Reading};
+    use pzt_probe::session::Event;
+    use pzt_probe::store::Loaded;
 
     /// Batches serviced by the sample interrupt.
     pub static BATCHES: AtomicU32 = AtomicU32::new(0);
@@ -172,69 +170,17 @@ mod shared {
         Stop,
     }
 
-    /// Everything the report task logs.
+    /// Everything the report task logs: the session's events and the board's own.
     #[derive(Clone, Copy)]
     pub enum Report {
         Loaded(Loaded),
-        Saved {
-            slot: u8,
-            seq: u32,
-        },
-        StoreFailed(StoreError),
-        Settings(Method, Settings),
-        Point {
-            tag: u16,
-            point: SweepPoint,
-        },
-        Reading(Reading),
-        Air {
-            f_hz: f32,
-            q: f32,
-        },
-        AirRefused(pzt_probe::Failure),
-        Reference {
-            e_kpa: f32,
-            f_hz: f32,
-            f_sigma_hz: f32,
-            n: u16,
-        },
-        Calibration(PowerLaw),
+        Event(Event),
         Rejected(CommandError),
-        /// What the user can do about a failed reading.
-        Hint(pzt_probe::Failure),
-        Refused(&'static str),
-        Stalled {
-            tag: u16,
-        },
+        #[cfg(feature = "qemu")]
+        SimRejected(pzt_probe::board::sim_script::SimError),
         Counters,
-        Status {
-            method: Method,
-            cal: PowerLaw,
-            fallback: bool,
-            air: bool,
-            references: u16,
-        },
         #[cfg_attr(not(feature = "qemu"), allow(dead_code))]
         Exit(bool),
-    }
-
-    pub fn slot_name(s: SlotState) -> &'static str {
-        match s {
-            SlotState::Valid(_) => "valid",
-            SlotState::Empty => "empty",
-            SlotState::Corrupt => "corrupt",
-            SlotState::Unreadable => "unreadable",
-        }
-    }
-
-    pub fn store_error_name(e: StoreError) -> &'static str {
-        match e {
-            StoreError::Geometry => "geometry",
-            StoreError::InvalidRecord => "invalid_record",
-            StoreError::Erase => "erase",
-            StoreError::Program => "program",
-            StoreError::Verify => "verify",
-        }
     }
 }
 
@@ -244,16 +190,14 @@ mod app {
     use crate::board;
     use crate::shared::*;
     use core::sync::atomic::Ordering;
-    use pzt_probe::command::{parse, Command, CommandError, LineBuffer};
+    use pzt_probe::command::{parse, Command, LineBuffer};
+    use pzt_probe::engine::PointPlan;
     use pzt_probe::engine::{PointRaw, SampleEngine};
     use pzt_probe::hal::FrontEndScale;
-    use pzt_probe::measure::DEFAULT_METHOD;
-    use pzt_probe::measure::{Measurement, Procedure, Settings};
-    use pzt_probe::profile::{self, Reference, UnitProfile, AIR_SWEEP};
-    use pzt_probe::runner::window_budget_samples;
-    use pzt_probe::runner::BATCH;
-    use pzt_probe::store::{LoadSource, Store};
-    use pzt_probe::{Failure, Method, PowerLaw, Reading, Seconds};
+    use pzt_probe::reading::{PointSource, BATCH};
+    use pzt_probe::session::{Event, Io, Session};
+    use pzt_probe::store::{LoadSource, Saved, Store, StoreError};
+    use pzt_probe::UnitProfile;
     use rtic_monotonics::systick::prelude::*;
     use rtic_sync::channel::{Receiver, Sender};
     use rtic_sync::make_channel;
@@ -267,10 +211,6 @@ mod app {
     const DONE_CAP: usize = 1;
     /// Received bytes buffered between the UART interrupt and the command task (STM32).
     const RX_CAP: usize = 64;
-    /// Reference readings kept for a calibration fit.
-    const MAX_REFERENCES: usize = 32;
-    /// Points of an air-reference sweep ([`AIR_SWEEP`]: 61).
-    const AIR_POINTS: usize = 64;
     /// The measurement task feeds the watchdog at least this often while it is alive (ms).
     const FEED_MS: u32 = 100;
 
@@ -278,7 +218,7 @@ mod app {
     /// reading with the default method (auto), one with sweep-G over a sweep of its own, back to
     /// auto with two-stage settings of its own, store, status.
     #[cfg(feature = "qemu")]
-    const SCRIPT: &[u8] = b"status\nmeasure\nmethod sweep-g\nsweep 200 260 2 0.02 0.03 5\nmeasure\nmethod auto\nstaged 180 280 6 0.02 0.03 5 0.8 5 4\nstore\nstatus\n";
+    const SCRIPT: &str = "status;measure;method sweep-g;sweep 200 260 2 0.02 0.03 5;measure;method auto;staged 180 280 6 0.02 0.03 5 0.8 5 4;store;status";
 
     #[shared]
     struct Shared {}
@@ -434,99 +374,64 @@ mod app {
         }
     }
 
-    /// The active settings: what the next reading uses.
-    struct Active {
-        method: Method,
-        settings: Settings,
-    }
-
-    impl Active {
-        /// `method` with its default settings.
-        fn of(method: Method) -> Self {
-            Self {
-                method,
-                settings: method.default_settings(),
-            }
-        }
-    }
-
-    /// What one reading needs from the measurement task's context.
-    struct Rig<'a> {
+    /// The measurement task's board: the interrupt's channels as the session's point source,
+    /// the flash store, the report channel as its event sink.
+    struct FwIo<'a> {
         plans: &'a mut Sender<'static, EngineCmd, PLAN_CAP>,
         points: &'a mut Receiver<'static, PointRaw, POINT_CAP>,
         reports: &'a mut Sender<'static, Report, REPORT_CAP>,
         watchdog: &'a mut board::Watchdog,
+        store: &'a mut Store<board::StoreFlash>,
         scale: FrontEndScale,
     }
 
-    impl Rig<'_> {
-        async fn report(&mut self, r: Report) {
-            // The report task only ends with the image; a closed channel is not an error here.
-            let _ = self.reports.send(r).await;
+    impl PointSource for FwIo<'_> {
+        fn scale(&self) -> FrontEndScale {
+            self.scale
         }
-
-        /// One reading with `method` and `settings`, plan by plan through the interrupt: every
-        /// window of a plan (one for a sweep point, several for a ring-down) is waited for with
-        /// the shared time-out rule ([`window_budget_samples`]) and handed to the procedure; the
-        /// reading ends in the one pipeline with the unit's profile. `on_point` sees every
-        /// admittance point.
-        async fn reading(
-            &mut self,
-            method: Method,
-            settings: &Settings,
-            unit: &UnitProfile,
-            mut on_point: impl FnMut(&pzt_probe::sweep::SweepPoint),
-        ) -> Reading {
-            let start = BATCHES.load(Ordering::Relaxed) as u64 * BATCH as u64;
-            let mut m = match Procedure::new(method, settings, &self.scale, start, unit) {
-                Ok(m) => m,
-                Err(_) => return Reading::failed(method, Failure::BadSettings, Seconds(0.0), 0),
+        /// The interrupt's double buffer: a plan applies from the batch after the one playing.
+        fn latency_batches(&self) -> usize {
+            2
+        }
+        fn now_sample(&self) -> u64 {
+            BATCHES.load(Ordering::Relaxed) as u64 * BATCH as u64
+        }
+        async fn load(&mut self, plan: PointPlan) -> bool {
+            self.plans.send(EngineCmd::Load(plan)).await.is_ok()
+        }
+        async fn next(&mut self, plan: &PointPlan, budget: u64) -> Option<PointRaw> {
+            // The budget in ms, with a watchdog period of margin for this task's own delay.
+            let ms = (budget as f32 / self.scale.sample_rate.0 * 1000.0) as u32 + FEED_MS;
+            let got = loop {
+                match Mono::timeout_after(ms.millis(), self.points.recv()).await {
+                    Ok(Ok(raw)) if raw.plan == *plan => break Some(raw),
+                    Ok(Ok(_stale)) => continue,
+                    _ => break None,
+                }
             };
-            let fs = self.scale.sample_rate.0;
-            let mut points: u16 = 0;
-            while !m.is_complete() {
-                let Some(plan) = m.next_plan() else { break };
-                if self.plans.send(EngineCmd::Load(plan)).await.is_err() {
-                    break;
-                }
-                // The shared stall rule with the interrupt's pipeline (two batches) as the
-                // stream's latency, and a watchdog period of margin for the task's own delay.
-                let budget_s = window_budget_samples(&plan, fs as f64, 2) as f32 / fs;
-                let budget_ms = (budget_s * 1000.0) as u32 + FEED_MS;
-                for _ in 0..plan.windows.max(1) {
-                    let got = loop {
-                        match Mono::timeout_after(budget_ms.millis(), self.points.recv()).await {
-                            Ok(Ok(raw)) if raw.plan == plan => break Some(raw),
-                            Ok(Ok(_stale)) => continue,
-                            _ => break None,
-                        }
-                    };
-                    self.watchdog.feed();
-                    let Some(raw) = got else {
-                        let _ = self.plans.send(EngineCmd::Stop).await;
-                        self.report(Report::Stalled { tag: plan.tag }).await;
-                        let now = BATCHES.load(Ordering::Relaxed) as u64 * BATCH as u64;
-                        let t = Seconds(now.saturating_sub(start) as f32 / fs);
-                        return Reading::failed(method, Failure::DriveFault, t, points);
-                    };
-                    if let Some(p) = m.accept(&raw) {
-                        points = points.saturating_add(1);
-                        on_point(&p);
-                        self.report(Report::Point {
-                            tag: plan.tag,
-                            point: p,
-                        })
-                        .await;
-                    }
-                }
-            }
+            self.watchdog.feed();
+            got
+        }
+        async fn stop(&mut self) {
             let _ = self.plans.send(EngineCmd::Stop).await;
-            m.finish(unit)
         }
     }
 
-    /// The measurement task: owns the settings, the calibration record, the reference readings
-    /// and the flash store; serves one request at a time and feeds the watchdog while alive.
+    impl Io for FwIo<'_> {
+        async fn emit(&mut self, e: Event) {
+            // The report task only ends with the image; a closed channel is not an error here.
+            let _ = self.reports.send(Report::Event(e)).await;
+            if matches!(e, Event::Reading(_) | Event::Status { .. }) {
+                let _ = self.reports.send(Report::Counters).await;
+            }
+        }
+        fn save(&mut self, p: &UnitProfile) -> Result<Saved, StoreError> {
+            self.store.save(p)
+        }
+    }
+
+    /// The measurement task: the session (src/session.rs) served one request at a time; it
+    /// feeds the watchdog while alive.
     #[task(priority = 1, local = [watchdog, store, scale])]
     async fn measure(
         cx: measure::Context,
@@ -536,20 +441,15 @@ mod app {
         mut reports: Sender<'static, Report, REPORT_CAP>,
         mut done: Sender<'static, bool, DONE_CAP>,
     ) {
-        let store = cx.local.store;
-        let loaded = store.load();
-        // The unit profile: calibration, contact condition, air reference.
-        let mut record = loaded.record;
-        let mut fallback = loaded.is_fallback();
+        let loaded = cx.local.store.load();
+        let mut session = Session::new(&loaded);
         let _ = reports.send(Report::Loaded(loaded)).await;
-        // The default strategy (the bench's too): fit, falling back to sweep-G.
-        let mut active = Active::of(DEFAULT_METHOD);
-        let mut refs: heapless::Vec<Reference, MAX_REFERENCES> = heapless::Vec::new();
-        let mut rig = Rig {
+        let mut io = FwIo {
             plans: &mut plans,
             points: &mut points,
             reports: &mut reports,
             watchdog: cx.local.watchdog,
+            store: cx.local.store,
             scale: *cx.local.scale,
         };
         loop {
@@ -558,179 +458,24 @@ mod app {
                 Ok(Err(_)) => {
                     // No command source any more: stay alive for the watchdog, serve nothing.
                     loop {
-                        rig.watchdog.feed();
+                        io.watchdog.feed();
                         Mono::delay(FEED_MS.millis()).await;
                     }
                 }
                 Err(_) => {
-                    rig.watchdog.feed();
+                    io.watchdog.feed();
                     continue;
                 }
             };
-            rig.watchdog.feed();
-            let ok = match req {
-                Command::Measure => {
-                    // Every check (air reference, contact, range, contact condition) is in the
-                    // pipeline the reading ends in.
-                    let r = rig
-                        .reading(active.method, &active.settings, &record, |_| {})
-                        .await;
-                    rig.report(Report::Reading(r)).await;
-                    if let pzt_probe::Status::Failed(f) = r.status {
-                        rig.report(Report::Hint(f)).await;
-                    }
-                    rig.report(Report::Counters).await;
-                    r.status.is_ok()
-                }
-                Command::Method(m) => {
-                    active = Active::of(m);
-                    rig.report(Report::Settings(active.method, active.settings))
-                        .await;
-                    true
-                }
-                Command::Settings(s) => {
-                    // Parsed and checked against the board; that they are settings of the
-                    // active method is checked here, by the method's own validation.
-                    // (The procedure is dropped at once: it must not live across an await.)
-                    let checked =
-                        Procedure::new(active.method, &s, &rig.scale, 0, &record).map(|_| ());
-                    match checked {
-                        Ok(()) => {
-                            active.settings = s;
-                            rig.report(Report::Settings(active.method, active.settings))
-                                .await;
-                            true
-                        }
-                        Err(e) => {
-                            rig.report(Report::Rejected(CommandError::Settings(e)))
-                                .await;
-                            false
-                        }
-                    }
-                }
-                Command::SettingsDefault => {
-                    active = Active::of(active.method);
-                    rig.report(Report::Settings(active.method, active.settings))
-                        .await;
-                    true
-                }
-                Command::Air => {
-                    // The one air-reference procedure: a sweep of the free probe and a BVD
-                    // fit of its points (profile::air_from_points), which refuses a probe that
-                    // touches something.
-                    let mut pts: heapless::Vec<pzt_probe::sweep::SweepPoint, AIR_POINTS> =
-                        heapless::Vec::new();
-                    let r = rig
-                        .reading(Method::SweepG, &Settings::Sweep(AIR_SWEEP), &record, |p| {
-                            let _ = pts.push(*p);
-                        })
-                        .await;
-                    let air = match r.status {
-                        pzt_probe::Status::Failed(Failure::DriveFault | Failure::BadSettings) => {
-                            Err(Failure::DriveFault)
-                        }
-                        _ => profile::air_from_points(&pts),
-                    };
-                    match air {
-                        Ok(air) => {
-                            record.air = Some(air);
-                            rig.report(Report::Air {
-                                f_hz: air.free_resonance.0,
-                                q: air.free_q,
-                            })
-                            .await;
-                            true
-                        }
-                        Err(f) => {
-                            rig.report(Report::AirRefused(f)).await;
-                            false
-                        }
-                    }
-                }
-                Command::CalibrateAdd(e) => {
-                    let r = rig
-                        .reading(active.method, &active.settings, &record, |_| {})
-                        .await;
-                    rig.report(Report::Reading(r)).await;
-                    match Reference::of(e, &r) {
-                        Some(x) if refs.push(x).is_ok() => {
-                            rig.report(Report::Reference {
-                                e_kpa: e.0,
-                                f_hz: x.resonance_hz as f32,
-                                f_sigma_hz: x.sigma_hz as f32,
-                                n: refs.len() as u16,
-                            })
-                            .await;
-                            true
-                        }
-                        Some(_) => {
-                            rig.report(Report::Refused("reference list full")).await;
-                            false
-                        }
-                        None => {
-                            rig.report(Report::Refused("no resonance")).await;
-                            false
-                        }
-                    }
-                }
-                // The one calibration procedure: robust power-law fit and the Q(E) contact
-                // condition of the same readings.
-                Command::CalibrateFit => match profile::calibrate(&refs) {
-                    Ok((cal, q_model)) => {
-                        record.calibration = cal;
-                        record.q_model = Some(q_model);
-                        fallback = false;
-                        rig.report(Report::Calibration(cal)).await;
-                        true
-                    }
-                    Err(_) => {
-                        rig.report(Report::Refused("calibration fit failed")).await;
-                        false
-                    }
-                },
-                Command::CalibrateClear => {
-                    refs.clear();
-                    true
-                }
-                Command::CalibratePaper => {
-                    record.calibration = PowerLaw::paper_experiment();
-                    rig.report(Report::Calibration(record.calibration)).await;
-                    true
-                }
-                Command::Store => match store.save(&record) {
-                    Ok(s) => {
-                        fallback = false;
-                        rig.report(Report::Saved {
-                            slot: s.slot,
-                            seq: s.seq,
-                        })
-                        .await;
-                        true
-                    }
-                    Err(e) => {
-                        rig.report(Report::StoreFailed(e)).await;
-                        false
-                    }
-                },
-                Command::Status => {
-                    rig.report(Report::Status {
-                        method: active.method,
-                        cal: record.calibration,
-                        fallback,
-                        air: record.air.is_some(),
-                        references: refs.len() as u16,
-                    })
-                    .await;
-                    rig.report(Report::Counters).await;
-                    true
-                }
-            };
+            io.watchdog.feed();
+            let ok = session.handle(req, &mut io).await;
             // Only the QEMU script waits for this; elsewhere the slot just stays full.
             let _ = done.try_send(ok);
         }
     }
 
     /// Turn lines into requests. Parse errors are reported and the line is dropped.
+    #[cfg_attr(feature = "qemu", allow(dead_code))]
     async fn serve_line(
         line: &[u8],
         scale: &FrontEndScale,
@@ -763,21 +508,45 @@ mod app {
         let mut lines = LineBuffer::new();
         #[cfg(feature = "qemu")]
         {
+            // The boot command line's script if there is one, else the built-in one; `sim`
+            // lines move the simulated probe (src/board/sim_script.rs), the others go through
+            // the same line buffer and parser as host bytes.
+            let mut cmdline = [0u8; board::CMDLINE_MAX];
+            let script = board::boot_script(&mut cmdline).unwrap_or(SCRIPT);
+            let mut sim = board::sim_state();
             let mut ok = true;
-            for &b in SCRIPT {
-                let line = match lines.push(b) {
-                    Some(Ok(l)) => l,
-                    Some(Err(e)) => {
-                        let _ = reports.send(Report::Rejected(e)).await;
+            for line in script
+                .split([';', '\n'])
+                .map(str::trim)
+                .filter(|l| !l.is_empty())
+            {
+                match pzt_probe::board::sim_script::apply(line, &mut sim) {
+                    Ok(true) => {
+                        board::set_scene(sim.scene(), sim.seed);
+                        continue;
+                    }
+                    Ok(false) => {}
+                    Err(e) => {
+                        let _ = reports.send(Report::SimRejected(e)).await;
                         ok = false;
                         continue;
                     }
-                    None => continue,
-                };
-                if serve_line(line, &scale, &mut requests, &mut reports).await {
-                    ok &= done.recv().await.unwrap_or(false);
-                } else {
-                    ok = false;
+                }
+                let mut parsed = None;
+                for &b in line.as_bytes().iter().chain(b"\n") {
+                    if let Some(r) = lines.push(b) {
+                        parsed = Some(r.map(|l| parse(l, &scale)));
+                    }
+                }
+                match parsed {
+                    Some(Ok(Ok(c))) if requests.send(c).await.is_ok() => {
+                        ok &= done.recv().await.unwrap_or(false);
+                    }
+                    Some(Ok(Err(e)) | Err(e)) => {
+                        let _ = reports.send(Report::Rejected(e)).await;
+                        ok = false;
+                    }
+                    _ => ok = false,
                 }
             }
             ok &= !Overruns::now().any();
@@ -802,50 +571,6 @@ mod app {
         }
     }
 
-    fn nan_or(v: Option<f32>) -> f32 {
-        v.unwrap_or(f32::NAN)
-    }
-
-    /// The `settings` line's fields `[start_hz, stop_hz, step_hz, settle_s, integrate_s,
-    /// drive_v]` of any method's settings: a sweep's own; for the staged methods the band, no
-    /// step (`NaN`), the coarse settling, the integration and the drive; for ring-down the
-    /// band, no step, the burst as settling, the ring as integration and the drive; `NaN` for
-    /// settings of other kinds.
-    fn settings_fields(s: &Settings) -> [f32; 6] {
-        if let Settings::Sweep(s) = s {
-            return [
-                s.start.0,
-                s.stop.0,
-                s.step.0,
-                s.settle.0,
-                s.integrate.0,
-                s.drive.0,
-            ];
-        }
-        if let Settings::Staged(s) = s {
-            return [
-                s.band_start.0,
-                s.band_stop.0,
-                f32::NAN,
-                s.coarse_settle.0,
-                s.integrate.0,
-                s.drive.0,
-            ];
-        }
-        #[cfg(feature = "all-methods")]
-        if let Settings::Ringdown(s) = s {
-            return [
-                s.band_start.0,
-                s.band_stop.0,
-                f32::NAN,
-                s.burst.0,
-                s.ring.0,
-                s.drive.0,
-            ];
-        }
-        [f32::NAN; 6]
-    }
-
     /// The report task: the only task that logs. Formats are listed in the crate docs.
     #[task(priority = 1)]
     async fn report(_cx: report::Context, mut rx: Receiver<'static, Report, REPORT_CAP>) {
@@ -857,85 +582,18 @@ mod app {
                         "store loaded slot={=u8} seq={=u32} other={=str}",
                         slot,
                         seq,
-                        slot_name(other)
+                        pzt_probe::log::slot_name(other)
                     ),
                     LoadSource::Fallback { slots } => defmt::warn!(
                         "store fallback slot0={=str} slot1={=str} calibration=paper-experiment",
-                        slot_name(slots[0]),
-                        slot_name(slots[1])
+                        pzt_probe::log::slot_name(slots[0]),
+                        pzt_probe::log::slot_name(slots[1])
                     ),
                 },
-                Report::Saved { slot, seq } => {
-                    defmt::info!("store saved slot={=u8} seq={=u32}", slot, seq)
-                }
-                Report::StoreFailed(e) => defmt::error!("store error={=str}", store_error_name(e)),
-                Report::Settings(m, s) => {
-                    let [start, stop, step, settle, integrate, drive] = settings_fields(&s);
-                    defmt::info!(
-                        "settings method={=str} start_hz={=f32} stop_hz={=f32} step_hz={=f32} settle_s={=f32} integrate_s={=f32} drive_v={=f32}",
-                        m.name(),
-                        start,
-                        stop,
-                        step,
-                        settle,
-                        integrate,
-                        drive
-                    )
-                }
-                Report::Point { tag, point } => defmt::info!(
-                    "point tag={=u16} f_hz={=f32} g_s={=f32} b_s={=f32} sigma_s={=f32}",
-                    tag,
-                    point.freq.0,
-                    point.g_s,
-                    point.b_s,
-                    point.sigma_s
-                ),
-                Report::Reading(r) => defmt::info!(
-                    "reading status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str}",
-                    r.status.code(),
-                    nan_or(r.resonance.map(|v| v.0)),
-                    nan_or(r.resonance_sigma.map(|v| v.0)),
-                    nan_or(r.modulus.map(|v| v.0)),
-                    nan_or(r.modulus_sigma.map(|v| v.0)),
-                    nan_or(r.q),
-                    r.probe_time.0,
-                    r.points,
-                    r.method.name()
-                ),
-                Report::Air { f_hz, q } => defmt::info!("air f_hz={=f32} q={=f32}", f_hz, q),
-                Report::AirRefused(f) => defmt::warn!(
-                    "rejected error={=str}",
-                    f.message()
-                ),
-                Report::Reference {
-                    e_kpa,
-                    f_hz,
-                    f_sigma_hz,
-                    n,
-                } => defmt::info!(
-                    "reference e_kpa={=f32} f_hz={=f32} f_sigma_hz={=f32} n={=u16}",
-                    e_kpa,
-                    f_hz,
-                    f_sigma_hz,
-                    n
-                ),
-                Report::Calibration(c) => defmt::info!(
-                    "calibration source={=str} a={=f32} b={=f32} c={=f32} min_kpa={=f32} max_kpa={=f32}",
-                    c.source.name(),
-                    c.a as f32,
-                    c.b as f32,
-                    c.c as f32,
-                    c.min_kpa as f32,
-                    c.max_kpa as f32
-                ),
+                Report::Event(e) => pzt_probe::log::event(e),
                 Report::Rejected(e) => defmt::warn!("rejected error={=str}", e.message()),
-                Report::Hint(f) => defmt::warn!(
-                    "hint code={=str} message={=str}",
-                    f.code(),
-                    f.message()
-                ),
-                Report::Refused(why) => defmt::warn!("rejected error={=str}", why),
-                Report::Stalled { tag } => defmt::error!("stalled tag={=u16}", tag),
+                #[cfg(feature = "qemu")]
+                Report::SimRejected(e) => defmt::warn!("rejected error={=str}", e.message()),
                 Report::Counters => defmt::info!(
                     "counters batches={=u32} late={=u32} ring={=u32} dropped={=u32} isr_mean={=u32} isr_max={=u32} unit={=str}",
                     BATCHES.load(Ordering::Relaxed),
@@ -945,20 +603,6 @@ mod app {
                     ISR_MEAN.load(Ordering::Relaxed),
                     ISR_MAX.load(Ordering::Relaxed),
                     board::ELAPSED_UNIT
-                ),
-                Report::Status {
-                    method,
-                    cal,
-                    fallback,
-                    air,
-                    references,
-                } => defmt::info!(
-                    "status method={=str} calibration={=str} fallback={=bool} air={=bool} references={=u16}",
-                    method.name(),
-                    cal.source.name(),
-                    fallback,
-                    air,
-                    references
                 ),
                 Report::Exit(ok) => {
                     report_overruns(&mut seen);

@@ -4,6 +4,8 @@
 pub mod sim;
 #[cfg(feature = "sim")]
 pub mod sim_factory;
+#[cfg(feature = "sim")]
+pub mod sim_script;
 
 #[cfg(all(target_os = "none", feature = "qemu"))]
 pub mod qemu;

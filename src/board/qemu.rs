@@ -96,10 +96,60 @@ pub mod device {
 /// Board name in the boot log line.
 pub const NAME: &str = "qemu";
 
-/// The probe the QEMU image measures: phantom B of paper 003 (279 kPa) at the bench noise
-/// level, noise seed 1.
+/// The probe at power-on: on phantom B of paper 003 (279 kPa) at 30 mN and the bench noise
+/// level, noise seed 1. The command script moves it (`sim ...` lines,
+/// [`super::sim_script`]).
+pub fn sim_state() -> super::sim_script::SimState {
+    super::sim_script::SimState {
+        base: hal_sim::Scene::on_phantom(&hal_sim::phantoms::B),
+        preload_n: 0.03,
+        noise: hal_sim::NoiseScene::Bench,
+        seed: 1,
+    }
+}
+
+/// The scene at power-on ([`sim_state`]).
 pub fn scene() -> hal_sim::Scene {
-    hal_sim::Scene::on_phantom(&hal_sim::phantoms::B).with_noise(hal_sim::NoiseScene::Bench)
+    sim_state().scene()
+}
+
+/// A new scene and noise stream for the probe, taken by the sample interrupt at its next batch.
+static SCENE_REQUEST: cortex_m::interrupt::Mutex<core::cell::Cell<Option<(hal_sim::Scene, u64)>>> =
+    cortex_m::interrupt::Mutex::new(core::cell::Cell::new(None));
+
+/// Put the probe on `scene` with noise stream `seed` from the next batch on (a fresh simulated
+/// probe: the state of the old scene does not carry over, as after a lift and a new press).
+pub fn set_scene(scene: hal_sim::Scene, seed: u64) {
+    cortex_m::interrupt::free(|cs| SCENE_REQUEST.borrow(cs).set(Some((scene, seed))));
+}
+
+/// Bytes of the boot command line the image reads.
+pub const CMDLINE_MAX: usize = 1024;
+
+/// The command script of the boot command line (semihosting `SYS_GET_CMDLINE`: QEMU's
+/// `-semihosting-config arg=...`, which `scripts/qemu-run` sets from `QEMU_SCRIPT`): the text
+/// after its `script:` prefix, lines separated by `;`, or `None` when the command line holds
+/// no script (the image then runs its built-in one).
+pub fn boot_script(buf: &mut [u8; CMDLINE_MAX]) -> Option<&str> {
+    let mut block = [buf.as_mut_ptr() as usize, CMDLINE_MAX];
+    // SAFETY: semihosting call with a block of (buffer, length) that outlives it; the host
+    // writes at most `CMDLINE_MAX` bytes and the length back.
+    let r = unsafe {
+        cortex_m_semihosting::syscall1(
+            cortex_m_semihosting::nr::GET_CMDLINE,
+            block.as_mut_ptr() as usize,
+        )
+    };
+    let n = block[1].min(CMDLINE_MAX);
+    if r != 0 || n == 0 {
+        return None;
+    }
+    // The host writes a NUL-terminated string.
+    let text = buf.get(..n)?;
+    let end = text.iter().position(|&b| b == 0).unwrap_or(text.len());
+    let s = core::str::from_utf8(text.get(..end)?).ok()?;
+    let i = s.find("script:")?;
+    s.get(i + "script:".len()..).map(str::trim)
 }
 
 /// Converter scale of the simulated front end (`hal_sim::FrontEnd::default()`).
@@ -245,6 +295,10 @@ impl Stream {
     pub fn capture(&mut self) -> (&[AdcFrame], &mut [DacCode]) {
         // SAFETY: write-one-to-clear of timer 0's interrupt.
         unsafe { write_volatile(reg(TIMER0_BASE, INTCLEAR), 1) };
+        if let Some((scene, seed)) = cortex_m::interrupt::free(|cs| SCENE_REQUEST.borrow(cs).take())
+        {
+            self.probe = SimProbe::new(scene, seed);
+        }
         let h = self.half & 1;
         self.half ^= 1;
         let mut codes = [0u16; BATCH];

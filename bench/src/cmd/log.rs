@@ -78,6 +78,7 @@ fn session_json(s: &Session) -> Value {
                 "line": r.line, "time_s": r.time_s, "status": r.status,
                 "resonance_hz": r.f_hz, "resonance_sigma_hz": r.f_sigma_hz,
                 "modulus_kpa": r.e_kpa, "modulus_sigma_kpa": r.e_sigma_kpa,
+                "modulus_repeatability_kpa": r.e_repeat_kpa,
                 "q_factor": r.q, "probe_time_s": r.probe_time_s,
                 "points": r.points, "method": r.method, "sweep": r.sweep,
             })

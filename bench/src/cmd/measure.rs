@@ -49,6 +49,12 @@ pub struct MeasureArgs {
     /// Write an SVG plot of the (first) admittance sweep with the estimate marked.
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Take the readings with the firmware image in QEMU on the same scene (the scene, noise,
+    /// seed, method and settings go to the image as its command script; the image reads with
+    /// its factory profile, `src/board/sim_factory.rs`). Needs qemu-system-arm, defmt-print
+    /// and the thumbv7em-none-eabihf target.
+    #[arg(long)]
+    pub qemu: bool,
 }
 
 /// Run the subcommand.
@@ -68,6 +74,9 @@ pub fn run(a: MeasureArgs) -> Result<()> {
     let scale = simboard::scale_of(&scene.front_end);
     Procedure::new(method, &settings, &scale, 0, &UnitProfile::fallback())
         .map_err(|e| anyhow::anyhow!("bad settings: {e}"))?;
+    if a.qemu {
+        return crate::qemu::measure(&a, &target, method, &settings, noise);
+    }
     // The simulated unit's profile is made as a unit's profile is made once: with the
     // method's own default settings at bench noise, whatever this reading's settings and noise
     // (a reading with a band that misses the resonance, or in heavy noise, must fail as a

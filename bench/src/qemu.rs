@@ -1,0 +1,169 @@
+//! `probe-bench measure --qemu`: the firmware image in QEMU on the scene of a host reading.
+//!
+//! The scene, noise, seed, method and settings become the image's command script (`sim ...`
+//! lines for the simulated probe, then the firmware's own commands, `src/board/sim_script.rs`),
+//! passed on its boot command line by `scripts/qemu-run`; the image's defmt log is parsed by
+//! the same parser as `probe-bench log`, and each logged reading prints through the same JSON
+//! and line as a host reading.
+
+use crate::cmd::measure::MeasureArgs;
+use crate::defmt_log;
+use crate::report;
+use crate::scene::Target;
+use anyhow::{bail, Context, Result};
+use hal_sim::NoiseScene;
+use pzt_probe::measure::{Method, Settings};
+use std::path::PathBuf;
+use std::process::Command;
+
+/// The workspace root (the firmware package).
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// The firmware command that sets `s`, or `None` for settings no command sets (hold's).
+pub fn settings_command(s: &Settings) -> Option<String> {
+    match s {
+        Settings::Sweep(s) => Some(format!(
+            "sweep {} {} {} {} {} {}",
+            s.start.0, s.stop.0, s.step.0, s.settle.0, s.integrate.0, s.drive.0
+        )),
+        Settings::Staged(s) => Some(format!(
+            "staged {} {} {} {} {} {} {} {} {}",
+            s.band_start.0,
+            s.band_stop.0,
+            s.coarse_points,
+            s.coarse_settle.0,
+            s.integrate.0,
+            s.refine_points,
+            s.refine_span,
+            s.settle_tau,
+            s.drive.0
+        )),
+        Settings::Ringdown(s) => Some(format!(
+            "ringdown {} {} {} {} {} {} {} {}",
+            s.band_start.0,
+            s.band_stop.0,
+            s.seed.0,
+            s.burst.0,
+            s.ring.0,
+            s.stages,
+            s.window_cycles,
+            s.drive.0
+        )),
+        Settings::Hold(_) => None,
+    }
+}
+
+/// The `sim` lines that put the simulated probe on `target` at `preload_n` under `noise`.
+pub fn scene_lines(target: &Target, preload_n: f64, noise: NoiseScene) -> Vec<String> {
+    let on = match target {
+        Target::Phantom(p) => format!("sim phantom {}", p.name),
+        Target::Modulus(e) => format!("sim modulus {e}"),
+        Target::FreeAir => "sim free-air".to_owned(),
+    };
+    let noise = match noise {
+        NoiseScene::Quiet => "quiet".to_owned(),
+        NoiseScene::Paper => "paper".to_owned(),
+        NoiseScene::Bench => "bench".to_owned(),
+        NoiseScene::Density(d) => format!("{d:e}"),
+    };
+    vec![
+        on,
+        format!("sim preload {preload_n}"),
+        format!("sim noise {noise}"),
+    ]
+}
+
+/// Build the QEMU image and run `script` on it; the decoded log.
+pub fn run_script(script: &str) -> Result<String> {
+    let status = Command::new(env!("CARGO"))
+        .current_dir(root())
+        .args(["qemu-build", "-q"])
+        .status()
+        .context("cannot run cargo to build the QEMU image")?;
+    if !status.success() {
+        bail!("building the QEMU image failed (is the thumbv7em-none-eabihf target installed?)");
+    }
+    let target_dir = std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root().join("target"));
+    let elf = target_dir.join("thumbv7em-none-eabihf/fw/probe");
+    let out = Command::new(root().join("scripts/qemu-run"))
+        .arg(&elf)
+        .env("QEMU_SCRIPT", script)
+        .output()
+        .context("cannot run scripts/qemu-run")?;
+    let log = String::from_utf8_lossy(&out.stdout).into_owned();
+    if !log.contains("exit ok=") {
+        bail!(
+            "the QEMU image did not finish: {}",
+            String::from_utf8_lossy(&out.stderr).trim()
+        );
+    }
+    Ok(log)
+}
+
+/// `measure --qemu`.
+pub fn measure(
+    a: &MeasureArgs,
+    target: &Target,
+    method: Method,
+    settings: &Settings,
+    noise: NoiseScene,
+) -> Result<()> {
+    if a.plot.is_some() {
+        bail!("--plot is not available with --qemu (use probe-bench log --plot on the log)");
+    }
+    if a.profile.is_some() || a.calibration != "unit" {
+        bail!(
+            "with --qemu the image reads with its own factory profile (src/board/sim_factory.rs)"
+        );
+    }
+    let mut lines = scene_lines(target, a.preload_n, noise);
+    lines.push(format!("method {}", method.name()));
+    if *settings != method.default_settings() {
+        match settings_command(settings) {
+            Some(c) => lines.push(c),
+            None => bail!(
+                "{} settings other than its defaults cannot be passed to the image",
+                method.name()
+            ),
+        }
+    }
+    for k in 0..a.repeat {
+        lines.push(format!("sim seed {}", a.seed + k as u64));
+        lines.push("measure".to_owned());
+    }
+    let script = lines.join(";");
+    if !a.json {
+        println!(
+            "probe-bench measure --qemu: the firmware image on {}",
+            target.describe()
+        );
+        println!("  script: {script}");
+    }
+    let log = run_script(&script)?;
+    let session = defmt_log::parse_log(&log);
+    if let Some(e) = session.errors.first() {
+        bail!("the image's log does not parse: {e}");
+    }
+    if session.readings.len() != a.repeat as usize {
+        bail!(
+            "the image logged {} readings of {}:\n{log}",
+            session.readings.len(),
+            a.repeat
+        );
+    }
+    for r in &session.readings {
+        let r = r
+            .to_reading()
+            .with_context(|| format!("unknown status or method in {r:?}"))?;
+        if a.json {
+            println!("{}", report::reading_json(&r));
+        } else {
+            println!("{}", report::reading_line(&r));
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,163 @@
+//! The simulated probe's own commands: what the QEMU image's command script (from its boot
+//! command line, or its built-in script) uses to put the probe on a scene — the bench's
+//! `measure --qemu` and the QEMU tests pass their scene this way, and move the probe between
+//! free air and phantoms in a session (air reference, calibration, readings).
+//!
+//! ```text
+//! sim phantom B | sim modulus 300 | sim free-air      what the probe is on (30 mN preload)
+//! sim preload 0.015                                    contact preload, N
+//! sim noise bench|paper|quiet|<A/sqrt(Hz)>             front-end noise
+//! sim seed 7                                           noise stream (a fresh probe)
+//! ```
+//!
+//! Every other line is a probe command for the firmware's own parser. The boot command line is
+//! a list of lines separated by `;`.
+
+use hal_sim::{phantoms, NoiseScene, Scene};
+
+/// What the simulated probe should become.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SimState {
+    /// What it is on, without noise and preload.
+    pub base: Scene,
+    /// Contact preload, N.
+    pub preload_n: f64,
+    /// Front-end noise.
+    pub noise: NoiseScene,
+    /// Noise stream.
+    pub seed: u64,
+}
+
+impl SimState {
+    /// The scene the probe is on.
+    pub fn scene(&self) -> Scene {
+        self.base
+            .with_noise(self.noise)
+            .with_preload_n(self.preload_n)
+    }
+}
+
+/// Why a `sim` line is not understood.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SimError {
+    /// No such `sim` sub-command.
+    Unknown,
+    /// Its argument is missing, not a number, or out of range.
+    BadArgument,
+    /// No phantom of that name.
+    UnknownPhantom,
+}
+
+impl SimError {
+    /// One line for a human.
+    pub fn message(self) -> &'static str {
+        match self {
+            SimError::Unknown => "sim: phantom, modulus, free-air, preload, noise or seed",
+            SimError::BadArgument => "sim: argument missing or out of range",
+            SimError::UnknownPhantom => "sim: unknown phantom",
+        }
+    }
+}
+
+fn number(w: Option<&str>, lo: f64, hi: f64) -> Result<f64, SimError> {
+    let v: f64 = w
+        .and_then(|w| w.parse().ok())
+        .ok_or(SimError::BadArgument)?;
+    if v.is_finite() && (lo..=hi).contains(&v) {
+        Ok(v)
+    } else {
+        Err(SimError::BadArgument)
+    }
+}
+
+/// Apply `line` to `state` when it is a `sim` command: `Ok(true)` when it was one and applied,
+/// `Ok(false)` when the line is not a `sim` command (a probe command), or why it is a bad one.
+pub fn apply(line: &str, state: &mut SimState) -> Result<bool, SimError> {
+    let mut words = line.split_whitespace();
+    if words.next() != Some("sim") {
+        return Ok(false);
+    }
+    let (what, arg) = (words.next(), words.next());
+    if words.next().is_some() {
+        return Err(SimError::BadArgument);
+    }
+    match what {
+        Some("phantom") => {
+            let p = arg
+                .and_then(phantoms::by_name)
+                .ok_or(SimError::UnknownPhantom)?;
+            state.base = Scene::on_phantom(&p);
+        }
+        Some("modulus") => state.base = Scene::on_modulus_kpa(number(arg, 1e-3, 1e6)?),
+        Some("free-air") if arg.is_none() => state.base = Scene::free_air(),
+        Some("preload") => state.preload_n = number(arg, 1e-4, 1.0)?,
+        Some("noise") => {
+            state.noise = match arg {
+                Some("bench") => NoiseScene::Bench,
+                Some("paper") => NoiseScene::Paper,
+                Some("quiet") => NoiseScene::Quiet,
+                a => NoiseScene::Density(number(a, 0.0, 1e-3)?),
+            }
+        }
+        Some("seed") => state.seed = number(arg, 0.0, 4e9)? as u64,
+        _ => return Err(SimError::Unknown),
+    }
+    Ok(true)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn start() -> SimState {
+        SimState {
+            base: Scene::free_air(),
+            preload_n: 0.03,
+            noise: NoiseScene::Bench,
+            seed: 1,
+        }
+    }
+
+    #[test]
+    fn sim_lines_set_the_scene_and_others_pass_through() {
+        let mut s = start();
+        assert_eq!(apply("measure", &mut s), Ok(false));
+        assert_eq!(apply("sim phantom C", &mut s), Ok(true));
+        assert_eq!(
+            s.scene().resonance_hz(),
+            Scene::on_phantom(&phantoms::C).resonance_hz()
+        );
+        assert_eq!(apply("sim preload 0.015", &mut s), Ok(true));
+        assert_eq!(
+            s.scene(),
+            Scene::on_phantom(&phantoms::C)
+                .with_noise(NoiseScene::Bench)
+                .with_preload_n(0.015)
+        );
+        assert_eq!(apply("sim noise 2e-9", &mut s), Ok(true));
+        assert_eq!(s.noise, NoiseScene::Density(2e-9));
+        assert_eq!(apply("sim seed 42", &mut s), Ok(true));
+        assert_eq!(s.seed, 42);
+        assert_eq!(apply("sim free-air", &mut s), Ok(true));
+        assert!(s.scene().tissue.is_none());
+    }
+
+    #[test]
+    fn bad_sim_lines_are_refused_without_change() {
+        let mut s = start();
+        for (line, e) in [
+            ("sim", SimError::Unknown),
+            ("sim teleport", SimError::Unknown),
+            ("sim phantom Z", SimError::UnknownPhantom),
+            ("sim modulus -3", SimError::BadArgument),
+            ("sim modulus nan", SimError::BadArgument),
+            ("sim preload 5", SimError::BadArgument),
+            ("sim noise loud", SimError::BadArgument),
+            ("sim seed 1 2", SimError::BadArgument),
+            ("sim free-air now", SimError::Unknown),
+        ] {
+            assert_eq!(apply(line, &mut s), Err(e), "{line}");
+            assert_eq!(s, start(), "{line}");
+        }
+    }
+}
