@@ -72,6 +72,10 @@ pub enum Command {
     Store,
     /// Report status.
     Status,
+    /// Discard unsaved changes: reload the unit profile from flash, as at power-on.
+    Reload,
+    /// List the commands, the methods and the default method.
+    Help,
 }
 
 /// Why a line is not a command.
@@ -276,6 +280,8 @@ pub fn parse(line: &[u8], scale: &FrontEndScale) -> Result<Command, CommandError
         "air" => arity(0).map(|_| Command::Air),
         "store" => arity(0).map(|_| Command::Store),
         "status" => arity(0).map(|_| Command::Status),
+        "reload" => arity(0).map(|_| Command::Reload),
+        "help" => arity(0).map(|_| Command::Help),
         "method" => {
             arity(1)?;
             let name = args.first().copied().unwrap_or_default();

@@ -9,6 +9,19 @@ use crate::store::{SlotState, StoreError};
 /// One defmt line per session event (formats in the crate docs).
 pub fn event(e: Event) {
     match e {
+        Event::Loaded(l) => match l.source {
+            crate::store::LoadSource::Stored { slot, seq, other } => defmt::info!(
+                "store loaded slot={=u8} seq={=u32} other={=str}",
+                slot,
+                seq,
+                slot_name(other)
+            ),
+            crate::store::LoadSource::Fallback { slots } => defmt::warn!(
+                "store fallback slot0={=str} slot1={=str} calibration=paper-experiment",
+                slot_name(slots[0]),
+                slot_name(slots[1])
+            ),
+        },
         Event::Saved(v) => defmt::info!("store saved slot={=u8} seq={=u32}", v.slot, v.seq),
         Event::StoreFailed(e) => defmt::error!("store error={=str}", store_error_name(e)),
         Event::Settings(m, s) => {
@@ -49,6 +62,12 @@ pub fn event(e: Event) {
             "hint code={=str} message={=str}",
             f.code(),
             f.message()
+        ),
+        Event::Help => defmt::info!(
+            "help commands={=str} methods={=str} default={=str}",
+            "measure,method,sweep,staged,ringdown,air,calibrate,store,reload,status,help",
+            crate::measure::METHOD_NAMES,
+            crate::measure::DEFAULT_METHOD.name()
         ),
         Event::Stalled(tag) => defmt::error!("stalled tag={=u16}", tag),
         Event::Air(a) => defmt::info!(

@@ -62,6 +62,10 @@ pub enum Settings {
 /// The default method of every caller: the firmware's measurement task and `probe-bench`.
 pub const DEFAULT_METHOD: Method = Method::Auto;
 
+/// The names of [`Method::ALL`], as the firmware's `help` lists them (a test checks they are
+/// the same list).
+pub const METHOD_NAMES: &str = "paper,sweep-g,adaptive,fit,track,ringdown,hold,auto";
+
 impl From<&SweepSettings> for Settings {
     fn from(s: &SweepSettings) -> Self {
         Settings::Sweep(*s)

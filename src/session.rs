@@ -26,6 +26,8 @@ pub const AIR_POINTS: usize = 64;
 /// What the session tells the outside world (the firmware logs each as one defmt line).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Event {
+    /// The unit profile was loaded from the store (at power-on or on `reload`).
+    Loaded(Loaded),
     /// The active method and its settings.
     Settings(Method, Settings),
     /// An admittance point of the reading in progress, with its plan's tag.
@@ -60,6 +62,8 @@ pub enum Event {
     StoreFailed(StoreError),
     /// A command was refused, with why.
     Refused(Refusal),
+    /// The commands, the methods and the default method.
+    Help,
     /// The session's state.
     Status {
         /// Active method.
@@ -112,6 +116,8 @@ pub trait Io: PointSource {
     async fn emit(&mut self, e: Event);
     /// Store the profile power-loss safe.
     fn save(&mut self, p: &UnitProfile) -> Result<Saved, StoreError>;
+    /// Load the newest stored profile (or the fallback).
+    fn load_profile(&mut self) -> Loaded;
 }
 
 /// The probe's session state.
@@ -125,6 +131,14 @@ pub struct Session {
 }
 
 impl Session {
+    /// Power-on: load the profile from the store (and say where it came from), with the
+    /// default method.
+    pub async fn boot<I: Io>(io: &mut I) -> Self {
+        let loaded = io.load_profile();
+        io.emit(Event::Loaded(loaded)).await;
+        Self::new(&loaded)
+    }
+
     /// A session on what the store loaded, with the default method.
     pub fn new(loaded: &Loaded) -> Self {
         Self {
@@ -218,6 +232,14 @@ impl Session {
                     false
                 }
             },
+            Command::Help => {
+                io.emit(Event::Help).await;
+                true
+            }
+            Command::Reload => {
+                *self = Self::boot(io).await;
+                true
+            }
             Command::Status => {
                 io.emit(Event::Status {
                     method: self.method,

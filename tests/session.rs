@@ -75,6 +75,9 @@ impl Io for SimIo {
     fn save(&mut self, p: &UnitProfile) -> Result<Saved, StoreError> {
         self.store.save(p)
     }
+    fn load_profile(&mut self) -> pzt_probe::store::Loaded {
+        self.store.load()
+    }
 }
 
 /// Serve `line` through the parser and the session.
@@ -164,7 +167,14 @@ fn a_user_session_from_fresh_unit_to_stored_profile_and_back() {
     assert!(send(&mut s, &mut io, "store"));
     assert!(matches!(io.events.last(), Some(Event::Saved(_))));
 
-    // Reboot: a new session on what the store loads.
+    // An unsaved change is discarded by `reload`...
+    assert!(send(&mut s, &mut io, "calibrate paper"));
+    assert!(send(&mut s, &mut io, "reload"));
+    assert_eq!(
+        s.profile().calibration.source,
+        pzt_probe::calibration::Source::Fitted
+    );
+    // ... and a reboot is a new session on what the store loads.
     let mut s = boot(&mut io);
     assert!(s.profile().air.is_some() && s.profile().q_model.is_some());
     io.put_on(Scene::on_phantom(&phantoms::B));
@@ -214,4 +224,15 @@ fn settings_that_do_not_suit_the_method_are_refused() {
         }
         e => panic!("{e:?}"),
     }
+}
+
+#[test]
+fn help_lists_every_method_and_the_default() {
+    let names: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
+    assert_eq!(pzt_probe::measure::METHOD_NAMES, names.join(","));
+    let mut io = SimIo::new(Flash::new());
+    let mut s = boot(&mut io);
+    assert!(send(&mut s, &mut io, "help"));
+    assert_eq!(io.events.last(), Some(&Event::Help));
+    assert_eq!(s.method(), pzt_probe::measure::DEFAULT_METHOD);
 }

@@ -39,6 +39,7 @@ pub const TEMPLATES: &[&str] = &[
     "overrun late={=u32} ring={=u32} dropped={=u32}",
     "counters batches={=u32} late={=u32} ring={=u32} dropped={=u32} isr_mean={=u32} isr_max={=u32} unit={=str}",
     "status method={=str} calibration={=str} fallback={=bool} air={=bool} q_model={=bool} references={=u16}",
+    "help commands={=str} methods={=str} default={=str}",
     "exit ok={=bool}",
 ];
 

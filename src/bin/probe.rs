@@ -51,6 +51,7 @@
 //! overrun late=<u32> ring=<u32> dropped=<u32>              (error; whenever a counter grew)
 //! counters batches=<u32> late=<u32> ring=<u32> dropped=<u32> isr_mean=<u32> isr_max=<u32> unit=<str>
 //! status method=<str> calibration=<str> fallback=<bool> air=<bool> q_model=<bool> references=<u16>
+//! help commands=<str> methods=<str> default=<str>
 //! exit ok=<bool>                                           (QEMU script end)
 //! ```
 //!
@@ -126,7 +127,6 @@ mod shared {
     use pzt_probe::command::CommandError;
     use pzt_probe::engine::PointPlan;
     use pzt_probe::session::Event;
-    use pzt_probe::store::Loaded;
 
     /// Batches serviced by the sample interrupt.
     pub static BATCHES: AtomicU32 = AtomicU32::new(0);
@@ -173,7 +173,6 @@ mod shared {
     /// Everything the report task logs: the session's events and the board's own.
     #[derive(Clone, Copy)]
     pub enum Report {
-        Loaded(Loaded),
         Event(Event),
         Rejected(CommandError),
         #[cfg(feature = "qemu")]
@@ -196,7 +195,7 @@ mod app {
     use pzt_probe::hal::FrontEndScale;
     use pzt_probe::reading::{PointSource, BATCH};
     use pzt_probe::session::{Event, Io, Session};
-    use pzt_probe::store::{LoadSource, Saved, Store, StoreError};
+    use pzt_probe::store::{Loaded, Saved, Store, StoreError};
     use pzt_probe::UnitProfile;
     use rtic_monotonics::systick::prelude::*;
     use rtic_sync::channel::{Receiver, Sender};
@@ -428,6 +427,9 @@ mod app {
         fn save(&mut self, p: &UnitProfile) -> Result<Saved, StoreError> {
             self.store.save(p)
         }
+        fn load_profile(&mut self) -> Loaded {
+            self.store.load()
+        }
     }
 
     /// The measurement task: the session (src/session.rs) served one request at a time; it
@@ -441,9 +443,6 @@ mod app {
         mut reports: Sender<'static, Report, REPORT_CAP>,
         mut done: Sender<'static, bool, DONE_CAP>,
     ) {
-        let loaded = cx.local.store.load();
-        let mut session = Session::new(&loaded);
-        let _ = reports.send(Report::Loaded(loaded)).await;
         let mut io = FwIo {
             plans: &mut plans,
             points: &mut points,
@@ -452,6 +451,7 @@ mod app {
             store: cx.local.store,
             scale: *cx.local.scale,
         };
+        let mut session = Session::boot(&mut io).await;
         loop {
             let req = match Mono::timeout_after(FEED_MS.millis(), requests.recv()).await {
                 Ok(Ok(r)) => r,
@@ -577,19 +577,6 @@ mod app {
         let mut seen = Overruns::default();
         while let Ok(r) = rx.recv().await {
             match r {
-                Report::Loaded(l) => match l.source {
-                    LoadSource::Stored { slot, seq, other } => defmt::info!(
-                        "store loaded slot={=u8} seq={=u32} other={=str}",
-                        slot,
-                        seq,
-                        pzt_probe::log::slot_name(other)
-                    ),
-                    LoadSource::Fallback { slots } => defmt::warn!(
-                        "store fallback slot0={=str} slot1={=str} calibration=paper-experiment",
-                        pzt_probe::log::slot_name(slots[0]),
-                        pzt_probe::log::slot_name(slots[1])
-                    ),
-                },
                 Report::Event(e) => pzt_probe::log::event(e),
                 Report::Rejected(e) => defmt::warn!("rejected error={=str}", e.message()),
                 #[cfg(feature = "qemu")]

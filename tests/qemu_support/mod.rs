@@ -95,6 +95,19 @@ pub fn build_image(bin: &str) -> PathBuf {
 /// virtual nanosecond); panics after `timeout` of wall time. Returns QEMU's success and the
 /// decoded log lines (`LEVEL message`).
 pub fn run_image(elf: &Path, timeout: Duration) -> (bool, Vec<String>) {
+    run_script(elf, timeout, None)
+}
+
+/// [`run_image`] with `script` as the image's command script (its boot command line, as
+/// `scripts/qemu-run` passes `QEMU_SCRIPT`), or its built-in one for `None`.
+pub fn run_script(elf: &Path, timeout: Duration, script: Option<&str>) -> (bool, Vec<String>) {
+    let semihosting = match script {
+        Some(s) => format!(
+            "enable=on,target=native,arg=script:{}",
+            s.replace(',', ",,")
+        ),
+        None => "enable=on,target=native".to_owned(),
+    };
     let mut qemu = Command::new("qemu-system-arm")
         .args([
             "-machine",
@@ -109,7 +122,7 @@ pub fn run_image(elf: &Path, timeout: Duration) -> (bool, Vec<String>) {
             "-serial",
             "null",
             "-semihosting-config",
-            "enable=on,target=native",
+            &semihosting,
             "-kernel",
         ])
         .arg(elf)
