@@ -69,3 +69,30 @@ fn help_lists_every_method_and_the_firmwares_default() {
         "{help}"
     );
 }
+
+/// The firmware image in QEMU on the same scene, seed, method and settings as the host reading
+/// agrees on status and method, and on the modulus within 1 % (the image reads with its factory
+/// profile, which is the host's auto profile: tests/factory_profile.rs). Needs QEMU's tools
+/// (tests/qemu.rs says which are missing).
+#[test]
+fn the_firmware_in_qemu_agrees_with_the_host() {
+    let cases: &[&[&str]] = &[
+        &["--phantom", "B"],
+        &["--phantom", "D", "--seed", "3"],
+        &["--free-air"],
+        &["--phantom", "B", "--preload-n", "0.002"],
+        &["--modulus-kpa", "6000"],
+    ];
+    for c in cases {
+        let host = measure(c);
+        let mut q = c.to_vec();
+        q.push("--qemu");
+        let fw = measure(&q);
+        println!("{c:?}: host {host}\n      qemu {fw}");
+        assert_eq!(host["status"], fw["status"], "{c:?}");
+        assert_eq!(host["method"], fw["method"], "{c:?}");
+        if let (Some(h), Some(f)) = (host["modulus_kpa"].as_f64(), fw["modulus_kpa"].as_f64()) {
+            assert!((f / h - 1.0).abs() <= 0.01, "{c:?}: {f} vs {h} kPa");
+        }
+    }
+}
