@@ -16,7 +16,7 @@
 //! | line | command |
 //! |---|---|
 //! | `measure` | take a reading with the current method and settings |
-//! | `method <name>` | choose the method by its [`Method::name`] — `auto` (the default: fit, falling back to sweep-G), `fit`, `sweep-g`, `paper`, `adaptive`, `track`, `ringdown`, ... — with its default settings |
+//! | `method <name>` | choose the method by its [`Method::name`] — `auto` (the default: hold, falling back to fit, then sweep-G), `fit`, `sweep-g`, `paper`, `adaptive`, `track`, `ringdown`, ... — with its default settings |
 //! | `sweep <start_hz> <stop_hz> <step_hz> <settle_s> <integrate_s> <drive_v>` | stepped-sweep settings (paper, sweep-g), validated against the board |
 //! | `staged <band_start_hz> <band_stop_hz> <coarse_points> <coarse_settle_s> <integrate_s> <refine_points> <refine_span> <settle_tau> <drive_v>` | two-stage settings (auto, fit, adaptive, track), validated against the board |
 //! | `ringdown <band_start_hz> <band_stop_hz> <seed_hz> <burst_s> <ring_s> <stages> <window_cycles> <drive_v>` | ring-down settings, validated against the board |

@@ -40,8 +40,9 @@ pub enum Method {
     Ringdown,
     /// Seed with a ring-down, then hold the drive on the resonance and fit its response.
     Hold,
-    /// The default strategy: fit (0.7 s), falling back to sweep-G (6 s) when fit finds no
-    /// trustworthy resonance; the reading names the method that produced it.
+    /// The default strategy: hold (0.37 s), falling back to fit (0.7 s) and then to sweep-G
+    /// (6 s) while the resonance is not found or not resolved; the reading names the method
+    /// that produced it.
     Auto,
 }
 
@@ -384,11 +385,27 @@ enum Inner {
     Ringdown(Ringdown),
     Hold(Hold),
     Auto {
+        /// The first stage, hold (`None` when the band does not suit it).
+        hold: Option<Hold>,
+        /// Its estimate, computed once when it completes.
+        hold_result: Option<Result<Estimate, Failure>>,
+        /// The second stage, fit.
         first: Staged,
-        /// The first method's estimate, computed once when it completes.
+        /// Its estimate, computed once when it completes.
         first_result: Option<Result<Estimate, Failure>>,
+        /// The last, sweep-G over its default band.
         fallback: Option<SweepMeasurement>,
     },
+}
+
+/// Hold's settings as the first stage of [`Method::Auto`]: its defaults over auto's band.
+fn auto_hold(s: &StagedSettings) -> HoldSettings {
+    HoldSettings {
+        band_start: s.band_start,
+        band_stop: s.band_stop,
+        seed: Hz(0.5 * (s.band_start.0 + s.band_stop.0)),
+        ..HoldSettings::DEFAULT
+    }
 }
 
 /// Failures of the first method of [`Method::Auto`] that the fallback may cure (the resonance
@@ -449,9 +466,16 @@ impl Procedure {
             (Method::Ringdown, Settings::Ringdown(s)) => Inner::Ringdown(s.validate(scale)?),
             (Method::Hold, Settings::Hold(s)) => Inner::Hold(s.validate(scale)?),
             (Method::Auto, Settings::Staged(s)) => {
-                // Validate the fallback now too: the interrupt must never see bad settings.
+                // Validate every stage now: the interrupt must never see bad settings.
                 Method::SweepG.default_sweep().validate(scale)?;
+                let mut hold = auto_hold(s);
+                if let Some(air) = unit.air {
+                    hold.static_capacitance = air.static_capacitance;
+                    hold.static_conductance = air.static_conductance;
+                }
                 Inner::Auto {
+                    hold: hold.validate(scale).ok(),
+                    hold_result: None,
                     first: s.validate(Refine::Bvd, scale)?,
                     first_result: None,
                     fallback: None,
@@ -487,10 +511,15 @@ impl Measurement for Procedure {
             Inner::Ringdown(m) => m.next_plan(),
             Inner::Hold(m) => m.next_plan(),
             Inner::Auto {
+                hold,
+                hold_result,
                 first,
                 first_result,
                 fallback,
             } => {
+                if let (Some(h), None) = (hold.as_mut(), hold_result.as_ref()) {
+                    return h.next_plan();
+                }
                 if fallback.is_none() && first_result.as_ref().is_some_and(retryable) {
                     let sweep = Method::SweepG.default_sweep();
                     *fallback =
@@ -520,9 +549,21 @@ impl Measurement for Procedure {
                 None
             }
             Inner::Auto {
+                hold: Some(h),
+                hold_result: hold_result @ None,
+                ..
+            } => {
+                h.accept(raw, &self.scale);
+                if h.is_complete() {
+                    *hold_result = Some(h.estimate());
+                }
+                None
+            }
+            Inner::Auto {
                 first,
                 first_result,
                 fallback,
+                ..
             } => match fallback {
                 Some(f) => f.accept(raw),
                 None => {
@@ -543,13 +584,24 @@ impl Measurement for Procedure {
             Inner::Ringdown(m) => m.is_complete(),
             Inner::Hold(m) => m.is_complete(),
             Inner::Auto {
+                hold,
+                hold_result,
                 first_result,
                 fallback,
                 ..
-            } => match fallback {
-                Some(f) => f.is_complete(),
-                None => first_result.as_ref().is_some_and(|r| !retryable(r)),
-            },
+            } => {
+                if hold.is_some() {
+                    match hold_result {
+                        None => return false,
+                        Some(r) if !retryable(r) => return true,
+                        Some(_) => {}
+                    }
+                }
+                match fallback {
+                    Some(f) => f.is_complete(),
+                    None => first_result.as_ref().is_some_and(|r| !retryable(r)),
+                }
+            }
         }
     }
 
@@ -561,9 +613,14 @@ impl Measurement for Procedure {
             Inner::Ringdown(m) => (self.method, m.estimate(), self.windows),
             Inner::Hold(m) => (self.method, m.estimate(), self.windows),
             Inner::Auto {
+                hold_result: Some(r),
+                ..
+            } if !retryable(r) => (Method::Hold, *r, self.windows),
+            Inner::Auto {
                 first,
                 first_result,
                 fallback,
+                ..
             } => match fallback {
                 Some(f) => (
                     Method::SweepG,

@@ -182,7 +182,7 @@ fn a_user_session_from_fresh_unit_to_stored_profile_and_back() {
     let r = last_reading(&io);
     let e = r.modulus.expect("modulus").0 as f64;
     assert!((e / 279.0 - 1.0).abs() <= 0.03, "{e} kPa");
-    assert_eq!(r.method, Method::Fit, "auto's first method");
+    assert_eq!(r.method, Method::Hold, "auto's first stage");
 
     // A method switch applies to the next reading.
     assert!(send(&mut s, &mut io, "method sweep-g"));

@@ -152,13 +152,13 @@ fn qemu_log_reconstructs_the_firmwares_reading() {
         l
     });
     assert!(s.errors.is_empty(), "{:?}", s.errors);
-    // The built-in script: a reading by the default method (auto, whose fit read it), then one
-    // by sweep-G over a sweep of the script's own.
+    // The built-in script: a reading by the default method (auto, whose first stage, hold,
+    // read it: no admittance points), then one by sweep-G over a sweep of the script's own.
     assert_eq!(s.readings.len(), 2);
-    assert_eq!(s.sweeps.len(), 2);
-    assert_eq!(s.readings[0].method, "fit");
+    assert_eq!(s.sweeps.len(), 1);
+    assert_eq!(s.readings[0].method, "hold");
     let r = &s.readings[1];
-    let w = &s.sweeps[1];
+    let w = &s.sweeps[0];
     assert_eq!(r.status, "ok");
     assert_eq!(r.method, "sweep-g");
     assert_eq!(w.reading, Some(1));
@@ -286,7 +286,7 @@ fn cli_table_stdin_plot_and_errors() {
     let out = run_ok(bin().arg("log").arg(&log).arg("--plot").arg(&svg));
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
-        stdout.contains("227.976 ± 0.042") && stdout.contains("279.2 ± 1.9"),
+        stdout.contains("227.961 ± 0.045") && stdout.contains("279.1 ± 1.8"),
         "{stdout}"
     );
     assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
@@ -307,7 +307,7 @@ fn cli_table_stdin_plot_and_errors() {
     assert!(out.status.success());
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(j["readings"][0]["status"], "ok");
-    assert_eq!(j["sweeps"][1]["points"].as_array().unwrap().len(), 31);
+    assert_eq!(j["sweeps"][0]["points"].as_array().unwrap().len(), 31);
     // Not a firmware log: one line, non-zero exit.
     run_fails_one_line(
         bin()

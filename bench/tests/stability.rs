@@ -1,4 +1,4 @@
-//! The stability catalogue: the default strategy (`auto`: fit, falling back to sweep-G) reports
+//! The stability catalogue: the default strategy (`auto`: hold, falling back to fit, then sweep-G) reports
 //! a modulus within 3 of its stated standard uncertainties in at least 99 % of its ok readings
 //! over every scene, and never a number where none is due; fit never reports a silent wrong
 //! number, sweep-G only under within-reading drift (its 6 s sweep). Where they fail with a code
@@ -24,9 +24,10 @@ fn the_default_strategy_is_within_three_sigma_in_99_percent_of_its_readings() {
     assert!(t.ok >= 100, "{t:?}");
     assert!(t.within_fraction() >= 0.99, "{t:?}");
     assert_eq!(t.ok_without_truth, 0, "{t:?}");
-    // The lost readings: bad_contact under mains hum (the fit's Q pulled off the Q(E) curve by
-    // less than a gross misfit), about 1 in 10 of the 80 mains readings.
-    assert!(t.wrong_failures <= 12, "{t:?}");
+    // The lost readings: mains hum pulls hold's Q off the Q(E) curve (bad_contact) or towards
+    // the free Q (no_contact) by less than a gross misfit: measured 15 of the 80 mains readings
+    // (12 when auto began with fit, which names the hum `interference` but reads 0.9 s).
+    assert!(t.wrong_failures <= 15, "{t:?}");
 }
 
 #[test]

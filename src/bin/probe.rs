@@ -24,9 +24,9 @@
 //! settings it started with; a new `method`, `sweep`, `staged` or `ringdown` applies from the
 //! next reading.
 //!
-//! The default method is `auto` ([`pzt_probe::Method::Auto`]): fit, falling back to sweep-G
-//! when fit finds no trustworthy resonance; its `reading` line names the method that produced
-//! it (`fit` or `sweep-g`).
+//! The default method is `auto` ([`pzt_probe::Method::Auto`]): hold, falling back to fit, then
+//! to sweep-G while the resonance is not found or not resolved; its `reading` line names the
+//! method that produced it (`hold`, `fit` or `sweep-g`).
 //!
 //! # Log lines (parsed by `probe-bench log` and `tests/qemu.rs`; keep them stable)
 //!

@@ -567,7 +567,7 @@ fn evaluate(
     for x in w {
         let (a, len) = (x.a, x.len);
         if x.gap {
-            ea = (lam * a).exp();
+            ea = cexp(lam * a);
         }
         let decay = if cache[0].0 == len {
             cache[0].1
@@ -575,7 +575,7 @@ fn evaluate(
             cache[1].1
         } else {
             cache[1] = cache[0];
-            cache[0] = (len, (lam * len).exp());
+            cache[0] = (len, cexp(lam * len));
             cache[0].1
         };
         // exp(λ a), exp(λ (a + len)); their mean over the window and its λ-derivative.
@@ -729,6 +729,15 @@ pub fn fit(
         },
         sigma_q,
     })
+}
+
+/// `exp(z)` by the `libm` crate's `expf`, `cosf`, `sinf`: the same bits on the host and the
+/// target, whatever `num-traits` features another crate of the build enables (with `std` its
+/// `Float::exp` is the platform's, which differs in the last bits and made the host's readings
+/// depend on which binary took them).
+fn cexp(z: num_complex::Complex32) -> num_complex::Complex32 {
+    let m = libm::expf(z.re);
+    num_complex::Complex32::new(m * libm::cosf(z.im), m * libm::sinf(z.im))
 }
 
 #[cfg(test)]

@@ -19,8 +19,8 @@ use pzt_probe::{Hz, Method, Seconds, Volts};
 
 #[derive(Args, Clone)]
 pub struct MethodArgs {
-    /// Resonance method: `auto` (the default, as in the firmware: fit, falling back to
-    /// sweep-g), `paper` (|Z| minimum, 200–300 Hz in 1 Hz steps), `sweep-g` (conductance
+    /// Resonance method: `auto` (the default, as in the firmware: hold, falling back to fit,
+    /// then sweep-g), `paper` (|Z| minimum, 200–300 Hz in 1 Hz steps), `sweep-g` (conductance
     /// maximum), `adaptive`, `fit`, `track`, `ringdown` or `hold` (see docs/methods.md).
     /// For the two-stage methods `--start-hz/--stop-hz` set the band, `--settle-s` the coarse
     /// settling and `--integrate-s` the integration per point; for ringdown and hold the band.
