@@ -167,3 +167,25 @@ pub fn measure(
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// What `settings_command` writes, the firmware's parser reads back as the same settings.
+    #[test]
+    fn settings_commands_parse_back_to_their_settings() {
+        let scale = pzt_probe::board::sim::scale_of(&hal_sim::FrontEnd::default());
+        for m in Method::ALL {
+            let s = m.default_settings();
+            match settings_command(&s) {
+                Some(line) => assert_eq!(
+                    pzt_probe::command::parse(line.as_bytes(), &scale),
+                    Ok(pzt_probe::command::Command::Settings(s)),
+                    "{line}"
+                ),
+                None => assert_eq!(m, Method::Hold),
+            }
+        }
+    }
+}

@@ -14,6 +14,19 @@ use std::sync::{Mutex, OnceLock};
 
 type Key = (String, String, u64, usize, u64);
 
+/// The simulated unit's profile as a user gets it out of the box: calibrated with `method`'s
+/// default settings at bench noise on A–E × 20 (noise seeds from 1000). `measure` and `analyze`
+/// read with it; `auto`'s is the QEMU image's factory profile (`tests/factory_profile.rs`).
+pub fn default_for(method: Method) -> Result<UnitProfile> {
+    simulated(
+        method,
+        &method.default_settings(),
+        NoiseScene::Bench,
+        20,
+        1000,
+    )
+}
+
 /// The simulated unit's profile calibrated with `method` and `settings` under `noise` on A–E ×
 /// `repeats` (noise seeds from `seed0`).
 pub fn simulated(

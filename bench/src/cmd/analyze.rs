@@ -158,15 +158,7 @@ pub fn analyze(
 /// (calibrated with `method` on A–E × 20 at bench noise; `auto` as the firmware's default), its
 /// curve replaced by a built-in one when `calibration` names one.
 pub fn profile(profile: Option<&Path>, calibration: &str, method: Method) -> Result<UnitProfile> {
-    calfile::resolve(profile, calibration, || {
-        crate::unit::simulated(
-            method,
-            &method.default_settings(),
-            hal_sim::NoiseScene::Bench,
-            20,
-            1000,
-        )
-    })
+    calfile::resolve(profile, calibration, || crate::unit::default_for(method))
 }
 
 /// The JSON object of an analysis: the reading's fields plus the capture's.

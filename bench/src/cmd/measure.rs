@@ -82,13 +82,7 @@ pub fn run(a: MeasureArgs) -> Result<()> {
     // (a reading with a band that misses the resonance, or in heavy noise, must fail as a
     // reading, not as a calibration).
     let unit = calfile::resolve(a.profile.as_deref(), &a.calibration, || {
-        crate::unit::simulated(
-            method,
-            &method.default_settings(),
-            hal_sim::NoiseScene::Bench,
-            20,
-            1000,
-        )
+        crate::unit::default_for(method)
     })?;
     if !a.json {
         println!(
