@@ -60,6 +60,27 @@ pub enum Settings {
     Hold(HoldSettings),
 }
 
+/// Which resonance a method reports and a calibration curve maps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Resonance {
+    /// The motional (series) resonance of the mode: every method but `paper`, and the papers'
+    /// published curves (the simulated unit's motional resonance follows paper 003's `f_e`).
+    Motional,
+    /// The |Z| dip of paper 003's method, between the series and the parallel resonance.
+    ImpedanceDip,
+}
+
+impl Resonance {
+    /// Stable name (`motional`, `impedance-dip`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Resonance::Motional => "motional",
+            Resonance::ImpedanceDip => "impedance-dip",
+        }
+    }
+}
+
 /// The default method of every caller: the firmware's measurement task and `probe-bench`.
 pub const DEFAULT_METHOD: Method = Method::Auto;
 
@@ -117,6 +138,16 @@ impl Method {
             Method::Ringdown => "ringdown",
             Method::Hold => "hold",
             Method::Auto => "auto",
+        }
+    }
+
+    /// Which resonance the method reports: every method but `paper` the motional one; `paper`
+    /// the |Z| dip, which C0 and the coupling pull several hertz off it. A calibration maps
+    /// one of them, so it serves only the methods that report that one.
+    pub const fn resonance(self) -> Resonance {
+        match self {
+            Method::Paper => Resonance::ImpedanceDip,
+            _ => Resonance::Motional,
         }
     }
 

@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! estimate ─▶ air reference present? ─▶ Q measured? ─▶ contact (against the air reference)
-//!          ─▶ calibration with range check ─▶ contact condition (Q against the Q model)
+//!          ─▶ the curve maps this method's resonance ─▶ calibration with range check ─▶ contact condition (Q against the Q model)
 //!          ─▶ repeatability small enough to tell tissue apart ─▶ Reading
 //! ```
 //!
@@ -60,6 +60,12 @@ pub fn conclude(
     };
     if air.looks_free(est.resonance, q) {
         r.status = Status::Failed(Failure::NoContact);
+        return r;
+    }
+    // A curve maps the resonance of the method it was calibrated with; paper's |Z| dip lies
+    // several hertz off the motional resonance the others report.
+    if method.resonance() != unit.resonance {
+        r.status = Status::Failed(Failure::Uncalibrated);
         return r;
     }
     let m = match unit.calibration.invert(est.resonance, est.sigma) {

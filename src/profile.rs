@@ -103,6 +103,9 @@ pub fn air_from_points(points: &[SweepPoint]) -> Result<AirReference, Failure> {
 pub struct UnitProfile {
     /// Calibration curve of this unit, with covariance and valid span.
     pub calibration: PowerLaw,
+    /// The resonance the curve maps (that of the method it was calibrated with): readings by a
+    /// method that reports another are refused (`uncalibrated`).
+    pub resonance: crate::measure::Resonance,
     /// The contact condition of the calibration: Q against modulus on the reference phantoms.
     /// Without it no reading is given (`uncalibrated`).
     pub q_model: Option<QModel>,
@@ -117,6 +120,7 @@ impl UnitProfile {
     pub fn fallback() -> Self {
         Self {
             calibration: PowerLaw::paper_experiment(),
+            resonance: crate::measure::Resonance::Motional,
             q_model: None,
             air: None,
         }

@@ -60,16 +60,30 @@ pub async fn read<S: PointSource>(
     method: Method,
     settings: &Settings,
     unit: &UnitProfile,
+    on_point: impl FnMut(u16, &SweepPoint),
+    on_stop: impl FnMut(Stop),
+) -> Reading {
+    let start = src.now_sample();
+    match Procedure::new(method, settings, &src.scale(), start, unit) {
+        Ok(mut m) => drive(src, &mut m, method, unit, on_point, on_stop).await,
+        Err(_) => Reading::failed(method, Failure::BadSettings, Seconds(0.0), 0),
+    }
+}
+
+/// Run the measurement `m` of `method` (validated, started at the source's present sample)
+/// plan by plan against `src` under the stall rule, and end it with `unit`: the loop of
+/// [`read`], open to a measurement wrapped for counting (the QEMU cost image).
+pub async fn drive<S: PointSource, M: Measurement>(
+    src: &mut S,
+    m: &mut M,
+    method: Method,
+    unit: &UnitProfile,
     mut on_point: impl FnMut(u16, &SweepPoint),
     mut on_stop: impl FnMut(Stop),
 ) -> Reading {
-    let scale = src.scale();
-    let fs = scale.sample_rate.0 as f64;
+    let fs = src.scale().sample_rate.0 as f64;
     let start = src.now_sample();
     let elapsed = |src: &S| Seconds(src.now_sample().saturating_sub(start) as f32 / fs as f32);
-    let Ok(mut m) = Procedure::new(method, settings, &scale, start, unit) else {
-        return Reading::failed(method, Failure::BadSettings, Seconds(0.0), 0);
-    };
     let mut points: u16 = 0;
     while !m.is_complete() {
         let Some(plan) = m.next_plan() else { break };

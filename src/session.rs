@@ -202,7 +202,10 @@ impl Session {
             Command::CalibrateAdd(e) => self.calibrate_add(io, e).await,
             Command::CalibrateFit => match profile::calibrate(&self.refs) {
                 Ok((cal, q_model)) => {
+                    // The references were read with the active method: the curve maps its
+                    // resonance.
                     self.profile.calibration = cal;
+                    self.profile.resonance = self.method.resonance();
                     self.profile.q_model = Some(q_model);
                     io.emit(Event::Calibration(cal)).await;
                     true
@@ -218,6 +221,7 @@ impl Session {
             }
             Command::CalibratePaper => {
                 self.profile.calibration = PowerLaw::paper_experiment();
+                self.profile.resonance = crate::measure::Resonance::Motional;
                 io.emit(Event::Calibration(self.profile.calibration)).await;
                 true
             }

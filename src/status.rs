@@ -108,7 +108,7 @@ impl Failure {
             Failure::BadSettings => "invalid settings",
             Failure::BadContact => "contact unlike calibration: press at the calibrated force (Q off its curve), or retake the air reference",
             Failure::NoAirReference => "no air reference: lift the probe into free air and take one (air)",
-            Failure::Uncalibrated => "unit not calibrated: calibrate it on reference phantoms",
+            Failure::Uncalibrated => "unit not calibrated (for this method): calibrate it on reference phantoms with this method",
         }
     }
 

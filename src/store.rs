@@ -15,7 +15,8 @@
 //! | 8 | 4 | sequence number |
 //! | 12 | 1 | flags (bit 0: air reference present, bit 1: Q model present) |
 //! | 13 | 1 | calibration source (0 paper-simulation, 1 paper-experiment, 2 fitted) |
-//! | 14 | 2 | zero |
+//! | 14 | 1 | the resonance the curve maps (0 motional, 1 impedance dip) |
+//! | 15 | 1 | zero |
 //! | 16 | 24 | `a`, `b`, `c` (f64) |
 //! | 40 | 72 | covariance of `(a, b, c)`, row major (f64) |
 //! | 112 | 16 | `min_kpa`, `max_kpa` (f64) |
@@ -46,7 +47,7 @@ use embedded_storage::nor_flash::NorFlash;
 /// Bytes of one record (a multiple of every common program word: 1, 2, 4, 8, 16, 32).
 pub const RECORD_LEN: usize = 192;
 /// Format version written into every record.
-pub const FORMAT_VERSION: u16 = 2;
+pub const FORMAT_VERSION: u16 = 3;
 const MAGIC: [u8; 4] = *b"PZTC";
 const CRC_AT: usize = RECORD_LEN - 4;
 const FLAG_AIR: u8 = 1;
@@ -392,7 +393,10 @@ pub fn encode(record: &UnitProfile, seq: u32) -> [u8; RECORD_LEN] {
                 0
             },
         source_code(c.source),
-        0,
+        match record.resonance {
+            crate::measure::Resonance::Motional => 0,
+            crate::measure::Resonance::ImpedanceDip => 1,
+        },
         0,
     ]);
     for v in [c.a, c.b, c.c] {
@@ -444,7 +448,12 @@ pub fn decode(buf: &[u8; RECORD_LEN]) -> Option<(u32, UnitProfile)> {
         return None;
     }
     let seq = u32::from_le_bytes(r.take());
-    let [flags, source, _, _] = r.take::<4>();
+    let [flags, source, resonance, _] = r.take::<4>();
+    let resonance = match resonance {
+        0 => crate::measure::Resonance::Motional,
+        1 => crate::measure::Resonance::ImpedanceDip,
+        _ => return None,
+    };
     let source = source_of(source)?;
     let (a, b, c) = (r.f64(), r.f64(), r.f64());
     let mut cov = [[0.0f64; 3]; 3];
@@ -473,6 +482,7 @@ pub fn decode(buf: &[u8; RECORD_LEN]) -> Option<(u32, UnitProfile)> {
             max_kpa,
             source,
         },
+        resonance,
         q_model,
         air,
     };
@@ -496,6 +506,7 @@ mod tests {
         cal.source = Source::Fitted;
         let rec = UnitProfile {
             calibration: cal,
+            resonance: crate::measure::Resonance::ImpedanceDip,
             q_model: Some(QModel { q0: 2.5, q1: 1.25 }),
             air: Some(AirReference {
                 free_resonance: Hz(232.3),

@@ -112,8 +112,13 @@ fn every_method_fits_its_budget_on_target() {
         .collect();
 
     // Every method of the firmware, at every modulus, each reading ok by the method itself
-    // (auto: by fit or its fallback sweep-G).
-    let nominal: Vec<&Case> = cases.iter().filter(|c| c.str("expect") == "ok").collect();
+    // (auto: by one of its stages, hold, fit or sweep-G) — but paper, whose |Z| dip the
+    // image's factory profile (calibrated on the motional resonance) does not map: its
+    // readings end `uncalibrated`, after the same work.
+    let nominal: Vec<&Case> = cases
+        .iter()
+        .filter(|c| c.str("expect") == "ok" || c.method() == "paper")
+        .collect();
     let moduli: BTreeSet<u64> = nominal.iter().map(|c| c.num("e_kpa") as u64).collect();
     assert!(moduli.len() >= MIN_MODULI, "moduli {moduli:?}");
     for m in Method::ALL {
@@ -122,17 +127,29 @@ fn every_method_fits_its_budget_on_target() {
                 .iter()
                 .find(|c| c.method() == m.name() && c.num("e_kpa") as u64 == *e)
                 .unwrap_or_else(|| panic!("{} at {e} kPa not measured", m.name()));
-            assert_eq!(c.str("status"), "ok", "{} at {e} kPa", m.name());
+            let expect = if m == Method::Paper {
+                "uncalibrated"
+            } else {
+                "ok"
+            };
+            assert_eq!(c.str("status"), expect, "{} at {e} kPa", m.name());
             let used = c.str("used");
             match m {
-                Method::Auto => assert!(used == "fit" || used == "sweep-g", "auto used {used}"),
+                Method::Auto => assert!(
+                    ["hold", "fit", "sweep-g"].contains(&used),
+                    "auto used {used}"
+                ),
                 _ => assert_eq!(used, m.name()),
             }
-            assert!(c.num("e_read_kpa") > 0.0 && c.num("points") > 0.0);
+            assert!(c.num("points") > 0.0);
+            assert_eq!(c.num("e_read_kpa") > 0.0, m != Method::Paper);
         }
     }
-    // auto's fallback: fit finds nothing in the band, sweep-G runs and says so.
-    let fallback: Vec<&Case> = cases.iter().filter(|c| c.str("expect") != "ok").collect();
+    // auto's fallback: hold and fit find nothing in the band, sweep-G runs and says so.
+    let fallback: Vec<&Case> = cases
+        .iter()
+        .filter(|c| c.str("expect") != "ok" && c.method() != "paper")
+        .collect();
     assert_eq!(fallback.len(), 1, "one fallback case");
     let fb = fallback[0];
     assert_eq!(fb.method(), "auto");

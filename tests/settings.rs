@@ -219,7 +219,8 @@ fn random_input_never_panics() {
     }
 }
 
-/// The default strategy falls back to sweep-G when fit misses the resonance, and says so.
+/// The default strategy falls back to sweep-G when hold and fit miss the resonance, and says
+/// so.
 #[test]
 fn auto_falls_back_and_names_the_method_used() {
     use hal_sim::{NoiseScene, Scene};
@@ -230,7 +231,7 @@ fn auto_falls_back_and_names_the_method_used() {
     let cal = pzt_probe::profile::UnitProfile::fallback();
     let scene = Scene::on_modulus_kpa(1000.0).with_noise(NoiseScene::Bench);
     let f0 = scene.resonance_hz();
-    // Default: fit finds it.
+    // Default: its first stage, hold, finds it.
     let r = read(
         &scene,
         3,
@@ -240,10 +241,10 @@ fn auto_falls_back_and_names_the_method_used() {
         |_| {},
     )
     .unwrap();
-    assert_eq!(r.method, Method::Fit);
+    assert_eq!(r.method, Method::Hold);
     assert!((r.resonance.unwrap().0 as f64 - f0).abs() < 0.5);
-    // A fit band that misses the resonance (170–200 Hz for 251 Hz): fit says out of band, the
-    // strategy sweeps 170–290 Hz with sweep-G and finds it.
+    // A band that misses the resonance (170–200 Hz for 251 Hz): hold and fit say out of band,
+    // the strategy sweeps 170–290 Hz with sweep-G and finds it.
     let narrow = StagedSettings {
         band_start: Hz(170.0),
         band_stop: Hz(200.0),

@@ -19,6 +19,11 @@ fn record(n: u32) -> UnitProfile {
     cal.cov[0][0] = 0.01 * n as f64;
     UnitProfile {
         calibration: cal,
+        resonance: if n.is_multiple_of(2) {
+            pzt_probe::measure::Resonance::Motional
+        } else {
+            pzt_probe::measure::Resonance::ImpedanceDip
+        },
         q_model: Some(QModel {
             q0: 4.0 + n as f64,
             q1: 1.0,

@@ -4,7 +4,12 @@
 
 use anyhow::{bail, Context, Result};
 use pzt_probe::calibration::{PowerLaw, QModel, Source};
+use pzt_probe::measure::Resonance;
 use pzt_probe::profile::{AirReference, UnitProfile};
+
+fn motional() -> String {
+    Resonance::Motional.name().to_owned()
+}
 use pzt_probe::{Farads, Hz, Siemens};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -104,6 +109,10 @@ pub struct QModelFile {
 pub struct ProfileFile {
     /// Calibration curve.
     pub calibration: CalFile,
+    /// The resonance the curve maps: `motional` (every method but paper) or `impedance-dip`
+    /// (paper's |Z| dip).
+    #[serde(default = "motional")]
+    pub resonance: String,
     /// Contact condition of the calibration.
     pub q_model: Option<QModelFile>,
     /// Air reference.
@@ -118,6 +127,7 @@ impl ProfileFile {
     pub fn from_profile(p: &UnitProfile, method: Option<&str>, taken: String) -> Self {
         Self {
             calibration: CalFile::from_law(&p.calibration, method),
+            resonance: p.resonance.name().to_owned(),
             q_model: p.q_model.map(|m| QModelFile { q0: m.q0, q1: m.q1 }),
             air: p.air.map(|a| AirFile {
                 free_resonance_hz: a.free_resonance.0,
@@ -131,8 +141,14 @@ impl ProfileFile {
 
     /// To a profile, validated.
     pub fn to_profile(&self) -> Result<UnitProfile> {
+        let resonance = match self.resonance.as_str() {
+            "motional" => Resonance::Motional,
+            "impedance-dip" => Resonance::ImpedanceDip,
+            r => bail!("unknown resonance `{r}` (motional or impedance-dip)"),
+        };
         let p = UnitProfile {
             calibration: self.calibration.to_law()?,
+            resonance,
             q_model: self.q_model.as_ref().map(|m| QModel { q0: m.q0, q1: m.q1 }),
             air: self.air.as_ref().map(|a| AirReference {
                 free_resonance: Hz(a.free_resonance_hz),
@@ -220,7 +236,9 @@ pub fn resolve(
         None => ProfileFile::load(Path::new(calibration))?,
     };
     if let Some(law) = builtin(calibration) {
+        // The papers' curves map the motional resonance (docs/physics.md).
         p.calibration = law;
+        p.resonance = Resonance::Motional;
     }
     Ok(p)
 }

@@ -193,6 +193,7 @@ pub fn calibrate_unit_with(
     let (calibration, q_model) = calibrate(&refs[..n]).map_err(SimError::Fit)?;
     Ok(UnitProfile {
         calibration,
+        resonance: method.resonance(),
         q_model: Some(q_model),
         air: Some(air),
     })
