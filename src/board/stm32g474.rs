@@ -91,7 +91,9 @@ pub fn scale() -> FrontEndScale {
 }
 
 /// Start of the calibration store: the last two 2 KiB pages of bank 2 (0x0807_F000), outside
-/// the linker's FLASH region (`memory/stm32g474re.x`), so a firmware update keeps it.
+/// the linker's FLASH region (bank 1 in the root `memory.x`, which names the store's pages
+/// `_pzt_store_start`/`_pzt_store_end`; `tests/memory_map.rs` checks they agree), so a firmware
+/// update keeps it.
 pub const STORE_BASE: u32 = 0x7_F000;
 /// The store's flash.
 pub type StoreFlash = InternalFlash;
