@@ -18,6 +18,7 @@
 pub mod board;
 pub mod calibration;
 pub mod command;
+pub mod counters;
 pub mod dsp;
 pub mod engine;
 pub mod estimate;

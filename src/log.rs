@@ -1,6 +1,42 @@
 //! The firmware's defmt log: one line per event, in the formats `probe-bench log` parses
 //! (`bench/src/defmt_log.rs` lists them; a test checks both lists are the same). Only the
-//! report task of the RTIC application calls these.
+//! report task of the RTIC application calls these (the board's own lines — boot, counters,
+//! overrun, exit — it logs itself).
+//!
+//! # Log lines (parsed by `probe-bench log` and `tests/qemu.rs`; keep them stable)
+//!
+//! Every line is one defmt message; floats are `{=f32}` (missing values are `NaN`), names
+//! `{=str}`:
+//!
+//! ```text
+//! boot board=<qemu|stm32> fs_hz=<f32> batch=<u32>
+//! store loaded slot=<u8> seq=<u32> other=<str>            (info)
+//! store fallback slot0=<str> slot1=<str> calibration=paper-experiment   (warn)
+//! store saved slot=<u8> seq=<u32>                          (info)
+//! store error=<str>                                        (error)
+//! settings method=<str> start_hz=<f32> stop_hz=<f32> step_hz=<f32> settle_s=<f32> integrate_s=<f32> drive_v=<f32>
+//! point tag=<u16> f_hz=<f32> g_s=<f32> b_s=<f32> sigma_s=<f32>
+//! reading status=<str> f_hz=<f32> f_sigma_hz=<f32> e_kpa=<f32> e_sigma_kpa=<f32> e_repeat_kpa=<f32> q=<f32> probe_time_s=<f32> points=<u16> method=<str>
+//! air f_hz=<f32> q=<f32>
+//! reference e_kpa=<f32> f_hz=<f32> f_sigma_hz=<f32> n=<u16>
+//! calibration source=<str> a=<f32> b=<f32> c=<f32> min_kpa=<f32> max_kpa=<f32>
+//! hint code=<str> message=<str>                           (warn; after a failed reading: what to do)
+//! rejected error=<str>                                     (warn)
+//! stalled tag=<u16>                                        (error)
+//! overrun late=<u32> ring=<u32> dropped=<u32>              (error; whenever a counter grew)
+//! counters batches=<u32> late=<u32> ring=<u32> dropped=<u32> isr_mean=<u32> isr_max=<u32> unit=<str>
+//! status method=<str> calibration=<str> fallback=<bool> air=<bool> q_model=<bool> references=<u16>
+//! help commands=<str> methods=<str> default=<str>
+//! exit ok=<bool>                                           (QEMU script end)
+//! ```
+//!
+//! `settings` carries a stepped sweep's own fields; for the two-stage methods (auto, fit,
+//! adaptive, track) `start_hz`/`stop_hz` are the band, `step_hz` is `NaN`, `settle_s` the
+//! coarse settling and `integrate_s` the integration; for ring-down the band, `NaN`, the burst
+//! and the ring. `status` of a reading is `ok` or a failure code of
+//! [`pzt_probe::Failure::code`]. `isr_mean`
+//! and `isr_max` are the sample interrupt's work per batch (plan intake, demodulation, DAC
+//! refill, point hand-off) in `unit`: instructions under QEMU, core cycles on the STM32.
 
 use crate::measure::Settings;
 use crate::session::Event;
@@ -173,5 +209,35 @@ pub fn store_error_name(e: StoreError) -> &'static str {
         StoreError::Erase => "erase",
         StoreError::Program => "program",
         StoreError::Verify => "verify",
+    }
+}
+
+/// The `counters` line; `unit` is the board's unit of the interrupt's work.
+pub fn counters(unit: &str) {
+    use crate::counters::*;
+    use core::sync::atomic::Ordering::Relaxed;
+    defmt::info!(
+        "counters batches={=u32} late={=u32} ring={=u32} dropped={=u32} isr_mean={=u32} isr_max={=u32} unit={=str}",
+        BATCHES.load(Relaxed),
+        LATE.load(Relaxed),
+        RING.load(Relaxed),
+        DROPPED.load(Relaxed),
+        ISR_MEAN.load(Relaxed),
+        ISR_MAX.load(Relaxed),
+        unit
+    );
+}
+
+/// The `overrun` line, whenever a counter grew since `seen` (which it updates).
+pub fn overruns_if_grew(seen: &mut crate::counters::Overruns) {
+    let now = crate::counters::Overruns::now();
+    if now != *seen {
+        defmt::error!(
+            "overrun late={=u32} ring={=u32} dropped={=u32}",
+            now.late,
+            now.ring,
+            now.dropped
+        );
+        *seen = now;
     }
 }

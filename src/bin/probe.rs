@@ -11,9 +11,9 @@
 //! |---|---|---|
 //! | `sample` (hardware) | 3 | per batch: demodulate the ADC half, refill the DAC half ([`SampleEngine`]) |
 //! | `uart_rx` (hardware, STM32) | 2 | host bytes from LPUART1 (ST-LINK virtual COM port) into a channel |
-//! | `measure` | 1 | owns settings, calibration and the flash store; runs readings plan by plan ([`pzt_probe::measure::Procedure`]) |
-//! | `command` | 1 | bytes → lines → [`pzt_probe::command::parse`] → requests to `measure` (QEMU: `command_script`, a fixed script through the same parser) |
-//! | `report` | 1 | the only place that logs: one defmt line per event, formats below |
+//! | `measure` | 1 | the session ([`pzt_probe::session`]): profile, settings, the flash store; readings through [`pzt_probe::reading`] |
+//! | `command` | 1 | bytes → lines → [`pzt_probe::command::parse`] → requests to `measure` (QEMU: the boot command line's script or the built-in one, [`pzt_probe::board::sim_script`]) |
+//! | `report` | 1 | the only place that logs: one defmt line per event ([`pzt_probe::log`]) |
 //!
 //! Data flow: `command` → (request channel) → `measure` → (plan channel, capacity 2: the double
 //! buffer of the interrupt's settings) → `sample` → (point channel) → `measure` → (report channel)
@@ -28,40 +28,7 @@
 //! to sweep-G while the resonance is not found or not resolved; its `reading` line names the
 //! method that produced it (`hold`, `fit` or `sweep-g`).
 //!
-//! # Log lines (parsed by `probe-bench log` and `tests/qemu.rs`; keep them stable)
-//!
-//! Every line is one defmt message; floats are `{=f32}` (missing values are `NaN`), names
-//! `{=str}`:
-//!
-//! ```text
-//! boot board=<qemu|stm32> fs_hz=<f32> batch=<u32>
-//! store loaded slot=<u8> seq=<u32> other=<str>            (info)
-//! store fallback slot0=<str> slot1=<str> calibration=paper-experiment   (warn)
-//! store saved slot=<u8> seq=<u32>                          (info)
-//! store error=<str>                                        (error)
-//! settings method=<str> start_hz=<f32> stop_hz=<f32> step_hz=<f32> settle_s=<f32> integrate_s=<f32> drive_v=<f32>
-//! point tag=<u16> f_hz=<f32> g_s=<f32> b_s=<f32> sigma_s=<f32>
-//! reading status=<str> f_hz=<f32> f_sigma_hz=<f32> e_kpa=<f32> e_sigma_kpa=<f32> e_repeat_kpa=<f32> q=<f32> probe_time_s=<f32> points=<u16> method=<str>
-//! air f_hz=<f32> q=<f32>
-//! reference e_kpa=<f32> f_hz=<f32> f_sigma_hz=<f32> n=<u16>
-//! calibration source=<str> a=<f32> b=<f32> c=<f32> min_kpa=<f32> max_kpa=<f32>
-//! hint code=<str> message=<str>                           (warn; after a failed reading: what to do)
-//! rejected error=<str>                                     (warn)
-//! stalled tag=<u16>                                        (error)
-//! overrun late=<u32> ring=<u32> dropped=<u32>              (error; whenever a counter grew)
-//! counters batches=<u32> late=<u32> ring=<u32> dropped=<u32> isr_mean=<u32> isr_max=<u32> unit=<str>
-//! status method=<str> calibration=<str> fallback=<bool> air=<bool> q_model=<bool> references=<u16>
-//! help commands=<str> methods=<str> default=<str>
-//! exit ok=<bool>                                           (QEMU script end)
-//! ```
-//!
-//! `settings` carries a stepped sweep's own fields; for the two-stage methods (auto, fit,
-//! adaptive, track) `start_hz`/`stop_hz` are the band, `step_hz` is `NaN`, `settle_s` the
-//! coarse settling and `integrate_s` the integration; for ring-down the band, `NaN`, the burst
-//! and the ring. `status` of a reading is `ok` or a failure code of
-//! [`pzt_probe::Failure::code`]. `isr_mean`
-//! and `isr_max` are the sample interrupt's work per batch (plan intake, demodulation, DAC
-//! refill, point hand-off) in `unit`: instructions under QEMU, core cycles on the STM32.
+//! The log lines (one defmt message per event) are listed in [`pzt_probe::log`].
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(not(target_os = "none"))]
@@ -123,45 +90,9 @@ unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
 mod shared {
     //! Types and counters shared by the tasks.
 
-    use core::sync::atomic::{AtomicU32, Ordering};
     use pzt_probe::command::CommandError;
     use pzt_probe::engine::PointPlan;
     use pzt_probe::session::Event;
-
-    /// Batches serviced by the sample interrupt.
-    pub static BATCHES: AtomicU32 = AtomicU32::new(0);
-    /// Batches whose interrupt overran its period (the next one was already pending).
-    pub static LATE: AtomicU32 = AtomicU32::new(0);
-    /// Engine ring overruns (a DAC batch forgotten before it was demodulated).
-    pub static RING: AtomicU32 = AtomicU32::new(0);
-    /// Finished points the interrupt could not hand on (channel full).
-    pub static DROPPED: AtomicU32 = AtomicU32::new(0);
-    /// Mean and largest interrupt work per batch (board unit).
-    pub static ISR_MEAN: AtomicU32 = AtomicU32::new(0);
-    /// See [`ISR_MEAN`].
-    pub static ISR_MAX: AtomicU32 = AtomicU32::new(0);
-
-    /// A snapshot of the overrun counters.
-    #[derive(Clone, Copy, PartialEq, Eq, Default)]
-    pub struct Overruns {
-        pub late: u32,
-        pub ring: u32,
-        pub dropped: u32,
-    }
-
-    impl Overruns {
-        pub fn now() -> Self {
-            Self {
-                late: LATE.load(Ordering::Relaxed),
-                ring: RING.load(Ordering::Relaxed),
-                dropped: DROPPED.load(Ordering::Relaxed),
-            }
-        }
-        #[cfg_attr(not(feature = "qemu"), allow(dead_code))]
-        pub fn any(&self) -> bool {
-            self.late + self.ring + self.dropped > 0
-        }
-    }
 
     /// What the measurement task asks of the interrupt.
     #[derive(Clone, Copy)]
@@ -189,7 +120,8 @@ mod app {
     use crate::board;
     use crate::shared::*;
     use core::sync::atomic::Ordering;
-    use pzt_probe::command::{parse, Command, LineBuffer};
+    use pzt_probe::command::Command;
+    use pzt_probe::counters::*;
     use pzt_probe::engine::PointPlan;
     use pzt_probe::engine::{PointRaw, SampleEngine};
     use pzt_probe::hal::FrontEndScale;
@@ -228,8 +160,7 @@ mod app {
         engine: SampleEngine,
         plan_rx: Receiver<'static, EngineCmd, PLAN_CAP>,
         point_tx: Sender<'static, PointRaw, POINT_CAP>,
-        isr_sum: u64,
-        isr_n: u32,
+        isr: BatchStats,
         watchdog: board::Watchdog,
         store: Store<board::StoreFlash>,
         scale: FrontEndScale,
@@ -285,8 +216,7 @@ mod app {
                 engine,
                 plan_rx,
                 point_tx,
-                isr_sum: 0,
-                isr_n: 0,
+                isr: BatchStats::default(),
                 watchdog: parts.watchdog,
                 store,
                 scale,
@@ -320,17 +250,10 @@ mod app {
     /// hands a finished point to the measurement task with a non-blocking send. It never logs,
     /// allocates or waits.
     ///
-    /// **Budget.** 2 % of the core per batch: 17 000 cycles at 170 MHz for 50 samples
-    /// (340 per sample); measured figures are in `docs/firmware.md` and in the `counters`
-    /// log line (`isr_mean`, `isr_max`). The hard limit is the batch period itself: the
-    /// refilled DAC half plays one batch after the one now playing.
-    ///
-    /// **Overrun.** Detected, counted and reported by the report task, never silent: if the
-    /// next batch interrupt is already pending when this one ends, the batch was late (`LATE`;
-    /// on the STM32 the DMA may then have played a stale half); if the engine's ring forgot a
-    /// batch (`RING`); if the point channel was full (`DROPPED`). The measurement task also
-    /// times every point out, so a lost point ends the reading as `stalled` rather than hanging.
-    #[task(binds = DMA1_CH1, priority = 3, local = [stream, engine, plan_rx, point_tx, isr_sum, isr_n])]
+    /// **Budget** 2 % of the core per batch (17 000 cycles at 170 MHz); **overruns** (late
+    /// batch, ring, full point channel) are counted ([`pzt_probe::counters`]) and reported,
+    /// never silent: `docs/firmware.md`.
+    #[task(binds = DMA1_CH1, priority = 3, local = [stream, engine, plan_rx, point_tx, isr])]
     fn sample(cx: sample::Context) {
         let stream = cx.local.stream;
         let engine = cx.local.engine;
@@ -349,19 +272,9 @@ mod app {
                 DROPPED.fetch_add(1, Ordering::Relaxed);
             }
         }
-        let work = board::elapsed(t0);
-        *cx.local.isr_sum += work as u64;
-        *cx.local.isr_n += 1;
-        // In f32 (24-bit mantissa: exact enough for a mean) rather than a u64 division, whose
-        // library routine costs a kilobyte of flash.
-        let mean = *cx.local.isr_sum as f32 / *cx.local.isr_n as f32;
-        ISR_MEAN.store(mean as u32, Ordering::Relaxed);
-        ISR_MAX.fetch_max(work, Ordering::Relaxed);
-        RING.store(engine.overruns(), Ordering::Relaxed);
-        BATCHES.fetch_add(1, Ordering::Relaxed);
-        if stream.late() {
-            LATE.fetch_add(1, Ordering::Relaxed);
-        }
+        cx.local
+            .isr
+            .batch(board::elapsed(t0), engine.overruns(), stream.late());
     }
 
     /// Host bytes from the UART into the command task's channel.
@@ -474,27 +387,10 @@ mod app {
         }
     }
 
-    /// Turn lines into requests. Parse errors are reported and the line is dropped.
-    #[cfg_attr(feature = "qemu", allow(dead_code))]
-    async fn serve_line(
-        line: &[u8],
-        scale: &FrontEndScale,
-        requests: &mut Sender<'static, Command, REQUEST_CAP>,
-        reports: &mut Sender<'static, Report, REPORT_CAP>,
-    ) -> bool {
-        match parse(line, scale) {
-            Ok(c) => requests.send(c).await.is_ok(),
-            Err(e) => {
-                let _ = reports.send(Report::Rejected(e)).await;
-                false
-            }
-        }
-    }
-
     /// The command task: host bytes → lines → requests, one request at a time.
     ///
-    /// On QEMU there is no host on the line: the task feeds the fixed [`SCRIPT`] through the
-    /// same line buffer and parser, waits for each request to finish, then ends the run with
+    /// On QEMU there is no host on the line: the task runs the boot command line's script (or
+    /// the built-in [`SCRIPT`]), waits for each request to finish, then ends the run with
     /// success iff every request succeeded and no overrun happened.
     #[task(priority = 1)]
     async fn command(
@@ -505,48 +401,30 @@ mod app {
         rx: Receiver<'static, u8, RX_CAP>,
     ) {
         let scale = board::scale();
-        let mut lines = LineBuffer::new();
         #[cfg(feature = "qemu")]
         {
-            // The boot command line's script if there is one, else the built-in one; `sim`
-            // lines move the simulated probe (src/board/sim_script.rs), the others go through
-            // the same line buffer and parser as host bytes.
+            use pzt_probe::board::sim_script::{lines, step, Step};
+            // The boot command line's script, else the built-in one: `sim` lines move the
+            // simulated probe, the others are parsed as host lines are.
             let mut cmdline = [0u8; board::CMDLINE_MAX];
             let script = board::boot_script(&mut cmdline).unwrap_or(SCRIPT);
             let mut sim = board::sim_state();
             let mut ok = true;
-            for line in script
-                .split([';', '\n'])
-                .map(str::trim)
-                .filter(|l| !l.is_empty())
-            {
-                match pzt_probe::board::sim_script::apply(line, &mut sim) {
-                    Ok(true) => {
-                        board::set_scene(sim.scene(), sim.seed);
-                        continue;
-                    }
-                    Ok(false) => {}
-                    Err(e) => {
-                        let _ = reports.send(Report::SimRejected(e)).await;
-                        ok = false;
-                        continue;
-                    }
-                }
-                let mut parsed = None;
-                for &b in line.as_bytes().iter().chain(b"\n") {
-                    if let Some(r) = lines.push(b) {
-                        parsed = Some(r.map(|l| parse(l, &scale)));
-                    }
-                }
-                match parsed {
-                    Some(Ok(Ok(c))) if requests.send(c).await.is_ok() => {
+            for line in lines(script) {
+                match step(line, &mut sim, &scale) {
+                    Step::Sim => board::set_scene(sim.scene(), sim.seed),
+                    Step::Command(c) if requests.send(c).await.is_ok() => {
                         ok &= done.recv().await.unwrap_or(false);
                     }
-                    Some(Ok(Err(e)) | Err(e)) => {
+                    Step::Command(_) => ok = false,
+                    Step::BadSim(e) => {
+                        let _ = reports.send(Report::SimRejected(e)).await;
+                        ok = false;
+                    }
+                    Step::BadCommand(e) => {
                         let _ = reports.send(Report::Rejected(e)).await;
                         ok = false;
                     }
-                    _ => ok = false,
                 }
             }
             ok &= !Overruns::now().any();
@@ -554,14 +432,18 @@ mod app {
             drop(rx);
         }
         #[cfg(not(feature = "qemu"))]
-        let mut rx = rx;
+        let (mut rx, mut lines) = (rx, pzt_probe::command::LineBuffer::new());
         #[cfg(not(feature = "qemu"))]
         while let Ok(b) = rx.recv().await {
             // A stale completion from an earlier request is of no interest here.
             let _ = done.try_recv();
-            match lines.push(b) {
-                Some(Ok(l)) => {
-                    serve_line(l, &scale, &mut requests, &mut reports).await;
+            // A parse error is reported and the line dropped.
+            match lines
+                .push(b)
+                .map(|l| l.and_then(|l| pzt_probe::command::parse(l, &scale)))
+            {
+                Some(Ok(c)) => {
+                    let _ = requests.send(c).await;
                 }
                 Some(Err(e)) => {
                     let _ = reports.send(Report::Rejected(e)).await;
@@ -581,38 +463,15 @@ mod app {
                 Report::Rejected(e) => defmt::warn!("rejected error={=str}", e.message()),
                 #[cfg(feature = "qemu")]
                 Report::SimRejected(e) => defmt::warn!("rejected error={=str}", e.message()),
-                Report::Counters => defmt::info!(
-                    "counters batches={=u32} late={=u32} ring={=u32} dropped={=u32} isr_mean={=u32} isr_max={=u32} unit={=str}",
-                    BATCHES.load(Ordering::Relaxed),
-                    LATE.load(Ordering::Relaxed),
-                    RING.load(Ordering::Relaxed),
-                    DROPPED.load(Ordering::Relaxed),
-                    ISR_MEAN.load(Ordering::Relaxed),
-                    ISR_MAX.load(Ordering::Relaxed),
-                    board::ELAPSED_UNIT
-                ),
+                Report::Counters => pzt_probe::log::counters(board::ELAPSED_UNIT),
                 Report::Exit(ok) => {
-                    report_overruns(&mut seen);
+                    pzt_probe::log::overruns_if_grew(&mut seen);
                     defmt::info!("exit ok={=bool}", ok);
                     #[cfg(feature = "qemu")]
                     board::exit(ok);
                 }
             }
-            report_overruns(&mut seen);
-        }
-    }
-
-    /// Log the overrun counters whenever one of them grew since the last call.
-    fn report_overruns(seen: &mut Overruns) {
-        let now = Overruns::now();
-        if now != *seen {
-            defmt::error!(
-                "overrun late={=u32} ring={=u32} dropped={=u32}",
-                now.late,
-                now.ring,
-                now.dropped
-            );
-            *seen = now;
+            pzt_probe::log::overruns_if_grew(&mut seen);
         }
     }
 }

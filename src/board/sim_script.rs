@@ -13,6 +13,8 @@
 //! Every other line is a probe command for the firmware's own parser. The boot command line is
 //! a list of lines separated by `;`.
 
+use crate::command::{parse, Command, CommandError, MAX_LINE};
+use crate::hal::FrontEndScale;
 use hal_sim::{phantoms, NoiseScene, Scene};
 
 /// What the simulated probe should become.
@@ -105,6 +107,41 @@ pub fn apply(line: &str, state: &mut SimState) -> Result<bool, SimError> {
     Ok(true)
 }
 
+/// The lines of a script: separated by `;` or newlines, trimmed, empty ones left out.
+pub fn lines(script: &str) -> impl Iterator<Item = &str> {
+    script
+        .split([';', '\n'])
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+}
+
+/// What one script line is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Step {
+    /// A `sim` line, applied to the state: put the probe on its new scene.
+    Sim,
+    /// A probe command for the session.
+    Command(Command),
+    /// A bad `sim` line.
+    BadSim(SimError),
+    /// A line the firmware's parser refuses (as it would from the serial line).
+    BadCommand(CommandError),
+}
+
+/// One script line: a `sim` line applied to `state`, or a probe command parsed by the
+/// firmware's own parser against `scale`.
+pub fn step(line: &str, state: &mut SimState, scale: &FrontEndScale) -> Step {
+    match apply(line, state) {
+        Ok(true) => Step::Sim,
+        Err(e) => Step::BadSim(e),
+        Ok(false) if line.len() > MAX_LINE => Step::BadCommand(CommandError::Oversized),
+        Ok(false) => match parse(line.as_bytes(), scale) {
+            Ok(c) => Step::Command(c),
+            Err(e) => Step::BadCommand(e),
+        },
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -140,6 +177,25 @@ mod tests {
         assert_eq!(s.seed, 42);
         assert_eq!(apply("sim free-air", &mut s), Ok(true));
         assert!(s.scene().tissue.is_none());
+    }
+
+    #[test]
+    fn a_script_steps_through_sim_lines_and_commands() {
+        let scale = crate::board::sim::scale_of(&hal_sim::FrontEnd::default());
+        let mut s = start();
+        let got: std::vec::Vec<Step> = lines(" sim phantom B ;measure\n;; method nope ;sim x")
+            .map(|l| step(l, &mut s, &scale))
+            .collect();
+        assert_eq!(
+            got,
+            [
+                Step::Sim,
+                Step::Command(Command::Measure),
+                Step::BadCommand(CommandError::UnknownMethod),
+                Step::BadSim(SimError::Unknown),
+            ]
+        );
+        assert_eq!(s.base, Scene::on_phantom(&phantoms::B));
     }
 
     #[test]
