@@ -43,6 +43,11 @@ pub trait PointSource {
     async fn next(&mut self, plan: &PointPlan, budget: u64) -> Option<PointRaw>;
     /// Stop the drive.
     async fn stop(&mut self);
+    /// An admittance point of the reading in progress, with its plan's tag, as it comes (the
+    /// firmware logs it; the default ignores it).
+    async fn point(&mut self, tag: u16, point: &SweepPoint) {
+        let _ = (tag, point);
+    }
 }
 
 /// Why a reading stopped before its procedure ended.
@@ -100,6 +105,7 @@ pub async fn drive<S: PointSource, M: Measurement>(
             if let Some(p) = m.accept(&raw) {
                 points = points.saturating_add(1);
                 on_point(plan.tag, &p);
+                src.point(plan.tag, &p).await;
             }
         }
     }

@@ -272,27 +272,18 @@ impl Session {
         settings: Settings,
         mut keep: impl FnMut(&SweepPoint),
     ) -> Reading {
-        // Points and stalls are collected during the reading and emitted after it: the
-        // driver borrows the board for the whole reading. The point log of one reading is
-        // bounded by the largest sweep the settings allow.
-        let mut points: heapless::Vec<(u16, SweepPoint), { crate::sweep::MAX_POINTS }> =
-            heapless::Vec::new();
+        // The points go out as they come, through the board's own point sink
+        // (PointSource::point); a stall is emitted after the reading, which borrows the board.
         let mut stalled = None;
         let r = read(
             io,
             method,
             &settings,
             &self.profile,
-            |tag, p| {
-                keep(p);
-                let _ = points.push((tag, *p));
-            },
+            |_, p| keep(p),
             |Stop::Stalled(tag)| stalled = Some(tag),
         )
         .await;
-        for (tag, point) in points {
-            io.emit(Event::Point { tag, point }).await;
-        }
         if let Some(tag) = stalled {
             io.emit(Event::Stalled(tag)).await;
         }

@@ -66,6 +66,9 @@ impl PointSource for SimIo {
     async fn stop(&mut self) {
         self.source().stop().await
     }
+    async fn point(&mut self, tag: u16, point: &pzt_probe::sweep::SweepPoint) {
+        self.events.push(Event::Point { tag, point: *point });
+    }
 }
 
 impl Io for SimIo {

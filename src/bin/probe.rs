@@ -48,32 +48,32 @@ use defmt_rtt as _;
 #[cfg(all(target_os = "none", feature = "qemu"))]
 use defmt_semihosting as _;
 
-/// Stop for good: QEMU exits with failure; the STM32 takes a permanent fault (`udf`, as
-/// `panic-probe` does: probe-rs shows the backtrace, and without a debugger the watchdog resets
-/// the core).
+// The STM32 image's panic handler: panic-probe logs the panic's message and location over defmt
+// (feature `print-defmt`), then takes a HardFault (`udf`): probe-rs shows the backtrace and,
+// without a debugger, the watchdog resets the core.
+#[cfg(all(target_os = "none", feature = "stm32"))]
+use panic_probe as _;
+
+/// Stop for good: QEMU exits with failure; the STM32 takes a permanent fault (panic-probe's
+/// `hard_fault`: `udf` with UsageFault disabled, so that it escalates to HardFault).
 #[cfg(target_os = "none")]
 fn fail() -> ! {
     #[cfg(feature = "qemu")]
     board::exit(false);
     #[cfg(not(feature = "qemu"))]
-    cortex_m::asm::udf()
+    panic_probe::hard_fault()
 }
 
-/// Log that the image panicked, then [`fail`]. Neither the message nor the location is
-/// logged: touching the `PanicInfo` at all keeps core's formatting machinery in the image (with
-/// float formatting for the messages of `f64::clamp` and the like: about 16 KiB of flash), and
-/// the STM32 image must fit 64 KiB. On the board probe-rs shows the backtrace of the fault that
-/// follows.
-#[cfg(target_os = "none")]
+/// The QEMU image's panic handler: log the panic's location and message, then exit with
+/// failure.
+#[cfg(all(target_os = "none", feature = "qemu"))]
 #[panic_handler]
-fn panic(_: &core::panic::PanicInfo) -> ! {
-    defmt::error!(
-        "panic {}",
-        "(message and location not kept: see src/bin/probe.rs)"
-    );
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    defmt::error!("panic {}", defmt::Display2Format(info));
     fail()
 }
 
+/// `defmt::panic!` and its kin have logged their message already: stop without a second line.
 #[cfg(target_os = "none")]
 #[defmt::panic_handler]
 fn defmt_panic() -> ! {
@@ -326,6 +326,10 @@ mod app {
         }
         async fn stop(&mut self) {
             let _ = self.plans.send(EngineCmd::Stop).await;
+        }
+        async fn point(&mut self, tag: u16, point: &pzt_probe::sweep::SweepPoint) {
+            let e = Event::Point { tag, point: *point };
+            let _ = self.reports.send(Report::Event(e)).await;
         }
     }
 
