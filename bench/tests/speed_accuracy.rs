@@ -41,10 +41,12 @@ fn paper(settle_ms: f32, integrate_ms: f32) -> Config {
     )
 }
 
-/// Efficiency: hold's error from noise stays within 3× the Cramér–Rao bound at the same probe
-/// time, from about 10 τ to about 100 τ (bench scene, 500 kPa, 20 readings each).
+/// Efficiency: hold's error from noise stays within 2.2× the Cramér–Rao bound at the same
+/// probe time, from about 10 τ to about 100 τ (bench scene, 500 kPa, 60 readings each, as the
+/// chart: docs/speed-accuracy.md measures 2.0×, 1.5×, 1.5× at 10.8, 26.8 and 96.5 τ; 60
+/// readings know an RMS to about ±9 %, hence 2.2 rather than 2.0).
 #[test]
-fn hold_stays_within_three_times_the_cramer_rao_bound_from_10_to_100_tau() {
+fn hold_stays_within_2_2_times_the_cramer_rao_bound_from_10_to_100_tau() {
     let tau = tau_ms(500.0);
     for (c, lo_tau, hi_tau) in [
         (hold(15.0, 0.0, 80.0), 9.0, 12.0),
@@ -52,8 +54,8 @@ fn hold_stays_within_three_times_the_cramer_rao_bound_from_10_to_100_tau() {
         (hold(20.0, 200.0, 1300.0), 90.0, 110.0),
     ] {
         let cal = calibrate(&c, 10, NoiseScene::Bench).expect("calibration");
-        let cell = evaluate(&c, &cal, 500.0, NoiseScene::Bench, 20, 31_000);
-        assert_eq!(cell.ok, 20);
+        let cell = evaluate(&c, &cal, 500.0, NoiseScene::Bench, 60, 31_000);
+        assert_eq!(cell.ok, 60);
         let t = cell.time_ms / tau;
         assert!((lo_tau..=hi_tau).contains(&t), "{t} tau");
         let crb = crb_pct(
@@ -64,8 +66,9 @@ fn hold_stays_within_three_times_the_cramer_rao_bound_from_10_to_100_tau() {
             cell.time_ms * 1e-3,
         );
         let ratio = cell.noise_rms_pct() / crb;
+        println!("hold at {t:.1} tau: {ratio:.2}x the bound");
         assert!(
-            ratio <= 3.0,
+            ratio <= 2.2,
             "{t:.1} tau: {:.4} % vs CRB {crb:.4} % ({ratio:.2}x)",
             cell.noise_rms_pct()
         );
