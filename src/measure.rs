@@ -275,10 +275,28 @@ pub struct SweepMeasurement {
     scale: FrontEndScale,
     next: usize,
     points: Vec<SweepPoint, MAX_POINTS>,
+    /// Sweep indices around the conductance peak measured again after the sweep.
+    revisit: Vec<usize, REVISITS>,
+    /// Their second measurement.
+    again: Vec<SweepPoint, REVISITS>,
     start_sample: u64,
     end_sample: u64,
     failure: Option<Failure>,
 }
+
+/// Tag of the first revisit of a sweep of `n` points: after the sweep's own tags `1..=n`.
+fn n_tag(n: usize) -> usize {
+    n + 1
+}
+
+/// Points around the peak a stepped sweep measures again at its end ([`SweepMeasurement`]).
+pub const REVISITS: usize = 3;
+
+/// Least shift of the resonance between the sweep and its revisits, as a fraction of the
+/// linewidth `f0/Q`, that counts as the resonance having moved: 1 % (0.23 Hz at Q = 10), a
+/// tenth of what a 0.3 Hz/s drift makes over a 6 s sweep and far above the reading's own
+/// uncertainty (0.005 Hz at bench noise).
+pub const REVISIT_SHIFT: f32 = 0.01;
 
 impl SweepMeasurement {
     /// Validate `settings` for `method` on a board of `scale`; `now_sample` is the engine's
@@ -296,6 +314,8 @@ impl SweepMeasurement {
             scale: *scale,
             next: 0,
             points: Vec::new(),
+            revisit: Vec::new(),
+            again: Vec::new(),
             start_sample: now_sample,
             end_sample: now_sample,
             failure: None,
@@ -307,20 +327,90 @@ impl SweepMeasurement {
         &self.sweep
     }
 
-    /// The next point to ask the engine for, or `None` when the sweep is complete.
+    /// The next point to ask the engine for, or `None` when the sweep is complete. After the
+    /// sweep, the points around the conductance peak are measured again (from the top down,
+    /// settled four times as long after the jump back): a resonance that moved during the
+    /// sweep (thermal drift, a creeping contact) shows as a change there.
     pub fn next_plan(&mut self) -> Option<PointPlan> {
-        if self.failure.is_some() || self.next >= self.sweep.len() {
+        if self.failure.is_some() {
             return None;
         }
-        let plan = self.sweep.plan(self.next, self.next as u16 + 1);
-        self.next += 1;
+        if self.next < self.sweep.len() {
+            let plan = self.sweep.plan(self.next, self.next as u16 + 1);
+            self.next += 1;
+            return Some(plan);
+        }
+        if self.revisit.is_empty() && self.points.len() >= 3 {
+            let i = estimate::argmax(&self.points, |p| p.g_s)?;
+            let n = self.points.len();
+            for k in [i + 1, i, i.wrapping_sub(1)] {
+                if k < n {
+                    let _ = self.revisit.push(k);
+                }
+            }
+        }
+        let &k = self.revisit.get(self.again.len())?;
+        let mut plan = self
+            .sweep
+            .plan(k, (n_tag(self.sweep.len()) + self.again.len()) as u16);
+        plan.settle_samples = plan.settle_samples.saturating_mul(4);
         Some(plan)
+    }
+
+    /// True when the revisits show the resonance moved during the sweep: their change from
+    /// the first measurement is a frequency shift `Δf` along the sweep's own slope `dY/df`
+    /// (least squares over the revisited points; a shift moves them all along it, a tone or a
+    /// knock does not), larger than five of its standard uncertainties and than
+    /// [`REVISIT_SHIFT`] of the linewidth, and it explains most of the change. A sweep that does
+    /// not settle (settling under three time constants of the estimated resonance: free air, a
+    /// rigid contact) is not judged: its points carry transients of their own.
+    fn moved(&self, e: &Estimate) -> bool {
+        let (f0, q) = (e.resonance.0, e.q.unwrap_or(0.0));
+        let tau = q / (core::f32::consts::PI * f0);
+        let settle = self.sweep.settings().settle.0;
+        if !(tau > 0.0 && settle >= 3.0 * tau) {
+            return false;
+        }
+        let n = self.points.len();
+        let (mut dd, mut dy, mut yy, mut var) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
+        for (&k, b) in self.revisit.iter().zip(&self.again) {
+            let (Some(a), Some(lo), Some(hi)) = (
+                self.points.get(k),
+                self.points.get(k.saturating_sub(1)),
+                self.points.get((k + 1).min(n - 1)),
+            ) else {
+                return false;
+            };
+            let df = hi.freq.0 - lo.freq.0;
+            if !(df > 0.0) {
+                return false;
+            }
+            let (dg, db) = ((hi.g_s - lo.g_s) / df, (hi.b_s - lo.b_s) / df);
+            let (cg, cb) = (b.g_s - a.g_s, b.b_s - a.b_s);
+            dd += dg * dg + db * db;
+            dy += dg * cg + db * cb;
+            yy += cg * cg + cb * cb;
+            var += a.sigma_s * a.sigma_s + b.sigma_s * b.sigma_s;
+        }
+        if !(dd > 0.0) {
+            return false;
+        }
+        let shift = dy / dd;
+        let sigma = libm::sqrtf(var / self.again.len().max(1) as f32 / dd);
+        let explained = shift * shift * dd;
+        libm::fabsf(shift) > (5.0 * sigma).max(REVISIT_SHIFT * f0 / q.max(1.0))
+            && explained >= 0.5 * yy
     }
 
     /// Take a finished point; returns it in physical units (for the log).
     pub fn accept(&mut self, raw: &PointRaw) -> Option<SweepPoint> {
         self.end_sample = raw.end_sample;
         match point_from_raw(raw, &self.scale) {
+            // A revisit: kept for the check, not a point of the sweep.
+            Ok(p) if self.points.len() >= self.sweep.len() => {
+                let _ = self.again.push(p);
+                None
+            }
             Ok(p) => {
                 // Capacity equals the largest valid sweep, so this push cannot fail.
                 let _ = self.points.push(p);
@@ -337,9 +427,12 @@ impl SweepMeasurement {
         }
     }
 
-    /// True when every point is in (or the sweep was abandoned).
+    /// True when every point and revisit is in (or the sweep was abandoned).
     pub fn is_complete(&self) -> bool {
-        self.failure.is_some() || self.points.len() >= self.sweep.len()
+        self.failure.is_some()
+            || (self.points.len() >= self.sweep.len()
+                && (self.points.len() < 3
+                    || (!self.revisit.is_empty() && self.again.len() >= self.revisit.len())))
     }
 
     /// Points measured so far.
@@ -359,11 +452,18 @@ impl SweepMeasurement {
         )
     }
 
-    /// The estimate of the points (or the failure that ended the sweep).
+    /// The estimate of the points (or the failure that ended the sweep); `unstable` when the
+    /// revisits show that the resonance moved during the sweep.
     pub fn estimate(&self) -> Result<Estimate, Failure> {
         match self.failure {
             Some(f) => Err(f),
-            None => self.method.estimate(&self.points),
+            None => {
+                let e = self.method.estimate(&self.points)?;
+                if self.moved(&e) {
+                    return Err(Failure::Unstable);
+                }
+                Ok(e)
+            }
         }
     }
 

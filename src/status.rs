@@ -42,11 +42,13 @@ pub enum Failure {
     NoAirReference,
     /// The unit has no calibrated contact condition (Q model): it was never calibrated.
     Uncalibrated,
+    /// The resonance moved during the reading (drift, a creeping contact).
+    Unstable,
 }
 
 impl Failure {
     /// Every code, in declaration order.
-    pub const ALL: [Failure; 17] = [
+    pub const ALL: [Failure; 18] = [
         Failure::NoContact,
         Failure::ContactLost,
         Failure::BelowRange,
@@ -64,6 +66,7 @@ impl Failure {
         Failure::BadContact,
         Failure::NoAirReference,
         Failure::Uncalibrated,
+        Failure::Unstable,
     ];
 
     /// Stable snake_case code, as used in JSON and logs.
@@ -86,6 +89,7 @@ impl Failure {
             Failure::BadContact => "bad_contact",
             Failure::NoAirReference => "no_air_reference",
             Failure::Uncalibrated => "uncalibrated",
+            Failure::Unstable => "unstable",
         }
     }
 
@@ -107,6 +111,7 @@ impl Failure {
             Failure::DriveFault => "drive does not follow the command",
             Failure::BadSettings => "invalid settings",
             Failure::BadContact => "contact unlike calibration: press at the calibrated force (Q off its curve), or retake the air reference",
+            Failure::Unstable => "the resonance moved during the reading: hold the probe still and retry",
             Failure::NoAirReference => "no air reference: lift the probe into free air and take one (air)",
             Failure::Uncalibrated => "unit not calibrated (for this method): calibrate it on reference phantoms with this method",
         }

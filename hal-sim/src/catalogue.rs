@@ -122,7 +122,7 @@ pub fn catalogue(noise: NoiseScene) -> [Case; SCENES] {
     const OK_OR_WEAK: &[&str] = &["low_snr", "no_resonance", "bad_contact"];
     const LIFT_OFF: &[&str] = &["contact_lost", "no_contact"];
     // A tracker that keeps following a moving resonance says so.
-    const DRIFTING: &[&str] = &["not_locked"];
+    const DRIFTING: &[&str] = &["not_locked", "unstable"];
     // A second mode ringing with the first makes a ring-down beat as a tone or a knock does.
     const SECOND_MODE: &[&str] = &["interference"];
     [
