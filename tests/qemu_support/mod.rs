@@ -46,6 +46,11 @@ pub fn require_tools() {
     if !have("defmt-print") {
         missing.push("defmt-print is not installed: cargo install defmt-print --locked");
     }
+    if !have("flip-link") {
+        missing.push(
+            "flip-link (the firmware's linker) is not installed: cargo install flip-link --locked",
+        );
+    }
     if !have_target() {
         missing.push(
             "the thumbv7em-none-eabihf target is not installed: \
