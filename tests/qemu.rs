@@ -6,6 +6,7 @@
 //! the test fails with the command that installs each (it never passes by skipping).
 
 mod qemu_support;
+mod reference;
 
 use qemu_support::{build_image, fields, last, num, require_tools, run_image, run_script};
 use std::collections::HashMap;
@@ -21,21 +22,8 @@ const PHANTOM_B_KPA: f64 = 279.0;
 fn curve_inverse(f: f64) -> f64 {
     let p = pzt_probe::board::sim_factory::profile().expect("factory record");
     let (a, b, c) = (p.calibration.a, p.calibration.b, p.calibration.c);
-    let g = |e: f64| a + b * e.powf(c) - f;
-    let (mut lo, mut hi) = (1e-3f64, 1e9f64);
-    assert!(g(lo) < 0.0 && g(hi) > 0.0, "{f} Hz outside the curve");
-    for _ in 0..200 {
-        let mid = (lo * hi).sqrt();
-        if mid <= lo || mid >= hi {
-            break;
-        }
-        if g(mid) < 0.0 {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    0.5 * (lo + hi)
+    reference::modulus_by_bisection(a, b, c, f)
+        .unwrap_or_else(|| panic!("{f} Hz outside the curve"))
 }
 
 /// Checks a logged reading of phantom B against the references: its resonance against the

@@ -5,34 +5,13 @@
 //! linear propagation itself by Monte Carlo through the bisection. The range checks against the
 //! reference modulus at the f32 neighbours of the asymptote and of the span's ends.
 
+mod reference;
 use pzt_probe::calibration::Source;
 use pzt_probe::{Failure, Hz, PowerLaw};
+use reference::modulus_by_bisection;
 
 /// `u = 2^-24`: the relative rounding of a value to the nearest `f32` (the result's type).
 const F32_ROUND: f64 = 1.0 / 16_777_216.0;
-
-/// The modulus (kPa) where `a + b E^c = f`, by bisection of `ln E` over [1e-9, 1e15] kPa to
-/// adjacent doubles; `None` where `f` is outside the curve's range (`f >= a` or below it at
-/// 1e-9 kPa). The curve rises monotonically in `E` for `b < 0`, `c < 0`.
-fn modulus_by_bisection(a: f64, b: f64, c: f64, f: f64) -> Option<f64> {
-    let g = |e: f64| a + b * e.powf(c) - f;
-    let (mut lo, mut hi) = (1e-9f64, 1e15f64);
-    if !(g(lo) < 0.0 && g(hi) > 0.0) {
-        return None;
-    }
-    for _ in 0..200 {
-        let mid = (lo * hi).sqrt();
-        if mid <= lo || mid >= hi {
-            break;
-        }
-        if g(mid) < 0.0 {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    Some(0.5 * (lo + hi))
-}
 
 /// Sensitivities `dE/d(f, a, b, c)` by central differences of the bisection. Steps: 1e-5 of
 /// `a − f` for `f` and `a` (E varies as `(a − f)^(1/c)`), 1e-5 of `|b|` (ln E is linear in
