@@ -10,6 +10,7 @@
 //!
 //! ```text
 //! boot board=<qemu|stm32> fs_hz=<f32> batch=<u32>
+//! boot fault=<str> clock=<str>                            (error; STM32: a bring-up step failed)
 //! store loaded slot=<u8> seq=<u32> other=<str>            (info)
 //! store fallback slot0=<str> slot1=<str> calibration=paper-experiment   (warn)
 //! store saved slot=<u8> seq=<u32>                          (info)

@@ -41,6 +41,7 @@ pub const TEMPLATES: &[&str] = &[
     "status method={=str} calibration={=str} fallback={=bool} air={=bool} q_model={=bool} references={=u16}",
     "help commands={=str} methods={=str} default={=str}",
     "exit ok={=bool}",
+    "boot fault={=str} clock={=str}",
 ];
 
 /// Type of a logged value (the defmt type hint).

@@ -15,20 +15,10 @@
 //! | `command` | 1 | bytes → lines → [`pzt_probe::command::parse`] → requests to `measure` (QEMU: the boot command line's script or the built-in one, [`pzt_probe::board::sim_script`]) |
 //! | `report` | 1 | the only place that logs: one defmt line per event ([`pzt_probe::log`]) |
 //!
-//! Data flow: `command` → (request channel) → `measure` → (plan channel, capacity 2: the double
-//! buffer of the interrupt's settings) → `sample` → (point channel) → `measure` → (report channel)
-//! → `report`. Settings are validated before anything reaches the interrupt: by the command
-//! parser against the board's converter scale, by the method's own validation when they are
-//! applied, and again by [`pzt_probe::measure::Procedure::new`] when a reading starts; the
-//! interrupt only ever sees [`PointPlan`]s of validated settings. The running reading keeps the
-//! settings it started with; a new `method`, `sweep`, `staged` or `ringdown` applies from the
-//! next reading.
-//!
-//! The default method is `auto` ([`pzt_probe::Method::Auto`]): hold, falling back to fit, then
-//! to sweep-G while the resonance is not found or not resolved; its `reading` line names the
-//! method that produced it (`hold`, `fit` or `sweep-g`).
-//!
-//! The log lines (one defmt message per event) are listed in [`pzt_probe::log`].
+//! Data flow: `command` → requests → `measure` → plans (capacity 2: the double buffer of the
+//! interrupt's settings, validated before they reach it) → `sample` → points → `measure` →
+//! reports → `report`; the path of one reading is in `docs/architecture.md`, the log lines in
+//! [`pzt_probe::log`].
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(not(target_os = "none"))]
@@ -94,12 +84,8 @@ mod shared {
     use pzt_probe::engine::PointPlan;
     use pzt_probe::session::Event;
 
-    /// What the measurement task asks of the interrupt.
-    #[derive(Clone, Copy)]
-    pub enum EngineCmd {
-        Load(PointPlan),
-        Stop,
-    }
+    /// What the measurement task asks of the interrupt: a plan to load, or `None` to stop.
+    pub type EngineCmd = Option<PointPlan>;
 
     /// Everything the report task logs: the session's events and the board's own.
     #[derive(Clone, Copy)]
@@ -122,8 +108,7 @@ mod app {
     use core::sync::atomic::Ordering;
     use pzt_probe::command::Command;
     use pzt_probe::counters::*;
-    use pzt_probe::engine::PointPlan;
-    use pzt_probe::engine::{PointRaw, SampleEngine};
+    use pzt_probe::engine::{PointPlan, PointRaw, SampleEngine};
     use pzt_probe::hal::FrontEndScale;
     use pzt_probe::reading::{PointSource, BATCH};
     use pzt_probe::session::{Event, Io, Session};
@@ -197,6 +182,12 @@ mod app {
             scale.sample_rate.0,
             BATCH as u32
         );
+        // A bring-up step that failed (bounded waits, docs/firmware.md): said, not a reset loop.
+        #[cfg(feature = "stm32")]
+        if let Some(e) = board::boot_error() {
+            let clock = board::clock_source().name();
+            defmt::error!("boot fault={=str} clock={=str}", e.name(), clock);
+        }
 
         let store = match Store::new(parts.flash, board::STORE_BASE) {
             Ok(s) => s,
@@ -261,8 +252,8 @@ mod app {
         let t0 = board::stamp();
         while let Ok(cmd) = cx.local.plan_rx.try_recv() {
             match cmd {
-                EngineCmd::Load(plan) => engine.load(plan),
-                EngineCmd::Stop => engine.stop(),
+                Some(plan) => engine.load(plan),
+                None => engine.stop(),
             }
         }
         let point = engine.demodulate(adc);
@@ -309,7 +300,7 @@ mod app {
             BATCHES.load(Ordering::Relaxed) as u64 * BATCH as u64
         }
         async fn load(&mut self, plan: PointPlan) -> bool {
-            self.plans.send(EngineCmd::Load(plan)).await.is_ok()
+            self.plans.send(Some(plan)).await.is_ok()
         }
         async fn next(&mut self, plan: &PointPlan, budget: u64) -> Option<PointRaw> {
             // The budget in ms, with a watchdog period of margin for this task's own delay.
@@ -325,7 +316,7 @@ mod app {
             got
         }
         async fn stop(&mut self) {
-            let _ = self.plans.send(EngineCmd::Stop).await;
+            let _ = self.plans.send(None).await;
         }
         async fn point(&mut self, tag: u16, point: &pzt_probe::sweep::SweepPoint) {
             let e = Event::Point { tag, point: *point };
