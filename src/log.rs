@@ -242,3 +242,49 @@ pub fn overruns_if_grew(seen: &mut crate::counters::Overruns) {
         *seen = now;
     }
 }
+
+/// Everything the firmware's report task logs: the session's events and the board's own.
+#[derive(Clone, Copy, Debug)]
+pub enum Report {
+    /// A session event.
+    Event(Event),
+    /// A host line the parser refused.
+    Rejected(crate::command::CommandError),
+    /// A `sim` line of the QEMU image's script that is refused.
+    #[cfg(feature = "sim")]
+    SimRejected(crate::board::sim_script::SimError),
+    /// The health counters.
+    Counters,
+    /// The end of the QEMU image's script, with its overall success.
+    Exit(bool),
+}
+
+/// Log `r` (`unit` is the board's unit of the interrupt's work), then the overrun counters if
+/// they grew since `seen`; `Some(ok)` for [`Report::Exit`].
+pub fn report(r: Report, unit: &str, seen: &mut crate::counters::Overruns) -> Option<bool> {
+    let exit = match r {
+        Report::Event(e) => {
+            event(e);
+            None
+        }
+        Report::Rejected(e) => {
+            defmt::warn!("rejected error={=str}", e.message());
+            None
+        }
+        #[cfg(feature = "sim")]
+        Report::SimRejected(e) => {
+            defmt::warn!("rejected error={=str}", e.message());
+            None
+        }
+        Report::Counters => {
+            counters(unit);
+            None
+        }
+        Report::Exit(ok) => Some(ok),
+    };
+    overruns_if_grew(seen);
+    if let Some(ok) = exit {
+        defmt::info!("exit ok={=bool}", ok);
+    }
+    exit
+}

@@ -80,24 +80,12 @@ unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
 mod shared {
     //! Types and counters shared by the tasks.
 
-    use pzt_probe::command::CommandError;
     use pzt_probe::engine::PointPlan;
-    use pzt_probe::session::Event;
 
     /// What the measurement task asks of the interrupt: a plan to load, or `None` to stop.
     pub type EngineCmd = Option<PointPlan>;
 
-    /// Everything the report task logs: the session's events and the board's own.
-    #[derive(Clone, Copy)]
-    pub enum Report {
-        Event(Event),
-        Rejected(CommandError),
-        #[cfg(feature = "qemu")]
-        SimRejected(pzt_probe::board::sim_script::SimError),
-        Counters,
-        #[cfg_attr(not(feature = "qemu"), allow(dead_code))]
-        Exit(bool),
-    }
+    pub use pzt_probe::log::Report;
 }
 
 #[cfg(target_os = "none")]
@@ -162,7 +150,7 @@ mod app {
         unsafe {
             cx.core.SCB.set_priority(
                 cortex_m::peripheral::scb::SystemHandler::SysTick,
-                logical_to_hw(2),
+                pzt_probe::board::nvic_priority(2, board::device::NVIC_PRIO_BITS),
             );
         }
 
@@ -215,12 +203,6 @@ mod app {
                 rx_tx,
             },
         )
-    }
-
-    /// Hardware priority value of RTIC logical priority `p`.
-    fn logical_to_hw(p: u8) -> u8 {
-        let bits = crate::board::device::NVIC_PRIO_BITS;
-        ((1u8 << bits) - p) << (8 - bits)
     }
 
     /// Runs when no task has work: sleep until the next interrupt.
@@ -453,20 +435,11 @@ mod app {
     async fn report(_cx: report::Context, mut rx: Receiver<'static, Report, REPORT_CAP>) {
         let mut seen = Overruns::default();
         while let Ok(r) = rx.recv().await {
-            match r {
-                Report::Event(e) => pzt_probe::log::event(e),
-                Report::Rejected(e) => defmt::warn!("rejected error={=str}", e.message()),
+            #[allow(unused_variables)] // the exit status ends only the QEMU image
+            if let Some(ok) = pzt_probe::log::report(r, board::ELAPSED_UNIT, &mut seen) {
                 #[cfg(feature = "qemu")]
-                Report::SimRejected(e) => defmt::warn!("rejected error={=str}", e.message()),
-                Report::Counters => pzt_probe::log::counters(board::ELAPSED_UNIT),
-                Report::Exit(ok) => {
-                    pzt_probe::log::overruns_if_grew(&mut seen);
-                    defmt::info!("exit ok={=bool}", ok);
-                    #[cfg(feature = "qemu")]
-                    board::exit(ok);
-                }
+                board::exit(ok);
             }
-            pzt_probe::log::overruns_if_grew(&mut seen);
         }
     }
 }

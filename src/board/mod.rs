@@ -11,3 +11,21 @@ pub mod sim_script;
 pub mod qemu;
 #[cfg(all(target_os = "none", feature = "stm32"))]
 pub mod stm32g474;
+
+/// The NVIC priority register value of RTIC logical priority `logical` on a core that
+/// implements the top `bits` bits of each priority (higher logical priority, lower value).
+pub const fn nvic_priority(logical: u8, bits: u8) -> u8 {
+    ((1u8 << bits).wrapping_sub(logical)) << (8 - bits)
+}
+
+#[cfg(test)]
+mod tests {
+    /// RM0440 / ARMv7-M: the STM32G4 implements 4 priority bits (values 0x00–0xF0 in steps of
+    /// 0x10, 0 the most urgent); RTIC's logical 1 is the least urgent task priority.
+    #[test]
+    fn logical_priorities_map_to_the_top_bits() {
+        assert_eq!(super::nvic_priority(1, 4), 0xF0);
+        assert_eq!(super::nvic_priority(2, 4), 0xE0);
+        assert_eq!(super::nvic_priority(3, 3), 0xA0);
+    }
+}
