@@ -52,6 +52,8 @@ struct BatchInfo {
     start_phase: u32,
     ftw: u32,
     plan: Option<PointPlan>,
+    /// Which load of the engine the batch belongs to ([`SampleEngine::load`] or `stop`).
+    load: u32,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -84,6 +86,11 @@ pub struct SampleEngine {
     generated: u32,
     demodulated: u32,
     demod_tag: Option<u16>,
+    /// Loads applied by `generate` (the batch's [`BatchInfo::load`]).
+    loads: u32,
+    /// The load of the batches being demodulated: a new load restarts the point even when its
+    /// plan has the same tag (a new reading's first plan after an abandoned one).
+    demod_load: u32,
     stage: Stage,
     sums: LockInSums,
     window: u16,
@@ -109,10 +116,13 @@ impl SampleEngine {
                 start_phase: 0,
                 ftw: 0,
                 plan: None,
+                load: 0,
             }; RING],
             generated: 0,
             demodulated: 0,
             demod_tag: None,
+            loads: 0,
+            demod_load: 0,
             stage: Stage::Idle,
             sums: LockInSums {
                 current: crate::dsp::lockin::ChannelSums {
@@ -175,6 +185,7 @@ impl SampleEngine {
     pub fn generate(&mut self, dac: &mut [DacCode]) {
         if let Some(p) = self.pending.take() {
             self.plan = p;
+            self.loads = self.loads.wrapping_add(1);
             match p {
                 Some(p) => {
                     self.dds.ftw = p.ftw;
@@ -194,6 +205,7 @@ impl SampleEngine {
             start_phase: self.dds.phase,
             ftw: self.dds.ftw,
             plan: self.plan,
+            load: self.loads,
         };
         self.generated = self.generated.wrapping_add(1);
         let amp = self.amplitude;
@@ -215,8 +227,9 @@ impl SampleEngine {
             BatchInfo::default()
         };
         let tag = info.plan.map(|p| p.tag);
-        if tag != self.demod_tag {
+        if tag != self.demod_tag || info.load != self.demod_load {
             self.demod_tag = tag;
+            self.demod_load = info.load;
             self.sums = LockInSums::default();
             self.window = 0;
             self.stage = match info.plan {

@@ -239,3 +239,25 @@ fn help_lists_every_method_and_the_default() {
     assert_eq!(io.events.last(), Some(&Event::Help));
     assert_eq!(s.method(), pzt_probe::measure::DEFAULT_METHOD);
 }
+
+/// An air reference taken while the drive does not follow the command (a DAC stuck at mid
+/// scale) is refused as `drive_fault` and leaves the profile's air reference as it was.
+#[test]
+fn air_with_a_stuck_drive_is_refused_as_a_drive_fault() {
+    let mut io = SimIo::new(Flash::new());
+    let mut s = boot(&mut io);
+    io.put_on(Scene::free_air());
+    io.board.probe.set_stuck_dac(Some(2048));
+    assert!(!send(&mut s, &mut io, "air"));
+    assert_eq!(
+        io.events.last(),
+        Some(&Event::Refused(Refusal::Air(Failure::DriveFault))),
+        "{:?}",
+        io.events.last()
+    );
+    assert!(s.profile().air.is_none());
+    // With the drive back, the same command takes it.
+    io.board.probe.set_stuck_dac(None);
+    assert!(send(&mut s, &mut io, "air"), "{:?}", io.events.last());
+    assert!(s.profile().air.is_some());
+}
