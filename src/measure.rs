@@ -284,11 +284,6 @@ pub struct SweepMeasurement {
     failure: Option<Failure>,
 }
 
-/// Tag of the first revisit of a sweep of `n` points: after the sweep's own tags `1..=n`.
-fn n_tag(n: usize) -> usize {
-    n + 1
-}
-
 /// Points around the peak a stepped sweep measures again at its end ([`SweepMeasurement`]).
 pub const REVISITS: usize = 3;
 
@@ -352,7 +347,7 @@ impl SweepMeasurement {
         let &k = self.revisit.get(self.again.len())?;
         let mut plan = self
             .sweep
-            .plan(k, (n_tag(self.sweep.len()) + self.again.len()) as u16);
+            .plan(k, (self.sweep.len() + 1 + self.again.len()) as u16);
         plan.settle_samples = plan.settle_samples.saturating_mul(4);
         Some(plan)
     }

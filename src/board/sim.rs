@@ -180,11 +180,9 @@ pub fn calibrate_unit_with(
         for r in 0..repeats {
             let seed = seed0 + (pi * MAX_REPEATS + r) as u64;
             let reading = read(&scene, seed, method, settings, &uncalibrated, |_| {})?;
+            // The reference moduli (paper 003's A–E) are exact in f32.
             if let Some(x) = Reference::of(KPa(p.modulus_kpa as f32), &reading) {
-                refs[n] = Reference {
-                    modulus_kpa: p.modulus_kpa,
-                    ..x
-                };
+                refs[n] = x;
                 n += 1;
             }
             on_reading();
