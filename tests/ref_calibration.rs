@@ -167,24 +167,6 @@ fn combined_sigma_matches_finite_difference_propagation() {
     println!("worst relative sigma error: {worst:e}");
 }
 
-/// splitmix64 and Box–Muller: a normal generator of this test's own.
-struct Normal(u64);
-
-impl Normal {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^= z >> 31;
-        ((z >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    fn next(&mut self) -> f64 {
-        let (u1, u2) = (self.uniform(), self.uniform());
-        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
-    }
-}
-
 #[test]
 fn linear_propagation_matches_monte_carlo() {
     // Draw (a, b, c) from N(law, cov) through the Cholesky factor, the frequency from
@@ -213,7 +195,7 @@ fn linear_propagation_matches_monte_carlo() {
             };
         }
     }
-    let mut rng = Normal(2024);
+    let mut rng = probe_rng::Rng::new(2024);
     let sigma_f = 0.05f32;
     for e_true in [200.0, 500.0, 1146.0] {
         let f = p.frequency(e_true) as f32;
@@ -221,11 +203,11 @@ fn linear_propagation_matches_monte_carlo() {
         let sf = ((sigma_f as f64).powi(2) + p.model_sigma_hz.powi(2)).sqrt();
         let (mut sum, mut sum2) = (0.0, 0.0);
         for _ in 0..N {
-            let z = [rng.next(), rng.next(), rng.next()];
+            let z = [rng.normal(), rng.normal(), rng.normal()];
             let d: Vec<f64> = (0..3)
                 .map(|i| (0..=i).map(|k| l[i][k] * z[k]).sum())
                 .collect();
-            let fi = f as f64 + sf * rng.next();
+            let fi = f as f64 + sf * rng.normal();
             let e = modulus_by_bisection(p.a + d[0], p.b + d[1], p.c + d[2], fi).unwrap();
             sum += e;
             sum2 += e * e;

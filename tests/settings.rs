@@ -1,6 +1,6 @@
 //! Bad settings are rejected with a clear error; no input panics the portable core.
 
-use hal_sim::rng::Rng;
+use probe_rng::Rng;
 use pzt_probe::board::sim::scale_of;
 use pzt_probe::estimate::{conductance, paper};
 use pzt_probe::sweep::{SettingsError, SweepPoint, SweepSettings};

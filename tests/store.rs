@@ -262,13 +262,8 @@ fn both_records_corrupt_falls_back_with_damage_reported() {
 /// record different from what was written.
 #[test]
 fn multi_bit_damage_never_yields_a_wrong_record() {
-    let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
-    let mut next = || {
-        x ^= x << 13;
-        x ^= x >> 7;
-        x ^= x << 17;
-        x
-    };
+    let mut rng = probe_rng::Rng::new(0x9E37_79B9_7F4A_7C15);
+    let mut next = || rng.next_u64();
     for _ in 0..2000 {
         let mut s = store_after(2);
         let flips = 2 + next() % 6;

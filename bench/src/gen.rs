@@ -8,8 +8,8 @@
 
 use crate::capture::{write_admittance_csv, write_impedance_csv};
 use anyhow::{anyhow, Result};
-use hal_sim::rng::Rng;
 use hal_sim::{NoiseScene, Scene, SimProbe};
+use probe_rng::Rng;
 use pzt_probe::board::sim as simboard;
 use pzt_probe::sweep::SweepSettings;
 use pzt_probe::Method;

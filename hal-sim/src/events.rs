@@ -8,7 +8,7 @@
 //! change and nothing but the piecewise-constant schedule is approximated (see
 //! [`SCHEDULE_STEP_S`]). Knocks are impulses: they change the state, not the physics.
 
-use crate::rng::Rng;
+use probe_rng::Rng;
 
 /// Time step of the piecewise-constant schedule of slowly changing physics (lift-off ramp,
 /// drift), in s. The plant is re-discretised at most this often, and only when the physics

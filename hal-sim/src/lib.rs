@@ -17,7 +17,7 @@
 //!
 //! The linear plant is discretised exactly ([`plant`]: matrix exponential of the continuous
 //! state-space model with a zero-order-hold DAC), so one step per sample is exact, not a tiny Euler
-//! step. Every random draw comes from a seeded generator ([`rng`]); a scene and a seed give the
+//! step. Every random draw comes from a seeded generator (`probe_rng`, the project's one); a scene and a seed give the
 //! same samples on every machine.
 //!
 //! The fitted constants and the reasoning behind them are in `docs/physics.md`.
@@ -37,7 +37,6 @@ pub mod phantoms;
 pub mod plant;
 pub mod probe;
 pub mod pzt;
-pub mod rng;
 pub mod scenes;
 pub mod tissue;
 

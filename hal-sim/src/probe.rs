@@ -6,10 +6,10 @@ use crate::frontend::{FrontEnd, MID_CODE};
 use crate::plant::{
     chain, chain_two_modes, Discrete, A1, CHAIN2_STATES, CHAIN_STATES, VELOCITY, Y_I, Y_V,
 };
-use crate::rng::Rng;
 use crate::scenes::Scene;
 use crate::tissue::Tissue;
 use core::f64::consts::PI;
+use probe_rng::Rng;
 
 /// One ADC conversion pair: sense current and drive monitor.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

@@ -1,5 +1,8 @@
-//! Deterministic random numbers: xoshiro256++ seeded through SplitMix64, Gaussian by the polar
-//! (Marsaglia) method. No dependency, identical streams on every platform.
+//! The project's one seeded generator: xoshiro256++ seeded through SplitMix64, Gaussian by the
+//! polar (Marsaglia) method. `no_std`, no allocation, identical streams on every platform (the
+//! only float functions are libm's). The simulator's noise (`hal-sim`), the bench's synthetic
+//! captures, the paper method's bootstrap on the firmware and the tests' draws all use it.
+#![no_std]
 
 /// Seeded pseudo-random generator.
 #[derive(Clone, Debug)]
