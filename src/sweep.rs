@@ -2,10 +2,11 @@
 //! conversion of a finished point into admittance.
 
 use crate::dsp::dds::{frequency_hz, tuning_word};
-use crate::dsp::lockin::solve;
+use crate::dsp::lockin::{solve, Phasor};
 use crate::engine::{PointPlan, PointRaw};
 use crate::hal::FrontEndScale;
 use crate::units::{Hz, Seconds, Volts};
+use num_complex::Complex64;
 
 /// Most points a sweep may have (bounded memory: the points are kept for the estimator).
 pub const MAX_POINTS: usize = 256;
@@ -260,33 +261,68 @@ pub enum PointError {
     NoDrive,
 }
 
+/// The measured drive voltage of a point or a hold segment: the one place a current becomes an
+/// admittance `Y = I / V`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Drive {
+    /// Drive phasor, V.
+    pub v: Complex64,
+    /// Variance of each of its components, V².
+    pub var_v: f64,
+}
+
+/// An admittance and the variance of each of its components.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Admittance {
+    /// `Y = G + jB`, S.
+    pub y: Complex64,
+    /// Variance of each of `G` and `B`, S².
+    pub var: f64,
+}
+
+impl Drive {
+    /// The drive from the monitor channel's phasor (codes); `None` below 2 monitor codes (no
+    /// drive: DAC or amplifier fault).
+    pub fn from_monitor(pv: &Phasor, scale: &FrontEndScale) -> Option<Self> {
+        let av = scale.monitor_volts_per_code as f64;
+        let v = pv.value * av;
+        if !(pv.value.norm() > 2.0) || !(v.norm_sqr() > 0.0) {
+            return None;
+        }
+        Some(Self {
+            v,
+            var_v: pv.variance * av * av,
+        })
+    }
+
+    /// `Y = I / V` for current `i` (A) with component variance `var_i` (A²); the variance
+    /// takes both channels' noise, `dY = dI / V − Y dV / V`.
+    pub fn admittance(&self, i: Complex64, var_i: f64) -> Admittance {
+        let y = i / self.v;
+        Admittance {
+            y,
+            var: (var_i + y.norm_sqr() * self.var_v) / self.v.norm_sqr(),
+        }
+    }
+}
+
 /// Admittance of a finished point.
 pub fn point_from_raw(raw: &PointRaw, scale: &FrontEndScale) -> Result<SweepPoint, PointError> {
     let r = &raw.sums.reference;
     let pi = solve(&raw.sums.current, r).ok_or(PointError::Degenerate)?;
     let pv = solve(&raw.sums.monitor, r).ok_or(PointError::Degenerate)?;
+    let drive = Drive::from_monitor(&pv, scale).ok_or(PointError::NoDrive)?;
     let ai = scale.amps_per_code as f64;
-    let av = scale.monitor_volts_per_code as f64;
     let i = pi.value * ai;
-    let v = pv.value * av;
-    let v2 = v.norm_sqr();
-    // A drive below 2 monitor codes is no drive.
-    if !(pv.value.norm() > 2.0) || !(v2 > 0.0) {
-        return Err(PointError::NoDrive);
-    }
-    let y = i / v;
-    // Var(Y) per component from both channels: dY = dI / V - Y dV / V.
-    let var_i = pi.variance * ai * ai;
-    let var_v = pv.variance * av * av;
-    let var_y = (var_i + y.norm_sqr() * var_v) / v2;
+    let y = drive.admittance(i, pi.variance * ai * ai);
     let n = r.n.max(1) as f32;
     Ok(SweepPoint {
         freq: Hz(frequency_hz(raw.plan.ftw, scale.sample_rate.0 as f64) as f32),
-        g_s: y.re as f32,
-        b_s: y.im as f32,
-        sigma_s: libm::sqrt(var_y) as f32,
+        g_s: y.y.re as f32,
+        b_s: y.y.im as f32,
+        sigma_s: libm::sqrt(y.var) as f32,
         current_a: i.norm() as f32,
-        drive_v: v.norm() as f32,
+        drive_v: drive.v.norm() as f32,
         clip_fraction: raw.sums.current_rail_hits as f32 / n,
         residual_a: (pi.residual_rms * ai) as f32,
     })

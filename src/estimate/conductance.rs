@@ -21,9 +21,6 @@ use crate::units::Hz;
 /// Reduced χ² above which the fit is a gross misfit and its uncertainty is scaled by it.
 pub const GROSS_CHI2: f64 = 16.0;
 
-/// Largest relative standard uncertainty of the resonance (σ_f / linewidth) accepted.
-pub const MAX_RELATIVE_SIGMA: f64 = 0.25;
-
 /// Estimate the resonance of a stepped sweep from its conductance.
 pub fn estimate(points: &[SweepPoint]) -> Result<Estimate, Failure> {
     screen(points)?;
@@ -99,9 +96,7 @@ pub fn estimate(points: &[SweepPoint]) -> Result<Estimate, Failure> {
     } else {
         f_hi - f_lo
     };
-    if !sigma.is_finite() || sigma > MAX_RELATIVE_SIGMA * linewidth {
-        return Err(Failure::LowSnr);
-    }
+    super::resolved(sigma, linewidth)?;
     Ok(Estimate {
         resonance: Hz(f0 as f32),
         sigma: Hz(sigma as f32),

@@ -8,8 +8,9 @@
 //! with their covariance (`(JᵀWJ)⁻¹`, Levenberg–Marquardt from a linear start). The uncertainty
 //! is scaled by the reduced χ² only when the fit is grossly wrong (as for sweep-G).
 
+use super::model::Motional;
 use super::{screen, Estimate};
-use crate::linalg::{damped_solve, spd_inverse, Lsq3};
+use crate::linalg::{damped_solve, spd_inverse, Fit3, Lsq3};
 use crate::status::Failure;
 use crate::sweep::SweepPoint;
 use crate::units::Hz;
@@ -49,16 +50,31 @@ impl Bvd {
     }
 }
 
-fn h(f0: f64, q: f64, f: f64) -> (f64, f64, f64) {
-    let u = f / f0 - f0 / f;
-    let d = 1.0 + q * q * u * u;
-    // 1 / (1 + j q u) = (1 - j q u) / d
-    (1.0 / d, -q * u / d, u)
+fn motional(g: f64, f0: f64, q: f64, f: f64) -> (f64, f64) {
+    let h = Motional::at(f0, q, f).h;
+    (g * h.re, g * h.im)
 }
 
-fn motional(g: f64, f0: f64, q: f64, f: f64) -> (f64, f64) {
-    let (hr, hi, _) = h(f0, q, f);
-    (g * hr, g * hi)
+/// The linear part of the BVD fit: `G0`, `b0` (at `f_ref`) and `g` by weighted least squares
+/// (`1/σ²` on real and imaginary parts) with the resonance `f0` and quality `q` held, and the
+/// number of points used. `None` when the system is singular.
+pub fn linear_part<'a>(
+    points: impl Iterator<Item = &'a SweepPoint>,
+    f0: f64,
+    q: f64,
+    f_ref: f64,
+) -> Option<(Fit3, usize)> {
+    let mut l = Lsq3::default();
+    let mut n = 0;
+    for pt in points {
+        let f = pt.freq.0 as f64;
+        let w = 1.0 / ((pt.sigma_s as f64) * (pt.sigma_s as f64)).max(1e-60);
+        let h = Motional::at(f0, q, f).h;
+        l.add([1.0, 0.0, h.re], pt.g_s as f64, w);
+        l.add([0.0, f / f_ref, h.im], pt.b_s as f64, w);
+        n += 1;
+    }
+    Some((l.solve()?, n))
 }
 
 /// Fit the BVD model to `points`, starting from resonance `f_start` and quality `q_start`.
@@ -67,15 +83,7 @@ pub fn fit_bvd(points: &[SweepPoint], f_start: f64, q_start: f64) -> Result<Bvd,
     let f_ref = f_start;
     let mut p = [0.0, 0.0, 0.0, f_start, q_start.clamp(1.0, 200.0)];
     // Linear start for (G0, b0, g) at the given f0, Q.
-    let mut l = Lsq3::default();
-    for pt in points {
-        let f = pt.freq.0 as f64;
-        let w = 1.0 / ((pt.sigma_s as f64) * (pt.sigma_s as f64)).max(1e-60);
-        let (hr, hi, _) = h(p[3], p[4], f);
-        l.add([1.0, 0.0, hr], pt.g_s as f64, w);
-        l.add([0.0, f / f_ref, hi], pt.b_s as f64, w);
-    }
-    let lin = l.solve().ok_or(Failure::NoResonance)?;
+    let (lin, _) = linear_part(points.iter(), p[3], p[4], f_ref).ok_or(Failure::NoResonance)?;
     p[0] = lin.p[0];
     p[1] = lin.p[1];
     p[2] = lin.p[2];
@@ -100,16 +108,13 @@ pub fn fit_bvd(points: &[SweepPoint], f_start: f64, q_start: f64) -> Result<Bvd,
         for pt in points {
             let f = pt.freq.0 as f64;
             let w = 1.0 / ((pt.sigma_s as f64) * (pt.sigma_s as f64)).max(1e-60);
-            let (hr, hi, u) = h(p[3], p[4], f);
             let (g, f0, q) = (p[2], p[3], p[4]);
-            // h² = (hr + j hi)²
-            let (h2r, h2i) = (hr * hr - hi * hi, 2.0 * hr * hi);
-            // dY/dQ = g (-j u h²); dY/df0 = g (-j q h²) du/df0, du/df0 = -f/f0² - 1/f
-            let dq = (g * u * h2i, -g * u * h2r);
-            let du = -f / (f0 * f0) - 1.0 / f;
-            let df0 = (g * q * du * h2i, -g * q * du * h2r);
-            let jr = [1.0, 0.0, hr, df0.0, dq.0];
-            let ji = [0.0, f / f_ref, hi, df0.1, dq.1];
+            let m = Motional::at(f0, q, f);
+            let (hr, hi) = (m.h.re, m.h.im);
+            // dY/df0 = g dh/df0, dY/dQ = g dh/dQ
+            let (df0, dq) = (m.d_f0(f0, q, f) * g, m.d_q() * g);
+            let jr = [1.0, 0.0, hr, df0.re, dq.re];
+            let ji = [0.0, f / f_ref, hi, df0.im, dq.im];
             let rr = pt.g_s as f64 - (p[0] + g * hr);
             let ri = pt.b_s as f64 - (p[1] * f / f_ref + g * hi);
             for a in 0..5 {
@@ -183,9 +188,7 @@ pub fn estimate(points: &[SweepPoint], f_start: f64, q_start: f64) -> Result<Est
     if !(b.f0 > lo) || !(b.f0 < hi) {
         return Err(Failure::OutOfBand);
     }
-    if b.sigma_f0 > 0.25 * b.f0 / b.q {
-        return Err(Failure::LowSnr);
-    }
+    super::resolved(b.sigma_f0, b.f0 / b.q)?;
     Ok(Estimate {
         resonance: Hz(b.f0 as f32),
         sigma: Hz(b.sigma_f0 as f32),
@@ -198,14 +201,16 @@ pub fn estimate(points: &[SweepPoint], f_start: f64, q_start: f64) -> Result<Est
 mod tests {
     use super::*;
 
-    /// Closed-form BVD points (f64 reference) with a few frequencies off the peak.
+    /// Closed-form BVD points (the circuit's f64 admittance, `super::super::reference`) with a
+    /// few frequencies off the peak.
     #[test]
     fn recovers_closed_form_bvd() {
         let (g0, b0, g, f0, q) = (2e-9, 3.0e-7, 1.5e-7, 241.94, 10.4);
         let mut pts = [SweepPoint::default(); 6];
         for (k, p) in pts.iter_mut().enumerate() {
             let f = 210.0 + 12.0 * k as f64;
-            let (mr, mi) = motional(g, f0, q, f);
+            let (hr, hi) = crate::estimate::reference::rlc_shape(f0, q, f);
+            let (mr, mi) = (g * hr, g * hi);
             *p = SweepPoint {
                 freq: Hz(f as f32),
                 g_s: (g0 + mr) as f32,

@@ -38,6 +38,7 @@
 //! longer matches the air reference (a different cable or a drifted `C0` biases `f0` by
 //! `f0 ΔB / (2 Q g)`: this is the method's systematic, documented in `docs/methods.md`).
 
+use super::model::Motional;
 use super::ringdown::{Ringdown, RingdownSettings};
 use super::Estimate;
 use crate::dsp::dds::{frequency_hz, tuning_word};
@@ -46,7 +47,7 @@ use crate::engine::{PointPlan, PointRaw};
 use crate::hal::FrontEndScale;
 use crate::linalg::{damped_solve, spd_inverse};
 use crate::status::Failure;
-use crate::sweep::{amplitude_codes, check_durations, SettingsError};
+use crate::sweep::{amplitude_codes, check_durations, Drive, SettingsError};
 use crate::units::{Farads, Hz, Seconds, Siemens, Volts};
 use core::f64::consts::PI;
 use num_complex::Complex64 as C64;
@@ -331,18 +332,11 @@ impl Hold {
     fn currents_to_admittances(&mut self, scale: &FrontEndScale) -> Result<(), Failure> {
         let (m, r) = &self.monitor;
         let pv = solve(m, r).ok_or(Failure::BadSettings)?;
-        // A drive below 2 monitor codes is no drive (as for sweep points).
-        if !(pv.value.norm() > 2.0) {
-            return Err(Failure::DriveFault);
-        }
-        let av = scale.monitor_volts_per_code as f64;
-        let v = pv.value * av;
-        let (v2, var_v) = (v.norm_sqr(), pv.variance * av * av);
+        let drive = Drive::from_monitor(&pv, scale).ok_or(Failure::DriveFault)?;
         for x in self.windows.iter_mut() {
-            let y = x.y / v;
-            // Var(Y) = (Var(I) + |Y|² Var(V)) / |V|²; Var(V) is that of the whole segment.
-            x.var = (x.var + y.norm_sqr() * var_v) / v2;
-            x.y = y;
+            // The segment's drive (its variance that of the whole segment) for every window.
+            let y = drive.admittance(x.y, x.var);
+            (x.y, x.var) = (y.y, y.var);
         }
         Ok(())
     }
@@ -524,14 +518,10 @@ fn evaluate(
     use num_complex::Complex32 as C32;
     let one = C32::new(1.0, 0.0);
     let (f0, q) = (p.f0, p.q);
-    // Steady state h = 1 / (1 + j Q u), u = f_h/f0 − f0/f_h, and its derivatives.
-    let u = f_h / f0 - f0 / f_h;
-    let h64 = C64::new(1.0, 0.0) / C64::new(1.0, q * u);
-    let h = C32::new(h64.re as f32, h64.im as f32);
-    let du_df0 = -f_h / (f0 * f0) - 1.0 / f_h;
-    let h2 = h64 * h64;
-    let dh_df0 = h2 * C64::new(0.0, -q * du_df0);
-    let dh_dq = h2 * C64::new(0.0, -u);
+    // Steady state h = 1 / (1 + j Q u) and its derivatives (the one model, `super::model`).
+    let m = Motional::at(f0, q, f_h);
+    let h = C32::new(m.h.re as f32, m.h.im as f32);
+    let (dh_df0, dh_dq) = (m.d_f0(f0, q, f_h), m.d_q());
     // Transient exponent λ = −π f0/Q + j 2π (f_d − f_h), f_d = f0 sqrt(1 − 1/(4Q²)).
     let root = libm::sqrt((1.0 - 0.25 / (q * q)).max(1e-12));
     let lam64 = C64::new(-PI * f0 / q, 2.0 * PI * (f0 * root - f_h));
@@ -717,9 +707,7 @@ pub fn fit(
     if !(p.g > 0.0) || !f0.is_finite() || !q.is_finite() || !sigma.is_finite() {
         return Err(Failure::NoResonance);
     }
-    if sigma > 0.25 * f0 / q {
-        return Err(Failure::LowSnr);
-    }
+    super::resolved(sigma, f0 / q)?;
     Ok(HoldFit {
         estimate: Estimate {
             resonance: Hz(f0 as f32),

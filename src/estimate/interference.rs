@@ -42,9 +42,11 @@
 //! Everything here is allocation-free and returns `Ok` on input it cannot judge (too few points,
 //! non-finite values): the estimators' own checks see those.
 
-use crate::linalg::{LineFit, Lsq3};
+use super::model::Motional;
+use crate::linalg::LineFit;
 use crate::status::Failure;
 use crate::sweep::SweepPoint;
+use num_complex::Complex64;
 
 /// One or two adjacent points whose residuals exceed this many times the residuals on either
 /// side of them hold a transient (a knock).
@@ -122,12 +124,6 @@ pub struct Misfit {
     pub points: usize,
 }
 
-fn motional_shape(f0: f64, q: f64, f: f64) -> (f64, f64) {
-    let u = f / f0 - f0 / f;
-    let d = 1.0 + q * q * u * u;
-    (1.0 / d, -q * u / d)
-}
-
 /// Scatter of `points` within [`MISFIT_SPAN_LINEWIDTHS`] of `f0_hz` about the admittance
 /// `G0 + j b0 f/f0 + g / (1 + j Q (f/f0 − f0/f))` with `G0, b0, g` fitted (weights `1/σ²`);
 /// `None` with fewer than three such points or on degenerate input. The points are taken in the
@@ -142,27 +138,17 @@ pub fn bvd_misfit(points: &[SweepPoint], f0_hz: f64, q: f64) -> Option<Misfit> {
         let s = p.sigma_s as f64;
         libm::fabs(f - f0_hz) <= span && f > 0.0 && s > 0.0 && s.is_finite()
     };
-    let mut l = Lsq3::default();
-    let mut n = 0usize;
-    for p in points.iter().filter(|p| near(p)) {
-        let f = p.freq.0 as f64;
-        let w = 1.0 / ((p.sigma_s as f64) * (p.sigma_s as f64));
-        let (hr, hi) = motional_shape(f0_hz, q, f);
-        l.add([1.0, 0.0, hr], p.g_s as f64, w);
-        l.add([0.0, f / f0_hz, hi], p.b_s as f64, w);
-        n += 1;
-    }
+    let (fit, n) = super::fit::linear_part(points.iter().filter(|p| near(p)), f0_hz, q, f0_hz)?;
     if n < 3 {
         return None;
     }
-    let fit = l.solve()?;
     let [g0, b0, g] = fit.p;
     let (mut ss, mut lag, mut raw, mut y2) = (0.0, 0.0, 0.0, 0.0);
     let mut prev: Option<(f64, f64)> = None;
     for p in points.iter().filter(|p| near(p)) {
         let f = p.freq.0 as f64;
         let s = p.sigma_s as f64;
-        let (hr, hi) = motional_shape(f0_hz, q, f);
+        let Complex64 { re: hr, im: hi } = Motional::at(f0_hz, q, f).h;
         let d = (
             p.g_s as f64 - g0 - g * hr,
             p.b_s as f64 - b0 * f / f0_hz - g * hi,
@@ -234,35 +220,19 @@ mod tests {
     use crate::linalg::Line;
     use crate::units::Hz;
 
-    /// Deterministic standard normal deviates (Box–Muller over a 64-bit LCG).
-    struct Gauss(u64);
-    impl Gauss {
-        fn uniform(&mut self) -> f64 {
-            self.0 = self
-                .0
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((self.0 >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-        }
-        fn next(&mut self) -> f64 {
-            let (u, v) = (self.uniform(), self.uniform());
-            libm::sqrt(-2.0 * libm::log(u)) * libm::cos(2.0 * core::f64::consts::PI * v)
-        }
-    }
-
     /// Closed-form BVD points `G0 + j b0 f/f0 + g/(1 + jQu)` at 2 Hz steps, noise `sigma` on
     /// each component, residual `res` each.
     fn bvd_points(f0: f64, q: f64, sigma: f64, seed: u64) -> heapless::Vec<SweepPoint, 64> {
         let (g0, b0, g) = (2e-9, 3e-7, 1.5e-7);
-        let mut n = Gauss(seed);
+        let mut n = probe_rng::Rng::new(seed);
         let mut v = heapless::Vec::new();
         for k in 0..61 {
             let f = 170.0 + 2.0 * k as f64;
-            let (hr, hi) = motional_shape(f0, q, f);
+            let (hr, hi) = crate::estimate::reference::rlc_shape(f0, q, f);
             let _ = v.push(SweepPoint {
                 freq: Hz(f as f32),
-                g_s: (g0 + g * hr + sigma * n.next()) as f32,
-                b_s: (b0 * f / f0 + g * hi + sigma * n.next()) as f32,
+                g_s: (g0 + g * hr + sigma * n.normal()) as f32,
+                b_s: (b0 * f / f0 + g * hi + sigma * n.normal()) as f32,
                 sigma_s: sigma as f32,
                 current_a: 1e-6,
                 drive_v: 5.0,
@@ -341,7 +311,7 @@ mod tests {
     /// Random-phase leakage of `leak` siemens added to points of noise `sigma`.
     fn leaky(sigma: f64, leak: f64) -> heapless::Vec<SweepPoint, 64> {
         let mut p = bvd_points(230.0, 10.0, sigma, 3);
-        let mut n = Gauss(99);
+        let mut n = probe_rng::Rng::new(99);
         for x in p.iter_mut() {
             let ph = 2.0 * core::f64::consts::PI * n.uniform();
             x.g_s += (leak * libm::cos(ph)) as f32;
@@ -372,7 +342,7 @@ mod tests {
         assert_eq!(misfit(&tiny, 230.0, 10.0), Ok(()));
         let mut two = bvd_points(230.0, 10.0, 1e-10, 4);
         for x in two.iter_mut() {
-            let (hr, hi) = motional_shape(295.0, 40.0, x.freq.0 as f64);
+            let (hr, hi) = crate::estimate::reference::rlc_shape(295.0, 40.0, x.freq.0 as f64);
             x.g_s += (7.5e-8 * hr) as f32;
             x.b_s += (7.5e-8 * hi) as f32;
         }
@@ -400,7 +370,7 @@ mod tests {
             f32::INFINITY,
             -f32::INFINITY,
         ];
-        let mut g = Gauss(5);
+        let mut g = probe_rng::Rng::new(5);
         for round in 0..400 {
             let n = round % 9;
             let mut p = [SweepPoint::default(); 8];
@@ -437,15 +407,15 @@ mod tests {
     fn a_decay_is_straight_and_a_tone_is_not() {
         let (s, df, var) = (30.0, 2.0, 1.0);
         let fits = |tone: f64, seed: u64| {
-            let mut n = Gauss(seed);
+            let mut n = probe_rng::Rng::new(seed);
             let (mut mag, mut ph) = (Line::default(), Line::default());
             for k in 0..20 {
                 let t = k as f64 * 0.0087;
                 let a = 400.0 * libm::exp(-s * t);
                 let arg = 2.0 * core::f64::consts::PI * df * t;
                 let tone_arg = 2.0 * core::f64::consts::PI * 20.0 * t;
-                let re = a * libm::cos(arg) + tone * libm::cos(tone_arg) + n.next();
-                let im = a * libm::sin(arg) + tone * libm::sin(tone_arg) + n.next();
+                let re = a * libm::cos(arg) + tone * libm::cos(tone_arg) + n.normal();
+                let im = a * libm::sin(arg) + tone * libm::sin(tone_arg) + n.normal();
                 let a2 = re * re + im * im;
                 // As the ring-down does: only windows 5 σ above the noise.
                 if a2 < 25.0 * var {

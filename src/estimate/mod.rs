@@ -11,6 +11,7 @@ pub mod contact;
 pub mod fit;
 pub mod hold;
 pub mod interference;
+pub mod model;
 pub mod paper;
 pub mod ringdown;
 pub mod staged;
@@ -54,6 +55,22 @@ pub fn gross_scale(reduced: f64) -> f64 {
     }
 }
 
+/// Largest standard uncertainty of a resonance accepted, as a fraction of its linewidth `f0/Q`.
+pub const MAX_RELATIVE_SIGMA: f64 = 0.25;
+
+/// The low-SNR rule every estimator applies to its result: a resonance whose standard
+/// uncertainty `sigma` (Hz) is not finite or exceeds [`MAX_RELATIVE_SIGMA`] of the peak's
+/// `linewidth` (Hz, `f0/Q`) is not resolved — `low_snr`. A quarter linewidth is where the
+/// peak's position is no longer better known than its width: the modulus would then be set by
+/// the noise, not by the tissue.
+pub fn resolved(sigma: f64, linewidth: f64) -> Result<(), Failure> {
+    if sigma.is_finite() && sigma <= MAX_RELATIVE_SIGMA * linewidth {
+        Ok(())
+    } else {
+        Err(Failure::LowSnr)
+    }
+}
+
 /// `e` if its resonance lies within `[start, stop]`, else `out_of_band`.
 pub fn in_band(e: Estimate, start: Hz, stop: Hz) -> Result<Estimate, Failure> {
     let f = e.resonance.0;
@@ -92,4 +109,23 @@ pub fn argmax(points: &[SweepPoint], key: impl Fn(&SweepPoint) -> f32) -> Option
         }
     }
     best.map(|(i, _)| i)
+}
+
+/// The tests' own reference for the resonance model, independent of [`model`].
+#[cfg(test)]
+pub(crate) mod reference {
+    /// The motional branch as the circuit it models: `1 / (R + jωL + 1/(jωC))` with `R = 1`,
+    /// `L = Q R / ω0`, `C = 1/(ω0² L)` — the branch's admittance over its peak conductance, as
+    /// `(Re, Im)`. Written from the circuit, not from the estimators' `1/(1 + jQu)` form.
+    pub fn rlc_shape(f0: f64, q: f64, f: f64) -> (f64, f64) {
+        let tau = 2.0 * core::f64::consts::PI;
+        let (w0, w) = (tau * f0, tau * f);
+        let r = 1.0;
+        let l = q * r / w0;
+        let c = 1.0 / (w0 * w0 * l);
+        let x = w * l - 1.0 / (w * c);
+        // 1 / (r + jx) = (r − jx) / (r² + x²)
+        let d = r * r + x * x;
+        (r / d, -x / d)
+    }
 }

@@ -313,9 +313,10 @@ fn fit(w: &[Window], f_ref: f64) -> Result<Estimate, Failure> {
     let var_f0 = (fd / f0) * (fd / f0) * var_fd + (sd / f0) * (sd / f0) * var_sd;
     let sigma = libm::sqrt(var_f0);
     let q = PI * f0 / decay;
-    if !sigma.is_finite() || !f0.is_finite() || sigma > 0.25 * f0 / q {
+    if !f0.is_finite() {
         return Err(Failure::LowSnr);
     }
+    super::resolved(sigma, f0 / q)?;
     Ok(Estimate {
         resonance: Hz(f0 as f32),
         sigma: Hz(sigma as f32),
