@@ -248,6 +248,60 @@ const POW10: [f64; 23] = [
     1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
 ];
 
+/// The command line that sets a method's settings: the inverse of [`parse`] for `sweep`,
+/// `staged` and `ringdown` lines (`Display` writes the line; `f32` prints its shortest exact
+/// form, so the line parses back to the same settings). Hold's settings have no command.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SettingsLine(Settings);
+
+impl SettingsLine {
+    /// The line for `s`, `None` for hold's settings.
+    pub fn of(s: &Settings) -> Option<Self> {
+        match s {
+            Settings::Hold(_) => None,
+            s => Some(Self(*s)),
+        }
+    }
+}
+
+impl core::fmt::Display for SettingsLine {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match &self.0 {
+            Settings::Sweep(s) => write!(
+                f,
+                "sweep {} {} {} {} {} {}",
+                s.start.0, s.stop.0, s.step.0, s.settle.0, s.integrate.0, s.drive.0
+            ),
+            Settings::Staged(s) => write!(
+                f,
+                "staged {} {} {} {} {} {} {} {} {}",
+                s.band_start.0,
+                s.band_stop.0,
+                s.coarse_points,
+                s.coarse_settle.0,
+                s.integrate.0,
+                s.refine_points,
+                s.refine_span,
+                s.settle_tau,
+                s.drive.0
+            ),
+            Settings::Ringdown(s) => write!(
+                f,
+                "ringdown {} {} {} {} {} {} {} {}",
+                s.band_start.0,
+                s.band_stop.0,
+                s.seed.0,
+                s.burst.0,
+                s.ring.0,
+                s.stages,
+                s.window_cycles,
+                s.drive.0
+            ),
+            Settings::Hold(_) => Ok(()),
+        }
+    }
+}
+
 /// Parse one line (without its terminator) into a command; sweep settings are validated
 /// against `scale`, the board's front end.
 pub fn parse(line: &[u8], scale: &FrontEndScale) -> Result<Command, CommandError> {
@@ -434,17 +488,8 @@ impl LineBuffer {
 mod tests {
     use super::*;
 
-    fn scale() -> FrontEndScale {
-        FrontEndScale {
-            sample_rate: Hz(10_000.0),
-            drive_volts_per_code: 5.0 * 3.3 / 4096.0,
-            amps_per_code: 3.3 / 4096.0 / 300e3,
-            monitor_volts_per_code: 3.3 / 4096.0 / 0.15,
-        }
-    }
-
     fn p(s: &str) -> Result<Command, CommandError> {
-        parse(s.as_bytes(), &scale())
+        parse(s.as_bytes(), &FrontEndScale::PROBE)
     }
 
     #[test]
@@ -474,41 +519,23 @@ mod tests {
                 drive: Volts(5.0),
             })))
         );
-        // The defaults of the two-stage and ring-down methods, spelled out, parse back to
-        // themselves.
-        for r in [Refine::Conductance, Refine::Bvd, Refine::Track] {
-            let s = StagedSettings::default_for(r);
-            let line = std::format!(
-                "staged {} {} {} {} {} {} {} {} {}",
-                s.band_start.0,
-                s.band_stop.0,
-                s.coarse_points,
-                s.coarse_settle.0,
-                s.integrate.0,
-                s.refine_points,
-                s.refine_span,
-                s.settle_tau,
-                s.drive.0
-            );
-            assert_eq!(
-                p(&line),
-                Ok(Command::Settings(Settings::Staged(s))),
-                "{line}"
-            );
+        // Every method's defaults (and the other two-stage refinements'), as `SettingsLine`
+        // spells them, parse back to themselves; hold's have no line.
+        let staged = [Refine::Conductance, Refine::Bvd, Refine::Track]
+            .map(|r| Settings::Staged(StagedSettings::default_for(r)));
+        for s in Method::ALL
+            .map(|m| m.default_settings())
+            .iter()
+            .chain(&staged)
+        {
+            match SettingsLine::of(s) {
+                Some(line) => {
+                    let line = std::format!("{line}");
+                    assert_eq!(p(&line), Ok(Command::Settings(*s)), "{line}");
+                }
+                None => assert!(matches!(s, Settings::Hold(_))),
+            }
         }
-        let s = RingdownSettings::DEFAULT;
-        let line = std::format!(
-            "ringdown {} {} {} {} {} {} {} {}",
-            s.band_start.0,
-            s.band_stop.0,
-            s.seed.0,
-            s.burst.0,
-            s.ring.0,
-            s.stages,
-            s.window_cycles,
-            s.drive.0
-        );
-        assert_eq!(p(&line), Ok(Command::Settings(Settings::Ringdown(s))));
         // Settings valid for one two-stage refinement only: adaptive's three coarse points,
         // track's zero span.
         assert!(p("staged 170 290 3 0.02 0.02 5 0.8 3 5").is_ok());
@@ -615,9 +642,12 @@ mod tests {
         assert_eq!(p("calibrate add 5 6"), Err(TooManyArguments));
         assert_eq!(p("calibrate fit now"), Err(TooManyArguments));
         assert_eq!(p("calibrate undo"), Err(UnknownSubcommand));
-        assert_eq!(parse(b"meas\xffure", &scale()), Err(NotUtf8));
-        assert_eq!(parse(b"\xc3", &scale()), Err(NotUtf8));
-        assert_eq!(parse(&[b'a'; MAX_LINE + 1], &scale()), Err(Oversized));
+        assert_eq!(parse(b"meas\xffure", &FrontEndScale::PROBE), Err(NotUtf8));
+        assert_eq!(parse(b"\xc3", &FrontEndScale::PROBE), Err(NotUtf8));
+        assert_eq!(
+            parse(&[b'a'; MAX_LINE + 1], &FrontEndScale::PROBE),
+            Err(Oversized)
+        );
         for e in [Empty, Oversized, NotUtf8, Settings(SettingsError::TooLong)] {
             assert!(!e.message().is_empty());
         }
@@ -644,7 +674,7 @@ mod tests {
         for m in Method::ALL {
             assert!(msg.contains(m.name()), "{msg} lacks {}", m.name());
         }
-        let p = |s: &str| parse(s.as_bytes(), &scale());
+        let p = |s: &str| parse(s.as_bytes(), &FrontEndScale::PROBE);
         assert_eq!(p("method fft"), Err(CommandError::UnknownMethod));
     }
 
@@ -733,7 +763,7 @@ mod tests {
                 alphabet[((x >> 16) as usize) % alphabet.len()]
             };
             if let Some(Ok(line)) = lb.push(b) {
-                let _ = parse(line, &scale());
+                let _ = parse(line, &FrontEndScale::PROBE);
                 lines += 1;
             }
         }

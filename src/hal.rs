@@ -53,6 +53,16 @@ pub struct FrontEndScale {
 }
 
 impl FrontEndScale {
+    /// The probe's front end (the STM32 board's): 12-bit DAC and ADC on a 3.3 V reference at
+    /// 10 kHz, drive amplifier gain 5, transimpedance 300 kΩ, drive-monitor divider 0.15 — the
+    /// front end `hal_sim::FrontEnd::default()` simulates (`board::sim` tests that they agree).
+    pub const PROBE: FrontEndScale = FrontEndScale {
+        sample_rate: Hz(10_000.0),
+        drive_volts_per_code: 5.0 * 3.3 / 4096.0,
+        amps_per_code: 3.3 / 4096.0 / 300e3,
+        monitor_volts_per_code: 3.3 / 4096.0 / 0.15,
+    };
+
     /// Largest drive amplitude in codes (mid-scale to rail).
     pub const MAX_AMPLITUDE_CODES: u16 = 2047;
 

@@ -4,19 +4,9 @@
 
 use pzt_probe::command::{parse, LineBuffer};
 use pzt_probe::hal::FrontEndScale;
-use pzt_probe::Hz;
-
-fn scale() -> FrontEndScale {
-    FrontEndScale {
-        sample_rate: Hz(10_000.0),
-        drive_volts_per_code: 5.0 * 3.3 / 4096.0,
-        amps_per_code: 3.3 / 4096.0 / 300e3,
-        monitor_volts_per_code: 3.3 / 4096.0 / 0.15,
-    }
-}
 
 fn feed(data: &[u8]) -> usize {
-    let s = scale();
+    let s = FrontEndScale::PROBE;
     let _ = parse(data, &s);
     let mut lb = LineBuffer::new();
     let mut lines = 0;
@@ -47,6 +37,9 @@ fn corpus_replays_without_panic() {
         let data = std::fs::read(format!("{dir}/{seed}")).unwrap();
         assert_eq!(feed(&data), 1);
         let line = data.strip_suffix(b"\n").unwrap();
-        assert!(parse(line, &scale()).is_ok(), "seed {seed} must parse");
+        assert!(
+            parse(line, &FrontEndScale::PROBE).is_ok(),
+            "seed {seed} must parse"
+        );
     }
 }

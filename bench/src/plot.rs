@@ -25,6 +25,18 @@ pub fn init_fonts() {
     });
 }
 
+/// The series colours of every chart, in order.
+pub const PALETTE: [RGBColor; 8] = [
+    RGBColor(200, 30, 30),
+    RGBColor(30, 90, 200),
+    RGBColor(20, 150, 60),
+    RGBColor(150, 60, 180),
+    RGBColor(230, 140, 0),
+    RGBColor(0, 160, 170),
+    RGBColor(120, 70, 20),
+    RGBColor(90, 90, 90),
+];
+
 /// Draw onto an SVG or a PNG file chosen by the extension of `path` (`.png` → PNG).
 pub fn with_backend(
     path: &Path,

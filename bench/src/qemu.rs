@@ -12,6 +12,7 @@ use crate::report;
 use crate::scene::Target;
 use anyhow::{bail, Context, Result};
 use hal_sim::NoiseScene;
+use pzt_probe::command::SettingsLine;
 use pzt_probe::measure::{Method, Settings};
 use std::path::PathBuf;
 use std::process::Command;
@@ -19,40 +20,6 @@ use std::process::Command;
 /// The workspace root (the firmware package).
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-/// The firmware command that sets `s`, or `None` for settings no command sets (hold's).
-pub fn settings_command(s: &Settings) -> Option<String> {
-    match s {
-        Settings::Sweep(s) => Some(format!(
-            "sweep {} {} {} {} {} {}",
-            s.start.0, s.stop.0, s.step.0, s.settle.0, s.integrate.0, s.drive.0
-        )),
-        Settings::Staged(s) => Some(format!(
-            "staged {} {} {} {} {} {} {} {} {}",
-            s.band_start.0,
-            s.band_stop.0,
-            s.coarse_points,
-            s.coarse_settle.0,
-            s.integrate.0,
-            s.refine_points,
-            s.refine_span,
-            s.settle_tau,
-            s.drive.0
-        )),
-        Settings::Ringdown(s) => Some(format!(
-            "ringdown {} {} {} {} {} {} {} {}",
-            s.band_start.0,
-            s.band_stop.0,
-            s.seed.0,
-            s.burst.0,
-            s.ring.0,
-            s.stages,
-            s.window_cycles,
-            s.drive.0
-        )),
-        Settings::Hold(_) => None,
-    }
 }
 
 /// The `sim` lines that put the simulated probe on `target` at `preload_n` under `noise`.
@@ -123,8 +90,8 @@ pub fn measure(
     let mut lines = scene_lines(target, a.preload_n, noise);
     lines.push(format!("method {}", method.name()));
     if *settings != method.default_settings() {
-        match settings_command(settings) {
-            Some(c) => lines.push(c),
+        match SettingsLine::of(settings) {
+            Some(c) => lines.push(c.to_string()),
             None => bail!(
                 "{} settings other than its defaults cannot be passed to the image",
                 method.name()
@@ -166,26 +133,4 @@ pub fn measure(
         }
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// What `settings_command` writes, the firmware's parser reads back as the same settings.
-    #[test]
-    fn settings_commands_parse_back_to_their_settings() {
-        let scale = pzt_probe::board::sim::scale_of(&hal_sim::FrontEnd::default());
-        for m in Method::ALL {
-            let s = m.default_settings();
-            match settings_command(&s) {
-                Some(line) => assert_eq!(
-                    pzt_probe::command::parse(line.as_bytes(), &scale),
-                    Ok(pzt_probe::command::Command::Settings(s)),
-                    "{line}"
-                ),
-                None => assert_eq!(m, Method::Hold),
-            }
-        }
-    }
 }

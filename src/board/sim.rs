@@ -230,3 +230,25 @@ pub fn air_reference_on(scene: &Scene, seed: u64) -> Result<AirReference, SimErr
     )?;
     air_from_points(&points).map_err(SimError::Air)
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::hal::FrontEndScale;
+
+    /// The simulated front end is the probe's: every factor of `FrontEndScale::PROBE` (written
+    /// from the schematic's values) within an `f32` rounding of what `hal_sim::FrontEnd`
+    /// derives in `f64` from its own parameters.
+    #[test]
+    fn simulated_front_end_is_the_probes() {
+        let s = super::scale_of(&hal_sim::FrontEnd::default());
+        let p = FrontEndScale::PROBE;
+        assert_eq!(s.sample_rate, p.sample_rate);
+        for (a, b) in [
+            (s.drive_volts_per_code, p.drive_volts_per_code),
+            (s.amps_per_code, p.amps_per_code),
+            (s.monitor_volts_per_code, p.monitor_volts_per_code),
+        ] {
+            assert!((a - b).abs() <= 2.0 * f32::EPSILON * b, "{a} vs {b}");
+        }
+    }
+}

@@ -105,12 +105,10 @@ fn taken_cmd(a: &CalibrateArgs, method: Method) -> String {
 /// The Rust source of the simulated unit's factory record: `profile` encoded as the store
 /// writes it (sequence number 1).
 pub fn firmware_record(profile: &UnitProfile, cmd: &str) -> String {
-    let bytes = pzt_probe::store::encode(profile, 1);
-    let mut body = String::new();
-    for chunk in bytes.chunks(16) {
-        let row: Vec<String> = chunk.iter().map(|b| format!("0x{b:02x}")).collect();
-        body.push_str(&format!("    {},\n", row.join(", ")));
-    }
+    let hex: String = pzt_probe::store::encode(profile, 1)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
     format!(
         "//! The simulated unit's factory flash: its unit profile as the store's record (sequence 1),\n\
          //! made by the unit's own procedure (air reference, then A–E) and programmed by the QEMU\n\
@@ -121,10 +119,49 @@ pub fn firmware_record(profile: &UnitProfile, cmd: &str) -> String {
          use crate::profile::UnitProfile;\n\
          use crate::store::{{decode, RECORD_LEN}};\n\
          \n\
+         /// The record bytes, in hex.\n\
+         const HEX: &[u8; 2 * RECORD_LEN] =\n    b\"{hex}\";\n\
+         \n\
          /// The record bytes.\n\
-         pub const RECORD: [u8; RECORD_LEN] = [\n{body}];\n\
+         pub const RECORD: [u8; RECORD_LEN] = bytes(HEX);\n\
+         \n\
+         const fn bytes(hex: &[u8; 2 * RECORD_LEN]) -> [u8; RECORD_LEN] {{\n    \
+         const fn nibble(c: u8) -> u8 {{\n        \
+         match c {{\n            \
+         b'0'..=b'9' => c - b'0',\n            \
+         b'a'..=b'f' => c - b'a' + 10,\n            \
+         _ => panic!(\"not lower-case hex\"),\n        \
+         }}\n    \
+         }}\n    \
+         let mut out = [0; RECORD_LEN];\n    \
+         let mut i = 0;\n    \
+         while i < RECORD_LEN {{\n        \
+         out[i] = nibble(hex[2 * i]) << 4 | nibble(hex[2 * i + 1]);\n        \
+         i += 1;\n    \
+         }}\n    \
+         out\n\
+         }}\n\
          \n\
          /// The profile the record holds (`None` only if the record were corrupt).\n\
          pub fn profile() -> Option<UnitProfile> {{\n    decode(&RECORD).map(|(_, p)| p)\n}}\n"
     )
+}
+
+#[cfg(test)]
+mod tests {
+    /// The committed factory record is exactly what `firmware_record` writes for the profile it
+    /// holds (and the command in its header): the generated file is never edited by hand.
+    /// (`tests/factory_profile.rs` checks the profile is today's procedure's.)
+    #[test]
+    fn the_factory_record_file_is_the_generators_output() {
+        let text = include_str!("../../../src/board/sim_factory.rs");
+        let cmd = text
+            .lines()
+            .find_map(|l| l.strip_prefix("//! `cargo run"))
+            .and_then(|l| l.strip_suffix("`."))
+            .map(|l| format!("cargo run{l}"))
+            .expect("the regeneration command in the header");
+        let profile = pzt_probe::board::sim_factory::profile().expect("a valid record");
+        assert_eq!(super::firmware_record(&profile, &cmd), text);
+    }
 }

@@ -1,7 +1,7 @@
 //! `probe-bench log`: the readings and sweeps in a decoded defmt log of the firmware.
 
 use crate::defmt_log::{self, Level, LoggedReading, Session};
-use crate::plot::with_backend;
+use crate::plot::{with_backend, PALETTE};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use plotters::prelude::*;
@@ -189,15 +189,6 @@ pub fn write_plot(path: &Path, title: &str, s: &Session) -> Result<()> {
         |root| draw(root, title, s),
     )
 }
-
-const PALETTE: [RGBColor; 6] = [
-    RGBColor(31, 119, 180),
-    RGBColor(255, 127, 14),
-    RGBColor(44, 160, 44),
-    RGBColor(214, 39, 40),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-];
 
 fn draw<DB: DrawingBackend>(
     root: &DrawingArea<DB, plotters::coord::Shift>,

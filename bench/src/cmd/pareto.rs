@@ -2,7 +2,7 @@
 
 use super::progress;
 use crate::pareto::{calibrate, configs, crb_pct, evaluate, tau_ms, Cell, Config};
-use crate::plot::with_backend;
+use crate::plot::{with_backend, PALETTE};
 use anyhow::{anyhow, Result};
 use clap::Args;
 use hal_sim::NoiseScene;
@@ -171,17 +171,6 @@ fn aggregate(rows: &[Row], c: usize, noise: NoiseScene) -> Option<(f64, f64, f64
     Some((t, 100.0 * (e2 / ok as f64).sqrt(), ok as f64 / n as f64))
 }
 
-const COLORS: [RGBColor; 8] = [
-    RGBColor(200, 30, 30),
-    RGBColor(30, 90, 200),
-    RGBColor(20, 150, 60),
-    RGBColor(150, 60, 180),
-    RGBColor(230, 140, 0),
-    RGBColor(0, 160, 170),
-    RGBColor(120, 70, 20),
-    RGBColor(90, 90, 90),
-];
-
 fn chart(
     path: &std::path::Path,
     cfgs: &[Config],
@@ -295,7 +284,7 @@ where
         .label("Cramér–Rao bound")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2)));
     for (mi, m) in pzt_probe::Method::ALL.iter().enumerate() {
-        let col = COLORS[mi % COLORS.len()];
+        let col = PALETTE[mi % PALETTE.len()];
         let mut p: Vec<&(usize, f64, f64, f64)> =
             pts.iter().filter(|p| cfgs[p.0].method == *m).collect();
         if p.is_empty() {
