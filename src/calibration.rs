@@ -102,6 +102,17 @@ impl QModel {
 /// Fraction by which the calibrated span extends beyond the reference moduli on either side.
 pub const SPAN_MARGIN: f64 = 0.10;
 
+/// One reference reading: a resonance measured on tissue of known modulus.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RefPoint {
+    /// The reference's modulus, kPa.
+    pub modulus_kpa: f64,
+    /// The measured resonance, Hz.
+    pub resonance_hz: f64,
+    /// Its standard uncertainty, Hz.
+    pub sigma_hz: f64,
+}
+
 /// The calibration curve `f = a + b E^c` with its parameter covariance and valid span.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -170,11 +181,11 @@ fn span(min: f64, max: f64) -> (f64, f64) {
 }
 
 /// 1.4826 × the median absolute residual of `data` about `law` (first 256 readings).
-fn robust_scale(data: &[(f64, f64, f64)], law: &PowerLaw) -> f64 {
+fn robust_scale(data: &[RefPoint], law: &PowerLaw) -> f64 {
     let mut abs = [0.0f64; 256];
     let m = data.len().min(abs.len());
     for (a, x) in abs.iter_mut().zip(data.iter()) {
-        *a = libm::fabs(x.1 - law.frequency(x.0));
+        *a = libm::fabs(x.resonance_hz - law.frequency(x.modulus_kpa));
     }
     abs[..m].sort_unstable_by(|x, y| x.total_cmp(y));
     1.4826 * abs[m / 2]
@@ -182,21 +193,21 @@ fn robust_scale(data: &[(f64, f64, f64)], law: &PowerLaw) -> f64 {
 
 /// RMS leave-one-out error (Hz) at the interior reference moduli (all but the lowest and the
 /// highest), or `None` with fewer than five distinct moduli or more than 256 readings.
-fn interior_loo_sigma(data: &[(f64, f64, f64)]) -> Option<f64> {
+fn interior_loo_sigma(data: &[RefPoint]) -> Option<f64> {
     if distinct_moduli(data) < 5 || data.len() > 256 {
         return None;
     }
     let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
     for d in data {
-        lo = lo.min(d.0);
-        hi = hi.max(d.0);
+        lo = lo.min(d.modulus_kpa);
+        hi = hi.max(d.modulus_kpa);
     }
-    let mut scratch = [(0.0f64, 0.0f64, 0.0f64); 256];
+    let mut scratch = [RefPoint::default(); 256];
     let (mut sum2, mut groups) = (0.0, 0u32);
     let mut done = [0.0f64; 64];
     let mut ndone = 0;
     for d in data {
-        let e = d.0;
+        let e = d.modulus_kpa;
         if e == lo || e == hi || done[..ndone].contains(&e) || ndone >= done.len() {
             continue;
         }
@@ -205,8 +216,8 @@ fn interior_loo_sigma(data: &[(f64, f64, f64)]) -> Option<f64> {
         let mut n = 0;
         let (mut fsum, mut k) = (0.0, 0.0);
         for x in data {
-            if x.0 == e {
-                fsum += x.1;
+            if x.modulus_kpa == e {
+                fsum += x.resonance_hz;
                 k += 1.0;
             } else {
                 scratch[n] = *x;
@@ -222,10 +233,10 @@ fn interior_loo_sigma(data: &[(f64, f64, f64)]) -> Option<f64> {
 }
 
 /// Number of distinct moduli in reference data (counting stops at 64).
-fn distinct_moduli(data: &[(f64, f64, f64)]) -> usize {
+fn distinct_moduli(data: &[RefPoint]) -> usize {
     let mut seen = [0.0f64; 64];
     let mut n = 0;
-    for &(e, _, _) in data {
+    for e in data.iter().map(|d| d.modulus_kpa) {
         if n < seen.len() && !seen[..n].contains(&e) {
             seen[n] = e;
             n += 1;
@@ -340,7 +351,7 @@ impl PowerLaw {
     /// it is dropped. At most a third of the readings are dropped. A
     /// reference reading gone wrong (a bogus peak, a knock) must not bend the whole curve.
     /// `data` is reordered: the kept readings come first.
-    pub fn fit_robust(data: &mut [(f64, f64, f64)]) -> Result<PowerLaw, FitError> {
+    pub fn fit_robust(data: &mut [RefPoint]) -> Result<PowerLaw, FitError> {
         let mut kept = data.len();
         let max_drop = kept / 3;
         let mut fit = Self::fit(data)?;
@@ -350,7 +361,7 @@ impl PowerLaw {
             for _ in 0..3 {
                 let mut best = (usize::MAX, -1.0);
                 for (i, d) in data[..kept].iter().enumerate() {
-                    let r = libm::fabs(d.1 - fit.frequency(d.0));
+                    let r = libm::fabs(d.resonance_hz - fit.frequency(d.modulus_kpa));
                     if !cand.contains(&i) && r > best.1 {
                         best = (i, r);
                     }
@@ -365,9 +376,9 @@ impl PowerLaw {
                 data.swap(c, kept - 1);
                 if let Ok(loo) = Self::fit(&data[..kept - 1]) {
                     let d = data[kept - 1];
-                    let r = libm::fabs(d.1 - loo.frequency(d.0));
+                    let r = libm::fabs(d.resonance_hz - loo.frequency(d.modulus_kpa));
                     let scale = robust_scale(&data[..kept - 1], &loo);
-                    let z = r / (5.0 * scale).max(0.05).max(5.0 * d.2);
+                    let z = r / (5.0 * scale).max(0.05).max(5.0 * d.sigma_hz);
                     if z > 1.0 && pick.as_ref().is_none_or(|p| z > p.1) {
                         pick = Some((c, z, loo));
                     }
@@ -384,7 +395,7 @@ impl PowerLaw {
         Ok(fit)
     }
 
-    /// Weighted least-squares fit of `(a, b, c)` to reference readings `(E kPa, f Hz, σ_f Hz)`.
+    /// Weighted least-squares fit of `(a, b, c)` to reference readings.
     ///
     /// Variable projection: for a fixed exponent the model is linear in `(a, b)`; the exponent is
     /// found by a coarse scan and golden-section refinement over `[-3, -0.05]`. The covariance
@@ -395,7 +406,7 @@ impl PowerLaw {
     /// leave-one-out error at the interior moduli: each is predicted by a fit without it. The
     /// residuals at the reference moduli understate how far the power law strays between them;
     /// the leave-one-out errors do not.
-    pub fn fit(data: &[(f64, f64, f64)]) -> Result<PowerLaw, FitError> {
+    pub fn fit(data: &[RefPoint]) -> Result<PowerLaw, FitError> {
         let mut p = Self::fit_plain(data)?;
         if let Some(loo) = interior_loo_sigma(data) {
             p.model_sigma_hz = p.model_sigma_hz.max(loo);
@@ -403,133 +414,167 @@ impl PowerLaw {
         Ok(p)
     }
 
-    fn fit_plain(data: &[(f64, f64, f64)]) -> Result<PowerLaw, FitError> {
-        if data.len() < 4 {
-            return Err(FitError::TooFewPoints);
-        }
-        let (mut emin, mut emax) = (f64::INFINITY, 0.0f64);
-        for &(e, f, s) in data {
-            if !(e > 0.0) || !e.is_finite() || !f.is_finite() || !(s > 0.0) || !s.is_finite() {
-                return Err(FitError::BadInput);
-            }
-            emin = emin.min(e);
-            emax = emax.max(e);
-        }
-        if distinct_moduli(data) < 3 {
-            return Err(FitError::TooFewPoints);
-        }
-        // chi2 of the best (a, b) for exponent c.
-        let profile = |c: f64| -> Option<(f64, f64, f64)> {
-            // Weighted 2×2 normal equations of f = a + b x, x = E^c.
-            let (mut s11, mut s12, mut s22, mut t1, mut t2, mut tt) =
-                (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-            for &(e, f, s) in data {
-                let w = 1.0 / (s * s);
-                let x = pow(e, c);
-                s11 += w;
-                s12 += w * x;
-                s22 += w * x * x;
-                t1 += w * f;
-                t2 += w * x * f;
-                tt += w * f * f;
-            }
-            let det = s11 * s22 - s12 * s12;
-            if !(det.abs() > 0.0) {
-                return None;
-            }
-            let a = (s22 * t1 - s12 * t2) / det;
-            let b = (s11 * t2 - s12 * t1) / det;
-            let chi2 = tt - a * t1 - b * t2;
-            Some((a, b, chi2))
-        };
-        let (lo, hi) = (-3.0f64, -0.05f64);
-        let steps = 60;
-        let mut best_c = f64::NAN;
-        let mut best_chi = f64::INFINITY;
-        for k in 0..=steps {
-            let c = lo + (hi - lo) * k as f64 / steps as f64;
-            if let Some((_, _, chi)) = profile(c) {
-                if chi < best_chi {
-                    best_chi = chi;
-                    best_c = c;
-                }
-            }
-        }
-        if !best_c.is_finite() {
-            return Err(FitError::NotSaturating);
-        }
-        let h = (hi - lo) / steps as f64;
-        let (mut x0, mut x3) = ((best_c - h).max(lo), (best_c + h).min(hi));
-        let gr = 0.618_033_988_749_895;
-        let chi = |c: f64| profile(c).map_or(f64::INFINITY, |p| p.2);
-        let mut x1 = x3 - gr * (x3 - x0);
-        let mut x2 = x0 + gr * (x3 - x0);
-        let (mut f1, mut f2) = (chi(x1), chi(x2));
-        for _ in 0..80 {
-            if f1 < f2 {
-                x3 = x2;
-                x2 = x1;
-                f2 = f1;
-                x1 = x3 - gr * (x3 - x0);
-                f1 = chi(x1);
-            } else {
-                x0 = x1;
-                x1 = x2;
-                f1 = f2;
-                x2 = x0 + gr * (x3 - x0);
-                f2 = chi(x2);
-            }
-        }
-        let c = 0.5 * (x1 + x2);
-        let (a, b, chi2) = profile(c).ok_or(FitError::NotSaturating)?;
+    fn fit_plain(data: &[RefPoint]) -> Result<PowerLaw, FitError> {
+        let (emin, emax) = checked_span(data)?;
+        let c = best_exponent(data)?;
+        let AtExponent { a, b, chi2 } = at_exponent(data, c).ok_or(FitError::NotSaturating)?;
         if !(b < 0.0) || !(c < 0.0) || !a.is_finite() {
             return Err(FitError::NotSaturating);
         }
-        // Covariance from the Jacobian [1, E^c, b E^c ln E].
-        let mut jtj = [[0.0; 3]; 3];
-        for &(e, _, s) in data {
-            let w = 1.0 / (s * s);
-            let x = pow(e, c);
-            let j = [1.0, x, b * x * libm::log(e)];
-            for r in 0..3 {
-                for q in 0..3 {
-                    jtj[r][q] += w * j[r] * j[q];
-                }
-            }
-        }
-        let mut cov = inverse3(&jtj).ok_or(FitError::NotSaturating)?;
-        let dof = data.len().saturating_sub(3).max(1) as f64;
-        let scale = (chi2 / dof).max(1.0);
-        for row in cov.iter_mut() {
-            for v in row.iter_mut() {
-                *v *= scale;
-            }
-        }
-        // Curve misfit: the mean square residual, corrected for the three parameters fitted to
-        // `distinct` reference moduli (only those carry independent misfit).
-        let mut ss = 0.0;
-        for &(e, f, _) in data {
-            let r = f - (a + b * pow(e, c));
-            ss += r * r;
-        }
-        let groups = distinct_moduli(data) as f64;
-        let misfit2 = if groups > 3.0 {
-            ss / data.len() as f64 * groups / (groups - 3.0)
-        } else {
-            ss / data.len() as f64
-        };
+        let cov = covariance(data, b, c, chi2)?;
         let (min_kpa, max_kpa) = span(emin, emax);
-        Ok(PowerLaw {
+        let mut law = PowerLaw {
             a,
             b,
             c,
             cov,
-            model_sigma_hz: libm::sqrt(misfit2),
+            model_sigma_hz: 0.0,
             min_kpa,
             max_kpa,
             source: Source::Fitted,
-        })
+        };
+        law.model_sigma_hz = residual_misfit(data, &law);
+        Ok(law)
     }
+}
+
+/// The modulus span of reference data, `TooFewPoints` with fewer than four readings or three
+/// distinct moduli, `BadInput` on a reading that is not finite and positive.
+fn checked_span(data: &[RefPoint]) -> Result<(f64, f64), FitError> {
+    if data.len() < 4 {
+        return Err(FitError::TooFewPoints);
+    }
+    let (mut emin, mut emax) = (f64::INFINITY, 0.0f64);
+    for d in data {
+        let (e, f, s) = (d.modulus_kpa, d.resonance_hz, d.sigma_hz);
+        if !(e > 0.0) || !e.is_finite() || !f.is_finite() || !(s > 0.0) || !s.is_finite() {
+            return Err(FitError::BadInput);
+        }
+        emin = emin.min(e);
+        emax = emax.max(e);
+    }
+    if distinct_moduli(data) < 3 {
+        return Err(FitError::TooFewPoints);
+    }
+    Ok((emin, emax))
+}
+
+/// The best straight line `f = a + b x`, `x = E^c`, for one exponent `c`, and its χ².
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct AtExponent {
+    a: f64,
+    b: f64,
+    chi2: f64,
+}
+
+/// Weighted 2×2 normal equations of `f = a + b E^c` at exponent `c`; `None` when singular.
+fn at_exponent(data: &[RefPoint], c: f64) -> Option<AtExponent> {
+    let (mut s11, mut s12, mut s22, mut t1, mut t2, mut tt) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    for d in data {
+        let (f, s) = (d.resonance_hz, d.sigma_hz);
+        let w = 1.0 / (s * s);
+        let x = pow(d.modulus_kpa, c);
+        s11 += w;
+        s12 += w * x;
+        s22 += w * x * x;
+        t1 += w * f;
+        t2 += w * x * f;
+        tt += w * f * f;
+    }
+    let det = s11 * s22 - s12 * s12;
+    if !(det.abs() > 0.0) {
+        return None;
+    }
+    let a = (s22 * t1 - s12 * t2) / det;
+    let b = (s11 * t2 - s12 * t1) / det;
+    let chi2 = tt - a * t1 - b * t2;
+    Some(AtExponent { a, b, chi2 })
+}
+
+/// The exponent of least χ² over `[-3, -0.05]`: a scan of 61 values, then 80 golden-section
+/// steps around the best.
+fn best_exponent(data: &[RefPoint]) -> Result<f64, FitError> {
+    let (lo, hi) = (-3.0f64, -0.05f64);
+    let steps = 60;
+    let mut best_c = f64::NAN;
+    let mut best_chi = f64::INFINITY;
+    for k in 0..=steps {
+        let c = lo + (hi - lo) * k as f64 / steps as f64;
+        if let Some(p) = at_exponent(data, c) {
+            if p.chi2 < best_chi {
+                best_chi = p.chi2;
+                best_c = c;
+            }
+        }
+    }
+    if !best_c.is_finite() {
+        return Err(FitError::NotSaturating);
+    }
+    let h = (hi - lo) / steps as f64;
+    let (mut x0, mut x3) = ((best_c - h).max(lo), (best_c + h).min(hi));
+    let gr = 0.618_033_988_749_895;
+    let chi = |c: f64| at_exponent(data, c).map_or(f64::INFINITY, |p| p.chi2);
+    let mut x1 = x3 - gr * (x3 - x0);
+    let mut x2 = x0 + gr * (x3 - x0);
+    let (mut f1, mut f2) = (chi(x1), chi(x2));
+    for _ in 0..80 {
+        if f1 < f2 {
+            x3 = x2;
+            x2 = x1;
+            f2 = f1;
+            x1 = x3 - gr * (x3 - x0);
+            f1 = chi(x1);
+        } else {
+            x0 = x1;
+            x1 = x2;
+            f1 = f2;
+            x2 = x0 + gr * (x3 - x0);
+            f2 = chi(x2);
+        }
+    }
+    Ok(0.5 * (x1 + x2))
+}
+
+/// Covariance of `(a, b, c)` from the Jacobian `[1, E^c, b E^c ln E]`, scaled by the reduced
+/// χ² when it exceeds 1.
+fn covariance(data: &[RefPoint], b: f64, c: f64, chi2: f64) -> Result<[[f64; 3]; 3], FitError> {
+    let mut jtj = [[0.0; 3]; 3];
+    for d in data {
+        let w = 1.0 / (d.sigma_hz * d.sigma_hz);
+        let x = pow(d.modulus_kpa, c);
+        let j = [1.0, x, b * x * libm::log(d.modulus_kpa)];
+        for r in 0..3 {
+            for q in 0..3 {
+                jtj[r][q] += w * j[r] * j[q];
+            }
+        }
+    }
+    let mut cov = inverse3(&jtj).ok_or(FitError::NotSaturating)?;
+    let dof = data.len().saturating_sub(3).max(1) as f64;
+    let scale = (chi2 / dof).max(1.0);
+    for row in cov.iter_mut() {
+        for v in row.iter_mut() {
+            *v *= scale;
+        }
+    }
+    Ok(cov)
+}
+
+/// Curve misfit (Hz): the mean square residual about `law`, corrected for the three parameters
+/// fitted to the distinct reference moduli (only those carry independent misfit).
+fn residual_misfit(data: &[RefPoint], law: &PowerLaw) -> f64 {
+    let mut ss = 0.0;
+    for d in data {
+        let r = d.resonance_hz - (law.a + law.b * pow(d.modulus_kpa, law.c));
+        ss += r * r;
+    }
+    let groups = distinct_moduli(data) as f64;
+    let misfit2 = if groups > 3.0 {
+        ss / data.len() as f64 * groups / (groups - 3.0)
+    } else {
+        ss / data.len() as f64
+    };
+    libm::sqrt(misfit2)
 }
 
 #[cfg(test)]
@@ -588,24 +633,23 @@ mod tests {
     #[test]
     fn fit_recovers_known_curve() {
         let truth = PowerLaw::paper_experiment();
-        let mut data = [(0.0, 0.0, 0.0); 5];
-        for (d, e) in data.iter_mut().zip([157.5, 279.0, 414.0, 1146.0, 2465.0]) {
-            *d = (e, truth.frequency(e), 0.05);
-        }
+        let at = |e: f64| RefPoint {
+            modulus_kpa: e,
+            resonance_hz: truth.frequency(e),
+            sigma_hz: 0.05,
+        };
+        let data = [157.5, 279.0, 414.0, 1146.0, 2465.0].map(at);
         let fit = PowerLaw::fit(&data).unwrap();
         assert!((fit.a - truth.a).abs() < 1e-3, "{}", fit.a);
         assert!((fit.b / truth.b - 1.0).abs() < 1e-4);
         assert!((fit.c - truth.c).abs() < 1e-5);
         assert_eq!(fit.source, Source::Fitted);
         // One bogus reference reading (a wrong peak) is discarded by the robust fit.
-        let mut noisy = [(0.0, 0.0, 0.0); 9];
-        for (k, d) in noisy.iter_mut().enumerate() {
-            let e = [
-                157.5, 279.0, 414.0, 1146.0, 2465.0, 200.0, 600.0, 900.0, 1800.0,
-            ][k];
-            *d = (e, truth.frequency(e), 0.05);
-        }
-        noisy[0].1 += 12.0;
+        let mut noisy = [
+            157.5, 279.0, 414.0, 1146.0, 2465.0, 200.0, 600.0, 900.0, 1800.0,
+        ]
+        .map(at);
+        noisy[0].resonance_hz += 12.0;
         let plain = PowerLaw::fit(&noisy).unwrap();
         let robust = PowerLaw::fit_robust(&mut noisy).unwrap();
         assert!(
@@ -615,7 +659,11 @@ mod tests {
         );
         assert!((robust.a - truth.a).abs() < 1e-3, "{}", robust.a);
         assert!(PowerLaw::fit(&data[..3]).is_err());
-        let bad = [(1.0, f64::NAN, 0.1); 5];
+        let bad = [RefPoint {
+            modulus_kpa: 1.0,
+            resonance_hz: f64::NAN,
+            sigma_hz: 0.1,
+        }; 5];
         assert_eq!(PowerLaw::fit(&bad), Err(FitError::BadInput));
     }
 }

@@ -8,7 +8,7 @@
 //! [`UnitProfile`]; the firmware keeps it in flash ([`crate::store`]), the bench in a file, and
 //! every reading goes through [`crate::pipeline`] with it.
 
-use crate::calibration::{PowerLaw, QModel};
+use crate::calibration::{PowerLaw, QModel, RefPoint};
 use crate::estimate::fit::fit_bvd;
 use crate::status::Failure;
 use crate::sweep::{SweepPoint, SweepSettings};
@@ -183,10 +183,14 @@ pub const MAX_REFERENCES: usize = 128;
 /// `calibrate`. Uses the first [`MAX_REFERENCES`] readings.
 pub fn calibrate(refs: &[Reference]) -> Result<(PowerLaw, QModel), crate::calibration::FitError> {
     let n = refs.len().min(MAX_REFERENCES);
-    let mut fq = [(0.0f64, 0.0f64, 0.0f64); MAX_REFERENCES];
+    let mut fq = [RefPoint::default(); MAX_REFERENCES];
     let mut eq = [(0.0f64, 0.0f64); MAX_REFERENCES];
     for ((d, q), r) in fq.iter_mut().zip(eq.iter_mut()).zip(refs) {
-        *d = (r.modulus_kpa, r.resonance_hz, r.sigma_hz);
+        *d = RefPoint {
+            modulus_kpa: r.modulus_kpa,
+            resonance_hz: r.resonance_hz,
+            sigma_hz: r.sigma_hz,
+        };
         *q = (r.modulus_kpa, r.q);
     }
     let law = PowerLaw::fit_robust(&mut fq[..n])?;

@@ -7,7 +7,7 @@
 //! `df/dE = b c E^(c−1)`, evaluated here with `f64::powf`; the Q model `Q = q0 + q1 ln E` through
 //! two hand-picked points; the stable names the calibration file and the log print.
 
-use pzt_probe::calibration::{QModel, Source};
+use pzt_probe::calibration::{QModel, RefPoint, Source};
 use pzt_probe::estimate::Estimate;
 use pzt_probe::measure::Resonance;
 use pzt_probe::pipeline::conclude;
@@ -188,10 +188,14 @@ fn source_names_are_stable() {
 /// (the count stops at 64 instead of running past its buffer).
 #[test]
 fn fit_with_more_than_64_distinct_moduli() {
-    let data: Vec<(f64, f64, f64)> = (0..70)
+    let data: Vec<RefPoint> = (0..70)
         .map(|k| {
             let e = 150.0 * (2450.0f64 / 150.0).powf(k as f64 / 69.0);
-            (e, f_of(e), 0.05)
+            RefPoint {
+                modulus_kpa: e,
+                resonance_hz: f_of(e),
+                sigma_hz: 0.05,
+            }
         })
         .collect();
     let fit = PowerLaw::fit(&data).expect("a curve");

@@ -2,6 +2,7 @@
 
 use probe_rng::Rng;
 use pzt_probe::board::sim::scale_of;
+use pzt_probe::calibration::RefPoint;
 use pzt_probe::estimate::{conductance, paper};
 use pzt_probe::sweep::{SettingsError, SweepPoint, SweepSettings};
 use pzt_probe::{Hz, Method, PowerLaw, Seconds, Volts};
@@ -204,13 +205,11 @@ fn random_input_never_panics() {
     // Calibration fit on garbage.
     for _ in 0..2_000 {
         let n = (r.next_u64() % 9) as usize;
-        let d: Vec<(f64, f64, f64)> = (0..n)
-            .map(|_| {
-                (
-                    wild(&mut r) as f64,
-                    wild(&mut r) as f64,
-                    wild(&mut r) as f64,
-                )
+        let d: Vec<RefPoint> = (0..n)
+            .map(|_| RefPoint {
+                modulus_kpa: wild(&mut r) as f64,
+                resonance_hz: wild(&mut r) as f64,
+                sigma_hz: wild(&mut r) as f64,
             })
             .collect();
         if let Ok(p) = PowerLaw::fit(&d) {

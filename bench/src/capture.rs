@@ -727,6 +727,46 @@ fn demodulate(
             needed: needed.max(1) * 8,
         });
     }
+    let fs = sample_rate(s)?;
+    let runs = runs_of_constant_drive(&s.f);
+    let mut run_cycles: Vec<f64> = runs
+        .iter()
+        .map(|r| (r.end - r.start) as f64 / fs * s.f[r.start])
+        .collect();
+    run_cycles.sort_by(f64::total_cmp);
+    let median_cycles = run_cycles[run_cycles.len() / 2];
+    let (shape, mut points, skipped) = if median_cycles >= MIN_STEP_CYCLES {
+        let (points, skipped) = stepped_points(s, &runs, fs, opts)?;
+        (SweepShape::Stepped, points, skipped)
+    } else {
+        (SweepShape::Continuous, continuous_points(s, opts)?, 0)
+    };
+    // The estimators take points in increasing frequency (a down sweep is read backwards).
+    points.sort_by(|a, b| a.freq.0.total_cmp(&b.freq.0));
+    if points.len() < needed.max(3) {
+        return Err(CaptureError::TooFewPoints {
+            line: last_line,
+            found: points.len(),
+            needed: needed.max(3),
+        });
+    }
+    Ok(Capture {
+        layout: Layout::TimeDomain,
+        points,
+        sample_rate_hz: Some(fs),
+        shape: Some(shape),
+        skipped_steps: skipped,
+        noise_sigma_s: None,
+        rows: n,
+    })
+}
+
+/// The sample rate of a capture (from the mean step), after checking that every drive frequency
+/// is positive and resolved (at least [`MIN_SAMPLES_PER_CYCLE`] samples a cycle) and that the
+/// time steps increase uniformly (each within [`DT_TOLERANCE`] of the median step: robust to
+/// the one bad step being looked for).
+fn sample_rate(s: &Samples) -> Result<f64, CaptureError> {
+    let n = s.t.len();
     for k in 0..n {
         if !(s.f[k] > 0.0) {
             return Err(CaptureError::NotPositive {
@@ -743,8 +783,6 @@ fn demodulate(
             });
         }
     }
-    // Every step against the median step (robust to the one bad step being looked for); the
-    // sample rate then from the mean step.
     let mut dts: Vec<f64> = s.t.windows(2).map(|w| w[1] - w[0]).collect();
     dts.sort_by(f64::total_cmp);
     let median_dt = dts[dts.len() / 2];
@@ -768,93 +806,92 @@ fn demodulate(
             });
         }
     }
-    // Runs of constant drive frequency.
-    let mut runs: Vec<(usize, usize)> = Vec::new();
-    let mut a = 0;
-    for k in 1..=n {
-        if k == n || s.f[k] != s.f[a] {
-            runs.push((a, k));
-            a = k;
+    Ok(fs)
+}
+
+/// Samples `start..end` of a capture, all at one drive frequency.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Run {
+    start: usize,
+    end: usize,
+}
+
+/// The runs of constant drive frequency, in order.
+fn runs_of_constant_drive(f: &[f64]) -> Vec<Run> {
+    let mut runs = Vec::new();
+    let mut start = 0;
+    for k in 1..=f.len() {
+        if k == f.len() || f[k] != f[start] {
+            runs.push(Run { start, end: k });
+            start = k;
         }
     }
-    let mut run_cycles: Vec<f64> = runs
-        .iter()
-        .map(|&(a, b)| (b - a) as f64 / fs * s.f[a])
+    runs
+}
+
+/// A stepped sweep: one point per run, over the whole drive cycles after its settling (the
+/// settle time of `opts`, else the run's first half); runs with fewer than two cycles left are
+/// skipped (counted).
+fn stepped_points(
+    s: &Samples,
+    runs: &[Run],
+    fs: f64,
+    opts: &DemodOptions,
+) -> Result<(Vec<SweepPoint>, usize), CaptureError> {
+    // Within a run the frequency is constant: the reference phase is 2π f t.
+    let phase: Vec<f64> = (0..s.t.len()).map(|k| 2.0 * PI * s.f[k] * s.t[k]).collect();
+    let (mut points, mut skipped) = (Vec::new(), 0);
+    for r in runs {
+        let f = s.f[r.start];
+        let len = r.end - r.start;
+        let settle = match opts.settle_s {
+            Some(x) => ((x * fs).round().max(0.0) as usize).min(len),
+            None => len / 2,
+        };
+        let avail = len - settle;
+        let spc = fs / f;
+        let cycles = (avail as f64 / spc).floor();
+        let take = (cycles * spc).round() as usize;
+        if cycles < 2.0 || take < 8 || take > avail {
+            skipped += 1;
+            continue;
+        }
+        points.push(window_point(s, r.end - take, r.end, &phase)?);
+    }
+    Ok((points, skipped))
+}
+
+/// A continuous (chirped) sweep: the drive phase integrated from the recorded frequency
+/// (trapezoid rule), one point per `cycles_per_window` drive cycles.
+fn continuous_points(s: &Samples, opts: &DemodOptions) -> Result<Vec<SweepPoint>, CaptureError> {
+    let n = s.t.len();
+    let mut acc = 0.0;
+    let cyc: Vec<f64> = (0..n)
+        .map(|k| {
+            if k > 0 {
+                acc += 0.5 * (s.f[k] + s.f[k - 1]) * (s.t[k] - s.t[k - 1]);
+            }
+            acc
+        })
         .collect();
-    run_cycles.sort_by(f64::total_cmp);
-    let median_cycles = run_cycles[run_cycles.len() / 2];
+    let phase: Vec<f64> = cyc
+        .iter()
+        .map(|c| 2.0 * PI * (c + s.f[0] * s.t[0]))
+        .collect();
+    let per = opts.cycles_per_window.max(1) as f64;
     let mut points = Vec::new();
-    let mut skipped = 0;
-    let shape;
-    if median_cycles >= MIN_STEP_CYCLES {
-        shape = SweepShape::Stepped;
-        // Within a run the frequency is constant: the reference phase is 2π f t.
-        let phase: Vec<f64> = (0..n).map(|k| 2.0 * PI * s.f[k] * s.t[k]).collect();
-        for &(a, b) in &runs {
-            let f = s.f[a];
-            let len = b - a;
-            let settle = match opts.settle_s {
-                Some(x) => ((x * fs).round().max(0.0) as usize).min(len),
-                None => len / 2,
-            };
-            let avail = len - settle;
-            let spc = fs / f;
-            let cycles = (avail as f64 / spc).floor();
-            let take = (cycles * spc).round() as usize;
-            if cycles < 2.0 || take < 8 || take > avail {
-                skipped += 1;
-                continue;
+    let mut a = 0;
+    let mut next = per;
+    for (k, &c) in cyc.iter().enumerate().skip(1) {
+        if c >= next {
+            if k - a >= 8 {
+                points.push(window_point(s, a, k, &phase)?);
             }
-            let (wa, wb) = (b - take, b);
-            points.push(window_point(s, wa, wb, &phase)?);
-        }
-    } else {
-        shape = SweepShape::Continuous;
-        // Drive phase integrated from the recorded frequency (trapezoid rule), in cycles.
-        let mut acc = 0.0;
-        let cyc: Vec<f64> = (0..n)
-            .map(|k| {
-                if k > 0 {
-                    acc += 0.5 * (s.f[k] + s.f[k - 1]) * (s.t[k] - s.t[k - 1]);
-                }
-                acc
-            })
-            .collect();
-        let phase: Vec<f64> = cyc
-            .iter()
-            .map(|c| 2.0 * PI * (c + s.f[0] * s.t[0]))
-            .collect();
-        let per = opts.cycles_per_window.max(1) as f64;
-        let mut a = 0;
-        let mut next = per;
-        for (k, &c) in cyc.iter().enumerate().skip(1) {
-            if c >= next {
-                if k - a >= 8 {
-                    points.push(window_point(s, a, k, &phase)?);
-                }
-                a = k;
-                next += per;
-            }
+            a = k;
+            next += per;
         }
     }
-    // The estimators take points in increasing frequency (a down sweep is read backwards).
-    points.sort_by(|a, b| a.freq.0.total_cmp(&b.freq.0));
-    if points.len() < needed.max(3) {
-        return Err(CaptureError::TooFewPoints {
-            line: last_line,
-            found: points.len(),
-            needed: needed.max(3),
-        });
-    }
-    Ok(Capture {
-        layout: Layout::TimeDomain,
-        points,
-        sample_rate_hz: Some(fs),
-        shape: Some(shape),
-        skipped_steps: skipped,
-        noise_sigma_s: None,
-        rows: n,
-    })
+    Ok(points)
 }
 
 /// Write admittance points as an `freq_hz,y_re_s,y_im_s` CSV (with `#` comment lines first).

@@ -31,8 +31,9 @@ fn coin_scan_reads_the_papers_frequencies_and_finds_the_coin() {
     assert!(res.points.len() > 100);
     assert!(res.points.iter().all(|p| p.reading.status == Status::Ok));
     let inc = spec.phantom.inclusion;
-    let (over, n_over) = mean_resonance(&res.points, &inc, |d| d <= over_radius_mm(&inc)).unwrap();
-    let (away, n_away) = mean_resonance(&res.points, &inc, |d| d >= away_radius_mm(&inc)).unwrap();
+    let over = mean_resonance(&res.points, &inc, |d| d <= over_radius_mm(&inc)).unwrap();
+    let away = mean_resonance(&res.points, &inc, |d| d >= away_radius_mm(&inc)).unwrap();
+    let (over, n_over, away, n_away) = (over.hz, over.points, away.hz, away.points);
     eprintln!("over the coin {over:.2} Hz ({n_over} points), away {away:.2} Hz ({n_away} points)");
     assert!(n_over >= 20 && n_away >= 10);
     assert!(

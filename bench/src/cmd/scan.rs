@@ -340,14 +340,26 @@ pub fn mean_resonance(
     points: &[ScanPoint],
     inclusion: &Inclusion,
     keep: impl Fn(f64) -> bool,
-) -> Option<(f64, usize)> {
+) -> Option<MeanResonance> {
     let (cx, cy) = inclusion.centre_m();
     let v: Vec<f64> = points
         .iter()
         .filter(|p| keep((p.x_mm - cx * 1e3).hypot(p.y_mm - cy * 1e3)))
         .filter_map(|p| p.reading.resonance.map(|f| f.0 as f64))
         .collect();
-    (!v.is_empty()).then(|| (v.iter().sum::<f64>() / v.len() as f64, v.len()))
+    (!v.is_empty()).then(|| MeanResonance {
+        hz: v.iter().sum::<f64>() / v.len() as f64,
+        points: v.len(),
+    })
+}
+
+/// The mean resonance of a region of a scan.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MeanResonance {
+    /// Mean, Hz.
+    pub hz: f64,
+    /// Points with a resonance in the region.
+    pub points: usize,
 }
 
 /// Distance from the inclusion's centre (mm) within which a point counts as "over" the lump:
@@ -363,6 +375,28 @@ pub fn away_radius_mm(inc: &Inclusion) -> f64 {
 
 /// Run the subcommand.
 pub fn run(a: ScanArgs) -> Result<()> {
+    let spec = spec_of(&a)?;
+    let n = spec.grid().len();
+    let pb = (!a.json).then(|| progress(n as u64, "scanning"));
+    let res = scan(&spec, || {
+        if let Some(pb) = &pb {
+            pb.inc(1)
+        }
+    })?;
+    if let Some(pb) = pb {
+        pb.finish_and_clear();
+    }
+    write_map(&a.plot, &spec, &res)?;
+    if a.json {
+        println!("{}", scan_json(&spec, &res));
+    } else {
+        print_summary(&a, &spec, &res);
+    }
+    Ok(())
+}
+
+/// The scan the arguments ask for: method, preload, noise, scene and the unit's profile.
+fn spec_of(a: &ScanArgs) -> Result<ScanSpec> {
     let method = Method::from_name(&a.method)
         .filter(|m| matches!(m.default_settings(), pzt_probe::measure::Settings::Sweep(_)))
         .ok_or_else(|| {
@@ -406,78 +440,81 @@ pub fn run(a: ScanArgs) -> Result<()> {
         Ok(u)
     })?;
     spec.seed = a.seed;
-    let n = spec.grid().len();
-    let pb = (!a.json).then(|| progress(n as u64, "scanning"));
-    let res = scan(&spec, || {
-        if let Some(pb) = &pb {
-            pb.inc(1)
-        }
-    })?;
-    if let Some(pb) = pb {
-        pb.finish_and_clear();
-    }
+    Ok(spec)
+}
+
+/// The mean resonance over the lump and away from it.
+fn contrast(spec: &ScanSpec, res: &ScanResult) -> (Option<MeanResonance>, Option<MeanResonance>) {
+    let inc = &spec.phantom.inclusion;
+    (
+        mean_resonance(&res.points, inc, |d| d <= over_radius_mm(inc)),
+        mean_resonance(&res.points, inc, |d| d >= away_radius_mm(inc)),
+    )
+}
+
+/// `scan --json`: the scene, the truth, the contrast, the lump found and every point.
+fn scan_json(spec: &ScanSpec, res: &ScanResult) -> Value {
     let inc = spec.phantom.inclusion;
     let (tx, ty) = inc.centre_m();
-    let over = mean_resonance(&res.points, &inc, |d| d <= over_radius_mm(&inc));
-    let away = mean_resonance(&res.points, &inc, |d| d >= away_radius_mm(&inc));
+    let (over, away) = contrast(spec, res);
+    let pts: Vec<Value> = res
+        .points
+        .iter()
+        .map(|p| {
+            json!({
+                "x_mm": p.x_mm, "y_mm": p.y_mm,
+                "apparent_kpa": p.apparent_kpa,
+                "status": p.reading.status.code(),
+                "resonance_hz": p.reading.resonance.map(|f| f.0),
+                "resonance_sigma_hz": p.reading.resonance_sigma.map(|f| f.0),
+                "modulus_kpa": p.reading.modulus.map(|e| e.0),
+            })
+        })
+        .collect();
+    let lump = res.lump.map(|l| {
+        json!({"x_mm": l.x_mm, "y_mm": l.y_mm, "diameter_mm": l.diameter_mm,
+               "background_hz": l.background_hz, "peak_hz": l.peak_hz, "cells": l.cells})
+    });
+    json!({
+        "scene": spec.phantom.name,
+        "method": spec.method.name(),
+        "step_mm": spec.step_mm,
+        "true_centre_mm": [tx * 1e3, ty * 1e3],
+        "true_diameter_mm": 2e3 * inc.radius_m(),
+        "over_mean_hz": over.map(|o| o.hz),
+        "away_mean_hz": away.map(|o| o.hz),
+        "lump": lump,
+        "points": pts,
+    })
+}
+
+/// The human summary of a scan.
+fn print_summary(a: &ScanArgs, spec: &ScanSpec, res: &ScanResult) {
+    let inc = spec.phantom.inclusion;
+    let (tx, ty) = inc.centre_m();
+    let (over, away) = contrast(spec, res);
     let ok = res
         .points
         .iter()
         .filter(|p| p.reading.status == Status::Ok)
         .count();
-    write_map(&a.plot, &spec, &res)?;
-    if a.json {
-        let pts: Vec<Value> = res
-            .points
-            .iter()
-            .map(|p| {
-                json!({
-                    "x_mm": p.x_mm, "y_mm": p.y_mm,
-                    "apparent_kpa": p.apparent_kpa,
-                    "status": p.reading.status.code(),
-                    "resonance_hz": p.reading.resonance.map(|f| f.0),
-                    "resonance_sigma_hz": p.reading.resonance_sigma.map(|f| f.0),
-                    "modulus_kpa": p.reading.modulus.map(|e| e.0),
-                })
-            })
-            .collect();
-        let lump = res.lump.map(|l| {
-            json!({"x_mm": l.x_mm, "y_mm": l.y_mm, "diameter_mm": l.diameter_mm,
-                   "background_hz": l.background_hz, "peak_hz": l.peak_hz, "cells": l.cells})
-        });
-        println!(
-            "{}",
-            json!({
-                "scene": spec.phantom.name,
-                "method": method.name(),
-                "step_mm": spec.step_mm,
-                "true_centre_mm": [tx * 1e3, ty * 1e3],
-                "true_diameter_mm": 2e3 * inc.radius_m(),
-                "over_mean_hz": over.map(|o| o.0),
-                "away_mean_hz": away.map(|o| o.0),
-                "lump": lump,
-                "points": pts,
-            })
-        );
-        return Ok(());
-    }
     println!("probe-bench scan: {}", spec.phantom.source);
     println!(
         "  grid {} points, step {} mm, preload {:.0} mN, noise {}, method {}; {} readings ok",
-        n,
+        res.points.len(),
         spec.step_mm,
         a.preload_n * 1e3,
         a.noise,
-        method.name(),
+        spec.method.name(),
         ok
     );
-    if let Some((f, k)) = over {
+    if let Some(MeanResonance { hz: f, points: k }) = over {
         println!(
             "  over the lump (within {:.1} mm of its centre): mean {f:.2} Hz over {k} points",
             over_radius_mm(&inc)
         );
     }
-    if let Some((f, k)) = away {
+    if let Some(MeanResonance { hz: f, points: k }) = away {
         println!(
             "  away from it (beyond {:.1} mm): mean {f:.2} Hz over {k} points",
             away_radius_mm(&inc)
@@ -498,7 +535,6 @@ pub fn run(a: ScanArgs) -> Result<()> {
         None => println!("  no lump stands out of the map"),
     }
     println!("  map: {}", a.plot.display());
-    Ok(())
 }
 
 fn check_step(step: f64) -> Result<()> {
@@ -560,21 +596,7 @@ where
 {
     let e = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("{e}");
     root.fill(&WHITE).map_err(e)?;
-    let fs: Vec<f64> = res
-        .points
-        .iter()
-        .filter_map(|p| p.reading.resonance.map(|f| f.0 as f64))
-        .collect();
-    let (fmin, fmax) = fs
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &f| {
-            (a.min(f), b.max(f))
-        });
-    let (fmin, fmax) = if fmin.is_finite() && fmax > fmin {
-        (fmin, fmax)
-    } else {
-        (200.0, 230.0)
-    };
+    let (fmin, fmax) = resonance_span(res);
     let s = spec.step_mm;
     let (x0, x1) = (
         spec.xs_mm.first().copied().unwrap_or(0.0) - s,
@@ -588,20 +610,7 @@ where
     let inc = spec.phantom.inclusion;
     let (tx, ty) = inc.centre_m();
     let (tx, ty, tr) = (tx * 1e3, ty * 1e3, inc.radius_m() * 1e3);
-    let title = match &res.lump {
-        Some(l) => format!(
-            "{} scan, {} — lump at ({:.1}, {:.1}) mm, {:.1} mm across (true ({:.1}, {:.1}), {:.0} mm)",
-            spec.phantom.name,
-            spec.method.name(),
-            l.x_mm,
-            l.y_mm,
-            l.diameter_mm,
-            tx,
-            ty,
-            2.0 * tr
-        ),
-        None => format!("{} scan, {} — no lump found", spec.phantom.name, spec.method.name()),
-    };
+    let title = map_title(spec, res);
     // Equal scales on both axes: fit the data span into the plot area.
     let (w_px, h_px) = (820.0 - 80.0, 820.0 - 110.0);
     let (xs, ys) = (x1 - x0, y1 - y0);
@@ -684,8 +693,62 @@ where
         .border_style(BLACK)
         .draw()
         .map_err(e)?;
-    // Colour bar: resonance in Hz, with the calibrated modulus beside it.
-    let mut bar = ChartBuilder::on(&bar_area)
+    draw_colour_bar(&bar_area, spec, fmin, fmax)?;
+    Ok(())
+}
+
+/// The colour scale's span of resonances (Hz): the scan's, or 200–230 Hz without any.
+fn resonance_span(res: &ScanResult) -> (f64, f64) {
+    let fs: Vec<f64> = res
+        .points
+        .iter()
+        .filter_map(|p| p.reading.resonance.map(|f| f.0 as f64))
+        .collect();
+    let (fmin, fmax) = fs
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &f| {
+            (a.min(f), b.max(f))
+        });
+    if fmin.is_finite() && fmax > fmin {
+        (fmin, fmax)
+    } else {
+        (200.0, 230.0)
+    }
+}
+
+/// The map's title: the scene, the method and the lump found against the truth.
+fn map_title(spec: &ScanSpec, res: &ScanResult) -> String {
+    let inc = spec.phantom.inclusion;
+    let (tx, ty) = inc.centre_m();
+    let (tx, ty, tr) = (tx * 1e3, ty * 1e3, inc.radius_m() * 1e3);
+    match &res.lump {
+        Some(l) => format!(
+            "{} scan, {} — lump at ({:.1}, {:.1}) mm, {:.1} mm across (true ({:.1}, {:.1}), {:.0} mm)",
+            spec.phantom.name,
+            spec.method.name(),
+            l.x_mm,
+            l.y_mm,
+            l.diameter_mm,
+            tx,
+            ty,
+            2.0 * tr
+        ),
+        None => format!("{} scan, {} — no lump found", spec.phantom.name, spec.method.name()),
+    }
+}
+
+/// The colour bar beside the map: resonance in Hz, with the calibrated modulus at its ends.
+fn draw_colour_bar<DB: DrawingBackend>(
+    bar_area: &DrawingArea<DB, plotters::coord::Shift>,
+    spec: &ScanSpec,
+    fmin: f64,
+    fmax: f64,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("{e}");
+    let mut bar = ChartBuilder::on(bar_area)
         .margin_top(40)
         .margin_bottom(50)
         .margin_right(10)
