@@ -305,134 +305,148 @@ impl core::fmt::Display for SettingsLine {
 /// Parse one line (without its terminator) into a command; sweep settings are validated
 /// against `scale`, the board's front end.
 pub fn parse(line: &[u8], scale: &FrontEndScale) -> Result<Command, CommandError> {
-    if line.len() > MAX_LINE {
-        return Err(CommandError::Oversized);
-    }
-    let text = core::str::from_utf8(line).map_err(|_| CommandError::NotUtf8)?;
     let mut words: [&str; MAX_WORDS] = [""; MAX_WORDS];
-    let mut n = 0;
-    for w in text.split_ascii_whitespace() {
-        match words.get_mut(n) {
-            Some(slot) => *slot = w,
-            None => return Err(CommandError::TooManyArguments),
-        }
-        n += 1;
-    }
-    let words = words.get(..n).unwrap_or(&[]);
+    let words = split_words(line, &mut words)?;
     let Some((&head, args)) = words.split_first() else {
         return Err(CommandError::Empty);
     };
-    let arity = |want: usize| -> Result<(), CommandError> {
-        match args.len() {
-            k if k < want => Err(CommandError::MissingArgument),
-            k if k > want => Err(CommandError::TooManyArguments),
-            _ => Ok(()),
-        }
-    };
     match head {
-        "measure" => arity(0).map(|_| Command::Measure),
-        "air" => arity(0).map(|_| Command::Air),
-        "store" => arity(0).map(|_| Command::Store),
-        "status" => arity(0).map(|_| Command::Status),
-        "reload" => arity(0).map(|_| Command::Reload),
-        "help" => arity(0).map(|_| Command::Help),
+        "measure" => arity(args, 0).map(|_| Command::Measure),
+        "air" => arity(args, 0).map(|_| Command::Air),
+        "store" => arity(args, 0).map(|_| Command::Store),
+        "status" => arity(args, 0).map(|_| Command::Status),
+        "reload" => arity(args, 0).map(|_| Command::Reload),
+        "help" => arity(args, 0).map(|_| Command::Help),
         "method" => {
-            arity(1)?;
+            arity(args, 1)?;
             let name = args.first().copied().unwrap_or_default();
             Method::from_name(name)
                 .map(Command::Method)
                 .ok_or(CommandError::UnknownMethod)
         }
-        "sweep" => {
-            if args.first() == Some(&"default") {
-                return arity(1).map(|_| Command::SettingsDefault);
-            }
-            arity(6)?;
-            let [start, stop, step, settle, integrate, drive] = numbers(args)?;
-            let s = SweepSettings {
-                start: Hz(start),
-                stop: Hz(stop),
-                step: Hz(step),
-                settle: Seconds(settle),
-                integrate: Seconds(integrate),
-                drive: Volts(drive),
-            };
-            s.validate(scale).map_err(CommandError::Settings)?;
-            Ok(Command::Settings(Settings::Sweep(s)))
+        "sweep" if args.first() == Some(&"default") => {
+            arity(args, 1).map(|_| Command::SettingsDefault)
         }
-        "staged" => {
-            arity(9)?;
-            let [start, stop, coarse_points, coarse_settle, integrate, refine_points, refine_span, settle_tau, drive] =
-                numbers(args)?;
-            let s = StagedSettings {
-                band_start: Hz(start),
-                band_stop: Hz(stop),
-                coarse_points: count(coarse_points)?,
-                coarse_settle: Seconds(coarse_settle),
-                integrate: Seconds(integrate),
-                refine_points: count(refine_points)?,
-                refine_span,
-                settle_tau,
-                drive: Volts(drive),
-            };
-            // Valid for one of the two-stage refinements at least; the firmware checks the
-            // active method's own.
-            let bvd = s.validate(Refine::Bvd, scale).map(|_| ());
-            let any = bvd.or_else(|e| {
-                [Refine::Conductance, Refine::Track]
-                    .iter()
-                    .any(|r| s.validate(*r, scale).is_ok())
-                    .then_some(())
-                    .ok_or(e)
-            });
-            any.map_err(CommandError::Settings)?;
-            Ok(Command::Settings(Settings::Staged(s)))
-        }
-        "ringdown" => {
-            arity(8)?;
-            let [start, stop, seed, burst, ring, stages, window_cycles, drive] = numbers(args)?;
-            let s = RingdownSettings {
-                band_start: Hz(start),
-                band_stop: Hz(stop),
-                seed: Hz(seed),
-                burst: Seconds(burst),
-                ring: Seconds(ring),
-                stages: count(stages)?,
-                window_cycles: count(window_cycles)?,
-                drive: Volts(drive),
-            };
-            s.validate(scale).map_err(CommandError::Settings)?;
-            Ok(Command::Settings(Settings::Ringdown(s)))
-        }
-        "calibrate" => {
-            let (&sub, rest) = args.split_first().ok_or(CommandError::MissingArgument)?;
-            let none = |c: Command| {
-                if rest.is_empty() {
-                    Ok(c)
-                } else {
-                    Err(CommandError::TooManyArguments)
-                }
-            };
-            match sub {
-                "add" => match rest {
-                    [] => Err(CommandError::MissingArgument),
-                    [w] => {
-                        let e = number(w)?;
-                        if (REFERENCE_KPA.0..=REFERENCE_KPA.1).contains(&e) {
-                            Ok(Command::CalibrateAdd(KPa(e)))
-                        } else {
-                            Err(CommandError::OutOfRange)
-                        }
-                    }
-                    _ => Err(CommandError::TooManyArguments),
-                },
-                "fit" => none(Command::CalibrateFit),
-                "clear" => none(Command::CalibrateClear),
-                "paper" => none(Command::CalibratePaper),
-                _ => Err(CommandError::UnknownSubcommand),
-            }
-        }
+        "sweep" => sweep(args, scale).map(|s| Command::Settings(Settings::Sweep(s))),
+        "staged" => staged(args, scale).map(|s| Command::Settings(Settings::Staged(s))),
+        "ringdown" => ringdown(args, scale).map(|s| Command::Settings(Settings::Ringdown(s))),
+        "calibrate" => calibrate(args),
         _ => Err(CommandError::UnknownCommand),
+    }
+}
+
+/// The line's words (at most [`MAX_WORDS`]) in `buf`, after the length and UTF-8 checks.
+fn split_words<'a>(
+    line: &'a [u8],
+    buf: &'a mut [&'a str; MAX_WORDS],
+) -> Result<&'a [&'a str], CommandError> {
+    if line.len() > MAX_LINE {
+        return Err(CommandError::Oversized);
+    }
+    let text = core::str::from_utf8(line).map_err(|_| CommandError::NotUtf8)?;
+    let mut n = 0;
+    for w in text.split_ascii_whitespace() {
+        match buf.get_mut(n) {
+            Some(slot) => *slot = w,
+            None => return Err(CommandError::TooManyArguments),
+        }
+        n += 1;
+    }
+    Ok(buf.get(..n).unwrap_or(&[]))
+}
+
+/// `Ok` when `args` has exactly `want` words.
+fn arity(args: &[&str], want: usize) -> Result<(), CommandError> {
+    match args.len() {
+        k if k < want => Err(CommandError::MissingArgument),
+        k if k > want => Err(CommandError::TooManyArguments),
+        _ => Ok(()),
+    }
+}
+
+/// `sweep <start_hz> <stop_hz> <step_hz> <settle_s> <integrate_s> <drive_v>`.
+fn sweep(args: &[&str], scale: &FrontEndScale) -> Result<SweepSettings, CommandError> {
+    arity(args, 6)?;
+    let [start, stop, step, settle, integrate, drive] = numbers(args)?;
+    let s = SweepSettings {
+        start: Hz(start),
+        stop: Hz(stop),
+        step: Hz(step),
+        settle: Seconds(settle),
+        integrate: Seconds(integrate),
+        drive: Volts(drive),
+    };
+    s.validate(scale).map_err(CommandError::Settings)?;
+    Ok(s)
+}
+
+/// `staged <band_start_hz> <band_stop_hz> <coarse_points> <coarse_settle_s> <integrate_s>
+/// <refine_points> <refine_span> <settle_tau> <drive_v>`: valid for one of the two-stage
+/// refinements at least (the firmware checks the active method's own).
+fn staged(args: &[&str], scale: &FrontEndScale) -> Result<StagedSettings, CommandError> {
+    arity(args, 9)?;
+    let [start, stop, coarse_points, coarse_settle, integrate, refine_points, refine_span, settle_tau, drive] =
+        numbers(args)?;
+    let s = StagedSettings {
+        band_start: Hz(start),
+        band_stop: Hz(stop),
+        coarse_points: count(coarse_points)?,
+        coarse_settle: Seconds(coarse_settle),
+        integrate: Seconds(integrate),
+        refine_points: count(refine_points)?,
+        refine_span,
+        settle_tau,
+        drive: Volts(drive),
+    };
+    let bvd = s.validate(Refine::Bvd, scale).map(|_| ());
+    let any = bvd.or_else(|e| {
+        [Refine::Conductance, Refine::Track]
+            .iter()
+            .any(|r| s.validate(*r, scale).is_ok())
+            .then_some(())
+            .ok_or(e)
+    });
+    any.map_err(CommandError::Settings)?;
+    Ok(s)
+}
+
+/// `ringdown <band_start_hz> <band_stop_hz> <seed_hz> <burst_s> <ring_s> <stages>
+/// <window_cycles> <drive_v>`.
+fn ringdown(args: &[&str], scale: &FrontEndScale) -> Result<RingdownSettings, CommandError> {
+    arity(args, 8)?;
+    let [start, stop, seed, burst, ring, stages, window_cycles, drive] = numbers(args)?;
+    let s = RingdownSettings {
+        band_start: Hz(start),
+        band_stop: Hz(stop),
+        seed: Hz(seed),
+        burst: Seconds(burst),
+        ring: Seconds(ring),
+        stages: count(stages)?,
+        window_cycles: count(window_cycles)?,
+        drive: Volts(drive),
+    };
+    s.validate(scale).map_err(CommandError::Settings)?;
+    Ok(s)
+}
+
+/// `calibrate add <kPa> | fit | clear | paper`.
+fn calibrate(args: &[&str]) -> Result<Command, CommandError> {
+    let (&sub, rest) = args.split_first().ok_or(CommandError::MissingArgument)?;
+    let none = |c: Command| arity(rest, 0).map(|_| c);
+    match sub {
+        "add" => {
+            arity(rest, 1)?;
+            let e = number(rest.first().copied().unwrap_or_default())?;
+            if (REFERENCE_KPA.0..=REFERENCE_KPA.1).contains(&e) {
+                Ok(Command::CalibrateAdd(KPa(e)))
+            } else {
+                Err(CommandError::OutOfRange)
+            }
+        }
+        "fit" => none(Command::CalibrateFit),
+        "clear" => none(Command::CalibrateClear),
+        "paper" => none(Command::CalibratePaper),
+        _ => Err(CommandError::UnknownSubcommand),
     }
 }
 
