@@ -299,6 +299,20 @@ mod tests {
     use crate::dsp::dds::tuning_word;
     use crate::units::AdcCode;
 
+    /// One batch of 50 samples with the DAC looped straight back into both ADC channels.
+    fn loopback_batch(e: &mut SampleEngine) -> Option<PointRaw> {
+        let mut dac = [DacCode::MID; 50];
+        let mut adc = [AdcFrame::default(); 50];
+        e.generate(&mut dac);
+        for (a, d) in adc.iter_mut().zip(dac.iter()) {
+            *a = AdcFrame {
+                current: AdcCode(d.0),
+                monitor: AdcCode(d.0),
+            };
+        }
+        e.demodulate(&adc)
+    }
+
     /// Loop the DAC straight back into both ADC channels: the point must integrate exactly the
     /// asked number of whole cycles and see a pure sine of the commanded amplitude.
     #[test]
@@ -313,18 +327,9 @@ mod tests {
             windows: 1,
             tag: 1,
         });
-        let mut dac = [DacCode::MID; 50];
-        let mut adc = [AdcFrame::default(); 50];
         let mut got = None;
         for _ in 0..100 {
-            e.generate(&mut dac);
-            for (a, d) in adc.iter_mut().zip(dac.iter()) {
-                *a = AdcFrame {
-                    current: AdcCode(d.0),
-                    monitor: AdcCode(d.0),
-                };
-            }
-            if let Some(p) = e.demodulate(&adc) {
+            if let Some(p) = loopback_batch(&mut e) {
                 got = Some(p);
                 break;
             }
@@ -357,18 +362,9 @@ mod tests {
             windows: 6,
             tag: 3,
         });
-        let mut dac = [DacCode::MID; 50];
-        let mut adc = [AdcFrame::default(); 50];
         let mut got = std::vec::Vec::new();
         for _ in 0..40 {
-            e.generate(&mut dac);
-            for (a, d) in adc.iter_mut().zip(dac.iter()) {
-                *a = AdcFrame {
-                    current: AdcCode(d.0),
-                    monitor: AdcCode(d.0),
-                };
-            }
-            if let Some(p) = e.demodulate(&adc) {
+            if let Some(p) = loopback_batch(&mut e) {
                 got.push(p);
             }
         }

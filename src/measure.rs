@@ -88,26 +88,22 @@ pub const DEFAULT_METHOD: Method = Method::Auto;
 /// the same list).
 pub const METHOD_NAMES: &str = "paper,sweep-g,adaptive,fit,track,ringdown,hold,auto";
 
-impl From<&SweepSettings> for Settings {
-    fn from(s: &SweepSettings) -> Self {
-        Settings::Sweep(*s)
-    }
+/// `Settings::from(&s)` for each method family's settings.
+macro_rules! settings_from {
+    ($($t:ty => $v:ident),*) => {$(
+        impl From<&$t> for Settings {
+            fn from(s: &$t) -> Self {
+                Settings::$v(*s)
+            }
+        }
+    )*};
 }
-impl From<&StagedSettings> for Settings {
-    fn from(s: &StagedSettings) -> Self {
-        Settings::Staged(*s)
-    }
-}
-impl From<&RingdownSettings> for Settings {
-    fn from(s: &RingdownSettings) -> Self {
-        Settings::Ringdown(*s)
-    }
-}
-impl From<&HoldSettings> for Settings {
-    fn from(s: &HoldSettings) -> Self {
-        Settings::Hold(*s)
-    }
-}
+settings_from!(
+    SweepSettings => Sweep,
+    StagedSettings => Staged,
+    RingdownSettings => Ringdown,
+    HoldSettings => Hold
+);
 impl From<&Settings> for Settings {
     fn from(s: &Settings) -> Self {
         *s

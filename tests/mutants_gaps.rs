@@ -67,6 +67,11 @@ fn status(est: Estimate, unit: &UnitProfile) -> Status {
     conclude(Method::SweepG, Ok(est), unit, Seconds(1.0), 10).status
 }
 
+/// The verdict on resonance `f` (Hz) with uncertainty `sigma` and quality `q` for [`unit`].
+fn verdict(f: f64, sigma: f64, q: Option<f32>) -> Status {
+    status(estimate(f, sigma, q), &unit())
+}
+
 /// 1000 kPa reads `266.6 − 2305 · 1000^−0.7243 = 251.12 Hz`; the model expects Q 20 there.
 #[test]
 fn a_good_reading_on_the_curve_gives_its_modulus() {
@@ -93,15 +98,12 @@ fn repeatability_gate_at_ten_percent() {
     let s = slope_of(1000.0);
     assert!((s - 0.011213).abs() < 2e-6, "{s}");
     // 1.05 Hz: 93.6 kPa, 9.4 % -> a reading.
-    assert_eq!(status(estimate(f, 1.05, Some(20.0)), &unit()), Status::Ok);
+    assert_eq!(verdict(f, 1.05, Some(20.0)), Status::Ok);
     // 1.2 Hz: 107 kPa, 10.7 % -> too scattered to place tissue.
-    assert_eq!(
-        status(estimate(f, 1.2, Some(20.0)), &unit()),
-        Status::Failed(Failure::LowSnr)
-    );
+    assert_eq!(verdict(f, 1.2, Some(20.0)), Status::Failed(Failure::LowSnr));
     // 20 Hz: 1784 kPa, 178 % of the value.
     assert_eq!(
-        status(estimate(f, 20.0, Some(20.0)), &unit()),
+        verdict(f, 20.0, Some(20.0)),
         Status::Failed(Failure::LowSnr)
     );
 }
@@ -119,7 +121,7 @@ fn unresolved_q_is_low_snr() {
         Some(f32::NAN),
     ] {
         assert_eq!(
-            status(estimate(f, 0.1, q), &unit()),
+            verdict(f, 0.1, q),
             Status::Failed(Failure::LowSnr),
             "q = {q:?}"
         );
@@ -144,13 +146,13 @@ fn contact_condition_holds_within_twenty_percent() {
 
     // Through the pipeline: off-condition contact is `bad_contact`, not a modulus.
     let f = f_of(1000.0);
-    assert_eq!(status(estimate(f, 0.1, Some(23.9)), &unit()), Status::Ok);
+    assert_eq!(verdict(f, 0.1, Some(23.9)), Status::Ok);
     assert_eq!(
-        status(estimate(f, 0.1, Some(26.0)), &unit()),
+        verdict(f, 0.1, Some(26.0)),
         Status::Failed(Failure::BadContact)
     );
     assert_eq!(
-        status(estimate(f, 0.1, Some(14.0)), &unit()),
+        verdict(f, 0.1, Some(14.0)),
         Status::Failed(Failure::BadContact)
     );
 }

@@ -8,9 +8,9 @@
 mod qemu_support;
 mod reference;
 
-use qemu_support::{build_image, fields, last, num, require_tools, run_image, run_script};
+use qemu_support::{build_and_run, build_image, fields, last, num, require_tools, run_script};
 use std::collections::HashMap;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 const TIMEOUT: Duration = Duration::from_secs(180);
 const PHANTOM_B_KPA: f64 = 279.0;
@@ -55,14 +55,7 @@ fn check_reading(who: &str, r: &HashMap<String, String>, f0: f64, tol_hz: f64) {
 
 #[test]
 fn qemu_image_measures_phantom_b() {
-    require_tools();
-    let wall = Instant::now();
-    let elf = build_image("probe");
-    let (exited_ok, lines) = run_image(&elf, TIMEOUT);
-    for l in &lines {
-        println!("{l}");
-    }
-    println!("build + run: {:.1} s", wall.elapsed().as_secs_f64());
+    let (exited_ok, lines) = build_and_run("probe", TIMEOUT);
 
     let parsed: Vec<(String, HashMap<String, String>)> =
         lines.iter().filter_map(|l| fields(l)).collect();

@@ -12,9 +12,9 @@
 mod qemu_support;
 
 use pzt_probe::Method;
-use qemu_support::{build_image, fields, last, num, require_tools, run_image};
+use qemu_support::{build_and_run, fields, last, num};
 use std::collections::{BTreeSet, HashMap};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 const TIMEOUT: Duration = Duration::from_secs(300);
 /// The budget: this share of the core (percent) ...
@@ -77,14 +77,7 @@ fn agrees(logged: f64, computed: f64) -> bool {
 
 #[test]
 fn every_method_fits_its_budget_on_target() {
-    require_tools();
-    let wall = Instant::now();
-    let elf = build_image("cost");
-    let (exited_ok, lines) = run_image(&elf, TIMEOUT);
-    for l in &lines {
-        println!("{l}");
-    }
-    println!("build + run: {:.1} s", wall.elapsed().as_secs_f64());
+    let (exited_ok, lines) = build_and_run("cost", TIMEOUT);
     let parsed: Vec<_> = lines.iter().filter_map(|l| fields(l)).collect();
 
     // The figures are stated for the budget of the issue.

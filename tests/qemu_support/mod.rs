@@ -108,6 +108,20 @@ pub fn run_image(elf: &Path, timeout: Duration) -> (bool, Vec<String>) {
     run_script(elf, timeout, None)
 }
 
+/// Check the tools, build the image `bin`, run it with its built-in script and print its log
+/// and the wall time taken: QEMU's success and the decoded log lines.
+pub fn build_and_run(bin: &str, timeout: Duration) -> (bool, Vec<String>) {
+    require_tools();
+    let wall = std::time::Instant::now();
+    let elf = build_image(bin);
+    let (exited_ok, lines) = run_image(&elf, timeout);
+    for l in &lines {
+        println!("{l}");
+    }
+    println!("build + run: {:.1} s", wall.elapsed().as_secs_f64());
+    (exited_ok, lines)
+}
+
 /// [`run_image`] with `script` as the image's command script (its boot command line, as
 /// `scripts/qemu-run` passes `QEMU_SCRIPT`), or its built-in one for `None`.
 pub fn run_script(elf: &Path, timeout: Duration, script: Option<&str>) -> (bool, Vec<String>) {
