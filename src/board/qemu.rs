@@ -25,7 +25,7 @@ use crate::engine::SampleEngine;
 use crate::hal::{AdcFrame, FrontEndScale};
 use crate::runner::BATCH;
 use crate::units::{AdcCode, DacCode};
-use core::ptr::{read_volatile, write_volatile};
+use core::ptr::{addr_of, addr_of_mut, read_volatile, write_volatile};
 use hal_sim::flash::SimFlash;
 use hal_sim::{AdcPair, SimProbe};
 
@@ -194,28 +194,35 @@ pub const SYSCLK_HZ: u32 = 25_000_000;
 /// Instructions per tick of the 25 MHz timers under `-icount shift=0` (1 instruction per ns).
 pub const INSTRUCTIONS_PER_TICK: u32 = 1_000_000_000 / SYSCLK_HZ;
 
-const TIMER0_BASE: usize = 0x4000_0000;
-const TIMER1_BASE: usize = 0x4000_1000;
-const CTRL: usize = 0x0;
-const VALUE: usize = 0x4;
-const RELOAD: usize = 0x8;
-const INTCLEAR: usize = 0xC;
-const CTRL_ENABLE: u32 = 1 << 0;
-const CTRL_IRQ_ENABLE: u32 = 1 << 3;
-
-fn reg(base: usize, off: usize) -> *mut u32 {
-    (base + off) as *mut u32
+/// A CMSDK APB timer's registers (ARM DDI 0479, "APB timer"; QEMU `cmsdk-apb-timer`).
+#[repr(C)]
+struct CmsdkTimer {
+    ctrl: u32,
+    value: u32,
+    reload: u32,
+    intclear: u32,
 }
+
+impl CmsdkTimer {
+    /// CTRL.EN.
+    const ENABLE: u32 = 1 << 0;
+    /// CTRL.INTEN.
+    const IRQ_ENABLE: u32 = 1 << 3;
+}
+
+/// mps2-an386's timer 0 (the sample clock) and timer 1 (the instruction clock).
+const TIMER0: *mut CmsdkTimer = 0x4000_0000 as *mut CmsdkTimer;
+const TIMER1: *mut CmsdkTimer = 0x4000_1000 as *mut CmsdkTimer;
 
 /// Start the free-running instruction clock (timer 1, no interrupt) read by [`stamp`]; the
 /// stream's [`Stream::start`] does this, a program without the stream calls it itself.
 pub fn start_stamp_clock() {
     // SAFETY: CMSDK timer 1 registers of mps2-an386; the image owns the timer.
     unsafe {
-        write_volatile(reg(TIMER1_BASE, CTRL), 0);
-        write_volatile(reg(TIMER1_BASE, RELOAD), u32::MAX);
-        write_volatile(reg(TIMER1_BASE, VALUE), u32::MAX);
-        write_volatile(reg(TIMER1_BASE, CTRL), CTRL_ENABLE);
+        write_volatile(addr_of_mut!((*TIMER1).ctrl), 0);
+        write_volatile(addr_of_mut!((*TIMER1).reload), u32::MAX);
+        write_volatile(addr_of_mut!((*TIMER1).value), u32::MAX);
+        write_volatile(addr_of_mut!((*TIMER1).ctrl), CmsdkTimer::ENABLE);
     }
 }
 
@@ -223,7 +230,7 @@ pub fn start_stamp_clock() {
 #[inline(always)]
 pub fn stamp() -> u32 {
     // SAFETY: read-only access to CMSDK timer 1's counter.
-    unsafe { read_volatile(reg(TIMER1_BASE, VALUE)) }
+    unsafe { read_volatile(addr_of!((*TIMER1).value)) }
 }
 
 /// Instructions executed since `start` (a [`stamp`]); valid for spans under 171 s.
@@ -281,11 +288,14 @@ impl Stream {
         let period = (SYSCLK_HZ as f32 * BATCH as f32 / self.scale.sample_rate.0) as u32;
         // SAFETY: CMSDK timer 0 registers; the image owns the timer.
         unsafe {
-            write_volatile(reg(TIMER0_BASE, CTRL), 0);
-            write_volatile(reg(TIMER0_BASE, RELOAD), period.saturating_sub(1));
-            write_volatile(reg(TIMER0_BASE, VALUE), period.saturating_sub(1));
-            write_volatile(reg(TIMER0_BASE, INTCLEAR), 1);
-            write_volatile(reg(TIMER0_BASE, CTRL), CTRL_ENABLE | CTRL_IRQ_ENABLE);
+            write_volatile(addr_of_mut!((*TIMER0).ctrl), 0);
+            write_volatile(addr_of_mut!((*TIMER0).reload), period.saturating_sub(1));
+            write_volatile(addr_of_mut!((*TIMER0).value), period.saturating_sub(1));
+            write_volatile(addr_of_mut!((*TIMER0).intclear), 1);
+            write_volatile(
+                addr_of_mut!((*TIMER0).ctrl),
+                CmsdkTimer::ENABLE | CmsdkTimer::IRQ_ENABLE,
+            );
         }
     }
 
@@ -294,7 +304,7 @@ impl Stream {
     /// just captured and the DAC half just played (to refill).
     pub fn capture(&mut self) -> (&[AdcFrame], &mut [DacCode]) {
         // SAFETY: write-one-to-clear of timer 0's interrupt.
-        unsafe { write_volatile(reg(TIMER0_BASE, INTCLEAR), 1) };
+        unsafe { write_volatile(addr_of_mut!((*TIMER0).intclear), 1) };
         if let Some((scene, seed)) = cortex_m::interrupt::free(|cs| SCENE_REQUEST.borrow(cs).take())
         {
             self.probe = SimProbe::new(scene, seed);
@@ -322,17 +332,27 @@ impl Stream {
     }
 }
 
-const UART0_BASE: usize = 0x4000_4000;
-const UART_DATA: usize = 0x0;
-const UART_STATE: usize = 0x4;
-const UART_CTRL: usize = 0x8;
-const UART_INTCLEAR: usize = 0xC;
-const UART_BAUDDIV: usize = 0x10;
-const UART_STATE_RX_FULL: u32 = 1 << 1;
-const UART_CTRL_TX_EN: u32 = 1 << 0;
-const UART_CTRL_RX_EN: u32 = 1 << 1;
-const UART_CTRL_RX_IRQ_EN: u32 = 1 << 3;
-const UART_INT_RX: u32 = 1 << 1;
+/// A CMSDK APB UART's registers (ARM DDI 0479, "APB UART"; QEMU `cmsdk-apb-uart`).
+#[repr(C)]
+struct CmsdkUart {
+    data: u32,
+    state: u32,
+    ctrl: u32,
+    intclear: u32,
+    bauddiv: u32,
+}
+
+impl CmsdkUart {
+    /// STATE.RXFULL.
+    const RX_FULL: u32 = 1 << 1;
+    /// CTRL.TXEN, CTRL.RXEN, CTRL.RXINTEN.
+    const TX_RX_RX_IRQ: u32 = (1 << 0) | (1 << 1) | (1 << 3);
+    /// INTCLEAR.RXINT.
+    const INT_RX: u32 = 1 << 1;
+}
+
+/// mps2-an386's UART0.
+const UART0: *mut CmsdkUart = 0x4000_4000 as *mut CmsdkUart;
 
 /// CMSDK UART0 (QEMU's first serial port), receive side, interrupt driven.
 pub struct Uart(());
@@ -341,11 +361,8 @@ impl Uart {
     fn new() -> Self {
         // SAFETY: CMSDK UART0 registers; the image owns the UART.
         unsafe {
-            write_volatile(reg(UART0_BASE, UART_BAUDDIV), SYSCLK_HZ / 115_200);
-            write_volatile(
-                reg(UART0_BASE, UART_CTRL),
-                UART_CTRL_TX_EN | UART_CTRL_RX_EN | UART_CTRL_RX_IRQ_EN,
-            );
+            write_volatile(addr_of_mut!((*UART0).bauddiv), SYSCLK_HZ / 115_200);
+            write_volatile(addr_of_mut!((*UART0).ctrl), CmsdkUart::TX_RX_RX_IRQ);
         }
         Self(())
     }
@@ -354,9 +371,9 @@ impl Uart {
     pub fn read_byte(&mut self) -> Option<u8> {
         // SAFETY: CMSDK UART0 registers; reading DATA pops the received byte.
         unsafe {
-            write_volatile(reg(UART0_BASE, UART_INTCLEAR), UART_INT_RX);
-            if read_volatile(reg(UART0_BASE, UART_STATE)) & UART_STATE_RX_FULL != 0 {
-                Some(read_volatile(reg(UART0_BASE, UART_DATA)) as u8)
+            write_volatile(addr_of_mut!((*UART0).intclear), CmsdkUart::INT_RX);
+            if read_volatile(addr_of!((*UART0).state)) & CmsdkUart::RX_FULL != 0 {
+                Some(read_volatile(addr_of!((*UART0).data)) as u8)
             } else {
                 None
             }
