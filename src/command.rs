@@ -566,96 +566,90 @@ mod tests {
     #[test]
     fn errors() {
         use CommandError::*;
-        assert_eq!(p(""), Err(Empty));
-        assert_eq!(p("   "), Err(Empty));
-        assert_eq!(p("measur"), Err(UnknownCommand));
-        assert_eq!(p("MEASURE"), Err(UnknownCommand));
-        assert_eq!(p("measure now"), Err(TooManyArguments));
-        assert_eq!(p("method"), Err(MissingArgument));
-        assert_eq!(p("method fft"), Err(UnknownMethod));
-        assert_eq!(p("method paper sweep-g"), Err(TooManyArguments));
-        assert_eq!(p("sweep 200 260 2 0.02 0.03"), Err(MissingArgument));
-        assert_eq!(p("sweep 200 260 2 0.02 0.03 5 6"), Err(TooManyArguments));
-        assert_eq!(
-            p("sweep 200 260 2 0.02 0.03 5 6 7 8"),
-            Err(TooManyArguments)
-        );
-        assert_eq!(p("sweep default x"), Err(TooManyArguments));
-        assert_eq!(p("sweep 200 260 2 0.02 0.03 five"), Err(BadNumber));
-        assert_eq!(p("sweep 200 NaN 2 0.02 0.03 5"), Err(BadNumber));
-        assert_eq!(p("sweep 200 inf 2 0.02 0.03 5"), Err(BadNumber));
-        assert_eq!(p("sweep 200 1e39 2 0.02 0.03 5"), Err(BadNumber));
-        assert_eq!(
-            p("sweep 260 200 2 0.02 0.03 5"),
-            Err(Settings(SettingsError::EmptyBand))
-        );
-        assert_eq!(
-            p("sweep 200 260 0 0.02 0.03 5"),
-            Err(Settings(SettingsError::StepNotPositive))
-        );
-        assert_eq!(
-            p("sweep 200 260 2 0.02 0.03 500"),
-            Err(Settings(SettingsError::DriveOutOfRange))
-        );
-        assert_eq!(
-            p("sweep 200 3000 2 0.02 0.03 5"),
-            Err(Settings(SettingsError::TooManyPoints))
-        );
-        assert_eq!(
-            p("sweep 200 260 2 -1 0.03 5"),
-            Err(Settings(SettingsError::SettleNegative))
-        );
-        assert_eq!(
-            p("staged 170 290 6 0.02 0.02 5 0.8 3"),
-            Err(MissingArgument)
-        );
-        assert_eq!(
-            p("staged 170 290 6 0.02 0.02 5 0.8 3 5 6"),
-            Err(TooManyArguments)
-        );
-        assert_eq!(p("staged 170 290 6.5 0.02 0.02 5 0.8 3 5"), Err(OutOfRange));
-        assert_eq!(p("staged 170 290 256 0.02 0.02 5 0.8 3 5"), Err(OutOfRange));
-        assert_eq!(p("staged 170 290 6 0.02 0.02 -1 0.8 3 5"), Err(OutOfRange));
-        assert_eq!(p("staged 170 290 6 0.02 0.02 5 x 3 5"), Err(BadNumber));
-        assert_eq!(
-            p("staged 290 170 6 0.02 0.02 5 0.8 3 5"),
-            Err(Settings(SettingsError::EmptyBand))
-        );
-        // Two coarse points suit no refinement; a span of 5 linewidths with one refine point
-        // neither (track ignores the span but needs two steps).
-        assert_eq!(
-            p("staged 170 290 2 0.02 0.02 5 0.8 3 5"),
-            Err(Settings(SettingsError::KnobOutOfRange))
-        );
-        assert_eq!(
-            p("staged 170 290 6 0.02 0.02 1 5 3 5"),
-            Err(Settings(SettingsError::KnobOutOfRange))
-        );
-        assert_eq!(
-            p("staged 170 290 6 0.02 0.02 5 0.8 3 500"),
-            Err(Settings(SettingsError::DriveOutOfRange))
-        );
-        assert_eq!(
-            p("ringdown 170 290 230 0.04 0.04 2 2"),
-            Err(MissingArgument)
-        );
-        assert_eq!(
-            p("ringdown 170 290 230 0.04 0.04 5 2 5"),
-            Err(Settings(SettingsError::KnobOutOfRange))
-        );
-        assert_eq!(p("ringdown 170 290 230 0.04 0.04 2 2.5 5"), Err(OutOfRange));
-        assert_eq!(
-            p("ringdown 170 290 9000 0.04 0.04 2 2 5"),
-            Err(Settings(SettingsError::AboveNyquist))
-        );
-        assert_eq!(p("calibrate"), Err(MissingArgument));
-        assert_eq!(p("calibrate add"), Err(MissingArgument));
-        assert_eq!(p("calibrate add 0"), Err(OutOfRange));
-        assert_eq!(p("calibrate add -5"), Err(OutOfRange));
-        assert_eq!(p("calibrate add 1e6"), Err(OutOfRange));
-        assert_eq!(p("calibrate add 5 6"), Err(TooManyArguments));
-        assert_eq!(p("calibrate fit now"), Err(TooManyArguments));
-        assert_eq!(p("calibrate undo"), Err(UnknownSubcommand));
+        // Each line and the error it must give.
+        let cases: &[(&str, CommandError)] = &[
+            ("", Empty),
+            ("   ", Empty),
+            ("measur", UnknownCommand),
+            ("MEASURE", UnknownCommand),
+            ("measure now", TooManyArguments),
+            ("method", MissingArgument),
+            ("method fft", UnknownMethod),
+            ("method paper sweep-g", TooManyArguments),
+            ("sweep 200 260 2 0.02 0.03", MissingArgument),
+            ("sweep 200 260 2 0.02 0.03 5 6", TooManyArguments),
+            ("sweep 200 260 2 0.02 0.03 5 6 7 8", TooManyArguments),
+            ("sweep default x", TooManyArguments),
+            ("sweep 200 260 2 0.02 0.03 five", BadNumber),
+            ("sweep 200 NaN 2 0.02 0.03 5", BadNumber),
+            ("sweep 200 inf 2 0.02 0.03 5", BadNumber),
+            ("sweep 200 1e39 2 0.02 0.03 5", BadNumber),
+            (
+                "sweep 260 200 2 0.02 0.03 5",
+                Settings(SettingsError::EmptyBand),
+            ),
+            (
+                "sweep 200 260 0 0.02 0.03 5",
+                Settings(SettingsError::StepNotPositive),
+            ),
+            (
+                "sweep 200 260 2 0.02 0.03 500",
+                Settings(SettingsError::DriveOutOfRange),
+            ),
+            (
+                "sweep 200 3000 2 0.02 0.03 5",
+                Settings(SettingsError::TooManyPoints),
+            ),
+            (
+                "sweep 200 260 2 -1 0.03 5",
+                Settings(SettingsError::SettleNegative),
+            ),
+            ("staged 170 290 6 0.02 0.02 5 0.8 3", MissingArgument),
+            ("staged 170 290 6 0.02 0.02 5 0.8 3 5 6", TooManyArguments),
+            ("staged 170 290 6.5 0.02 0.02 5 0.8 3 5", OutOfRange),
+            ("staged 170 290 256 0.02 0.02 5 0.8 3 5", OutOfRange),
+            ("staged 170 290 6 0.02 0.02 -1 0.8 3 5", OutOfRange),
+            ("staged 170 290 6 0.02 0.02 5 x 3 5", BadNumber),
+            (
+                "staged 290 170 6 0.02 0.02 5 0.8 3 5",
+                Settings(SettingsError::EmptyBand),
+            ),
+            // Two coarse points suit no refinement; a span of 5 linewidths with one refine point
+            // neither (track ignores the span but needs two steps).
+            (
+                "staged 170 290 2 0.02 0.02 5 0.8 3 5",
+                Settings(SettingsError::KnobOutOfRange),
+            ),
+            (
+                "staged 170 290 6 0.02 0.02 1 5 3 5",
+                Settings(SettingsError::KnobOutOfRange),
+            ),
+            (
+                "staged 170 290 6 0.02 0.02 5 0.8 3 500",
+                Settings(SettingsError::DriveOutOfRange),
+            ),
+            ("ringdown 170 290 230 0.04 0.04 2 2", MissingArgument),
+            (
+                "ringdown 170 290 230 0.04 0.04 5 2 5",
+                Settings(SettingsError::KnobOutOfRange),
+            ),
+            ("ringdown 170 290 230 0.04 0.04 2 2.5 5", OutOfRange),
+            (
+                "ringdown 170 290 9000 0.04 0.04 2 2 5",
+                Settings(SettingsError::AboveNyquist),
+            ),
+            ("calibrate", MissingArgument),
+            ("calibrate add", MissingArgument),
+            ("calibrate add 0", OutOfRange),
+            ("calibrate add -5", OutOfRange),
+            ("calibrate add 1e6", OutOfRange),
+            ("calibrate add 5 6", TooManyArguments),
+            ("calibrate fit now", TooManyArguments),
+            ("calibrate undo", UnknownSubcommand),
+        ];
+        for (line, want) in cases {
+            assert_eq!(p(line), Err(*want), "{line}");
+        }
         assert_eq!(parse(b"meas\xffure", &FrontEndScale::PROBE), Err(NotUtf8));
         assert_eq!(parse(b"\xc3", &FrontEndScale::PROBE), Err(NotUtf8));
         assert_eq!(

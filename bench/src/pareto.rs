@@ -25,6 +25,15 @@ pub struct Config {
 }
 
 impl Config {
+    /// `method` with `settings`, described by `label`.
+    pub fn new(method: Method, label: String, settings: impl Into<Settings>) -> Self {
+        Self {
+            method,
+            label,
+            settings: settings.into(),
+        }
+    }
+
     /// True when these are the method's default settings.
     pub fn is_default(&self) -> bool {
         self.settings == self.method.default_settings()
@@ -41,11 +50,11 @@ pub fn configs() -> Vec<Config> {
             integrate: ms(int),
             ..Method::Paper.default_sweep()
         };
-        v.push(Config {
-            method: Method::Paper,
-            label: format!("1 Hz, {settle}+{int} ms"),
-            settings: Settings::Sweep(s),
-        });
+        v.push(Config::new(
+            Method::Paper,
+            format!("1 Hz, {settle}+{int} ms"),
+            &s,
+        ));
     }
     for (step, settle, int) in [
         (4.0, 15.0, 10.0),
@@ -59,33 +68,25 @@ pub fn configs() -> Vec<Config> {
             integrate: ms(int),
             ..Method::SweepG.default_sweep()
         };
-        v.push(Config {
-            method: Method::SweepG,
-            label: format!("{step} Hz, {settle}+{int} ms"),
-            settings: Settings::Sweep(s),
-        });
+        v.push(Config::new(
+            Method::SweepG,
+            format!("{step} Hz, {settle}+{int} ms"),
+            &s,
+        ));
     }
     for int in [10.0, 20.0, 40.0] {
         let s = StagedSettings {
             integrate: ms(int),
             ..StagedSettings::default_for(Refine::Conductance)
         };
-        v.push(Config {
-            method: Method::Adaptive,
-            label: format!("{int} ms"),
-            settings: Settings::Staged(s),
-        });
+        v.push(Config::new(Method::Adaptive, format!("{int} ms"), &s));
     }
     for int in [10.0, 20.0, 40.0, 80.0] {
         let s = StagedSettings {
             integrate: ms(int),
             ..StagedSettings::default_for(Refine::Bvd)
         };
-        v.push(Config {
-            method: Method::Fit,
-            label: format!("{int} ms"),
-            settings: Settings::Staged(s),
-        });
+        v.push(Config::new(Method::Fit, format!("{int} ms"), &s));
     }
     for (steps, int) in [(4u8, 20.0), (8, 20.0), (8, 40.0), (16, 40.0), (16, 80.0)] {
         let s = StagedSettings {
@@ -93,11 +94,11 @@ pub fn configs() -> Vec<Config> {
             integrate: ms(int),
             ..StagedSettings::default_for(Refine::Track)
         };
-        v.push(Config {
-            method: Method::Track,
-            label: format!("{steps} steps, {int} ms"),
-            settings: Settings::Staged(s),
-        });
+        v.push(Config::new(
+            Method::Track,
+            format!("{steps} steps, {int} ms"),
+            &s,
+        ));
     }
     for (stages, burst, ring) in [
         (1u8, 20.0, 20.0),
@@ -113,11 +114,11 @@ pub fn configs() -> Vec<Config> {
             ring: ms(ring),
             ..RingdownSettings::DEFAULT
         };
-        v.push(Config {
-            method: Method::Ringdown,
-            label: format!("{stages}× {burst}+{ring} ms"),
-            settings: Settings::Ringdown(s),
-        });
+        v.push(Config::new(
+            Method::Ringdown,
+            format!("{stages}× {burst}+{ring} ms"),
+            &s,
+        ));
     }
     // hold subtracts the unit's static admittance: the profile's air reference supplies it.
     let air = HoldSettings::DEFAULT;
