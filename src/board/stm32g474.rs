@@ -1,8 +1,8 @@
 //! The STM32G474RE board (NUCLEO-G474RE) on `embassy-stm32` 0.6: clocks, TIM6, DAC1, ADC1/ADC2
 //! on DMA ring buffers, the bank-2 flash of the calibration store, LPUART1 and the independent
 //! watchdog are embassy drivers, used from RTIC 2 tasks without an embassy executor. Raw
-//! register code remains only where embassy 0.6 lacks the feature: ten accesses, each marked
-//! `RAW n/10` with the gap and the RM0440 section, listed in `docs/firmware.md`.
+//! register code remains only where embassy 0.6 lacks the feature: twelve access sites, each
+//! marked `RAW n/12` with the gap and the RM0440 section, listed in `docs/firmware.md`.
 //!
 //! # Bring-up ([`init`])
 //!
@@ -52,7 +52,7 @@ use core::ptr::{addr_of, addr_of_mut};
 use core::sync::atomic::{AtomicU32, AtomicU8, Ordering};
 use core::task::{Context, Waker};
 use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, Exten, RingBufferedAdc, SampleTime};
-use embassy_stm32::dac::{DacChannel, ValueArray};
+use embassy_stm32::dac::{DacChannel, Mode, ValueArray};
 use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::interrupt::typelevel::{Binding, Handler};
 use embassy_stm32::interrupt::Priority;
@@ -129,13 +129,17 @@ pub enum BootError {
     Uart,
     /// The DAC's circular DMA transfer did not start: the sample stream is not started.
     DacStart,
+    /// The DAC output buffer calibration found no trim (CAL_FLAG1 never rose): the stream runs
+    /// with OTRIM1 = 31; the drive's offset is unknown.
+    DacCalibration,
 }
 
 impl BootError {
-    const ALL: [BootError; 3] = [
+    const ALL: [BootError; 4] = [
         BootError::FlashSingleBank,
         BootError::Uart,
         BootError::DacStart,
+        BootError::DacCalibration,
     ];
 
     /// Short name for the log.
@@ -144,6 +148,7 @@ impl BootError {
             BootError::FlashSingleBank => "flash_single_bank",
             BootError::Uart => "uart",
             BootError::DacStart => "dac_start",
+            BootError::DacCalibration => "dac_calibration",
         }
     }
 }
@@ -272,14 +277,14 @@ unsafe impl Binding<interrupt::typelevel::LPUART1, usart::InterruptHandler<perip
 ///
 /// Gap: embassy-stm32 0.6's DMA interrupt handler (`dma_bdma.rs`, `on_irq`) panics on TEIF; the
 /// stream must count a transfer error and stop instead (the hardware has already disabled the
-/// channel: RM0440 13.4.7 "DMA error management").
+/// channel: RM0440 DMA chapter, "DMA error management").
 struct DmaFaults;
 
 impl<I: interrupt::typelevel::Interrupt> Handler<I> for DmaFaults {
     unsafe fn on_interrupt() {
-        // RAW 1/10: DMA1_ISR TEIF1..4 (RM0440 13.6.1).
+        // RAW 1/12: DMA1_ISR TEIF1..4 (RM0440 DMA chapter, DMA_ISR).
         let isr = pac::DMA1.isr().read();
-        // RAW 2/10: DMA1_IFCR CTEIF1..4, write-one-to-clear (RM0440 13.6.2).
+        // RAW 2/12: DMA1_IFCR CTEIF1..4, write-one-to-clear (RM0440 DMA chapter, DMA_IFCR).
         let n = pac::DMA1.ifcr().write(|w| {
             let mut n = 0;
             for ch in 0..4 {
@@ -301,10 +306,10 @@ impl<I: interrupt::typelevel::Interrupt> Handler<I> for DmaFaults {
 /// Start the HSE crystal and wait for it, bounded. embassy's `rcc::init` (g4.rs) sets HSEON and
 /// then spins on HSERDY without a bound: it is given the HSE only once it runs.
 fn hse_starts() -> bool {
-    // RAW 3/10: RCC_CR.HSEON (RM0440 7.4.1; 7.2.1 HSE clock). HSEBYP stays 0 (crystal). If the
+    // RAW 3/12: RCC_CR.HSEON (RM0440 RCC chapter, RCC_CR; "HSE clock"). HSEBYP stays 0 (crystal). If the
     // crystal does not start, embassy's init (`hse: None`) clears HSEON again.
     pac::RCC.cr().modify(|w| w.set_hseon(true));
-    // RAW 4/10: RCC_CR.HSERDY, polled with a bound (RM0440 7.4.1).
+    // RAW 4/12: RCC_CR.HSERDY, polled with a bound (RM0440 RCC chapter, RCC_CR).
     spin_until(HSE_TIMEOUT, || pac::RCC.cr().read().hserdy())
 }
 
@@ -470,8 +475,8 @@ impl Stream {
         let h = (self.half + periods as usize - 1) % 2;
         self.half = (h + 1) % 2;
 
-        // Gap: embassy 0.6's DAC driver has no underrun check. RAW 5/10: DAC1_SR.DMAUDR1
-        // (RM0440 22.4.8 "DMA underrun"; 22.7.10 DAC_SR). Not cleared: the stream stops on the
+        // Gap: embassy 0.6's DAC driver has no underrun check. RAW 9/12: DAC1_SR.DMAUDR1
+        // (RM0440 DAC chapter, "DMA underrun"; DAC_SR). Not cleared: the stream stops on the
         // first underrun, which is counted once.
         if !self.dac_underrun && pac::DAC1.sr().read().dmaudr(0) {
             self.dac_underrun = true;
@@ -654,6 +659,34 @@ impl NorFlash for InternalFlash {
     }
 }
 
+/// tTRIM, the settling time of one calibration step (DS12288: 50 µs max), at 170 MHz.
+const DAC_TRIM_CYCLES: u32 = SYSCLK_HZ / 20_000;
+
+/// Calibrate DAC1 channel 1's output buffer offset (RM0440 DAC chapter, "DAC channel output buffer
+/// calibration"): with the channel off and in normal buffered mode, CEN1 set, OTRIM1 stepped up
+/// from 0, tTRIM after each step, until CAL_FLAG1 reads 1 — the first trim at or above the
+/// offset. 32 steps at most (1.6 ms); false if the flag never rose (OTRIM1 is then left at 31).
+///
+/// Gap: embassy-stm32 0.6's DAC driver has no calibration.
+fn calibrate_dac() -> bool {
+    // RAW 10/12: DAC_CR.CEN1, calibration mode on and off (RM0440 DAC chapter, DAC_CR).
+    let cen = |on| pac::DAC1.cr().modify(|w| w.set_cen(0, on));
+    cen(true);
+    let mut found = false;
+    for trim in 0..32 {
+        // RAW 11/12: DAC_CCR.OTRIM1 (RM0440 DAC chapter, DAC_CCR); OTRIM2 (channel 2, unused) written 0.
+        pac::DAC1.ccr().write(|w| w.set_otrim(0, trim));
+        cortex_m::asm::delay(DAC_TRIM_CYCLES);
+        // RAW 12/12: DAC_SR.CAL_FLAG1 (RM0440 DAC chapter, DAC_SR).
+        if pac::DAC1.sr().read().cal_flag(0) {
+            found = true;
+            break;
+        }
+    }
+    cen(false);
+    found
+}
+
 // ---- bring-up --------------------------------------------------------------------------
 
 /// The board's parts, as the application takes them over.
@@ -680,13 +713,13 @@ pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
     CLOCK.store(if hse { 1 } else { 2 }, Ordering::Relaxed);
     let p = embassy_stm32::init(embassy_config(hse));
 
-    // Gap: embassy 0.6 never sets FLASH_ACR.PRFTEN. RAW 6/10: prefetch on (RM0440 3.3.4
-    // "Read access latency"/ART accelerator; 3.7.1 FLASH_ACR), after embassy set 4 wait states.
+    // Gap: embassy 0.6 never sets FLASH_ACR.PRFTEN. RAW 5/12: prefetch on (RM0440 3.3.4
+    // ART accelerator / prefetch; FLASH_ACR), after embassy set 4 wait states.
     pac::FLASH.acr().modify(|w| w.set_prften(true));
 
     // Gap: embassy's `Flash::new_blocking` panics when FLASH_OPTR.DBANK does not match its
-    // `dual-bank` feature (flash/g.rs `check_bank_setup`). RAW 7/10: DBANK read first
-    // (RM0440 3.3.1 "Flash memory organization"; 3.7.10 FLASH_OPTR), a typed boot error instead.
+    // `dual-bank` feature (flash/g.rs `check_bank_setup`). RAW 6/12: DBANK read first
+    // (RM0440 3.3.1 "Flash memory organization"; FLASH_OPTR), a typed boot error instead.
     let flash = if pac::FLASH.optr().read().dbank() {
         Some(Flash::new_blocking(p.FLASH))
     } else {
@@ -697,23 +730,31 @@ pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
     // TIM6: 10 kHz update, its update event as TRGO, not yet running.
     let tim = Timer::new(p.TIM6);
     tim.set_frequency(Hertz(SAMPLE_RATE_HZ), RoundTo::Faster);
-    // Gap: embassy 0.6's low-level timer has no master-mode setter. RAW 8/10: TIM6_CR2.MMS =
-    // update → TRGO (RM0440 29.4.2 TIMx_CR2 of the basic timers).
+    // Gap: embassy 0.6's low-level timer has no master-mode setter. RAW 7/12: TIM6_CR2.MMS =
+    // update → TRGO (RM0440 basic timers chapter, TIMx_CR2).
     tim.regs_basic()
         .cr2()
         .modify(|w| w.set_mms(pac::timer::vals::Mms::UPDATE));
     tim.generate_update_event();
 
-    // DAC1 CH1 on PA4, buffered, triggered by TIM6_TRGO, fed by DMA1 CH3 (started in
-    // `Stream::start`). No output-buffer calibration: embassy 0.6 has none, and the raw
-    // sequence is over the register budget (docs/firmware.md).
-    let dac = DacChannel::new_triggered(
+    // DAC1 CH1 on PA4, normal mode with the output buffer, triggered by TIM6_TRGO, fed by DMA1
+    // CH3 (started in `Stream::start`).
+    let mut dac = DacChannel::new_triggered(
         p.DAC1,
         p.DMA1_CH3,
         embassy_stm32::triggers::TIM6_TRGO,
         Irqs,
         p.PA4,
     );
+    // embassy's `new_triggered` selects the trigger (TSEL1) and enables the channel but never
+    // sets TEN1, without which the DAC neither waits for TIM6 nor requests DMA (RM0440 DAC
+    // chapter, "DAC trigger selection", "DMA requests"): `set_mode` turns EN1 off (TEN1 and the calibration want the channel off), the
+    // buffer is calibrated, TEN1 set; `write` turns EN1 on again.
+    dac.set_mode(Mode::NormalExternalBuffered);
+    if !calibrate_dac() {
+        record(BootError::DacCalibration);
+    }
+    dac.set_triggering(true);
     // SAFETY: init context; `Stream::start` is the only other user of `DAC`.
     unsafe { *addr_of_mut!(DAC) = Some(dac) };
 
@@ -754,8 +795,8 @@ pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
         }
     };
 
-    // Gap: embassy 0.6 has no DBGMCU API. RAW 9/10: DBGMCU_APB1FZR1.DBG_IWDG_STOP, the IWDG
-    // frozen while the core is halted (RM0440 47.16.4), before it starts.
+    // Gap: embassy 0.6 has no DBGMCU API. RAW 8/12: DBGMCU_APB1FZR1.DBG_IWDG_STOP, the IWDG
+    // frozen while the core is halted (RM0440 DBGMCU chapter, DBGMCU_APB1FZR1), before it starts.
     pac::DBGMCU.apb1lfzr().modify(|w| w.set_iwdg(true));
     let mut wdg = IndependentWatchdog::new(p.IWDG, WATCHDOG_US);
     wdg.unleash();
