@@ -129,8 +129,8 @@ pub enum BootError {
     Uart,
     /// The DAC's circular DMA transfer did not start: the sample stream is not started.
     DacStart,
-    /// The DAC output buffer calibration found no trim (CAL_FLAG1 never rose): the stream runs
-    /// with OTRIM1 = 31; the drive's offset is unknown.
+    /// The DAC output buffer calibration found no trim (CAL_FLAG1 never rose): the DAC is not
+    /// trusted with the drive and the sample stream is not started.
     DacCalibration,
 }
 
@@ -665,7 +665,7 @@ const DAC_TRIM_CYCLES: u32 = SYSCLK_HZ / 20_000;
 /// Calibrate DAC1 channel 1's output buffer offset (RM0440 DAC chapter, "DAC channel output buffer
 /// calibration"): with the channel off and in normal buffered mode, CEN1 set, OTRIM1 stepped up
 /// from 0, tTRIM after each step, until CAL_FLAG1 reads 1 — the first trim at or above the
-/// offset. 32 steps at most (1.6 ms); false if the flag never rose (OTRIM1 is then left at 31).
+/// offset. 32 steps at most (1.6 ms); false if the flag never rose.
 ///
 /// Gap: embassy-stm32 0.6's DAC driver has no calibration.
 fn calibrate_dac() -> bool {
@@ -748,15 +748,19 @@ pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
     );
     // embassy's `new_triggered` selects the trigger (TSEL1) and enables the channel but never
     // sets TEN1, without which the DAC neither waits for TIM6 nor requests DMA (RM0440 DAC
-    // chapter, "DAC trigger selection", "DMA requests"): `set_mode` turns EN1 off (TEN1 and the calibration want the channel off), the
-    // buffer is calibrated, TEN1 set; `write` turns EN1 on again.
+    // chapter, "DAC trigger selection", "DMA requests"): `set_mode` turns EN1 off (TEN1 and the
+    // calibration want the channel off), TEN1 is set, the buffer calibrated; `write` turns EN1
+    // on again.
     dac.set_mode(Mode::NormalExternalBuffered);
-    if !calibrate_dac() {
+    dac.set_triggering(true);
+    // A DAC whose calibration never settles is not trusted with the drive: the stream is not
+    // started (readings end as `stalled`).
+    if calibrate_dac() {
+        // SAFETY: init context; `Stream::start` is the only other user of `DAC`.
+        unsafe { *addr_of_mut!(DAC) = Some(dac) };
+    } else {
         record(BootError::DacCalibration);
     }
-    dac.set_triggering(true);
-    // SAFETY: init context; `Stream::start` is the only other user of `DAC`.
-    unsafe { *addr_of_mut!(DAC) = Some(dac) };
 
     // ADC1 (current, PA0 = IN1) and ADC2 (monitor, PA1 = IN2): calibrated (single-ended and
     // differential), 20 µs before ADEN, by `Adc::new`; kernel clock SYSCLK / 4 = 42.5 MHz.
@@ -788,7 +792,13 @@ pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
     // SAFETY: init context; the ring is handed to embassy for good.
     let uart_buf = unsafe { &mut *addr_of_mut!(UART_BUF) };
     let uart = match UartRx::new(p.LPUART1, p.PA3, p.DMA1_CH4, Irqs, cfg) {
-        Ok(rx) => Some(rx.into_ring_buffered(uart_buf)),
+        Ok(rx) => {
+            let mut rx = rx.into_ring_buffered(uart_buf);
+            // The ring's DMA and the idle/error interrupts; embassy starts them only from a
+            // read, and the first read here waits for the first interrupt.
+            rx.start_uart();
+            Some(rx)
+        }
         Err(_) => {
             record(BootError::Uart);
             None
