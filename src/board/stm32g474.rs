@@ -659,7 +659,8 @@ impl NorFlash for InternalFlash {
     }
 }
 
-/// tTRIM, the settling time of one calibration step (DS12288: 50 µs max), at 170 MHz.
+/// tTRIM, the settling time of one calibration step, taken as 50 µs (the datasheet's figure
+/// is to be checked), at 170 MHz.
 const DAC_TRIM_CYCLES: u32 = SYSCLK_HZ / 20_000;
 
 /// Calibrate DAC1 channel 1's output buffer offset (RM0440 DAC chapter, "DAC channel output buffer
