@@ -6,16 +6,20 @@
 //!
 //! # Bring-up ([`init`])
 //!
-//! The cycle counter first (it times the bounded waits); the 24 MHz HSE crystal (X3) started
-//! and probed here with a bounded wait (embassy's `rcc::init` waits for HSERDY without a bound,
-//! so it is handed the HSE only once it is known to run; otherwise the PLL runs from HSI16 and
+//! The cycle counter first (it times the bounded waits); the IWDG, frozen under the debugger,
+//! started before any of embassy's own waits (several have no bound: `docs/firmware.md`), with
+//! the step in progress kept in RAM a reset does not clear ([`Step`]): a step that hangs ends in
+//! a watchdog reset, and the next boot goes around it with a typed [`BootError`]
+//! (`clock_hang`: HSI16 at 16 MHz, no stream; `converter_hang`: no stream; `flash_hang`: no
+//! store) instead of hanging again. Then the 24 MHz HSE crystal (X3), started and probed here
+//! with a bounded wait (embassy's `rcc::init` waits for HSERDY without a bound, so it is handed
+//! the HSE only once it is known to run; otherwise the PLL runs from HSI16 and
 //! [`clock_source`] says so); `embassy_stm32::init` (PWR and FLASH clocked and reset, range 1
 //! boost, 4 wait states, PLL 170 MHz, ADC12 kernel clock = SYSCLK, DMA interrupt priority);
 //! flash prefetch; the option bytes' bank mode (embassy's `Flash::new_blocking` panics on a
-//! mismatch: checked first, [`BootError::FlashSingleBank`]); LPUART1 receive on a DMA ring; the
-//! IWDG frozen under the debugger, then started. A failed step records a [`BootError`] (the
-//! first is kept, [`boot_error`]) and the board carries on degraded. The waits that remain
-//! inside embassy without a bound are listed in `docs/firmware.md` (unverified on hardware).
+//! mismatch: checked first, [`BootError::FlashSingleBank`]); the converters; LPUART1 receive
+//! on a DMA ring. A failed step records a [`BootError`] (the first is kept, [`boot_error`]) and
+//! the board carries on degraded. Unverified on hardware.
 //!
 //! # Analog stream ([`Stream`])
 //!
@@ -62,7 +66,7 @@ use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::{RoundTo, Timer};
 use embassy_stm32::usart::{RingBufferedUartRx, UartRx};
 use embassy_stm32::wdg::IndependentWatchdog;
-use embassy_stm32::{bind_interrupts, dma, interrupt, pac, peripherals, usart};
+use embassy_stm32::{bind_interrupts, dma, interrupt, pac, peripherals, usart, Peri};
 use embedded_storage::nor_flash::{
     check_erase, check_read, check_write, ErrorType, NorFlash, NorFlashError, NorFlashErrorKind,
     ReadNorFlash,
@@ -132,14 +136,27 @@ pub enum BootError {
     /// The DAC output buffer calibration found no trim (CAL_FLAG1 never rose): the DAC is not
     /// trusted with the drive and the sample stream is not started.
     DacCalibration,
+    /// The boot before did not get through embassy's clock setup (its waits on HSIRDY, PLLRDY,
+    /// the flash latency and the clock switch have no bound; the watchdog ended it): this boot
+    /// runs on HSI16 at 16 MHz without the PLL and does not start the sample stream.
+    ClockHang,
+    /// The boot before did not get through the converters' setup (embassy's ADC calibration and
+    /// ready waits): TIM6, DAC1 and the ADCs are left alone, the stream is not started.
+    ConverterHang,
+    /// The run before hung in a flash erase or program (embassy's waits on FLASH_SR.BSY): the
+    /// store's flash is not used this boot.
+    FlashHang,
 }
 
 impl BootError {
-    const ALL: [BootError; 4] = [
+    const ALL: [BootError; 7] = [
         BootError::FlashSingleBank,
         BootError::Uart,
         BootError::DacStart,
         BootError::DacCalibration,
+        BootError::ClockHang,
+        BootError::ConverterHang,
+        BootError::FlashHang,
     ];
 
     /// Short name for the log.
@@ -149,6 +166,9 @@ impl BootError {
             BootError::Uart => "uart",
             BootError::DacStart => "dac_start",
             BootError::DacCalibration => "dac_calibration",
+            BootError::ClockHang => "clock_hang",
+            BootError::ConverterHang => "converter_hang",
+            BootError::FlashHang => "flash_hang",
         }
     }
 }
@@ -167,6 +187,59 @@ pub fn boot_error() -> Option<BootError> {
     BootError::ALL.into_iter().find(|e| *e as u8 == v)
 }
 
+// ---- the boot-step marker ----------------------------------------------------------------
+
+/// A step whose waits are embassy's own and unbounded. The watchdog runs from the start of
+/// [`init`]; the step in progress is kept in RAM that a reset does not clear, so the boot after
+/// a watchdog reset knows which step hung and goes around it with a typed [`BootError`] instead
+/// of hanging again (no reset loop).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+enum Step {
+    /// `embassy_stm32::init` (RCC, flash latency).
+    Clock = 1,
+    /// TIM6, DAC1 (with its calibration), ADC1 and ADC2.
+    Converters = 2,
+    /// A flash erase or program of the store.
+    Flash = 3,
+}
+
+/// Tag of a valid marker (upper half-word); the second word is the first's complement, so the
+/// random contents of SRAM at power-on are not taken for a step.
+const STEP_MAGIC: u32 = 0x5EB0_0000;
+
+/// The step in progress: not zeroed by the start-up code (`.uninit`), so it survives a reset
+/// (not a power cycle).
+#[link_section = ".uninit.pzt_boot_step"]
+static mut STEP: MaybeUninit<[u32; 2]> = MaybeUninit::uninit();
+
+fn set_step(step: Option<Step>) {
+    let v = step.map_or(0, |s| STEP_MAGIC | s as u32);
+    // SAFETY: two aligned words of our own static; volatile so the marker is in RAM before the
+    // step's first wait.
+    unsafe {
+        let p = addr_of_mut!(STEP) as *mut u32;
+        p.write_volatile(v);
+        p.add(1).write_volatile(!v);
+    }
+}
+
+/// The step the run before this boot was in when it was reset.
+fn interrupted_step() -> Option<Step> {
+    // SAFETY: two aligned words of our own static; after a power-on they hold whatever SRAM
+    // came up with, which the complement check and the tag reject (read as plain words).
+    let (a, b) = unsafe {
+        let p = addr_of!(STEP) as *const u32;
+        (p.read_volatile(), p.add(1).read_volatile())
+    };
+    if a != !b || a & 0xFFFF_0000 != STEP_MAGIC {
+        return None;
+    }
+    [Step::Clock, Step::Converters, Step::Flash]
+        .into_iter()
+        .find(|s| *s as u32 == a & 0xFFFF)
+}
+
 /// The oscillator the core clock comes from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ClockSource {
@@ -174,6 +247,9 @@ pub enum ClockSource {
     Hse24,
     /// HSI16 through the PLL (the HSE did not start): 170 MHz, RC accuracy.
     Hsi16Pll,
+    /// HSI16 directly, 16 MHz, no PLL: the boot before hung in the clock setup
+    /// ([`BootError::ClockHang`]); the sample stream is not started.
+    Hsi16,
 }
 
 impl ClockSource {
@@ -182,18 +258,20 @@ impl ClockSource {
         match self {
             ClockSource::Hse24 => "hse24",
             ClockSource::Hsi16Pll => "hsi16-pll",
+            ClockSource::Hsi16 => "hsi16",
         }
     }
 }
 
-/// 1: HSE through the PLL, otherwise HSI16 through the PLL.
+/// 1: HSE through the PLL, 2: HSI16 through the PLL, otherwise HSI16 directly.
 static CLOCK: AtomicU8 = AtomicU8::new(0);
 
 /// The oscillator the core runs from (set by [`init`]).
 pub fn clock_source() -> ClockSource {
     match CLOCK.load(Ordering::Relaxed) {
         1 => ClockSource::Hse24,
-        _ => ClockSource::Hsi16Pll,
+        2 => ClockSource::Hsi16Pll,
+        _ => ClockSource::Hsi16,
     }
 }
 
@@ -314,31 +392,36 @@ fn hse_starts() -> bool {
 }
 
 /// embassy's clock configuration: 170 MHz from the PLL (24 MHz / 6 or 16 MHz / 4 = 4 MHz × 85
-/// / 2), range 1 boost, the ADC12 kernel clock from SYSCLK (embassy's default is none).
-fn embassy_config(hse: bool) -> embassy_stm32::Config {
+/// / 2), range 1 boost — or HSI16 at 16 MHz without the PLL ([`ClockSource::Hsi16`], after a
+/// boot that hung in the clock setup) —, the ADC12 kernel clock from SYSCLK (embassy's default
+/// is none).
+fn embassy_config(clock: ClockSource) -> embassy_stm32::Config {
     use embassy_stm32::rcc::{
         mux, Hse, HseMode, LsConfig, Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk,
     };
     let mut config = embassy_stm32::Config::default();
     let rcc = &mut config.rcc;
+    let hse = clock == ClockSource::Hse24;
     rcc.hse = hse.then_some(Hse {
         freq: Hertz(HSE_HZ),
         mode: HseMode::Oscillator,
     });
-    rcc.pll = Some(Pll {
-        source: if hse { PllSource::HSE } else { PllSource::HSI },
-        prediv: if hse {
-            PllPreDiv::DIV6
-        } else {
-            PllPreDiv::DIV4
-        },
-        mul: PllMul::MUL85,
-        divp: None,
-        divq: None,
-        divr: Some(PllRDiv::DIV2),
-    });
-    rcc.sys = Sysclk::PLL1_R;
-    rcc.boost = true;
+    if clock != ClockSource::Hsi16 {
+        rcc.pll = Some(Pll {
+            source: if hse { PllSource::HSE } else { PllSource::HSI },
+            prediv: if hse {
+                PllPreDiv::DIV6
+            } else {
+                PllPreDiv::DIV4
+            },
+            mul: PllMul::MUL85,
+            divp: None,
+            divq: None,
+            divr: Some(PllRDiv::DIV2),
+        });
+        rcc.sys = Sysclk::PLL1_R;
+        rcc.boost = true;
+    }
     // Nothing uses HSI48 (USB, RNG) or the RTC: no HSI48RDY or LSIRDY waits, no backup domain.
     rcc.hsi48 = None;
     rcc.ls = LsConfig::off();
@@ -391,11 +474,16 @@ fn park_and_poll<F: Future>(fut: F) -> bool {
         .is_pending()
 }
 
-/// The DAC/ADC sample stream over TIM6, DAC1, ADC1, ADC2 and three DMA1 channels.
-pub struct Stream {
+/// The converters of the stream (absent when a boot error kept them from being set up).
+struct Converters {
     adc1: RingBufferedAdc<'static, ADC1>,
     adc2: RingBufferedAdc<'static, ADC2>,
     tim: Timer<'static, TIM6>,
+}
+
+/// The DAC/ADC sample stream over TIM6, DAC1, ADC1, ADC2 and three DMA1 channels.
+pub struct Stream {
+    hw: Option<Converters>,
     frames: [AdcFrame; BATCH],
     current: [u16; BATCH],
     monitor: [u16; BATCH],
@@ -440,15 +528,18 @@ impl Stream {
                 None => false,
             }
         };
+        let Some(hw) = self.hw.as_mut() else {
+            return;
+        };
         if !started {
             record(BootError::DacStart);
             return;
         }
         // The rings (DMA and ADSTART) before the trigger: every TIM6 update from the first on
         // plays one DAC code and converts one sample on each ADC.
-        self.adc1.start();
-        self.adc2.start();
-        self.tim.start();
+        hw.adc1.start();
+        hw.adc2.start();
+        hw.tim.start();
     }
 
     /// Acknowledge the DMA half/full-transfer interrupt of ADC1's ring; returns the ADC frames
@@ -485,15 +576,18 @@ impl Stream {
         let faults = stream_faults();
         self.fault_seen = faults != self.faults;
         self.faults = faults;
-        if self.fault_seen {
+        match self.hw.as_mut() {
             // Either fault ends the stream as a whole (a disabled DMA channel, a DAC that no
             // longer requests data): stop the trigger, so the measurement task's readings end
             // as `stalled` rather than run on with a dead drive or stale samples.
-            self.tim.stop();
-        } else if !(fill(&mut self.adc1, &mut self.current)
-            && fill(&mut self.adc2, &mut self.monitor))
-        {
-            self.late_seen = true;
+            Some(hw) if self.fault_seen => hw.tim.stop(),
+            Some(hw) => {
+                if !(fill(&mut hw.adc1, &mut self.current) && fill(&mut hw.adc2, &mut self.monitor))
+                {
+                    self.late_seen = true;
+                }
+            }
+            None => self.late_seen = true,
         }
         for ((f, &i), &v) in self.frames.iter_mut().zip(&self.current).zip(&self.monitor) {
             *f = AdcFrame {
@@ -646,16 +740,24 @@ impl NorFlash for InternalFlash {
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
         check_erase(self, from, to)?;
-        self.flash()?
+        let flash = self.flash()?;
+        set_step(Some(Step::Flash));
+        let r = flash
             .blocking_erase(from, to)
-            .map_err(FlashError::Controller)
+            .map_err(FlashError::Controller);
+        set_step(None);
+        r
     }
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
         check_write(self, offset, bytes.len())?;
-        self.flash()?
+        let flash = self.flash()?;
+        set_step(Some(Step::Flash));
+        let r = flash
             .blocking_write(offset, bytes)
-            .map_err(FlashError::Controller)
+            .map_err(FlashError::Controller);
+        set_step(None);
+        r
     }
 }
 
@@ -688,6 +790,83 @@ fn calibrate_dac() -> bool {
     found
 }
 
+/// The peripherals of the sample stream.
+struct ConverterPins {
+    tim6: Peri<'static, TIM6>,
+    dac1: Peri<'static, peripherals::DAC1>,
+    dac_dma: Peri<'static, peripherals::DMA1_CH3>,
+    pa4: Peri<'static, peripherals::PA4>,
+    adc1: Peri<'static, ADC1>,
+    adc1_dma: Peri<'static, DMA1_CH1>,
+    pa0: Peri<'static, peripherals::PA0>,
+    adc2: Peri<'static, ADC2>,
+    adc2_dma: Peri<'static, peripherals::DMA1_CH2>,
+    pa1: Peri<'static, peripherals::PA1>,
+}
+
+/// Set up TIM6 (10 kHz TRGO, stopped), DAC1 CH1 (triggered, calibrated, into [`DAC`]) and the
+/// two ADC rings; [`Stream::start`] starts them.
+fn converters(p: ConverterPins) -> Converters {
+    // TIM6: 10 kHz update, its update event as TRGO, not yet running.
+    let tim = Timer::new(p.tim6);
+    tim.set_frequency(Hertz(SAMPLE_RATE_HZ), RoundTo::Faster);
+    // Gap: embassy 0.6's low-level timer has no master-mode setter. RAW 7/12: TIM6_CR2.MMS =
+    // update → TRGO (RM0440 basic timers chapter, TIMx_CR2).
+    tim.regs_basic()
+        .cr2()
+        .modify(|w| w.set_mms(pac::timer::vals::Mms::UPDATE));
+    tim.generate_update_event();
+
+    // DAC1 CH1 on PA4, normal mode with the output buffer, triggered by TIM6_TRGO, fed by DMA1
+    // CH3 (started in `Stream::start`).
+    let mut dac = DacChannel::new_triggered(
+        p.dac1,
+        p.dac_dma,
+        embassy_stm32::triggers::TIM6_TRGO,
+        Irqs,
+        p.pa4,
+    );
+    // embassy's `new_triggered` selects the trigger (TSEL1) and enables the channel but never
+    // sets TEN1, without which the DAC neither waits for TIM6 nor requests DMA (RM0440 DAC
+    // chapter, "DAC trigger selection", "DMA requests"): `set_mode` turns EN1 off (TEN1 and the
+    // calibration want the channel off), TEN1 is set, the buffer calibrated; `write` turns EN1
+    // on again.
+    dac.set_mode(Mode::NormalExternalBuffered);
+    dac.set_triggering(true);
+    // A DAC whose calibration never settles is not trusted with the drive: the stream is not
+    // started (readings end as `stalled`).
+    if calibrate_dac() {
+        // SAFETY: init context; `Stream::start` is the only other user of `DAC`.
+        unsafe { *addr_of_mut!(DAC) = Some(dac) };
+    } else {
+        record(BootError::DacCalibration);
+    }
+
+    // ADC1 (current, PA0 = IN1) and ADC2 (monitor, PA1 = IN2): calibrated (single-ended and
+    // differential), 20 µs before ADEN, by `Adc::new`; kernel clock SYSCLK / 4 = 42.5 MHz.
+    let adc1 = Adc::new(p.adc1, AdcConfig::default());
+    let adc2 = Adc::new(p.adc2, AdcConfig::default());
+    // SAFETY: init context, before any DMA runs; the rings are handed to embassy for good.
+    let (ring1, ring2) = unsafe { (&mut *addr_of_mut!(ADC1_RING), &mut *addr_of_mut!(ADC2_RING)) };
+    let adc1 = adc1.into_ring_buffered(
+        p.adc1_dma,
+        ring1,
+        Irqs,
+        [(p.pa0.degrade_adc(), SampleTime::CYCLES47_5)].into_iter(),
+        embassy_stm32::triggers::TIM6_TRGO,
+        Exten::RISING_EDGE,
+    );
+    let adc2 = adc2.into_ring_buffered(
+        p.adc2_dma,
+        ring2,
+        Irqs,
+        [(p.pa1.degrade_adc(), SampleTime::CYCLES47_5)].into_iter(),
+        embassy_stm32::triggers::TIM6_TRGO,
+        Exten::RISING_EDGE,
+    );
+    Converters { adc1, adc2, tim }
+}
+
 // ---- bring-up --------------------------------------------------------------------------
 
 /// The board's parts, as the application takes them over.
@@ -710,81 +889,87 @@ pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
     // The cycle counter first: it times the bounded waits.
     core.DCB.enable_trace();
     core.DWT.enable_cycle_counter();
-    let hse = hse_starts();
-    CLOCK.store(if hse { 1 } else { 2 }, Ordering::Relaxed);
-    let p = embassy_stm32::init(embassy_config(hse));
+    let interrupted = interrupted_step();
+    let safe_clock = interrupted == Some(Step::Clock);
+
+    // The watchdog before any wait of embassy's: a step that hangs ends in a reset, and the
+    // next boot goes around it (`interrupted_step`). Frozen while a debugger halts the core.
+    // Gap: embassy 0.6 has no DBGMCU API. RAW 8/12: DBGMCU_APB1FZR1.DBG_IWDG_STOP (RM0440
+    // DBGMCU chapter, DBGMCU_APB1FZR1), before the IWDG starts.
+    pac::DBGMCU.apb1lfzr().modify(|w| w.set_iwdg(true));
+    // On HSI16 without the PLL the monotonic (started for 170 MHz) runs 10.6 times slow, and
+    // the measurement task's 100 ms feeds come every 1.06 s: the timeout grows with it.
+    let timeout = if safe_clock {
+        WATCHDOG_US * 11
+    } else {
+        WATCHDOG_US
+    };
+    // SAFETY: the IWDG is taken before `embassy_stm32::init` hands out the peripherals; its
+    // singleton from there is dropped unused, so this is its only driver.
+    let mut wdg = IndependentWatchdog::new(unsafe { peripherals::IWDG::steal() }, timeout);
+    wdg.unleash();
+
+    let clock = if safe_clock {
+        record(BootError::ClockHang);
+        ClockSource::Hsi16
+    } else if hse_starts() {
+        ClockSource::Hse24
+    } else {
+        ClockSource::Hsi16Pll
+    };
+    CLOCK.store(
+        match clock {
+            ClockSource::Hse24 => 1,
+            ClockSource::Hsi16Pll => 2,
+            ClockSource::Hsi16 => 0,
+        },
+        Ordering::Relaxed,
+    );
+    set_step(Some(Step::Clock));
+    let p = embassy_stm32::init(embassy_config(clock));
+    set_step(None);
 
     // Gap: embassy 0.6 never sets FLASH_ACR.PRFTEN. RAW 5/12: prefetch on (RM0440 3.3.4
-    // ART accelerator / prefetch; FLASH_ACR), after embassy set 4 wait states.
+    // ART accelerator / prefetch; FLASH_ACR), after embassy set the wait states.
     pac::FLASH.acr().modify(|w| w.set_prften(true));
 
     // Gap: embassy's `Flash::new_blocking` panics when FLASH_OPTR.DBANK does not match its
     // `dual-bank` feature (flash/g.rs `check_bank_setup`). RAW 6/12: DBANK read first
     // (RM0440 3.3.1 "Flash memory organization"; FLASH_OPTR), a typed boot error instead.
-    let flash = if pac::FLASH.optr().read().dbank() {
+    let flash = if interrupted == Some(Step::Flash) {
+        record(BootError::FlashHang);
+        None
+    } else if pac::FLASH.optr().read().dbank() {
         Some(Flash::new_blocking(p.FLASH))
     } else {
         record(BootError::FlashSingleBank);
         None
     };
 
-    // TIM6: 10 kHz update, its update event as TRGO, not yet running.
-    let tim = Timer::new(p.TIM6);
-    tim.set_frequency(Hertz(SAMPLE_RATE_HZ), RoundTo::Faster);
-    // Gap: embassy 0.6's low-level timer has no master-mode setter. RAW 7/12: TIM6_CR2.MMS =
-    // update → TRGO (RM0440 basic timers chapter, TIMx_CR2).
-    tim.regs_basic()
-        .cr2()
-        .modify(|w| w.set_mms(pac::timer::vals::Mms::UPDATE));
-    tim.generate_update_event();
-
-    // DAC1 CH1 on PA4, normal mode with the output buffer, triggered by TIM6_TRGO, fed by DMA1
-    // CH3 (started in `Stream::start`).
-    let mut dac = DacChannel::new_triggered(
-        p.DAC1,
-        p.DMA1_CH3,
-        embassy_stm32::triggers::TIM6_TRGO,
-        Irqs,
-        p.PA4,
-    );
-    // embassy's `new_triggered` selects the trigger (TSEL1) and enables the channel but never
-    // sets TEN1, without which the DAC neither waits for TIM6 nor requests DMA (RM0440 DAC
-    // chapter, "DAC trigger selection", "DMA requests"): `set_mode` turns EN1 off (TEN1 and the
-    // calibration want the channel off), TEN1 is set, the buffer calibrated; `write` turns EN1
-    // on again.
-    dac.set_mode(Mode::NormalExternalBuffered);
-    dac.set_triggering(true);
-    // A DAC whose calibration never settles is not trusted with the drive: the stream is not
-    // started (readings end as `stalled`).
-    if calibrate_dac() {
-        // SAFETY: init context; `Stream::start` is the only other user of `DAC`.
-        unsafe { *addr_of_mut!(DAC) = Some(dac) };
+    // The converters: not on HSI16 alone (readings are refused after a clock hang), not after
+    // a boot that hung setting them up.
+    let hw = if safe_clock {
+        None
+    } else if interrupted == Some(Step::Converters) {
+        record(BootError::ConverterHang);
+        None
     } else {
-        record(BootError::DacCalibration);
-    }
-
-    // ADC1 (current, PA0 = IN1) and ADC2 (monitor, PA1 = IN2): calibrated (single-ended and
-    // differential), 20 µs before ADEN, by `Adc::new`; kernel clock SYSCLK / 4 = 42.5 MHz.
-    let adc1 = Adc::new(p.ADC1, AdcConfig::default());
-    let adc2 = Adc::new(p.ADC2, AdcConfig::default());
-    // SAFETY: init context, before any DMA runs; the rings are handed to embassy for good.
-    let (ring1, ring2) = unsafe { (&mut *addr_of_mut!(ADC1_RING), &mut *addr_of_mut!(ADC2_RING)) };
-    let adc1 = adc1.into_ring_buffered(
-        p.DMA1_CH1,
-        ring1,
-        Irqs,
-        [(p.PA0.degrade_adc(), SampleTime::CYCLES47_5)].into_iter(),
-        embassy_stm32::triggers::TIM6_TRGO,
-        Exten::RISING_EDGE,
-    );
-    let adc2 = adc2.into_ring_buffered(
-        p.DMA1_CH2,
-        ring2,
-        Irqs,
-        [(p.PA1.degrade_adc(), SampleTime::CYCLES47_5)].into_iter(),
-        embassy_stm32::triggers::TIM6_TRGO,
-        Exten::RISING_EDGE,
-    );
+        set_step(Some(Step::Converters));
+        let hw = converters(ConverterPins {
+            tim6: p.TIM6,
+            dac1: p.DAC1,
+            dac_dma: p.DMA1_CH3,
+            pa4: p.PA4,
+            adc1: p.ADC1,
+            adc1_dma: p.DMA1_CH1,
+            pa0: p.PA0,
+            adc2: p.ADC2,
+            adc2_dma: p.DMA1_CH2,
+            pa1: p.PA1,
+        });
+        set_step(None);
+        Some(hw)
+    };
 
     // LPUART1 RX on PA3 (AF12), DMA1 CH4 ring.
     let mut cfg = embassy_stm32::usart::Config::default();
@@ -806,17 +991,9 @@ pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
         }
     };
 
-    // Gap: embassy 0.6 has no DBGMCU API. RAW 8/12: DBGMCU_APB1FZR1.DBG_IWDG_STOP, the IWDG
-    // frozen while the core is halted (RM0440 DBGMCU chapter, DBGMCU_APB1FZR1), before it starts.
-    pac::DBGMCU.apb1lfzr().modify(|w| w.set_iwdg(true));
-    let mut wdg = IndependentWatchdog::new(p.IWDG, WATCHDOG_US);
-    wdg.unleash();
-
     Parts {
         stream: Stream {
-            adc1,
-            adc2,
-            tim,
+            hw,
             frames: [AdcFrame::default(); BATCH],
             current: [0; BATCH],
             monitor: [0; BATCH],
