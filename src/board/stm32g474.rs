@@ -1,7 +1,7 @@
 //! The STM32G474RE board (NUCLEO-G474RE) on `embassy-stm32` 0.6: clocks, TIM6, DAC1, ADC1/ADC2
 //! on DMA ring buffers, the bank-2 flash of the calibration store, LPUART1 and the independent
 //! watchdog are embassy drivers, used from RTIC 2 tasks without an embassy executor. Raw
-//! register code remains only where embassy 0.6 lacks the feature: twelve access sites, each
+//! register code remains only where embassy 0.6 lacks the feature: twelve accesses, each
 //! marked `RAW n/12` with the gap and the RM0440 section, listed in `docs/firmware.md`.
 //!
 //! # Bring-up ([`init`])
@@ -49,14 +49,11 @@ use crate::engine::SampleEngine;
 use crate::hal::{AdcFrame, FrontEndScale};
 use crate::runner::BATCH;
 use crate::units::{AdcCode, DacCode, Hz};
-use core::future::Future;
 use core::mem::MaybeUninit;
-use core::pin::Pin;
 use core::ptr::{addr_of, addr_of_mut};
 use core::sync::atomic::{AtomicU32, AtomicU8, Ordering};
-use core::task::{Context, Waker};
 use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, Exten, RingBufferedAdc, SampleTime};
-use embassy_stm32::dac::{DacChannel, Mode, ValueArray};
+use embassy_stm32::dac::{DacChannel, Mode};
 use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::interrupt::typelevel::{Binding, Handler};
 use embassy_stm32::interrupt::Priority;
@@ -191,8 +188,8 @@ pub fn boot_error() -> Option<BootError> {
 
 /// A step whose waits are embassy's own and unbounded. The watchdog runs from the start of
 /// [`init`]; the step in progress is kept in RAM that a reset does not clear, so the boot after
-/// a watchdog reset knows which step hung and goes around it with a typed [`BootError`] instead
-/// of hanging again (no reset loop).
+/// a watchdog reset ([`watchdog_reset`]) knows which step hung and goes around it with a typed
+/// [`BootError`] instead of hanging again (no reset loop).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(u32)]
 enum Step {
@@ -224,7 +221,20 @@ fn set_step(step: Option<Step>) {
     }
 }
 
-/// The step the run before this boot was in when it was reset.
+/// Whether the independent watchdog caused the last reset; the reset flags are cleared, so the
+/// next boot reads its own cause (they are sticky until RMVF).
+///
+/// Gap: embassy-stm32 0.6 has no reset-cause API. RAW 12/12: RCC_CSR read-modify-write,
+/// IWDGRSTF read and RMVF set in one access (RM0440 RCC chapter, RCC_CSR).
+fn watchdog_reset() -> bool {
+    pac::RCC.csr().modify(|w| {
+        let iwdg = w.iwdgrstf();
+        w.set_rmvf(true);
+        iwdg
+    })
+}
+
+/// The step the run before this boot was in when the watchdog reset it.
 fn interrupted_step() -> Option<Step> {
     // SAFETY: two aligned words of our own static; after a power-on they hold whatever SRAM
     // came up with, which the complement check and the tag reject (read as plain words).
@@ -334,6 +344,7 @@ bind_interrupts!(struct Irqs {
     DMA1_CHANNEL2 => DmaFaults, dma::InterruptHandler<peripherals::DMA1_CH2>;
     DMA1_CHANNEL3 => DmaFaults, dma::InterruptHandler<peripherals::DMA1_CH3>;
     DMA1_CHANNEL4 => DmaFaults, dma::InterruptHandler<peripherals::DMA1_CH4>;
+    DMA1_CHANNEL5 => DmaFaults, dma::InterruptHandler<peripherals::DMA1_CH5>;
 });
 
 // DMA1 CH1's vector (`DMA1_CHANNEL1`) is the RTIC task `sample` (src/bin/probe.rs), which calls embassy's handler
@@ -445,40 +456,20 @@ static mut DAC_BUF: [DacCode; 2 * BATCH] = [DacCode::MID; 2 * BATCH];
 static mut ADC1_RING: [u16; 2 * BATCH] = [0; 2 * BATCH];
 static mut ADC2_RING: [u16; 2 * BATCH] = [0; 2 * BATCH];
 
-/// The DAC channel, borrowed by its circular transfer for the life of the image.
-static mut DAC: Option<DacChannel<'static, Async>> = None;
-/// Bytes reserved for the DAC's circular-write future (checked at compile time).
-const DAC_FUTURE_BYTES: usize = 128;
-#[repr(C, align(8))]
-struct FutureSlot([u8; DAC_FUTURE_BYTES]);
-/// The DAC's circular-write future: pinned here, polled once, never dropped (it never
-/// completes; dropping it would stop the DMA).
-static mut DAC_FUTURE: MaybeUninit<FutureSlot> = MaybeUninit::uninit();
-
-/// Move `fut` into [`DAC_FUTURE`] and poll it once: embassy's `DacChannel::write` with
-/// `circular = true` sets DAC EN and DMAEN and starts the circular DMA on its first poll, then
-/// stays pending for ever. Pending after the poll: true.
-fn park_and_poll<F: Future>(fut: F) -> bool {
-    const {
-        assert!(core::mem::size_of::<F>() <= DAC_FUTURE_BYTES);
-        assert!(core::mem::align_of::<F>() <= 8);
-    }
-    // SAFETY: called once, from `Stream::start`; the slot is large and aligned enough (above),
-    // static (never freed or reused), and the future is never moved or dropped after this.
-    let fut = unsafe {
-        let slot = addr_of_mut!(DAC_FUTURE) as *mut F;
-        slot.write(fut);
-        Pin::new_unchecked(&mut *slot)
-    };
-    fut.poll(&mut Context::from_waker(Waker::noop()))
-        .is_pending()
-}
+/// DMA1 CH3, the DAC's channel, borrowed by its circular transfer for the life of the image.
+static mut DAC_DMA: Option<dma::Channel<'static>> = None;
 
 /// The converters of the stream (absent when a boot error kept them from being set up).
 struct Converters {
     adc1: RingBufferedAdc<'static, ADC1>,
     adc2: RingBufferedAdc<'static, ADC2>,
     tim: Timer<'static, TIM6>,
+    /// Kept for its `Drop` (which would disable the channel); its DMA is [`DAC_DMA`].
+    _dac: DacChannel<'static, Async>,
+    /// DMAMUX request of DAC1 channel 1.
+    dac_request: dma::Request,
+    /// The DAC's circular transfer, once started.
+    dac_transfer: Option<dma::Transfer<'static>>,
 }
 
 /// The DAC/ADC sample stream over TIM6, DAC1, ADC1, ADC2 and three DMA1 channels.
@@ -487,8 +478,6 @@ pub struct Stream {
     frames: [AdcFrame; BATCH],
     current: [u16; BATCH],
     monitor: [u16; BATCH],
-    /// The DAC half the next batch refills.
-    half: usize,
     /// [`stamp`] of the last batch (`None` before the first).
     last: Option<u32>,
     started: u32,
@@ -515,26 +504,34 @@ impl Stream {
         for half in dac_buf.chunks_exact_mut(BATCH) {
             engine.generate(half);
         }
-        // SAFETY: `DAC` was filled by `init`; nothing else touches it. The DMA reads the
-        // buffer for ever while `capture` writes the half the DMA has left: the slice handed to
-        // embassy is only its address and length (DacCode is `repr(transparent)` over u16).
-        let started = unsafe {
-            match (*addr_of_mut!(DAC)).as_mut() {
-                Some(dac) => {
-                    let codes =
-                        core::slice::from_raw_parts(addr_of!(DAC_BUF) as *const u16, 2 * BATCH);
-                    park_and_poll(dac.write(ValueArray::Bit12Right(codes), true))
-                }
-                None => false,
-            }
-        };
         let Some(hw) = self.hw.as_mut() else {
             return;
         };
-        if !started {
+        // The DAC's circular DMA, DAC_BUF → DHR12R1, half-words read and written as words
+        // (zero-extended by the DMA): embassy's `DacChannel::write` programs 16-bit peripheral
+        // writes, which the G4's DAC answers with a bus error (RM0440's DAC registers take word
+        // accesses only; embassy issue #2783, fixed after 0.6).
+        // SAFETY: `DAC_DMA` was filled by `converters` and is used only here; the buffer is
+        // static; the DMA reads it for ever while `capture` writes the half the DMA has left.
+        let mut options = dma::TransferOptions::default();
+        options.circular = true;
+        options.half_transfer_ir = false;
+        options.complete_transfer_ir = false;
+        let transfer = unsafe {
+            (*addr_of_mut!(DAC_DMA)).as_mut().map(|ch| {
+                ch.write_raw::<u16, u32>(
+                    hw.dac_request,
+                    core::ptr::slice_from_raw_parts(addr_of!(DAC_BUF) as *const u16, 2 * BATCH),
+                    pac::DAC1.dhr12r(0).as_ptr() as *mut u32,
+                    options,
+                )
+            })
+        };
+        let Some(transfer) = transfer else {
             record(BootError::DacStart);
             return;
-        }
+        };
+        hw.dac_transfer = Some(transfer);
         // The rings (DMA and ADSTART) before the trigger: every TIM6 update from the first on
         // plays one DAC code and converts one sample on each ADC.
         hw.adc1.start();
@@ -553,23 +550,26 @@ impl Stream {
             <DmaFaults as Handler<interrupt::typelevel::DMA1_CHANNEL1>>::on_interrupt();
             <dma::InterruptHandler<DMA1_CH1> as Handler<interrupt::typelevel::DMA1_CHANNEL1>>::on_interrupt();
         }
-        // A half that went by unserviced shows in the time since the last batch: skip the DAC
-        // halves it played, so the refilled half stays the one just played.
-        let periods = match self.last {
-            Some(t) => (now.wrapping_sub(t) + BATCH_CYCLES / 2) / BATCH_CYCLES,
-            None => 1,
-        }
-        .max(1);
-        self.late_seen = periods > 1;
+        // A half that went by unserviced shows in the time since the last batch.
+        self.late_seen = self
+            .last
+            .is_some_and(|t| now.wrapping_sub(t) > BATCH_CYCLES + BATCH_CYCLES / 2);
         self.last = Some(now);
         self.started = now;
-        let h = (self.half + periods as usize - 1) % 2;
-        self.half = (h + 1) % 2;
+        // The DAC half just played is the one its DMA is not in (from the channel's remaining
+        // count: 2 × BATCH .. BATCH + 1 in half 0, BATCH .. 1 in half 1). Both DMA streams run
+        // off the same trigger, so it is the half of the ADC batch just captured; the DAC's
+        // output register holds the last sample of that half already (it is fetched one trigger
+        // ahead), so the whole half can be refilled.
+        let h = match self.hw.as_ref().and_then(|hw| hw.dac_transfer.as_ref()) {
+            Some(t) if t.get_remaining_transfers() as usize > BATCH => 1,
+            _ => 0,
+        };
 
-        // Gap: embassy 0.6's DAC driver has no underrun check. RAW 9/12: DAC1_SR.DMAUDR1
-        // (RM0440 DAC chapter, "DMA underrun"; DAC_SR). Not cleared: the stream stops on the
-        // first underrun, which is counted once.
-        if !self.dac_underrun && pac::DAC1.sr().read().dmaudr(0) {
+        // Gap: embassy 0.6's DAC driver has no underrun check: DAC_SR.DMAUDR1 (RM0440 DAC
+        // chapter, "DMA underrun"), read through [`dac_sr`]. Not cleared: the stream stops on
+        // the first underrun, which is counted once.
+        if !self.dac_underrun && self.hw.is_some() && dac_sr().dmaudr(0) {
             self.dac_underrun = true;
             DAC_UNDERRUNS.fetch_add(1, Ordering::Relaxed);
         }
@@ -765,28 +765,41 @@ impl NorFlash for InternalFlash {
 /// is to be checked), at 170 MHz.
 const DAC_TRIM_CYCLES: u32 = SYSCLK_HZ / 20_000;
 
-/// Calibrate DAC1 channel 1's output buffer offset (RM0440 DAC chapter, "DAC channel output buffer
-/// calibration"): with the channel off and in normal buffered mode, CEN1 set, OTRIM1 stepped up
-/// from 0, tTRIM after each step, until CAL_FLAG1 reads 1 — the first trim at or above the
-/// offset. 32 steps at most (1.6 ms); false if the flag never rose.
+/// DAC_SR (RM0440 DAC chapter, DAC_SR): CAL_FLAG1 for the calibration, DMAUDR1 for the
+/// stream. Gap: embassy-stm32 0.6's DAC driver reads neither.
+fn dac_sr() -> pac::dac::regs::Sr {
+    // RAW 9/12: DAC_SR read.
+    pac::DAC1.sr().read()
+}
+
+/// DAC_CR (RM0440 DAC chapter, DAC_CR): CEN1 (calibration mode) and DMAEN1. Gap: embassy-stm32
+/// 0.6 sets DMAEN1 only inside `DacChannel::write`, whose 16-bit DMA the G4's DAC refuses, and
+/// has no calibration.
+fn dac_cr(f: impl FnOnce(&mut pac::dac::regs::Cr)) {
+    // RAW 10/12: DAC_CR modify.
+    pac::DAC1.cr().modify(f);
+}
+
+/// Calibrate DAC1 channel 1's output buffer offset (RM0440 DAC chapter, "DAC channel output
+/// buffer calibration"): with the channel off and in normal buffered mode, CEN1 set, OTRIM1
+/// stepped up from 0, tTRIM after each step, until CAL_FLAG1 reads 1 — the first trim at or
+/// above the offset. 32 steps at most (1.6 ms); false if the flag never rose.
 ///
 /// Gap: embassy-stm32 0.6's DAC driver has no calibration.
 fn calibrate_dac() -> bool {
-    // RAW 10/12: DAC_CR.CEN1, calibration mode on and off (RM0440 DAC chapter, DAC_CR).
-    let cen = |on| pac::DAC1.cr().modify(|w| w.set_cen(0, on));
-    cen(true);
+    dac_cr(|w| w.set_cen(0, true));
     let mut found = false;
     for trim in 0..32 {
-        // RAW 11/12: DAC_CCR.OTRIM1 (RM0440 DAC chapter, DAC_CCR); OTRIM2 (channel 2, unused) written 0.
+        // RAW 11/12: DAC_CCR.OTRIM1 (RM0440 DAC chapter, DAC_CCR); OTRIM2 (channel 2, unused)
+        // written 0.
         pac::DAC1.ccr().write(|w| w.set_otrim(0, trim));
         cortex_m::asm::delay(DAC_TRIM_CYCLES);
-        // RAW 12/12: DAC_SR.CAL_FLAG1 (RM0440 DAC chapter, DAC_SR).
-        if pac::DAC1.sr().read().cal_flag(0) {
+        if dac_sr().cal_flag(0) {
             found = true;
             break;
         }
     }
-    cen(false);
+    dac_cr(|w| w.set_cen(0, false));
     found
 }
 
@@ -795,6 +808,8 @@ struct ConverterPins {
     tim6: Peri<'static, TIM6>,
     dac1: Peri<'static, peripherals::DAC1>,
     dac_dma: Peri<'static, peripherals::DMA1_CH3>,
+    /// Handed to `DacChannel::new_triggered`, which wants a DMA channel; never started.
+    dac_dma_unused: Peri<'static, peripherals::DMA1_CH5>,
     pa4: Peri<'static, peripherals::PA4>,
     adc1: Peri<'static, ADC1>,
     adc1_dma: Peri<'static, DMA1_CH1>,
@@ -818,10 +833,13 @@ fn converters(p: ConverterPins) -> Converters {
     tim.generate_update_event();
 
     // DAC1 CH1 on PA4, normal mode with the output buffer, triggered by TIM6_TRGO, fed by DMA1
-    // CH3 (started in `Stream::start`).
+    // CH3 (our own transfer, started in `Stream::start`: embassy's `DacChannel::write` programs
+    // 16-bit peripheral writes, which the G4's DAC refuses).
+    let dac_request =
+        embassy_stm32::dac::Dma::<peripherals::DAC1, embassy_stm32::dac::Ch1>::request(&*p.dac_dma);
     let mut dac = DacChannel::new_triggered(
         p.dac1,
-        p.dac_dma,
+        p.dac_dma_unused,
         embassy_stm32::triggers::TIM6_TRGO,
         Irqs,
         p.pa4,
@@ -829,15 +847,18 @@ fn converters(p: ConverterPins) -> Converters {
     // embassy's `new_triggered` selects the trigger (TSEL1) and enables the channel but never
     // sets TEN1, without which the DAC neither waits for TIM6 nor requests DMA (RM0440 DAC
     // chapter, "DAC trigger selection", "DMA requests"): `set_mode` turns EN1 off (TEN1 and the
-    // calibration want the channel off), TEN1 is set, the buffer calibrated; `write` turns EN1
-    // on again.
+    // calibration want the channel off), TEN1 is set, the buffer calibrated, EN1 and DMAEN1
+    // set. No trigger comes before TIM6 starts, so no DMA request before the transfer runs.
     dac.set_mode(Mode::NormalExternalBuffered);
     dac.set_triggering(true);
     // A DAC whose calibration never settles is not trusted with the drive: the stream is not
     // started (readings end as `stalled`).
-    if calibrate_dac() {
-        // SAFETY: init context; `Stream::start` is the only other user of `DAC`.
-        unsafe { *addr_of_mut!(DAC) = Some(dac) };
+    let calibrated = calibrate_dac();
+    if calibrated {
+        dac.enable();
+        dac_cr(|w| w.set_dmaen(0, true));
+        // SAFETY: init context; `Stream::start` is the only other user of `DAC_DMA`.
+        unsafe { *addr_of_mut!(DAC_DMA) = Some(dma::Channel::new(p.dac_dma, Irqs)) };
     } else {
         record(BootError::DacCalibration);
     }
@@ -864,7 +885,14 @@ fn converters(p: ConverterPins) -> Converters {
         embassy_stm32::triggers::TIM6_TRGO,
         Exten::RISING_EDGE,
     );
-    Converters { adc1, adc2, tim }
+    Converters {
+        adc1,
+        adc2,
+        tim,
+        _dac: dac,
+        dac_request,
+        dac_transfer: None,
+    }
 }
 
 // ---- bring-up --------------------------------------------------------------------------
@@ -889,7 +917,13 @@ pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
     // The cycle counter first: it times the bounded waits.
     core.DCB.enable_trace();
     core.DWT.enable_cycle_counter();
-    let interrupted = interrupted_step();
+    // A step is taken for hung only after a watchdog reset (a reset button pressed during a
+    // step is not a hang).
+    let interrupted = if watchdog_reset() {
+        interrupted_step()
+    } else {
+        None
+    };
     let safe_clock = interrupted == Some(Step::Clock);
 
     // The watchdog before any wait of embassy's: a step that hangs ends in a reset, and the
@@ -959,6 +993,7 @@ pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
             tim6: p.TIM6,
             dac1: p.DAC1,
             dac_dma: p.DMA1_CH3,
+            dac_dma_unused: p.DMA1_CH5,
             pa4: p.PA4,
             adc1: p.ADC1,
             adc1_dma: p.DMA1_CH1,
@@ -997,7 +1032,6 @@ pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
             frames: [AdcFrame::default(); BATCH],
             current: [0; BATCH],
             monitor: [0; BATCH],
-            half: 0,
             last: None,
             started: 0,
             late_seen: false,
