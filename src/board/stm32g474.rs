@@ -347,9 +347,9 @@ bind_interrupts!(struct Irqs {
     DMA1_CHANNEL5 => DmaFaults, dma::InterruptHandler<peripherals::DMA1_CH5>;
 });
 
-// DMA1 CH1's vector (`DMA1_CHANNEL1`) is the RTIC task `sample` (src/bin/probe.rs), which calls embassy's handler
-// for the channel itself (after [`DmaFaults`]) in [`Stream::capture`]; `bind_interrupts!` would
-// define the same vector symbol a second time.
+// DMA1 CH1's vector (`DMA1_CHANNEL1`) is the RTIC task `sample` (src/bin/probe.rs), which calls
+// embassy's handler for the channel itself (after [`DmaFaults`]) in [`Stream::capture`];
+// `bind_interrupts!` would define the same vector symbol a second time.
 // SAFETY: the handler runs on every DMA1_CH1 interrupt, from `Stream::capture`.
 unsafe impl Binding<interrupt::typelevel::DMA1_CHANNEL1, dma::InterruptHandler<DMA1_CH1>> for Irqs {}
 // The LPUART1 vector is the RTIC task `uart_rx`, which reads the ring through embassy's
@@ -395,8 +395,8 @@ impl<I: interrupt::typelevel::Interrupt> Handler<I> for DmaFaults {
 /// Start the HSE crystal and wait for it, bounded. embassy's `rcc::init` (g4.rs) sets HSEON and
 /// then spins on HSERDY without a bound: it is given the HSE only once it runs.
 fn hse_starts() -> bool {
-    // RAW 3/12: RCC_CR.HSEON (RM0440 RCC chapter, RCC_CR; "HSE clock"). HSEBYP stays 0 (crystal). If the
-    // crystal does not start, embassy's init (`hse: None`) clears HSEON again.
+    // RAW 3/12: RCC_CR.HSEON (RM0440 RCC chapter, RCC_CR; "HSE clock"). HSEBYP stays 0
+    // (crystal). If the crystal does not start, embassy's init (`hse: None`) clears HSEON again.
     pac::RCC.cr().modify(|w| w.set_hseon(true));
     // RAW 4/12: RCC_CR.HSERDY, polled with a bound (RM0440 RCC chapter, RCC_CR).
     spin_until(HSE_TIMEOUT, || pac::RCC.cr().read().hserdy())
