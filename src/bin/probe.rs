@@ -10,7 +10,7 @@
 //! | task | priority | what |
 //! |---|---|---|
 //! | `sample` (hardware) | 3 | per batch: demodulate the ADC half, refill the DAC half ([`SampleEngine`]) |
-//! | `uart_rx` (hardware, STM32) | 2 | host bytes from LPUART1 (ST-LINK virtual COM port) into a channel |
+//! | `uart_rx` (hardware) | 2 | host bytes from LPUART1's DMA ring (ST-LINK virtual COM port) into a channel |
 //! | `measure` | 1 | the session ([`pzt_probe::session`]): profile, settings, the flash store; readings through [`pzt_probe::reading`] |
 //! | `command` | 1 | bytes → lines → [`pzt_probe::command::parse`] → requests to `measure` (QEMU: the boot command line's script or the built-in one, [`pzt_probe::board::sim_script`]) |
 //! | `report` | 1 | the only place that logs: one defmt line per event ([`pzt_probe::log`]) |
@@ -215,7 +215,7 @@ mod app {
 
     /// The sample interrupt: one batch ([`BATCH`] samples, 5 ms at 10 kHz) per call.
     ///
-    /// Bound to the ADC DMA half/full-transfer interrupt `DMA1_CH1` on the STM32; on QEMU the
+    /// Bound to the ADC DMA half/full-transfer interrupt `DMA1_CHANNEL1` on the STM32; on QEMU the
     /// same vector is the batch timer, whose driver first emulates the DMA of the period. It
     /// takes any queued plan (`Load`/`Stop`) from the plan channel, demodulates the ADC
     /// half-buffer just captured ([`SampleEngine::demodulate`]), refills the DAC half-buffer
@@ -226,7 +226,7 @@ mod app {
     /// **Budget** 2 % of the core per batch (17 000 cycles at 170 MHz); **overruns** (late
     /// batch, ring, full point channel) are counted ([`pzt_probe::counters`]) and reported,
     /// never silent: `docs/firmware.md`.
-    #[task(binds = DMA1_CH1, priority = 3, local = [stream, engine, plan_rx, point_tx, isr])]
+    #[task(binds = DMA1_CHANNEL1, priority = 3, local = [stream, engine, plan_rx, point_tx, isr])]
     fn sample(cx: sample::Context) {
         let stream = cx.local.stream;
         let engine = cx.local.engine;
@@ -251,7 +251,7 @@ mod app {
     }
 
     /// Host bytes from the UART into the command task's channel.
-    #[task(binds = LPUART, priority = 2, local = [uart, rx_tx])]
+    #[task(binds = LPUART1, priority = 2, local = [uart, rx_tx])]
     fn uart_rx(cx: uart_rx::Context) {
         while let Some(b) = cx.local.uart.read_byte() {
             // A full channel drops the byte; the line then fails to parse and is reported.

@@ -4,7 +4,7 @@
 //!
 //! * **Sample cadence.** CMSDK APB timer 0 (IRQ 8) fires once per batch period
 //!   ([`BATCH`] samples at the simulated front end's sample rate: 5 ms at 10 kHz), standing in for
-//!   the STM32's ADC DMA half/full-transfer interrupt (and bound under its name, `DMA1_CH1`). [`Stream::capture`] then does what the two
+//!   the STM32's ADC DMA half/full-transfer interrupt (and bound under its name, `DMA1_CHANNEL1`, as embassy-stm32's device crate calls it). [`Stream::capture`] then does what the two
 //!   DMA channels did during that period — play the DAC half-buffer through [`SimProbe`] and fill
 //!   the ADC half-buffer — and hands both halves to the interrupt, exactly as the STM32 driver
 //!   does: the ADC half just captured and the DAC half just played (to be refilled; it plays two
@@ -35,9 +35,9 @@ use hal_sim::{AdcPair, SimProbe};
 /// ...). The image binds two of them, and names them after the STM32G474 vectors they stand in
 /// for, so one RTIC application (same `binds`, same dispatcher) serves both boards:
 ///
-/// * line 8, CMSDK timer 0, is `DMA1_CH1`: the batch cadence, in place of the STM32's ADC DMA
+/// * line 8, CMSDK timer 0, is `DMA1_CHANNEL1`: the batch cadence, in place of the STM32's ADC DMA
 ///   half/full-transfer interrupt;
-/// * line 0, CMSDK UART0 receive, is `LPUART` (the STM32 LPUART1 vector): host bytes, like the STM32's ST-LINK virtual COM
+/// * line 0, CMSDK UART0 receive, is `LPUART1` (the STM32 LPUART1 vector): host bytes, like the STM32's ST-LINK virtual COM
 ///   port (QEMU's first serial port);
 /// * line 11 (the AN386 SPI controller, unused here) is `SPI3`: the software-task dispatcher,
 ///   the same unused vector the STM32 image dispatches on.
@@ -52,9 +52,9 @@ pub mod device {
     #[repr(u16)]
     pub enum Interrupt {
         /// CMSDK UART0 receive.
-        LPUART = 0,
+        LPUART1 = 0,
         /// CMSDK timer 0: the sample cadence (one batch per period).
-        DMA1_CH1 = 8,
+        DMA1_CHANNEL1 = 8,
         /// Line 11: the software-task dispatcher.
         SPI3 = 11,
     }
@@ -74,8 +74,8 @@ pub mod device {
     pub struct Vector(unsafe extern "C" fn());
 
     extern "C" {
-        fn LPUART();
-        fn DMA1_CH1();
+        fn LPUART1();
+        fn DMA1_CHANNEL1();
         fn SPI3();
         fn DefaultHandler();
     }
@@ -86,8 +86,8 @@ pub mod device {
     #[no_mangle]
     pub static __INTERRUPTS: [Vector; 32] = {
         let mut v = [Vector(DefaultHandler); 32];
-        v[0] = Vector(LPUART);
-        v[8] = Vector(DMA1_CH1);
+        v[0] = Vector(LPUART1);
+        v[8] = Vector(DMA1_CHANNEL1);
         v[11] = Vector(SPI3);
         v
     };
@@ -328,7 +328,7 @@ impl Stream {
 
     /// True when the next batch interrupt is already pending: the handler overran its period.
     pub fn late(&self) -> bool {
-        cortex_m::peripheral::NVIC::is_pending(device::Interrupt::DMA1_CH1)
+        cortex_m::peripheral::NVIC::is_pending(device::Interrupt::DMA1_CHANNEL1)
     }
 }
 

@@ -1,72 +1,76 @@
-//! The STM32G474RE board (NUCLEO-G474RE): clocks from `stm32g4xx-hal`, and a small
-//! register-level driver for what the HAL lacks — the timer-triggered DAC/ADC sample stream
-//! with circular DMA — plus the internal-flash driver of the calibration store, the
-//! independent watchdog and the LPUART1 receive path.
+//! The STM32G474RE board (NUCLEO-G474RE) on `embassy-stm32` 0.6: clocks, TIM6, DAC1, ADC1/ADC2
+//! on DMA ring buffers, the bank-2 flash of the calibration store, LPUART1 and the independent
+//! watchdog are embassy drivers, used from RTIC 2 tasks without an embassy executor. Raw
+//! register code remains only where embassy 0.6 lacks the feature: twelve accesses, each
+//! marked `RAW n/12` with the gap and the RM0440 section, listed in `docs/firmware.md`.
 //!
-//! # Bring-up (RM0440 references; audit table in `docs/firmware.md`)
+//! # Bring-up ([`init`])
 //!
-//! [`init`] runs, in order: the cycle counter (it times every bounded wait), DBGMCU freezes the
-//! IWDG while the core is halted, PWR's bus clock (the HAL's `Rcc::freeze` reads PWR_CR1 but
-//! never clocks PWR), flash prefetch and 4 wait states read back before the clock goes up, the
-//! 24 MHz HSE crystal (X3) with a bounded start-up wait and HSI16 as the fallback, a bounded
-//! PLL lock probe, then the HAL's `Rcc::freeze` (range 1 boost, PLL 170 MHz), the option-byte
-//! check of dual-bank mode and the watchdog. [`Stream::start`] calibrates and enables ADC1 with
-//! bounded waits. Nothing on this path panics or spins without a bound: a wait that times out
-//! records a [`BootError`] (the first one is kept, see [`boot_error`]) and the board carries on
-//! degraded — without the PLL at 16 MHz, without the sample stream, or without flash writes.
-//! [`clock_source`] says which oscillator the PLL runs from. Waits that remain inside the HAL
-//! (`enable_hse`, `enable_hsi`, `config_pll`, the SYSCLK switch) are entered only once the
-//! condition they wait for is known to hold (HSE ready, HSI16 on at reset, PLL locked once).
+//! The cycle counter first (it times the bounded waits); the IWDG, frozen under the debugger,
+//! started before any of embassy's own waits (several have no bound: `docs/firmware.md`), with
+//! the step in progress kept in RAM a reset does not clear ([`Step`]): a step that hangs ends in
+//! a watchdog reset, and the next boot goes around it with a typed [`BootError`]
+//! (`clock_hang`: HSI16 at 16 MHz, no stream; `converter_hang`: no stream; `flash_hang`: no
+//! store) instead of hanging again. Then the 24 MHz HSE crystal (X3), started and probed here
+//! with a bounded wait (embassy's `rcc::init` waits for HSERDY without a bound, so it is handed
+//! the HSE only once it is known to run; otherwise the PLL runs from HSI16 and
+//! [`clock_source`] says so); `embassy_stm32::init` (PWR and FLASH clocked and reset, range 1
+//! boost, 4 wait states, PLL 170 MHz, ADC12 kernel clock = SYSCLK, DMA interrupt priority);
+//! flash prefetch; the option bytes' bank mode (embassy's `Flash::new_blocking` panics on a
+//! mismatch: checked first, [`BootError::FlashSingleBank`]); the converters; LPUART1 receive
+//! on a DMA ring. A failed step records a [`BootError`] (the first is kept, [`boot_error`]) and
+//! the board carries on degraded. Unverified on hardware.
 //!
-//! # Analog stream (RM0440 references)
+//! # Analog stream ([`Stream`])
 //!
 //! ```text
-//! TIM6 update @ 10 kHz ──TRGO──┬─> DAC1 CH1 (PA4) ← DMA1 CH2 ← DAC_BUF [2 × 50] (circular)
-//!                              └─> ADC1 seq: IN1 (PA0, sense current), IN2 (PA1, drive monitor)
-//!                                   → DMA1 CH1 → ADC_BUF [2 × 50 × 2] (circular, HT + TC irq)
+//! TIM6 update @ 10 kHz ──TRGO──┬─> DAC1 CH1 (PA4) ← DMA1 CH3 ← DAC_BUF [2 × 50] (circular)
+//!                              ├─> ADC1 IN1 (PA0, sense current)  → DMA1 CH1 → ring [2 × 50]
+//!                              └─> ADC2 IN2 (PA1, drive monitor)  → DMA1 CH2 → ring [2 × 50]
 //! ```
 //!
-//! * TIM6: PSC 0, ARR = 170 MHz / 10 kHz − 1, CR2.MMS = update → TRGO.
-//! * DAC1 CH1: TEN1, TSEL1 = 7 (`dac_ch1_trg7` = TIM6_TRGO), DMAEN1; MCR.HFSEL for AHB > 160 MHz.
-//! * ADC1: synchronous clock HCLK/4 (42.5 MHz); regular sequence of 2 (IN1, IN2), 47.5-cycle
-//!   sampling; EXTSEL = 13 (TIM6_TRGO), rising edge; circular DMA (DMACFG), overrun overwrites.
-//! * DMAMUX1: channel 0 (→ DMA1 CH1) request 5 = ADC1; channel 1 (→ DMA1 CH2) request 6 =
-//!   DAC1_CH1.
-//! * DMA1 CH1 half-transfer and transfer-complete interrupts (vector `DMA1_CH1`) mark a captured
-//!   ADC half; the DAC half with the same index has been played (the DAC's DMA runs off the same
-//!   trigger) and is refilled by the interrupt; it plays again two halves later.
+//! ADC1 and ADC2 convert on the same TIM6_TRGO rising edge, with the same kernel clock, sample
+//! time and resolution, so the current and the drive monitor are sampled at the same instant
+//! (before: one ADC's sequence, 1.4 µs apart). They run as two independent ADCs rather than in
+//! the dual regular-simultaneous mode: embassy 0.6 writes ADC_CCR.DUAL after enabling ADC1,
+//! where RM0440 allows the field to be written only with both ADCs disabled (docs/firmware.md).
+//! The DMA1 CH1 half/full-transfer interrupt (ADC1's ring) is the RTIC `sample` task; it runs
+//! embassy's DMA handler for that channel itself ([`Stream::capture`]).
 //!
-//! Both DMA streams start together from one trigger source, so DAC half `h` and ADC half `h`
-//! cover the same 50 sample periods (the DAC's one-sample output register delay shifts drive and
-//! monitor alike and cancels in the admittance).
-//!
-//! DMA transfer errors (TEIF1, TEIF2; the hardware then disables the channel: RM0440 DMA chapter,
-//! "DMA error management") and DAC DMA underruns (DMAUDR1; the DAC then stops requesting: RM0440
-//! DAC chapter, "DMA underrun") are checked at every batch: they make [`Stream::late`] true
-//! for that batch (the `LATE` counter of the application), are counted in [`stream_faults`]
-//! and stop TIM6, so readings stall rather than run on without drive or samples.
+//! DMA transfer errors (TEIF on any of the four channels) are counted and cleared before
+//! embassy's DMA handler runs (embassy 0.6 panics on TEIF); DAC DMA underruns (DMAUDR1; embassy
+//! has no check) are read every batch. Either makes [`Stream::late`] true, is counted in
+//! [`stream_faults`] and stops TIM6, so readings stall rather than run on without drive.
 //!
 //! Pins: PA0 sense current (TIA output), PA1 drive monitor, PA4 DAC out to the drive amplifier,
-//! PA2/PA3 LPUART1 TX/RX (AF12) to the ST-LINK virtual COM port.
+//! PA3 LPUART1 RX (AF12) from the ST-LINK virtual COM port.
 
 use crate::engine::SampleEngine;
 use crate::hal::{AdcFrame, FrontEndScale};
 use crate::runner::BATCH;
 use crate::units::{AdcCode, DacCode, Hz};
-use core::ptr::{addr_of_mut, read_volatile, write_volatile};
+use core::mem::MaybeUninit;
+use core::ptr::{addr_of, addr_of_mut};
 use core::sync::atomic::{AtomicU32, AtomicU8, Ordering};
+use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, Exten, RingBufferedAdc, SampleTime};
+use embassy_stm32::dac::{DacChannel, Mode};
+use embassy_stm32::flash::{Blocking, Flash};
+use embassy_stm32::interrupt::typelevel::{Binding, Handler};
+use embassy_stm32::interrupt::Priority;
+use embassy_stm32::mode::Async;
+use embassy_stm32::peripherals::{ADC1, ADC2, DMA1_CH1, TIM6};
+use embassy_stm32::time::Hertz;
+use embassy_stm32::timer::low_level::{RoundTo, Timer};
+use embassy_stm32::usart::{RingBufferedUartRx, UartRx};
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_stm32::{bind_interrupts, dma, interrupt, pac, peripherals, usart, Peri};
 use embedded_storage::nor_flash::{
     check_erase, check_read, check_write, ErrorType, NorFlash, NorFlashError, NorFlashErrorKind,
     ReadNorFlash,
 };
-use stm32g4xx_hal::pwr::{PwrExt, VoltageScale};
-use stm32g4xx_hal::rcc::{
-    Config, PllConfig, PllMDiv, PllNMul, PllRDiv, PllSrc, RccExt, SysClockSrc,
-};
-use stm32g4xx_hal::time::RateExtU32;
 
-/// The device crate (PAC) RTIC binds to.
-pub use stm32g4xx_hal::stm32 as device;
+/// The device crate RTIC binds to (`device = embassy_stm32`, `peripherals = false`).
+pub use embassy_stm32 as device;
 
 /// Board name in the boot log line.
 pub const NAME: &str = "stm32";
@@ -115,55 +119,53 @@ pub fn elapsed(start: u32) -> u32 {
 
 // ---- boot errors, clock source, stream faults ---------------------------------------------
 
-/// A bring-up step that did not complete within its bound. The board carries on degraded;
-/// [`boot_error`] holds the first one.
+/// A bring-up step that failed. The board carries on degraded; [`boot_error`] holds the first.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(u8)]
 pub enum BootError {
-    /// PWR_CR1.VOS did not read range 1 after PWR was clocked (or SYSCLK already ran from the
-    /// PLL): the clock configuration was skipped, the core runs from HSI16 at 16 MHz.
-    PowerRange = 1,
-    /// FLASH_ACR did not take the wait states within its bound: clock configuration skipped.
-    FlashLatency,
-    /// The PLL did not lock within its bound: clock configuration skipped (HSI16, 16 MHz).
-    PllLock,
-    /// The independent watchdog did not acknowledge its prescaler and reload (IWDG_SR): it runs
-    /// with its reset configuration (about 512 ms).
-    Watchdog,
-    /// The flash controller stayed busy at boot.
-    FlashBusy,
-    /// FLASH_OPTR.DBANK is 0 (single-bank mode, 4 KiB pages): the store's erase and program
-    /// are refused (they would address the wrong pages).
-    FlashSingleBank,
-    /// ADC1 calibration (ADCAL) did not finish: the sample stream is not started.
-    AdcCalibration,
-    /// ADC1 did not become ready (ADRDY) after ADEN: the sample stream is not started.
-    AdcReady,
+    /// FLASH_OPTR.DBANK is 0 (single-bank mode, 4 KiB pages): the store's flash driver is not
+    /// created (embassy's `Flash::new_blocking` would panic) and every store access is refused.
+    FlashSingleBank = 1,
+    /// LPUART1 did not take its configuration: no command line.
+    Uart,
+    /// The DAC's circular DMA transfer did not start: the sample stream is not started.
+    DacStart,
+    /// The DAC output buffer calibration found no trim (CAL_FLAG1 never rose): the DAC is not
+    /// trusted with the drive and the sample stream is not started.
+    DacCalibration,
+    /// The boot before did not get through embassy's clock setup (its waits on HSIRDY, PLLRDY,
+    /// the flash latency and the clock switch have no bound; the watchdog ended it): this boot
+    /// runs on HSI16 at 16 MHz without the PLL and does not start the sample stream.
+    ClockHang,
+    /// The boot before did not get through the converters' setup (embassy's ADC calibration and
+    /// ready waits): TIM6, DAC1 and the ADCs are left alone, the stream is not started.
+    ConverterHang,
+    /// The run before hung in a flash erase or program (embassy's waits on FLASH_SR.BSY): the
+    /// store's flash is not used this boot.
+    FlashHang,
 }
 
 impl BootError {
-    const ALL: [BootError; 8] = [
-        BootError::PowerRange,
-        BootError::FlashLatency,
-        BootError::PllLock,
-        BootError::Watchdog,
-        BootError::FlashBusy,
+    const ALL: [BootError; 7] = [
         BootError::FlashSingleBank,
-        BootError::AdcCalibration,
-        BootError::AdcReady,
+        BootError::Uart,
+        BootError::DacStart,
+        BootError::DacCalibration,
+        BootError::ClockHang,
+        BootError::ConverterHang,
+        BootError::FlashHang,
     ];
 
     /// Short name for the log.
     pub fn name(self) -> &'static str {
         match self {
-            BootError::PowerRange => "power_range",
-            BootError::FlashLatency => "flash_latency",
-            BootError::PllLock => "pll_lock",
-            BootError::Watchdog => "watchdog",
-            BootError::FlashBusy => "flash_busy",
             BootError::FlashSingleBank => "flash_single_bank",
-            BootError::AdcCalibration => "adc_calibration",
-            BootError::AdcReady => "adc_ready",
+            BootError::Uart => "uart",
+            BootError::DacStart => "dac_start",
+            BootError::DacCalibration => "dac_calibration",
+            BootError::ClockHang => "clock_hang",
+            BootError::ConverterHang => "converter_hang",
+            BootError::FlashHang => "flash_hang",
         }
     }
 }
@@ -182,6 +184,72 @@ pub fn boot_error() -> Option<BootError> {
     BootError::ALL.into_iter().find(|e| *e as u8 == v)
 }
 
+// ---- the boot-step marker ----------------------------------------------------------------
+
+/// A step whose waits are embassy's own and unbounded. The watchdog runs from the start of
+/// [`init`]; the step in progress is kept in RAM that a reset does not clear, so the boot after
+/// a watchdog reset ([`watchdog_reset`]) knows which step hung and goes around it with a typed
+/// [`BootError`] instead of hanging again (no reset loop).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+enum Step {
+    /// `embassy_stm32::init` (RCC, flash latency).
+    Clock = 1,
+    /// TIM6, DAC1 (with its calibration), ADC1 and ADC2.
+    Converters = 2,
+    /// A flash erase or program of the store.
+    Flash = 3,
+}
+
+/// Tag of a valid marker (upper half-word); the second word is the first's complement, so the
+/// random contents of SRAM at power-on are not taken for a step.
+const STEP_MAGIC: u32 = 0x5EB0_0000;
+
+/// The step in progress: not zeroed by the start-up code (`.uninit`), so it survives a reset
+/// (not a power cycle).
+#[link_section = ".uninit.pzt_boot_step"]
+static mut STEP: MaybeUninit<[u32; 2]> = MaybeUninit::uninit();
+
+fn set_step(step: Option<Step>) {
+    let v = step.map_or(0, |s| STEP_MAGIC | s as u32);
+    // SAFETY: two aligned words of our own static; volatile so the marker is in RAM before the
+    // step's first wait.
+    unsafe {
+        let p = addr_of_mut!(STEP) as *mut u32;
+        p.write_volatile(v);
+        p.add(1).write_volatile(!v);
+    }
+}
+
+/// Whether the independent watchdog caused the last reset; the reset flags are cleared, so the
+/// next boot reads its own cause (they are sticky until RMVF).
+///
+/// Gap: embassy-stm32 0.6 has no reset-cause API. RAW 12/12: RCC_CSR read-modify-write,
+/// IWDGRSTF read and RMVF set in one access (RM0440 RCC chapter, RCC_CSR).
+fn watchdog_reset() -> bool {
+    pac::RCC.csr().modify(|w| {
+        let iwdg = w.iwdgrstf();
+        w.set_rmvf(true);
+        iwdg
+    })
+}
+
+/// The step the run before this boot was in when the watchdog reset it.
+fn interrupted_step() -> Option<Step> {
+    // SAFETY: two aligned words of our own static; after a power-on they hold whatever SRAM
+    // came up with, which the complement check and the tag reject (read as plain words).
+    let (a, b) = unsafe {
+        let p = addr_of!(STEP) as *const u32;
+        (p.read_volatile(), p.add(1).read_volatile())
+    };
+    if a != !b || a & 0xFFFF_0000 != STEP_MAGIC {
+        return None;
+    }
+    [Step::Clock, Step::Converters, Step::Flash]
+        .into_iter()
+        .find(|s| *s as u32 == a & 0xFFFF)
+}
+
 /// The oscillator the core clock comes from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ClockSource {
@@ -189,7 +257,8 @@ pub enum ClockSource {
     Hse24,
     /// HSI16 through the PLL (the HSE did not start): 170 MHz, RC accuracy.
     Hsi16Pll,
-    /// HSI16 directly, 16 MHz: clock configuration skipped (see [`boot_error`]).
+    /// HSI16 directly, 16 MHz, no PLL: the boot before hung in the clock setup
+    /// ([`BootError::ClockHang`]); the sample stream is not started.
     Hsi16,
 }
 
@@ -204,7 +273,7 @@ impl ClockSource {
     }
 }
 
-/// 0: HSI16 (reset state), 1: HSE through the PLL, 2: HSI16 through the PLL.
+/// 1: HSE through the PLL, 2: HSI16 through the PLL, otherwise HSI16 directly.
 static CLOCK: AtomicU8 = AtomicU8::new(0);
 
 /// The oscillator the core runs from (set by [`init`]).
@@ -224,7 +293,7 @@ static DAC_UNDERRUNS: AtomicU32 = AtomicU32::new(0);
 /// count the readings stall until reset.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct StreamFaults {
-    /// DMA1 transfer errors (TEIF) on channel 1 (ADC) or 2 (DAC).
+    /// DMA1 transfer errors (TEIF) on channels 1–4 (ADC1, ADC2, DAC1, LPUART1 RX).
     pub dma_transfer_errors: u32,
     /// DAC1 channel 1 DMA underruns (DMAUDR1).
     pub dac_underruns: u32,
@@ -253,148 +322,169 @@ fn spin_until(cycles: u32, mut done: impl FnMut() -> bool) -> bool {
     done()
 }
 
-// Bounds of the waits, in core cycles at the clock the wait runs under.
 /// HSE crystal start-up, at HSI16: 100 ms (ST's HSE_STARTUP_TIMEOUT; typical start-up 2 ms).
 const HSE_TIMEOUT: u32 = 16_000_000 / 10;
-/// PLL lock, at HSI16: 10 ms (typical lock time tens of µs).
-const PLL_TIMEOUT: u32 = 16_000_000 / 100;
-/// FLASH_ACR write taking effect: a few bus cycles.
-const ACR_TIMEOUT: u32 = 1_000;
-/// IWDG register updates (PVU, RVU: up to a few LSI periods), at 170 MHz: 10 ms.
-const IWDG_TIMEOUT: u32 = SYSCLK_HZ / 100;
-/// ADC calibration (about 116 ADC clocks) and ADRDY, at 170 MHz: 1 ms.
-const ADC_TIMEOUT: u32 = SYSCLK_HZ / 1_000;
-/// Flash page erase (about 22 ms) or double-word program (about 82 µs), at 170 MHz: 50 ms.
-const FLASH_TIMEOUT: u32 = SYSCLK_HZ / 20;
-
-// ---- register map (RM0440) --------------------------------------------------------------
-
-const RCC_AHB1ENR_DMA1EN: u32 = 1 << 0;
-const RCC_AHB1ENR_DMAMUX1EN: u32 = 1 << 2;
-const RCC_AHB2ENR_GPIOAEN: u32 = 1 << 0;
-const RCC_AHB2ENR_ADC12EN: u32 = 1 << 13;
-const RCC_AHB2ENR_DAC1EN: u32 = 1 << 16;
-const RCC_APB1ENR1_TIM6EN: u32 = 1 << 4;
-const RCC_APB1ENR1_PWREN: u32 = 1 << 28;
-const RCC_APB1ENR2_LPUART1EN: u32 = 1 << 0;
-const RCC_CR_HSEON: u32 = 1 << 16;
-const RCC_CR_HSERDY: u32 = 1 << 17;
-const RCC_CR_HSEBYP: u32 = 1 << 18;
-const RCC_CR_PLLON: u32 = 1 << 24;
-const RCC_CR_PLLRDY: u32 = 1 << 25;
-const RCC_CFGR_SWS_MASK: u32 = 0b11 << 2;
-const RCC_CFGR_SWS_PLL: u32 = 0b11 << 2;
-const RCC_PLLCFGR_SRC_HSI16: u32 = 0b10;
-const RCC_PLLCFGR_SRC_HSE: u32 = 0b11;
-const RCC_PLLCFGR_N85: u32 = 85 << 8;
-/// PLLR = /2 (field 00), output enabled.
-const RCC_PLLCFGR_REN_R2: u32 = 1 << 24;
+/// The second ADC's last sample of a batch, after the first ADC's DMA interrupt: both convert
+/// on the same trigger, so it is there within a few bus cycles; 2 000 cycles (12 µs) of margin.
+const ADC_PAIR_TIMEOUT: u32 = 2_000;
+/// One batch period in core cycles (5 ms).
+const BATCH_CYCLES: u32 = SYSCLK_HZ / SAMPLE_RATE_HZ * BATCH as u32;
 /// HSE frequency of the NUCLEO-G474RE's crystal X3.
 const HSE_HZ: u32 = 24_000_000;
-
-const PWR_CR1_VOS_MASK: u32 = 0b11 << 9;
-const PWR_CR1_VOS_RANGE1: u32 = 0b01 << 9;
-
-const FLASH_ACR_LATENCY_MASK: u32 = 0xF;
-/// 4 wait states: range 1 boost, 136–170 MHz.
-const FLASH_ACR_LATENCY_4WS: u32 = 4;
-const FLASH_ACR_PRFTEN: u32 = 1 << 8;
-const FLASH_ACR_DCEN: u32 = 1 << 10;
-const FLASH_ACR_DCRST: u32 = 1 << 12;
-const FLASH_OPTR_DBANK: u32 = 1 << 22;
-
-const DBGMCU_APB1FZR1_DBG_IWDG_STOP: u32 = 1 << 12;
-
-const IWDG_KEY_START: u16 = 0xCCCC;
-const IWDG_KEY_UNLOCK: u16 = 0x5555;
-const IWDG_KEY_FEED: u16 = 0xAAAA;
-/// Prescaler /4: LSI 32 kHz → 8 kHz.
-const IWDG_PR_DIV4: u16 = 0;
-/// 500 ms at 8 kHz.
-const IWDG_RLR_500MS: u16 = 500 * 8 - 1;
-
-const TIM_CR1_CEN: u32 = 1 << 0;
-const TIM_CR2_MMS_UPDATE: u32 = 0b010 << 4;
-const TIM_EGR_UG: u32 = 1 << 0;
-
-const DAC_CR_EN1: u32 = 1 << 0;
-const DAC_CR_TEN1: u32 = 1 << 1;
-const DAC_CR_TSEL1_TIM6: u32 = 7 << 2;
-const DAC_CR_DMAEN1: u32 = 1 << 12;
-const DAC_MCR_HFSEL_160: u32 = 0b10 << 14;
-const DAC_SR_DMAUDR1: u32 = 1 << 13;
-
-const ADC_CR_ADEN: u32 = 1 << 0;
-const ADC_CR_ADSTART: u32 = 1 << 2;
-const ADC_CR_ADVREGEN: u32 = 1 << 28;
-const ADC_CR_ADCAL: u32 = 1 << 31;
-/// Core cycles from the end of ADCAL to ADEN: at least 4 ADC clocks (HCLK/4), 16 core cycles;
-/// 64 leaves a margin.
-const ADC_CAL_TO_ADEN_CYCLES: u32 = 64;
-const ADC_ISR_ADRDY: u32 = 1 << 0;
-const ADC_CFGR_DMAEN: u32 = 1 << 0;
-const ADC_CFGR_DMACFG: u32 = 1 << 1;
-const ADC_CFGR_EXTSEL_TIM6: u32 = 13 << 5;
-const ADC_CFGR_EXTEN_RISING: u32 = 0b01 << 10;
-const ADC_CFGR_OVRMOD: u32 = 1 << 12;
-const ADC_CCR_CKMODE_HCLK_4: u32 = 0b11 << 16;
-/// 47.5 ADC clock cycles sampling for IN1 and IN2.
-const ADC_SMPR1_IN1_IN2: u32 = (0b100 << 3) | (0b100 << 6);
-/// Two conversions: IN1 then IN2.
-const ADC_SQR1_SEQ: u32 = 1 | (1 << 6) | (2 << 12);
-
-const DMAMUX_REQ_ADC1: u32 = 5;
-const DMAMUX_REQ_DAC1_CH1: u32 = 6;
-const DMA_CCR_EN: u32 = 1 << 0;
-const DMA_CCR_TCIE: u32 = 1 << 1;
-const DMA_CCR_HTIE: u32 = 1 << 2;
-const DMA_CCR_TEIE: u32 = 1 << 3;
-const DMA_CCR_DIR_FROM_MEM: u32 = 1 << 4;
-const DMA_CCR_CIRC: u32 = 1 << 5;
-const DMA_CCR_MINC: u32 = 1 << 7;
-const DMA_CCR_PSIZE_16: u32 = 0b01 << 8;
-const DMA_CCR_PSIZE_32: u32 = 0b10 << 8;
-const DMA_CCR_MSIZE_16: u32 = 0b01 << 10;
-const DMA_CCR_PL_VERY_HIGH: u32 = 0b11 << 12;
-const DMA_ISR_TCIF1: u32 = 1 << 1;
-const DMA_ISR_HTIF1: u32 = 1 << 2;
-const DMA_ISR_TEIF1: u32 = 1 << 3;
-const DMA_ISR_TEIF2: u32 = 1 << 7;
-const DMA_IFCR_CGIF1: u32 = 1 << 0;
-const DMA_IFCR_CGIF2: u32 = 1 << 4;
-const DMA_IFCR_CTEIF2: u32 = 1 << 7;
-
-const GPIOA_MODER_PA2_PA3_AF: u32 = (0b10 << 4) | (0b10 << 6);
-const GPIOA_MODER_PA2_PA3_MASK: u32 = (0b11 << 4) | (0b11 << 6);
-const GPIOA_AFRL_PA2_PA3_AF12: u32 = (12 << 8) | (12 << 12);
-const GPIOA_AFRL_PA2_PA3_MASK: u32 = (0xF << 8) | (0xF << 12);
-
-const LPUART_CR1_UE: u32 = 1 << 0;
-const LPUART_CR1_RE: u32 = 1 << 2;
-const LPUART_CR1_TE: u32 = 1 << 3;
-const LPUART_CR1_RXNEIE: u32 = 1 << 5;
-const LPUART_ISR_RXNE: u32 = 1 << 5;
-const LPUART_ISR_ORE: u32 = 1 << 3;
-const LPUART_ICR_ORECF: u32 = 1 << 3;
+/// LPUART1 baud rate (ST-LINK virtual COM port).
 const LPUART_BAUD: u32 = 115_200;
+/// Received bytes buffered by LPUART1's DMA ring.
+const UART_RING: usize = 64;
+/// Watchdog timeout, µs.
+const WATCHDOG_US: u32 = 500_000;
 
-/// DMA buffers: the DMA owns them once started; the interrupt touches only the half the DMA
-/// has just left.
-static mut DAC_BUF: [[DacCode; BATCH]; 2] = [[DacCode::MID; BATCH]; 2];
-static mut ADC_BUF: [[[u16; 2]; BATCH]; 2] = [[[0; 2]; BATCH]; 2];
+// ---- interrupts ------------------------------------------------------------------------
 
-fn pac() -> device::Peripherals {
-    // SAFETY: the board driver is the only user of these peripherals; every register it
-    // touches belongs to a peripheral this module configures and owns exclusively, and the
-    // RTIC application does not take the PAC's peripherals itself (`peripherals = false`).
-    unsafe { device::Peripherals::steal() }
+bind_interrupts!(struct Irqs {
+    DMA1_CHANNEL2 => DmaFaults, dma::InterruptHandler<peripherals::DMA1_CH2>;
+    DMA1_CHANNEL3 => DmaFaults, dma::InterruptHandler<peripherals::DMA1_CH3>;
+    DMA1_CHANNEL4 => DmaFaults, dma::InterruptHandler<peripherals::DMA1_CH4>;
+    DMA1_CHANNEL5 => DmaFaults, dma::InterruptHandler<peripherals::DMA1_CH5>;
+});
+
+// DMA1 CH1's vector (`DMA1_CHANNEL1`) is the RTIC task `sample` (src/bin/probe.rs), which calls
+// embassy's handler for the channel itself (after [`DmaFaults`]) in [`Stream::capture`];
+// `bind_interrupts!` would define the same vector symbol a second time.
+// SAFETY: the handler runs on every DMA1_CH1 interrupt, from `Stream::capture`.
+unsafe impl Binding<interrupt::typelevel::DMA1_CHANNEL1, dma::InterruptHandler<DMA1_CH1>> for Irqs {}
+// The LPUART1 vector is the RTIC task `uart_rx`, which reads the ring through embassy's
+// non-blocking read ([`Uart::read_byte`]); that read clears the idle and error flags the
+// interrupt is enabled for, and embassy's handler (which only masks them and wakes an async
+// reader) is not needed.
+// SAFETY: every `uart_rx` run reads until the ring is empty, clearing the flags.
+unsafe impl Binding<interrupt::typelevel::LPUART1, usart::InterruptHandler<peripherals::LPUART1>>
+    for Irqs
+{
 }
 
-/// The DAC/ADC sample stream over TIM6, DAC1, ADC1 and two DMA1 channels.
+/// Counts and clears DMA1 transfer errors before embassy's DMA handler sees them.
+///
+/// Gap: embassy-stm32 0.6's DMA interrupt handler (`dma_bdma.rs`, `on_irq`) panics on TEIF; the
+/// stream must count a transfer error and stop instead (the hardware has already disabled the
+/// channel: RM0440 DMA chapter, "DMA error management").
+struct DmaFaults;
+
+impl<I: interrupt::typelevel::Interrupt> Handler<I> for DmaFaults {
+    unsafe fn on_interrupt() {
+        // RAW 1/12: DMA1_ISR TEIF1..4 (RM0440 DMA chapter, DMA_ISR).
+        let isr = pac::DMA1.isr().read();
+        // RAW 2/12: DMA1_IFCR CTEIF1..4, write-one-to-clear (RM0440 DMA chapter, DMA_IFCR).
+        let n = pac::DMA1.ifcr().write(|w| {
+            let mut n = 0;
+            for ch in 0..4 {
+                if isr.teif(ch) {
+                    w.set_teif(ch, true);
+                    n += 1;
+                }
+            }
+            n
+        });
+        if n != 0 {
+            DMA_TRANSFER_ERRORS.fetch_add(n, Ordering::Relaxed);
+        }
+    }
+}
+
+// ---- clocks ----------------------------------------------------------------------------
+
+/// Start the HSE crystal and wait for it, bounded. embassy's `rcc::init` (g4.rs) sets HSEON and
+/// then spins on HSERDY without a bound: it is given the HSE only once it runs.
+fn hse_starts() -> bool {
+    // RAW 3/12: RCC_CR.HSEON (RM0440 RCC chapter, RCC_CR; "HSE clock"). HSEBYP stays 0
+    // (crystal). If the crystal does not start, embassy's init (`hse: None`) clears HSEON again.
+    pac::RCC.cr().modify(|w| w.set_hseon(true));
+    // RAW 4/12: RCC_CR.HSERDY, polled with a bound (RM0440 RCC chapter, RCC_CR).
+    spin_until(HSE_TIMEOUT, || pac::RCC.cr().read().hserdy())
+}
+
+/// embassy's clock configuration: 170 MHz from the PLL (24 MHz / 6 or 16 MHz / 4 = 4 MHz × 85
+/// / 2), range 1 boost — or HSI16 at 16 MHz without the PLL ([`ClockSource::Hsi16`], after a
+/// boot that hung in the clock setup) —, the ADC12 kernel clock from SYSCLK (embassy's default
+/// is none).
+fn embassy_config(clock: ClockSource) -> embassy_stm32::Config {
+    use embassy_stm32::rcc::{
+        mux, Hse, HseMode, LsConfig, Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk,
+    };
+    let mut config = embassy_stm32::Config::default();
+    let rcc = &mut config.rcc;
+    let hse = clock == ClockSource::Hse24;
+    rcc.hse = hse.then_some(Hse {
+        freq: Hertz(HSE_HZ),
+        mode: HseMode::Oscillator,
+    });
+    if clock != ClockSource::Hsi16 {
+        rcc.pll = Some(Pll {
+            source: if hse { PllSource::HSE } else { PllSource::HSI },
+            prediv: if hse {
+                PllPreDiv::DIV6
+            } else {
+                PllPreDiv::DIV4
+            },
+            mul: PllMul::MUL85,
+            divp: None,
+            divq: None,
+            divr: Some(PllRDiv::DIV2),
+        });
+        rcc.sys = Sysclk::PLL1_R;
+        rcc.boost = true;
+    }
+    // Nothing uses HSI48 (USB, RNG) or the RTC: no HSI48RDY or LSIRDY waits, no backup domain.
+    rcc.hsi48 = None;
+    rcc.ls = LsConfig::off();
+    rcc.mux.adc12sel = mux::Adcsel::SYS;
+    // embassy enables every DMA channel interrupt at this priority: the sample task's (RTIC
+    // logical 3), so none preempts the sample interrupt.
+    config.bdma_interrupt_priority = prio(3);
+    config
+}
+
+/// The NVIC priority of RTIC logical priority `logical`.
+fn prio(logical: u8) -> Priority {
+    Priority::from(super::nvic_priority(logical, device::NVIC_PRIO_BITS))
+}
+
+// ---- the sample stream -----------------------------------------------------------------
+
+/// DMA buffers: the DMA owns them once started; the interrupt touches only the DAC half the DMA
+/// has just left, and reads the ADC rings through embassy.
+static mut DAC_BUF: [DacCode; 2 * BATCH] = [DacCode::MID; 2 * BATCH];
+static mut ADC1_RING: [u16; 2 * BATCH] = [0; 2 * BATCH];
+static mut ADC2_RING: [u16; 2 * BATCH] = [0; 2 * BATCH];
+
+/// DMA1 CH3, the DAC's channel, borrowed by its circular transfer for the life of the image.
+static mut DAC_DMA: Option<dma::Channel<'static>> = None;
+
+/// The converters of the stream (absent when a boot error kept them from being set up).
+struct Converters {
+    adc1: RingBufferedAdc<'static, ADC1>,
+    adc2: RingBufferedAdc<'static, ADC2>,
+    tim: Timer<'static, TIM6>,
+    /// Kept for its `Drop` (which would disable the channel); its DMA is [`DAC_DMA`].
+    _dac: DacChannel<'static, Async>,
+    /// DMAMUX request of DAC1 channel 1.
+    dac_request: dma::Request,
+    /// The DAC's circular transfer, once started.
+    dac_transfer: Option<dma::Transfer<'static>>,
+}
+
+/// The DAC/ADC sample stream over TIM6, DAC1, ADC1, ADC2 and three DMA1 channels.
 pub struct Stream {
+    hw: Option<Converters>,
     frames: [AdcFrame; BATCH],
+    current: [u16; BATCH],
+    monitor: [u16; BATCH],
+    /// [`stamp`] of the last batch (`None` before the first).
+    last: Option<u32>,
+    started: u32,
     late_seen: bool,
     fault_seen: bool,
+    faults: StreamFaults,
+    dac_underrun: bool,
 }
 
 impl Stream {
@@ -403,315 +493,189 @@ impl Stream {
         SCALE
     }
 
-    fn new() -> Self {
-        Self {
-            frames: [AdcFrame::default(); BATCH],
-            late_seen: false,
-            fault_seen: false,
-        }
-    }
-
-    /// Prefill both DAC halves from `engine`, configure the converters and DMA and start the
-    /// trigger timer. Called once from `init` with interrupts disabled. If ADC1 does not
-    /// calibrate or become ready within its bound, records [`BootError::AdcCalibration`] or
-    /// [`BootError::AdcReady`] and leaves the timer stopped (no batches, readings stall).
+    /// Prefill both DAC halves from `engine`, start the DAC's circular DMA and the ADC rings,
+    /// then the trigger timer. Called once from `init` with interrupts disabled. If the DAC's
+    /// transfer does not start, records [`BootError::DacStart`] and leaves the timer stopped
+    /// (no batches, readings stall).
     pub fn start(&mut self, engine: &mut SampleEngine) {
-        let dp = pac();
-        // SAFETY: init context, the DMA is not running yet; the buffers are only reached
-        // through these raw pointers.
-        let (dac_buf, adc_buf) =
-            unsafe { (&mut *addr_of_mut!(DAC_BUF), &mut *addr_of_mut!(ADC_BUF)) };
-        for half in dac_buf.iter_mut() {
+        // SAFETY: init context, no DMA runs yet; the buffer is reached only through this
+        // pointer now and, once the DMA runs, only the half it has left (`capture`).
+        let dac_buf = unsafe { &mut *addr_of_mut!(DAC_BUF) };
+        for half in dac_buf.chunks_exact_mut(BATCH) {
             engine.generate(half);
         }
-        // SAFETY (all `bits` writes below): values follow RM0440's register descriptions; the
-        // peripherals are owned by this driver.
-        unsafe {
-            dp.RCC
-                .ahb1enr()
-                .modify(|r, w| w.bits(r.bits() | RCC_AHB1ENR_DMA1EN | RCC_AHB1ENR_DMAMUX1EN));
-            dp.RCC.ahb2enr().modify(|r, w| {
-                w.bits(r.bits() | RCC_AHB2ENR_GPIOAEN | RCC_AHB2ENR_ADC12EN | RCC_AHB2ENR_DAC1EN)
-            });
-            dp.RCC
-                .apb1enr1()
-                .modify(|r, w| w.bits(r.bits() | RCC_APB1ENR1_TIM6EN));
-            // PA0, PA1, PA4 stay in their reset mode: analog.
-
-            // TIM6: 10 kHz update as TRGO, not yet running.
-            let tim = &dp.TIM6;
-            tim.psc().write(|w| w.bits(0));
-            tim.arr().write(|w| w.bits(SYSCLK_HZ / SAMPLE_RATE_HZ - 1));
-            tim.cr2().write(|w| w.bits(TIM_CR2_MMS_UPDATE));
-            tim.egr().write(|w| w.bits(TIM_EGR_UG));
-
-            // Stale fault flags would be counted as faults of this stream: clear channel 1's and
-            // 2's DMA flags and the DAC underrun (RM0440 DMA_IFCR, DAC_SR; no HAL driver).
-            dp.DMA1
-                .ifcr()
-                .write(|w| w.bits(DMA_IFCR_CGIF1 | DMA_IFCR_CGIF2));
-            dp.DAC1.sr().write(|w| w.bits(DAC_SR_DMAUDR1));
-
-            // DMAMUX: request lines of the two DMA1 channels.
-            dp.DMAMUX.ccr(0).write(|w| w.bits(DMAMUX_REQ_ADC1));
-            dp.DMAMUX.ccr(1).write(|w| w.bits(DMAMUX_REQ_DAC1_CH1));
-
-            // DMA1 CH2: DAC buffer → DHR12R1, 32-bit peripheral writes of 16-bit codes.
-            let ch2 = dp.DMA1.ch2();
-            ch2.par()
-                .write(|w| w.bits(dp.DAC1.dhr12r1().as_ptr() as u32));
-            ch2.mar().write(|w| w.bits(dac_buf.as_ptr() as u32));
-            ch2.ndtr().write(|w| w.bits((2 * BATCH) as u32));
-            ch2.cr().write(|w| {
-                w.bits(
-                    DMA_CCR_DIR_FROM_MEM
-                        | DMA_CCR_CIRC
-                        | DMA_CCR_MINC
-                        | DMA_CCR_PSIZE_32
-                        | DMA_CCR_MSIZE_16
-                        | DMA_CCR_PL_VERY_HIGH,
+        let Some(hw) = self.hw.as_mut() else {
+            return;
+        };
+        // The DAC's circular DMA, DAC_BUF → DHR12R1, half-words read and written as words
+        // (zero-extended by the DMA): embassy's `DacChannel::write` programs 16-bit peripheral
+        // writes, which the G4's DAC answers with a bus error (RM0440's DAC registers take word
+        // accesses only; embassy issue #2783, fixed after 0.6).
+        // SAFETY: `DAC_DMA` was filled by `converters` and is used only here; the buffer is
+        // static; the DMA reads it for ever while `capture` writes the half the DMA has left.
+        let mut options = dma::TransferOptions::default();
+        options.circular = true;
+        options.half_transfer_ir = false;
+        options.complete_transfer_ir = false;
+        let transfer = unsafe {
+            (*addr_of_mut!(DAC_DMA)).as_mut().map(|ch| {
+                ch.write_raw::<u16, u32>(
+                    hw.dac_request,
+                    core::ptr::slice_from_raw_parts(addr_of!(DAC_BUF) as *const u16, 2 * BATCH),
+                    pac::DAC1.dhr12r(0).as_ptr() as *mut u32,
+                    options,
                 )
-            });
-            ch2.cr().modify(|r, w| w.bits(r.bits() | DMA_CCR_EN));
-
-            // DMA1 CH1: ADC1 DR → ADC buffer, interleaved (IN1, IN2) pairs, HT + TC interrupts.
-            let ch1 = dp.DMA1.ch1();
-            ch1.par().write(|w| w.bits(dp.ADC1.dr().as_ptr() as u32));
-            ch1.mar().write(|w| w.bits(adc_buf.as_ptr() as u32));
-            ch1.ndtr().write(|w| w.bits((2 * BATCH * 2) as u32));
-            ch1.cr().write(|w| {
-                w.bits(
-                    DMA_CCR_CIRC
-                        | DMA_CCR_MINC
-                        | DMA_CCR_PSIZE_16
-                        | DMA_CCR_MSIZE_16
-                        | DMA_CCR_PL_VERY_HIGH
-                        | DMA_CCR_HTIE
-                        | DMA_CCR_TCIE
-                        | DMA_CCR_TEIE,
-                )
-            });
-            ch1.cr().modify(|r, w| w.bits(r.bits() | DMA_CCR_EN));
-
-            // DAC1 CH1: triggered by TIM6, fed by DMA; first code mid-scale.
-            dp.DAC1
-                .mcr()
-                .modify(|r, w| w.bits(r.bits() | DAC_MCR_HFSEL_160));
-            dp.DAC1.dhr12r1().write(|w| w.bits(DacCode::MID.0 as u32));
-            dp.DAC1
-                .cr()
-                .write(|w| w.bits(DAC_CR_TEN1 | DAC_CR_TSEL1_TIM6 | DAC_CR_DMAEN1));
-            dp.DAC1.cr().modify(|r, w| w.bits(r.bits() | DAC_CR_EN1));
-
-            // ADC1: power up, calibrate, configure, enable, arm.
-            dp.ADC12_COMMON
-                .ccr()
-                .modify(|r, w| w.bits(r.bits() | ADC_CCR_CKMODE_HCLK_4));
-            let adc = &dp.ADC1;
-            adc.cr().write(|w| w.bits(0)); // leave deep power-down
-            adc.cr().write(|w| w.bits(ADC_CR_ADVREGEN));
-            cortex_m::asm::delay(SYSCLK_HZ / 50_000); // t_ADCVREG_STUP = 20 µs
-
-            // Calibration, bounded (RM0440 21.4.8; the HAL's ADC driver is not used).
-            adc.cr().write(|w| w.bits(ADC_CR_ADVREGEN | ADC_CR_ADCAL));
-            if !spin_until(ADC_TIMEOUT, || adc.cr().read().bits() & ADC_CR_ADCAL == 0) {
-                record(BootError::AdcCalibration);
-                return;
-            }
-            // ADEN must not be set within 4 ADC clock cycles of ADCAL's end (RM0440 21.4.8,
-            // 21.4.9); the register writes below take fewer, hence the explicit delay.
-            cortex_m::asm::delay(ADC_CAL_TO_ADEN_CYCLES);
-            adc.cfgr().write(|w| {
-                w.bits(
-                    ADC_CFGR_DMAEN
-                        | ADC_CFGR_DMACFG
-                        | ADC_CFGR_EXTSEL_TIM6
-                        | ADC_CFGR_EXTEN_RISING
-                        | ADC_CFGR_OVRMOD,
-                )
-            });
-            adc.smpr1().write(|w| w.bits(ADC_SMPR1_IN1_IN2));
-            adc.sqr1().write(|w| w.bits(ADC_SQR1_SEQ));
-            adc.isr().write(|w| w.bits(ADC_ISR_ADRDY));
-            // Enable, bounded wait for ADRDY (RM0440 21.4.9).
-            adc.cr().write(|w| w.bits(ADC_CR_ADVREGEN | ADC_CR_ADEN));
-            if !spin_until(ADC_TIMEOUT, || adc.isr().read().bits() & ADC_ISR_ADRDY != 0) {
-                record(BootError::AdcReady);
-                return;
-            }
-            adc.cr()
-                .write(|w| w.bits(ADC_CR_ADVREGEN | ADC_CR_ADEN | ADC_CR_ADSTART));
-
-            // Go: every TIM6 update now plays one DAC code and converts one frame.
-            tim.cr1().write(|w| w.bits(TIM_CR1_CEN));
-        }
+            })
+        };
+        let Some(transfer) = transfer else {
+            record(BootError::DacStart);
+            return;
+        };
+        hw.dac_transfer = Some(transfer);
+        // The rings (DMA and ADSTART) before the trigger: every TIM6 update from the first on
+        // plays one DAC code and converts one sample on each ADC.
+        hw.adc1.start();
+        hw.adc2.start();
+        hw.tim.start();
     }
 
-    /// Acknowledge the DMA half/full-transfer interrupt; returns the ADC half just captured
-    /// (de-interleaved into frames) and the DAC half just played (to refill). Counts DMA
+    /// Acknowledge the DMA half/full-transfer interrupt of ADC1's ring; returns the ADC frames
+    /// of the batch just captured and the DAC half just played (to refill). Counts DMA
     /// transfer errors and DAC underruns ([`stream_faults`]); a batch that saw one is late.
     pub fn capture(&mut self) -> (&[AdcFrame], &mut [DacCode]) {
-        let dp = pac();
-        let flags = dp.DMA1.isr().read().bits();
-        // Faults the register-level stream must watch itself (no HAL driver; RM0440 DMA_ISR
-        // TEIFx, DAC_SR DMAUDR1): on a transfer error the DMA disables the channel, on an
-        // underrun the DAC stops its DMA requests.
-        let dac_sr = dp.DAC1.sr().read().bits();
-        let te2 = flags & DMA_ISR_TEIF2 != 0;
-        // SAFETY: write-one-to-clear of channel 1's flags, of channel 2's transfer error flag
-        // and of the DAC's underrun flag.
+        let now = stamp();
+        // SAFETY: the DMA1_CH1 vector is this task's; embassy's handler for the channel (half
+        // and full transfer of ADC1's ring, waker) runs here, after the transfer-error check.
         unsafe {
-            dp.DMA1
-                .ifcr()
-                .write(|w| w.bits(DMA_IFCR_CGIF1 | if te2 { DMA_IFCR_CTEIF2 } else { 0 }));
+            <DmaFaults as Handler<interrupt::typelevel::DMA1_CHANNEL1>>::on_interrupt();
+            <dma::InterruptHandler<DMA1_CH1> as Handler<interrupt::typelevel::DMA1_CHANNEL1>>::on_interrupt();
         }
-        let transfer_errors = (flags & DMA_ISR_TEIF1 != 0) as u32 + te2 as u32;
-        let underrun = dac_sr & DAC_SR_DMAUDR1 != 0;
-        if underrun {
-            // SAFETY: as above.
-            unsafe { dp.DAC1.sr().write(|w| w.bits(DAC_SR_DMAUDR1)) };
+        // A half that went by unserviced shows in the time since the last batch.
+        self.late_seen = self
+            .last
+            .is_some_and(|t| now.wrapping_sub(t) > BATCH_CYCLES + BATCH_CYCLES / 2);
+        self.last = Some(now);
+        self.started = now;
+        // The DAC half just played is the one its DMA is not in (from the channel's remaining
+        // count: 2 × BATCH .. BATCH + 1 in half 0, BATCH .. 1 in half 1). Both DMA streams run
+        // off the same trigger, so it is the half of the ADC batch just captured; the DAC's
+        // output register holds the last sample of that half already (it is fetched one trigger
+        // ahead), so the whole half can be refilled.
+        let h = match self.hw.as_ref().and_then(|hw| hw.dac_transfer.as_ref()) {
+            Some(t) if t.get_remaining_transfers() as usize > BATCH => 1,
+            _ => 0,
+        };
+
+        // Gap: embassy 0.6's DAC driver has no underrun check: DAC_SR.DMAUDR1 (RM0440 DAC
+        // chapter, "DMA underrun"), read through [`dac_sr`]. Not cleared: the stream stops on
+        // the first underrun, which is counted once.
+        if !self.dac_underrun && self.hw.is_some() && dac_sr().dmaudr(0) {
+            self.dac_underrun = true;
             DAC_UNDERRUNS.fetch_add(1, Ordering::Relaxed);
         }
-        if transfer_errors != 0 {
-            DMA_TRANSFER_ERRORS.fetch_add(transfer_errors, Ordering::Relaxed);
-        }
-        self.fault_seen = underrun || transfer_errors != 0;
-        if self.fault_seen {
+        let faults = stream_faults();
+        self.fault_seen = faults != self.faults;
+        self.faults = faults;
+        match self.hw.as_mut() {
             // Either fault ends the stream as a whole (a disabled DMA channel, a DAC that no
             // longer requests data): stop the trigger, so the measurement task's readings end
             // as `stalled` rather than run on with a dead drive or stale samples.
-            // SAFETY: TIM6 belongs to this driver.
-            unsafe { dp.TIM6.cr1().write(|w| w.bits(0)) };
+            Some(hw) if self.fault_seen => hw.tim.stop(),
+            Some(hw) => {
+                if !(fill(&mut hw.adc1, &mut self.current) && fill(&mut hw.adc2, &mut self.monitor))
+                {
+                    self.late_seen = true;
+                }
+            }
+            None => self.late_seen = true,
         }
-        let both = DMA_ISR_HTIF1 | DMA_ISR_TCIF1;
-        // Both flags at once: a whole half went by unserviced.
-        self.late_seen = flags & both == both;
-        let h = if flags & DMA_ISR_TCIF1 != 0 { 1 } else { 0 };
-        // SAFETY: the DMA has left half `h` of both buffers (it is now in the other half) and
-        // comes back to it only after the other half completes.
-        let (adc, dac) = unsafe {
-            (
-                &(*addr_of_mut!(ADC_BUF))[h],
-                &mut (*addr_of_mut!(DAC_BUF))[h],
-            )
-        };
-        for (f, pair) in self.frames.iter_mut().zip(adc.iter()) {
+        for ((f, &i), &v) in self.frames.iter_mut().zip(&self.current).zip(&self.monitor) {
             *f = AdcFrame {
-                current: AdcCode(pair[0]),
-                monitor: AdcCode(pair[1]),
+                current: AdcCode(i),
+                monitor: AdcCode(v),
             };
         }
+        // SAFETY: the DAC's DMA has left half `h` (it is in the other half) and comes back to it
+        // only after the other half completes.
+        let dac = unsafe {
+            core::slice::from_raw_parts_mut(
+                (addr_of_mut!(DAC_BUF) as *mut DacCode).add(h * BATCH),
+                BATCH,
+            )
+        };
         (&self.frames, dac)
     }
 
-    /// True when the handler was late: a half went by unserviced, or the next half completed
-    /// before the handler finished — or the batch saw a DMA transfer error or DAC underrun
-    /// (its data are stale; [`stream_faults`] tells the two apart).
+    /// True when the handler was late: a half went by unserviced, or the handler ran longer
+    /// than a batch (the next half completed before it finished) — or the batch saw a DMA
+    /// transfer error or DAC underrun (its data are stale; [`stream_faults`] tells them apart).
     pub fn late(&self) -> bool {
-        let flags = pac().DMA1.isr().read().bits();
-        self.late_seen || self.fault_seen || flags & (DMA_ISR_HTIF1 | DMA_ISR_TCIF1) != 0
+        self.late_seen || self.fault_seen || elapsed(self.started) >= BATCH_CYCLES
     }
 }
 
-/// LPUART1 receiver (115 200 Bd, 8N1) on the ST-LINK virtual COM port.
-pub struct Uart(());
+/// Read the newest [`BATCH`] samples of `adc`'s ring into `out`, waiting a bounded time for the
+/// last ones (the second ADC's DMA may trail the first's interrupt by a few bus cycles).
+fn fill<T: embassy_stm32::adc::Instance>(
+    adc: &mut RingBufferedAdc<'static, T>,
+    out: &mut [u16; BATCH],
+) -> bool {
+    let mut got = 0;
+    spin_until(ADC_PAIR_TIMEOUT, || {
+        got += adc.read_latest(&mut out[got..]);
+        got == BATCH
+    })
+}
+
+// ---- host link, watchdog ---------------------------------------------------------------
+
+/// LPUART1 receiver (115 200 Bd, 8N1) on the ST-LINK virtual COM port: embassy's DMA ring
+/// (DMA1 CH4, [`UART_RING`] bytes), drained by the RTIC task `uart_rx` on the LPUART1 vector.
+///
+/// embassy enables LPUART1's idle-line and error interrupts for its ring; the vector is RTIC's,
+/// and [`Uart::read_byte`] reads through embassy's non-blocking `embedded_hal_nb` read, which
+/// clears those flags (`check_idle_and_errors`) and restarts the ring after an error. Bytes that
+/// arrive without a pause wait in the ring until the idle line.
+pub struct Uart(Option<RingBufferedUartRx<'static>>);
 
 impl Uart {
-    fn new() -> Self {
-        let dp = pac();
-        // SAFETY: LPUART1 and GPIOA (PA2/PA3 only) belong to this driver; values per RM0440.
-        unsafe {
-            dp.RCC
-                .apb1enr2()
-                .modify(|r, w| w.bits(r.bits() | RCC_APB1ENR2_LPUART1EN));
-            dp.RCC
-                .ahb2enr()
-                .modify(|r, w| w.bits(r.bits() | RCC_AHB2ENR_GPIOAEN));
-            dp.GPIOA.afrl().modify(|r, w| {
-                w.bits((r.bits() & !GPIOA_AFRL_PA2_PA3_MASK) | GPIOA_AFRL_PA2_PA3_AF12)
-            });
-            dp.GPIOA.moder().modify(|r, w| {
-                w.bits((r.bits() & !GPIOA_MODER_PA2_PA3_MASK) | GPIOA_MODER_PA2_PA3_AF)
-            });
-            // LPUART clock = PCLK1 (170 MHz, CCIPR reset value); BRR = 256 f / baud.
-            let brr = ((256u64 * SYSCLK_HZ as u64) / LPUART_BAUD as u64) as u32;
-            dp.LPUART1.brr().write(|w| w.bits(brr));
-            dp.LPUART1.cr1().write(|w| {
-                w.bits(LPUART_CR1_UE | LPUART_CR1_RE | LPUART_CR1_TE | LPUART_CR1_RXNEIE)
-            });
-        }
-        Self(())
-    }
-
-    /// The next received byte, if any (reading it clears the receive interrupt).
+    /// The next received byte, if any (reading clears the receive interrupt). A receive error
+    /// (overrun, noise, framing) is dropped and the read retried once: the lost byte shows up
+    /// as a malformed line, which the parser reports.
     pub fn read_byte(&mut self) -> Option<u8> {
-        let dp = pac();
-        let isr = dp.LPUART1.isr().read().bits();
-        if isr & LPUART_ISR_ORE != 0 {
-            // SAFETY: write-one-to-clear of the overrun flag; the lost byte shows up as a
-            // malformed line, which the parser reports.
-            unsafe { dp.LPUART1.icr().write(|w| w.bits(LPUART_ICR_ORECF)) };
+        let rx = self.0.as_mut()?;
+        for _ in 0..2 {
+            match embedded_hal_nb::serial::Read::read(rx) {
+                Ok(b) => return Some(b),
+                Err(nb::Error::WouldBlock) => return None,
+                Err(nb::Error::Other(_)) => {}
+            }
         }
-        (isr & LPUART_ISR_RXNE != 0).then(|| dp.LPUART1.rdr().read().bits() as u8)
+        None
     }
 }
 
 /// The independent watchdog (LSI): 500 ms timeout, fed by the measurement task while alive;
 /// frozen while a debugger halts the core.
-pub struct Watchdog(());
+pub struct Watchdog(IndependentWatchdog<'static, peripherals::IWDG>);
 
 impl Watchdog {
-    /// Freeze the IWDG under the debugger, start it, set 500 ms. Register level rather than
-    /// the HAL's `IndependentWatchdog::start`, whose waits on IWDG_SR are unbounded and which
-    /// carries an `expect`: here a wait that times out records [`BootError::Watchdog`] and the
-    /// IWDG keeps its reset configuration (/4, reload 0xFFF: about 512 ms).
-    fn start() -> Self {
-        let dp = pac();
-        // SAFETY: DBGMCU and IWDG belong to this driver; values per RM0440 (DBGMCU_APB1FZR1,
-        // IWDG_KR/PR/RLR/SR).
-        unsafe {
-            // Freeze the IWDG counter while the core is halted (DBG_IWDG_STOP; the HAL has no
-            // DBGMCU API; RM0440 DBGMCU chapter, DBGMCU_APB1FZR1), so a breakpoint does not
-            // reset the board.
-            dp.DBGMCU
-                .apb1l_fz()
-                .modify(|r, w| w.bits(r.bits() | DBGMCU_APB1FZR1_DBG_IWDG_STOP));
-            let iwdg = &dp.IWDG;
-            iwdg.kr().write(|w| w.bits(IWDG_KEY_START));
-            iwdg.kr().write(|w| w.bits(IWDG_KEY_UNLOCK));
-            // PR and RLR take writes only while PVU/RVU are clear, and PVU/RVU/WVU clear once
-            // the LSI domain took the values (RM0440 IWDG chapter, IWDG_SR): bounded waits
-            // before and after.
-            let idle = || iwdg.sr().read().bits() == 0;
-            if spin_until(IWDG_TIMEOUT, idle) {
-                iwdg.pr().write(|w| w.bits(IWDG_PR_DIV4));
-                iwdg.rlr().write(|w| w.bits(IWDG_RLR_500MS));
-            }
-            if !spin_until(IWDG_TIMEOUT, idle) {
-                record(BootError::Watchdog);
-            }
-            iwdg.kr().write(|w| w.bits(IWDG_KEY_FEED));
-        }
-        Watchdog(())
-    }
-
     /// Feed the watchdog.
     pub fn feed(&mut self) {
-        // SAFETY: the refresh key (RM0440 IWDG_KR).
-        unsafe { pac().IWDG.kr().write(|w| w.bits(IWDG_KEY_FEED)) };
+        self.0.pet();
     }
 }
+
+// ---- flash -----------------------------------------------------------------------------
 
 /// Errors of the internal flash driver.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FlashError {
     /// Bad alignment or range.
     Args(NorFlashErrorKind),
-    /// The controller reported an error (FLASH_SR bits).
-    Controller(u32),
-    /// FLASH_SR.BSY did not clear within its bound.
-    Busy,
-    /// The flash is in single-bank mode (FLASH_OPTR.DBANK = 0): erase and program refused.
+    /// The controller reported an error (embassy's reading of FLASH_SR).
+    Controller(embassy_stm32::flash::Error),
+    /// The flash is in single-bank mode (FLASH_OPTR.DBANK = 0): every access refused.
     SingleBank,
 }
 
@@ -719,9 +683,7 @@ impl NorFlashError for FlashError {
     fn kind(&self) -> NorFlashErrorKind {
         match self {
             FlashError::Args(k) => *k,
-            FlashError::Controller(_) | FlashError::Busy | FlashError::SingleBank => {
-                NorFlashErrorKind::Other
-            }
+            FlashError::Controller(_) | FlashError::SingleBank => NorFlashErrorKind::Other,
         }
     }
 }
@@ -732,116 +694,24 @@ impl From<NorFlashErrorKind> for FlashError {
     }
 }
 
-const FLASH_BASE: u32 = 0x0800_0000;
 const FLASH_SIZE: usize = 512 * 1024;
 const FLASH_PAGE: usize = 2048;
-const FLASH_BANK_PAGES: u32 = 128;
-const FLASH_KEY1: u32 = 0x4567_0123;
-const FLASH_KEY2: u32 = 0xCDEF_89AB;
-const FLASH_CR_PG: u32 = 1 << 0;
-const FLASH_CR_PER: u32 = 1 << 1;
-const FLASH_CR_BKER: u32 = 1 << 11;
-const FLASH_CR_STRT: u32 = 1 << 16;
-const FLASH_CR_LOCK: u32 = 1 << 31;
-const FLASH_SR_BSY: u32 = 1 << 16;
-/// OPERR, PROGERR, WRPERR, PGAERR, SIZERR, PGSERR, MISERR, FASTERR, RDERR, OPTVERR.
-const FLASH_SR_ERRORS: u32 = 0xC3FA;
-const FLASH_SR_EOP: u32 = 1 << 0;
 
-/// The internal flash as a NOR flash (dual-bank mode, the factory default of the
-/// STM32G474RE: 2 KiB pages, 8-byte double-word programming; checked in FLASH_OPTR.DBANK, and
-/// erase and program are refused in single-bank mode). Offsets count from 0x0800_0000. The
-/// store lives in bank 2 while the code runs from bank 1, so erasing and programming do not
-/// stall the sample interrupt (read-while-write across banks). Every wait on FLASH_SR.BSY is
-/// bounded ([`FlashError::Busy`]). Register level: the HAL's `FlashWriter` waits on BSY
-/// without a bound and knows nothing of DBANK or the data cache.
-pub struct InternalFlash(());
+/// The internal flash as a NOR flash: embassy's blocking driver on the whole flash (dual-bank
+/// mode, 2 KiB pages, 8-byte double words); offsets count from 0x0800_0000. The store lives in
+/// bank 2 while the code runs from bank 1 (read-while-write).
+///
+/// embassy's `Flash<Blocking>` methods (`blocking_erase`, `blocking_write`) run without a
+/// critical section — unlike its region drivers' blocking methods, which keep interrupts off
+/// for the whole ~20 ms page erase and would overrun the sample stream — so the sample
+/// interrupt keeps running while the measurement task erases or programs. embassy clears stale
+/// FLASH_SR flags before each operation and, on the G4, turns the data cache off around it and
+/// resets it (DCRST) before turning it back on (`flash/g.rs`).
+pub struct InternalFlash(Option<Flash<'static, Blocking>>);
 
 impl InternalFlash {
-    /// Dual-bank mode (RM0440 3.3.1, FLASH_OPTR.DBANK; the HAL does not check it).
-    fn dual_bank() -> bool {
-        pac().FLASH.optr().read().bits() & FLASH_OPTR_DBANK != 0
-    }
-
-    /// Bounded wait for BSY to clear (RM0440 3.3.7/3.3.8, step "check BSY"; the HAL's waits
-    /// are unbounded).
-    fn wait_idle() -> Result<(), FlashError> {
-        let dp = pac();
-        if spin_until(FLASH_TIMEOUT, || {
-            dp.FLASH.sr().read().bits() & FLASH_SR_BSY == 0
-        }) {
-            Ok(())
-        } else {
-            Err(FlashError::Busy)
-        }
-    }
-
-    /// Wait for the operation to end, then read and clear FLASH_SR: its error flags are the
-    /// operation's result.
-    fn finish() -> Result<(), FlashError> {
-        Self::wait_idle()?;
-        let dp = pac();
-        let sr = dp.FLASH.sr().read().bits();
-        // SAFETY: write-one-to-clear of the status flags (RM0440 FLASH_SR).
-        unsafe {
-            dp.FLASH
-                .sr()
-                .write(|w| w.bits(FLASH_SR_ERRORS | FLASH_SR_EOP))
-        };
-        if sr & FLASH_SR_ERRORS != 0 {
-            Err(FlashError::Controller(sr))
-        } else {
-            Ok(())
-        }
-    }
-
-    /// Unlock, wait for idle, clear stale error flags (a flag left by an earlier operation
-    /// would block the next one: PGSERR and friends, RM0440 3.3.7/3.3.8 "check and clear all
-    /// error programming flags due to a previous programming"), run `f`, lock again.
-    fn unlocked<T>(f: impl FnOnce() -> Result<T, FlashError>) -> Result<T, FlashError> {
-        if !Self::dual_bank() {
-            return Err(FlashError::SingleBank);
-        }
-        let dp = pac();
-        // SAFETY: the documented unlock sequence, then CR is restored to locked.
-        unsafe {
-            if dp.FLASH.cr().read().bits() & FLASH_CR_LOCK != 0 {
-                dp.FLASH.keyr().write(|w| w.bits(FLASH_KEY1));
-                dp.FLASH.keyr().write(|w| w.bits(FLASH_KEY2));
-            }
-        }
-        let r = Self::wait_idle().and_then(|_| {
-            // SAFETY: write-one-to-clear of stale flags before the operation (RM0440 FLASH_SR).
-            unsafe {
-                dp.FLASH
-                    .sr()
-                    .write(|w| w.bits(FLASH_SR_ERRORS | FLASH_SR_EOP))
-            };
-            f()
-        });
-        // SAFETY: lock again (clears PER/PG with it).
-        unsafe { dp.FLASH.cr().write(|w| w.bits(FLASH_CR_LOCK)) };
-        r
-    }
-
-    /// Reset the flash data cache so reads of the store see what the operation left, not
-    /// lines cached before it (RM0440 3.3.4: DCRST may only be written with DCEN = 0; the HAL
-    /// has no cache maintenance). Bank 2 holds no code, so the instruction cache needs none.
-    fn flush_data_cache() {
-        let dp = pac();
-        let acr = dp.FLASH.acr().read().bits();
-        if acr & FLASH_ACR_DCEN == 0 {
-            return;
-        }
-        let off = acr & !FLASH_ACR_DCEN;
-        // SAFETY: FLASH_ACR sequence DCEN off, DCRST pulse, DCEN back; nothing else writes ACR
-        // after boot.
-        unsafe {
-            dp.FLASH.acr().write(|w| w.bits(off));
-            dp.FLASH.acr().write(|w| w.bits(off | FLASH_ACR_DCRST));
-            dp.FLASH.acr().write(|w| w.bits(off));
-            dp.FLASH.acr().write(|w| w.bits(acr));
-        }
+    fn flash(&mut self) -> Result<&mut Flash<'static, Blocking>, FlashError> {
+        self.0.as_mut().ok_or(FlashError::SingleBank)
     }
 }
 
@@ -854,11 +724,9 @@ impl ReadNorFlash for InternalFlash {
 
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
         check_read(self, offset, bytes.len())?;
-        for (i, b) in bytes.iter_mut().enumerate() {
-            // SAFETY: within the checked range of the memory-mapped flash.
-            *b = unsafe { read_volatile((FLASH_BASE + offset + i as u32) as *const u8) };
-        }
-        Ok(())
+        self.flash()?
+            .blocking_read(offset, bytes)
+            .map_err(FlashError::Controller)
     }
 
     fn capacity(&self) -> usize {
@@ -872,54 +740,162 @@ impl NorFlash for InternalFlash {
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
         check_erase(self, from, to)?;
-        for page in (from / FLASH_PAGE as u32)..(to / FLASH_PAGE as u32) {
-            let bank2 = page >= FLASH_BANK_PAGES;
-            let pnb = page % FLASH_BANK_PAGES;
-            let r = Self::unlocked(|| {
-                let dp = pac();
-                let bker = if bank2 { FLASH_CR_BKER } else { 0 };
-                // SAFETY: page erase per RM0440 3.3.7.
-                unsafe {
-                    dp.FLASH
-                        .cr()
-                        .write(|w| w.bits(FLASH_CR_PER | bker | (pnb << 3)));
-                    dp.FLASH
-                        .cr()
-                        .write(|w| w.bits(FLASH_CR_PER | bker | (pnb << 3) | FLASH_CR_STRT));
-                }
-                Self::finish()
-            });
-            // Also after a failed erase: the page may be partly erased.
-            Self::flush_data_cache();
-            r?;
-        }
-        Ok(())
+        let flash = self.flash()?;
+        set_step(Some(Step::Flash));
+        let r = flash
+            .blocking_erase(from, to)
+            .map_err(FlashError::Controller);
+        set_step(None);
+        r
     }
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
         check_write(self, offset, bytes.len())?;
-        let r = Self::unlocked(|| {
-            let dp = pac();
-            // SAFETY: double-word programming per RM0440 3.3.8: PG set, two word writes.
-            unsafe { dp.FLASH.cr().write(|w| w.bits(FLASH_CR_PG)) };
-            for (k, dw) in bytes.chunks_exact(8).enumerate() {
-                let addr = FLASH_BASE + offset + 8 * k as u32;
-                let lo = u32::from_le_bytes([dw[0], dw[1], dw[2], dw[3]]);
-                let hi = u32::from_le_bytes([dw[4], dw[5], dw[6], dw[7]]);
-                // SAFETY: an aligned double word inside the checked range.
-                unsafe {
-                    write_volatile(addr as *mut u32, lo);
-                    write_volatile((addr + 4) as *mut u32, hi);
-                }
-                Self::finish()?;
-            }
-            Ok(())
-        });
-        // A line read between the erase and this write may hold the erased bytes.
-        Self::flush_data_cache();
+        let flash = self.flash()?;
+        set_step(Some(Step::Flash));
+        let r = flash
+            .blocking_write(offset, bytes)
+            .map_err(FlashError::Controller);
+        set_step(None);
         r
     }
 }
+
+/// tTRIM, the settling time of one calibration step, taken as 50 µs (the datasheet's figure
+/// is to be checked), at 170 MHz.
+const DAC_TRIM_CYCLES: u32 = SYSCLK_HZ / 20_000;
+
+/// DAC_SR (RM0440 DAC chapter, DAC_SR): CAL_FLAG1 for the calibration, DMAUDR1 for the
+/// stream. Gap: embassy-stm32 0.6's DAC driver reads neither.
+fn dac_sr() -> pac::dac::regs::Sr {
+    // RAW 9/12: DAC_SR read.
+    pac::DAC1.sr().read()
+}
+
+/// DAC_CR (RM0440 DAC chapter, DAC_CR): CEN1 (calibration mode) and DMAEN1. Gap: embassy-stm32
+/// 0.6 sets DMAEN1 only inside `DacChannel::write`, whose 16-bit DMA the G4's DAC refuses, and
+/// has no calibration.
+fn dac_cr(f: impl FnOnce(&mut pac::dac::regs::Cr)) {
+    // RAW 10/12: DAC_CR modify.
+    pac::DAC1.cr().modify(f);
+}
+
+/// Calibrate DAC1 channel 1's output buffer offset (RM0440 DAC chapter, "DAC channel output
+/// buffer calibration"): with the channel off and in normal buffered mode, CEN1 set, OTRIM1
+/// stepped up from 0, tTRIM after each step, until CAL_FLAG1 reads 1 — the first trim at or
+/// above the offset. 32 steps at most (1.6 ms); false if the flag never rose.
+///
+/// Gap: embassy-stm32 0.6's DAC driver has no calibration.
+fn calibrate_dac() -> bool {
+    dac_cr(|w| w.set_cen(0, true));
+    let mut found = false;
+    for trim in 0..32 {
+        // RAW 11/12: DAC_CCR.OTRIM1 (RM0440 DAC chapter, DAC_CCR); OTRIM2 (channel 2, unused)
+        // written 0.
+        pac::DAC1.ccr().write(|w| w.set_otrim(0, trim));
+        cortex_m::asm::delay(DAC_TRIM_CYCLES);
+        if dac_sr().cal_flag(0) {
+            found = true;
+            break;
+        }
+    }
+    dac_cr(|w| w.set_cen(0, false));
+    found
+}
+
+/// The peripherals of the sample stream.
+struct ConverterPins {
+    tim6: Peri<'static, TIM6>,
+    dac1: Peri<'static, peripherals::DAC1>,
+    dac_dma: Peri<'static, peripherals::DMA1_CH3>,
+    /// Handed to `DacChannel::new_triggered`, which wants a DMA channel; never started.
+    dac_dma_unused: Peri<'static, peripherals::DMA1_CH5>,
+    pa4: Peri<'static, peripherals::PA4>,
+    adc1: Peri<'static, ADC1>,
+    adc1_dma: Peri<'static, DMA1_CH1>,
+    pa0: Peri<'static, peripherals::PA0>,
+    adc2: Peri<'static, ADC2>,
+    adc2_dma: Peri<'static, peripherals::DMA1_CH2>,
+    pa1: Peri<'static, peripherals::PA1>,
+}
+
+/// Set up TIM6 (10 kHz TRGO, stopped), DAC1 CH1 (triggered, calibrated, into [`DAC`]) and the
+/// two ADC rings; [`Stream::start`] starts them.
+fn converters(p: ConverterPins) -> Converters {
+    // TIM6: 10 kHz update, its update event as TRGO, not yet running.
+    let tim = Timer::new(p.tim6);
+    tim.set_frequency(Hertz(SAMPLE_RATE_HZ), RoundTo::Faster);
+    // Gap: embassy 0.6's low-level timer has no master-mode setter. RAW 7/12: TIM6_CR2.MMS =
+    // update → TRGO (RM0440 basic timers chapter, TIMx_CR2).
+    tim.regs_basic()
+        .cr2()
+        .modify(|w| w.set_mms(pac::timer::vals::Mms::UPDATE));
+    tim.generate_update_event();
+
+    // DAC1 CH1 on PA4, normal mode with the output buffer, triggered by TIM6_TRGO, fed by DMA1
+    // CH3 (our own transfer, started in `Stream::start`: embassy's `DacChannel::write` programs
+    // 16-bit peripheral writes, which the G4's DAC refuses).
+    let dac_request =
+        embassy_stm32::dac::Dma::<peripherals::DAC1, embassy_stm32::dac::Ch1>::request(&*p.dac_dma);
+    let mut dac = DacChannel::new_triggered(
+        p.dac1,
+        p.dac_dma_unused,
+        embassy_stm32::triggers::TIM6_TRGO,
+        Irqs,
+        p.pa4,
+    );
+    // embassy's `new_triggered` selects the trigger (TSEL1) and enables the channel but never
+    // sets TEN1, without which the DAC neither waits for TIM6 nor requests DMA (RM0440 DAC
+    // chapter, "DAC trigger selection", "DMA requests"): `set_mode` turns EN1 off (TEN1 and the
+    // calibration want the channel off), TEN1 is set, the buffer calibrated, EN1 and DMAEN1
+    // set. No trigger comes before TIM6 starts, so no DMA request before the transfer runs.
+    dac.set_mode(Mode::NormalExternalBuffered);
+    dac.set_triggering(true);
+    // A DAC whose calibration never settles is not trusted with the drive: the stream is not
+    // started (readings end as `stalled`).
+    let calibrated = calibrate_dac();
+    if calibrated {
+        dac.enable();
+        dac_cr(|w| w.set_dmaen(0, true));
+        // SAFETY: init context; `Stream::start` is the only other user of `DAC_DMA`.
+        unsafe { *addr_of_mut!(DAC_DMA) = Some(dma::Channel::new(p.dac_dma, Irqs)) };
+    } else {
+        record(BootError::DacCalibration);
+    }
+
+    // ADC1 (current, PA0 = IN1) and ADC2 (monitor, PA1 = IN2): calibrated (single-ended and
+    // differential), 20 µs before ADEN, by `Adc::new`; kernel clock SYSCLK / 4 = 42.5 MHz.
+    let adc1 = Adc::new(p.adc1, AdcConfig::default());
+    let adc2 = Adc::new(p.adc2, AdcConfig::default());
+    // SAFETY: init context, before any DMA runs; the rings are handed to embassy for good.
+    let (ring1, ring2) = unsafe { (&mut *addr_of_mut!(ADC1_RING), &mut *addr_of_mut!(ADC2_RING)) };
+    let adc1 = adc1.into_ring_buffered(
+        p.adc1_dma,
+        ring1,
+        Irqs,
+        [(p.pa0.degrade_adc(), SampleTime::CYCLES47_5)].into_iter(),
+        embassy_stm32::triggers::TIM6_TRGO,
+        Exten::RISING_EDGE,
+    );
+    let adc2 = adc2.into_ring_buffered(
+        p.adc2_dma,
+        ring2,
+        Irqs,
+        [(p.pa1.degrade_adc(), SampleTime::CYCLES47_5)].into_iter(),
+        embassy_stm32::triggers::TIM6_TRGO,
+        Exten::RISING_EDGE,
+    );
+    Converters {
+        adc1,
+        adc2,
+        tim,
+        _dac: dac,
+        dac_request,
+        dac_transfer: None,
+    }
+}
+
+// ---- bring-up --------------------------------------------------------------------------
 
 /// The board's parts, as the application takes them over.
 pub struct Parts {
@@ -934,156 +910,137 @@ pub struct Parts {
 }
 
 /// Set the board up: cycle counter; 170 MHz from the 24 MHz HSE crystal through the PLL
-/// (HSI16 if the crystal does not start), range 1 boost; UART; watchdog (frozen under the
-/// debugger). Call once, from `init`. Never panics or waits without a bound: see
-/// [`boot_error`] and [`clock_source`] for what happened.
+/// (HSI16 if the crystal does not start), range 1 boost; the converters; UART; watchdog
+/// (frozen under the debugger). Call once, from `init`. See [`boot_error`] and
+/// [`clock_source`] for what happened.
 pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
-    // The cycle counter first: it times the bounded waits below.
+    // The cycle counter first: it times the bounded waits.
     core.DCB.enable_trace();
     core.DWT.enable_cycle_counter();
-    match configure_clocks() {
-        Ok(source) => CLOCK.store(source, Ordering::Relaxed),
-        Err(e) => record(e),
-    }
-    check_flash();
-    Parts {
-        stream: Stream::new(),
-        watchdog: Watchdog::start(),
-        flash: InternalFlash(()),
-        uart: Uart::new(),
-    }
-}
-
-/// The flash controller at boot: idle, no stale error flags, dual-bank mode.
-fn check_flash() {
-    if InternalFlash::wait_idle().is_err() {
-        record(BootError::FlashBusy);
+    // A step is taken for hung only after a watchdog reset (a reset button pressed during a
+    // step is not a hang).
+    let interrupted = if watchdog_reset() {
+        interrupted_step()
     } else {
-        // SAFETY: write-one-to-clear of stale FLASH_SR flags (RM0440 FLASH_SR).
-        unsafe {
-            pac()
-                .FLASH
-                .sr()
-                .write(|w| w.bits(FLASH_SR_ERRORS | FLASH_SR_EOP))
-        };
-    }
-    if !InternalFlash::dual_bank() {
+        None
+    };
+    let safe_clock = interrupted == Some(Step::Clock);
+
+    // The watchdog before any wait of embassy's: a step that hangs ends in a reset, and the
+    // next boot goes around it (`interrupted_step`). Frozen while a debugger halts the core.
+    // Gap: embassy 0.6 has no DBGMCU API. RAW 8/12: DBGMCU_APB1FZR1.DBG_IWDG_STOP (RM0440
+    // DBGMCU chapter, DBGMCU_APB1FZR1), before the IWDG starts.
+    pac::DBGMCU.apb1lfzr().modify(|w| w.set_iwdg(true));
+    // On HSI16 without the PLL the monotonic (started for 170 MHz) runs 10.6 times slow, and
+    // the measurement task's 100 ms feeds come every 1.06 s: the timeout grows with it.
+    let timeout = if safe_clock {
+        WATCHDOG_US * 11
+    } else {
+        WATCHDOG_US
+    };
+    // SAFETY: the IWDG is taken before `embassy_stm32::init` hands out the peripherals; its
+    // singleton from there is dropped unused, so this is its only driver.
+    let mut wdg = IndependentWatchdog::new(unsafe { peripherals::IWDG::steal() }, timeout);
+    wdg.unleash();
+
+    let clock = if safe_clock {
+        record(BootError::ClockHang);
+        ClockSource::Hsi16
+    } else if hse_starts() {
+        ClockSource::Hse24
+    } else {
+        ClockSource::Hsi16Pll
+    };
+    CLOCK.store(
+        match clock {
+            ClockSource::Hse24 => 1,
+            ClockSource::Hsi16Pll => 2,
+            ClockSource::Hsi16 => 0,
+        },
+        Ordering::Relaxed,
+    );
+    set_step(Some(Step::Clock));
+    let p = embassy_stm32::init(embassy_config(clock));
+    set_step(None);
+
+    // Gap: embassy 0.6 never sets FLASH_ACR.PRFTEN. RAW 5/12: prefetch on (RM0440 3.3.4
+    // ART accelerator / prefetch; FLASH_ACR), after embassy set the wait states.
+    pac::FLASH.acr().modify(|w| w.set_prften(true));
+
+    // Gap: embassy's `Flash::new_blocking` panics when FLASH_OPTR.DBANK does not match its
+    // `dual-bank` feature (flash/g.rs `check_bank_setup`). RAW 6/12: DBANK read first
+    // (RM0440 3.3.1 "Flash memory organization"; FLASH_OPTR), a typed boot error instead.
+    let flash = if interrupted == Some(Step::Flash) {
+        record(BootError::FlashHang);
+        None
+    } else if pac::FLASH.optr().read().dbank() {
+        Some(Flash::new_blocking(p.FLASH))
+    } else {
         record(BootError::FlashSingleBank);
-    }
-}
+        None
+    };
 
-/// The clock tree: the HAL's `Rcc::freeze` with what it leaves out done around it. Returns
-/// the [`CLOCK`] code of the PLL's source; on an error the core stays on HSI16 at 16 MHz.
-fn configure_clocks() -> Result<u8, BootError> {
-    let dp = pac();
-    // SAFETY (all `bits` writes): RCC, PWR and FLASH_ACR belong to this function during
-    // `init`; values per RM0440.
-    unsafe {
-        // PWR's bus clock. The HAL's `Rcc::freeze` reads PWR_CR1 (`pwr::current_vos`) and
-        // writes PWR_CR5 (boost) but neither `PwrExt::constrain` nor `RccExt::constrain` /
-        // `freeze` sets RCC_APB1ENR1.PWREN (only `Rcc::unlock_rtc` does); unclocked, PWR_CR1
-        // reads 0 and `current_vos` hits `unreachable!()`. RM0440 7.4 (RCC_APB1ENR1), 6.4.1
-        // (PWR_CR1). The read back is the delay RM0440 asks for after a clock enable.
-        dp.RCC
-            .apb1enr1()
-            .modify(|r, w| w.bits(r.bits() | RCC_APB1ENR1_PWREN));
-        let _ = dp.RCC.apb1enr1().read().bits();
-    }
-    // The HAL's freeze handles only range 1 (normal or boost) → range 1 boost and has `todo!`
-    // for the rest, and cannot stop a PLL that already clocks the core (its wait for PLLRDY to
-    // clear would never end): check both before calling it (RM0440 6.1.5, 7.4.3 SWS).
-    let vos = dp.PWR.cr1().read().bits() & PWR_CR1_VOS_MASK;
-    let sws = dp.RCC.cfgr().read().bits() & RCC_CFGR_SWS_MASK;
-    if vos != PWR_CR1_VOS_RANGE1 || sws == RCC_CFGR_SWS_PLL {
-        return Err(BootError::PowerRange);
-    }
-    unsafe {
-        // Flash: prefetch on (the HAL never sets PRFTEN; RM0440 3.3.4), and the 4 wait states
-        // of 136–170 MHz in range 1 boost (RM0440 3.3.3, Table 9) set and read back *before*
-        // the clock goes up, as RM0440 3.3.3 asks (the HAL's `configure_wait_states` writes
-        // the same LATENCY but does not read it back). 4 wait states are valid at 16 MHz too.
-        dp.FLASH.acr().modify(|r, w| {
-            w.bits((r.bits() & !FLASH_ACR_LATENCY_MASK) | FLASH_ACR_LATENCY_4WS | FLASH_ACR_PRFTEN)
-        });
-    }
-    let want = FLASH_ACR_LATENCY_4WS | FLASH_ACR_PRFTEN;
-    if !spin_until(ACR_TIMEOUT, || {
-        dp.FLASH.acr().read().bits() & (FLASH_ACR_LATENCY_MASK | FLASH_ACR_PRFTEN) == want
-    }) {
-        return Err(BootError::FlashLatency);
-    }
-
-    // HSE: the NUCLEO-G474RE's 24 MHz crystal X3 (not a bypass clock). The HAL's `enable_hse`
-    // waits for HSERDY without a bound; start it here with a bounded wait (RM0440 7.2.1, HSE
-    // clock) and hand it to the HAL only once it is ready. Otherwise switch it off again and
-    // run the PLL from HSI16.
-    unsafe {
-        dp.RCC
-            .cr()
-            .modify(|r, w| w.bits((r.bits() & !RCC_CR_HSEBYP) | RCC_CR_HSEON));
-    }
-    let hse = spin_until(HSE_TIMEOUT, || {
-        dp.RCC.cr().read().bits() & RCC_CR_HSERDY != 0
-    });
-    let (mux, m, src_bits, code) = if hse {
-        // 24 MHz / 6 = 4 MHz PLL input.
-        (
-            PllSrc::HSE(HSE_HZ.Hz()),
-            PllMDiv::DIV_6,
-            RCC_PLLCFGR_SRC_HSE | (5 << 4),
-            1,
-        )
+    // The converters: not on HSI16 alone (readings are refused after a clock hang), not after
+    // a boot that hung setting them up.
+    let hw = if safe_clock {
+        None
+    } else if interrupted == Some(Step::Converters) {
+        record(BootError::ConverterHang);
+        None
     } else {
-        unsafe {
-            dp.RCC.cr().modify(|r, w| w.bits(r.bits() & !RCC_CR_HSEON));
+        set_step(Some(Step::Converters));
+        let hw = converters(ConverterPins {
+            tim6: p.TIM6,
+            dac1: p.DAC1,
+            dac_dma: p.DMA1_CH3,
+            dac_dma_unused: p.DMA1_CH5,
+            pa4: p.PA4,
+            adc1: p.ADC1,
+            adc1_dma: p.DMA1_CH1,
+            pa0: p.PA0,
+            adc2: p.ADC2,
+            adc2_dma: p.DMA1_CH2,
+            pa1: p.PA1,
+        });
+        set_step(None);
+        Some(hw)
+    };
+
+    // LPUART1 RX on PA3 (AF12), DMA1 CH4 ring.
+    let mut cfg = embassy_stm32::usart::Config::default();
+    cfg.baudrate = LPUART_BAUD;
+    static mut UART_BUF: [u8; UART_RING] = [0; UART_RING];
+    // SAFETY: init context; the ring is handed to embassy for good.
+    let uart_buf = unsafe { &mut *addr_of_mut!(UART_BUF) };
+    let uart = match UartRx::new(p.LPUART1, p.PA3, p.DMA1_CH4, Irqs, cfg) {
+        Ok(rx) => {
+            let mut rx = rx.into_ring_buffered(uart_buf);
+            // The ring's DMA and the idle/error interrupts; embassy starts them only from a
+            // read, and the first read here waits for the first interrupt.
+            rx.start_uart();
+            Some(rx)
         }
-        // 16 MHz / 4 = 4 MHz PLL input.
-        (
-            PllSrc::HSI,
-            PllMDiv::DIV_4,
-            RCC_PLLCFGR_SRC_HSI16 | (3 << 4),
-            2,
-        )
+        Err(_) => {
+            record(BootError::Uart);
+            None
+        }
     };
 
-    // PLL lock probe: the HAL's `config_pll` waits for PLLRDY without a bound. Lock the same
-    // configuration (4 MHz × 85 / 2 = 170 MHz, RM0440 7.2.4 / 7.4.4 PLLCFGR) once here with a
-    // bounded wait, switch it off again and let the HAL redo it: a PLL that locked from this
-    // input will lock again.
-    unsafe {
-        dp.RCC
-            .pllcfgr()
-            .write(|w| w.bits(src_bits | RCC_PLLCFGR_N85 | RCC_PLLCFGR_REN_R2));
-        dp.RCC.cr().modify(|r, w| w.bits(r.bits() | RCC_CR_PLLON));
+    Parts {
+        stream: Stream {
+            hw,
+            frames: [AdcFrame::default(); BATCH],
+            current: [0; BATCH],
+            monitor: [0; BATCH],
+            last: None,
+            started: 0,
+            late_seen: false,
+            fault_seen: false,
+            faults: StreamFaults::default(),
+            dac_underrun: false,
+        },
+        watchdog: Watchdog(wdg),
+        flash: InternalFlash(flash),
+        uart: Uart(uart),
     }
-    let locked = spin_until(PLL_TIMEOUT, || {
-        dp.RCC.cr().read().bits() & RCC_CR_PLLRDY != 0
-    });
-    unsafe {
-        dp.RCC.cr().modify(|r, w| w.bits(r.bits() & !RCC_CR_PLLON));
-    }
-    if !locked {
-        return Err(BootError::PllLock);
-    }
-
-    // The HAL: range 1 boost (R1MODE via the RM0440 6.1.5 sequence: AHB /2, boost, wait
-    // states, switch, 1 µs, AHB /1), 4 wait states, PLL, SYSCLK switch.
-    let pll = PllConfig {
-        mux,
-        m,
-        n: PllNMul::MUL_85,
-        r: Some(PllRDiv::DIV_2),
-        q: None,
-        p: None,
-    };
-    let pwr = dp
-        .PWR
-        .constrain()
-        .vos(VoltageScale::Range1 { enable_boost: true })
-        .freeze();
-    let _rcc = dp
-        .RCC
-        .constrain()
-        .freeze(Config::new(SysClockSrc::PLL).pll_cfg(pll), pwr);
-    Ok(code)
 }
