@@ -24,6 +24,7 @@ pub mod engine;
 pub mod estimate;
 pub mod hal;
 pub mod linalg;
+pub mod loadcell;
 #[cfg(feature = "defmt")]
 pub mod log;
 pub mod measure;

@@ -32,6 +32,7 @@ pub mod events;
 pub mod flash;
 pub mod frontend;
 pub mod linalg;
+pub mod loadcell;
 pub mod lump;
 pub mod phantoms;
 pub mod plant;
