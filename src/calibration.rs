@@ -150,6 +150,34 @@ pub struct Modulus {
     pub sigma_repeat: KPa,
 }
 
+impl Modulus {
+    /// The modulus `e_kpa` read through a curve, with its uncertainty (GUM, first order): the
+    /// resonance's standard uncertainty `sigma_hz` and the curve's misfit `model_sigma_hz`
+    /// through the slope `de_df` (kPa/Hz), and the curve's parameter covariance `cov` through
+    /// the gradient `g` of the modulus in its parameters.
+    pub fn propagated(
+        e_kpa: f64,
+        de_df: f64,
+        sigma_hz: f64,
+        model_sigma_hz: f64,
+        g: &[f64; 3],
+        cov: &[[f64; 3]; 3],
+    ) -> Self {
+        let var_repeat = de_df * de_df * sigma_hz * sigma_hz;
+        let mut var = var_repeat + de_df * de_df * model_sigma_hz * model_sigma_hz;
+        for i in 0..3 {
+            for j in 0..3 {
+                var += g[i] * cov[i][j] * g[j];
+            }
+        }
+        Modulus {
+            value: KPa(e_kpa as f32),
+            sigma: KPa(libm::sqrt(var.max(0.0)) as f32),
+            sigma_repeat: KPa(libm::sqrt(var_repeat) as f32),
+        }
+    }
+}
+
 /// Why a calibration fit failed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -330,18 +358,14 @@ impl PowerLaw {
             -e / (self.c * self.b),
             -e * libm::log(u) / (self.c * self.c),
         ];
-        let var_repeat = de_df * de_df * sf * sf;
-        let mut var = var_repeat + de_df * de_df * self.model_sigma_hz * self.model_sigma_hz;
-        for i in 0..3 {
-            for j in 0..3 {
-                var += g[i] * self.cov[i][j] * g[j];
-            }
-        }
-        Ok(Modulus {
-            value: KPa(e as f32),
-            sigma: KPa(libm::sqrt(var.max(0.0)) as f32),
-            sigma_repeat: KPa(libm::sqrt(var_repeat) as f32),
-        })
+        Ok(Modulus::propagated(
+            e,
+            de_df,
+            sf,
+            self.model_sigma_hz,
+            &g,
+            &self.cov,
+        ))
     }
 
     /// [`fit`](Self::fit) that discards gross outliers first. Repeatedly, the reading with the

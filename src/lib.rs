@@ -18,6 +18,7 @@
 pub mod board;
 pub mod calibration;
 pub mod command;
+pub mod contact_law;
 pub mod counters;
 pub mod dsp;
 pub mod engine;

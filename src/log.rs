@@ -245,6 +245,9 @@ pub fn overruns_if_grew(seen: &mut crate::counters::Overruns) {
 
 /// Everything the firmware's report task logs: the session's events and the board's own.
 #[derive(Clone, Copy, Debug)]
+// `Event(Loaded)` carries the whole unit profile: the report channel holds `REPORT_CAP` of these
+// (docs/firmware.md has the RAM it takes); no allocator to box into.
+#[allow(clippy::large_enum_variant)]
 pub enum Report {
     /// A session event.
     Event(Event),

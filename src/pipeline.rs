@@ -68,7 +68,7 @@ pub fn conclude(
         r.status = Status::Failed(Failure::Uncalibrated);
         return r;
     }
-    let m = match unit.calibration.invert(est.resonance, est.sigma) {
+    let m = match unit.invert(est.resonance, est.sigma) {
         Ok(m) => m,
         Err(f) => {
             r.status = Status::Failed(f);

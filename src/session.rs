@@ -25,6 +25,9 @@ pub const AIR_POINTS: usize = 64;
 
 /// What the session tells the outside world (the firmware logs each as one defmt line).
 #[derive(Clone, Copy, Debug, PartialEq)]
+// `Loaded` carries the whole unit profile (336 bytes): events are made and handled one at a time
+// on the stack, and there is no allocator to box it into.
+#[allow(clippy::large_enum_variant)]
 pub enum Event {
     /// The unit profile was loaded from the store (at power-on or on `reload`).
     Loaded(Loaded),
@@ -200,28 +203,33 @@ impl Session {
             }
             Command::Air => self.air(io).await,
             Command::CalibrateAdd(e) => self.calibrate_add(io, e).await,
-            Command::CalibrateFit => match profile::calibrate(&self.refs) {
-                Ok((cal, q_model)) => {
-                    // The references were read with the active method: the curve maps its
-                    // resonance.
-                    self.profile.calibration = cal;
-                    self.profile.resonance = self.method.resonance();
-                    self.profile.q_model = Some(q_model);
-                    io.emit(Event::Calibration(cal)).await;
-                    true
+            Command::CalibrateFit => {
+                match profile::calibrate(&self.refs, self.profile.air.as_ref()) {
+                    Ok(c) => {
+                        // The references were read with the active method: the curve maps its
+                        // resonance.
+                        self.profile.calibration = c.law;
+                        self.profile.resonance = self.method.resonance();
+                        self.profile.q_model = Some(c.q_model);
+                        self.profile.contact = c.contact;
+                        io.emit(Event::Calibration(c.law)).await;
+                        true
+                    }
+                    Err(_) => {
+                        io.emit(Event::Refused(Refusal::Fit)).await;
+                        false
+                    }
                 }
-                Err(_) => {
-                    io.emit(Event::Refused(Refusal::Fit)).await;
-                    false
-                }
-            },
+            }
             Command::CalibrateClear => {
                 self.refs.clear();
                 true
             }
             Command::CalibratePaper => {
-                self.profile.calibration = PowerLaw::paper_experiment();
-                self.profile.resonance = crate::measure::Resonance::Motional;
+                self.profile.use_power_law(
+                    PowerLaw::paper_experiment(),
+                    crate::measure::Resonance::Motional,
+                );
                 io.emit(Event::Calibration(self.profile.calibration)).await;
                 true
             }

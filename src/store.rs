@@ -13,7 +13,7 @@
 //! | 4 | 2 | format version ([`FORMAT_VERSION`]) |
 //! | 6 | 2 | record length ([`RECORD_LEN`]) |
 //! | 8 | 4 | sequence number |
-//! | 12 | 1 | flags (bit 0: air reference present, bit 1: Q model present) |
+//! | 12 | 1 | flags (bit 0: air reference present, bit 1: Q model present, bit 2: contact law present) |
 //! | 13 | 1 | calibration source (0 paper-simulation, 1 paper-experiment, 2 fitted) |
 //! | 14 | 1 | the resonance the curve maps (0 motional, 1 impedance dip) |
 //! | 15 | 1 | zero |
@@ -24,8 +24,12 @@
 //! | 136 | 8 | air reference: free resonance Hz, free Q (f32) |
 //! | 144 | 8 | air reference: static capacitance F, static conductance S (f32) |
 //! | 152 | 16 | Q model `q0`, `q1` (f64) |
-//! | 168 | 20 | zero |
-//! | 188 | 4 | CRC-32 (IEEE) of bytes 0..188 |
+//! | 168 | 8 | contact law: free resonance, Hz (f64) |
+//! | 176 | 24 | contact law: `ln Ks`, `ln A`, `ln B` (f64) |
+//! | 200 | 72 | contact law: their covariance, row major (f64) |
+//! | 272 | 24 | contact law: `model_sigma_hz`, `min_kpa`, `max_kpa` (f64) |
+//! | 296 | 20 | zero |
+//! | 316 | 4 | CRC-32 (IEEE) of bytes 0..316 |
 //!
 //! [`Store::save`] writes the slot that does **not** hold the newest valid record (erase, program,
 //! read back and compare), with the sequence number one above the newest. The newest valid record
@@ -40,18 +44,20 @@
 //! status flag. Nothing here panics, whatever the flash contains.
 
 use crate::calibration::{PowerLaw, QModel, Source};
+use crate::contact_law::{self, ContactLaw};
 pub use crate::profile::{AirReference, UnitProfile};
 use crate::units::{Farads, Hz, Siemens};
 use embedded_storage::nor_flash::NorFlash;
 
 /// Bytes of one record (a multiple of every common program word: 1, 2, 4, 8, 16, 32).
-pub const RECORD_LEN: usize = 192;
-/// Format version written into every record.
-pub const FORMAT_VERSION: u16 = 3;
+pub const RECORD_LEN: usize = 320;
+/// Format version written into every record (4: the contact law).
+pub const FORMAT_VERSION: u16 = 4;
 const MAGIC: [u8; 4] = *b"PZTC";
 const CRC_AT: usize = RECORD_LEN - 4;
 const FLAG_AIR: u8 = 1;
 const FLAG_Q_MODEL: u8 = 2;
+const FLAG_CONTACT: u8 = 4;
 
 /// State of one slot as found by a scan.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -391,6 +397,11 @@ pub fn encode(record: &UnitProfile, seq: u32) -> [u8; RECORD_LEN] {
                 FLAG_Q_MODEL
             } else {
                 0
+            }
+            | if record.contact.is_some() {
+                FLAG_CONTACT
+            } else {
+                0
             },
         source_code(c.source),
         match record.resonance {
@@ -422,6 +433,12 @@ pub fn encode(record: &UnitProfile, seq: u32) -> [u8; RECORD_LEN] {
     let (q0, q1) = record.q_model.map_or((0.0, 0.0), |m| (m.q0, m.q1));
     w.put(&q0.to_le_bytes());
     w.put(&q1.to_le_bytes());
+    let law = record
+        .contact
+        .map_or([0.0; contact_law::VALUES], |c| c.to_values());
+    for v in law {
+        w.put(&v.to_le_bytes());
+    }
     let crc = crc32(w.buf.get(..CRC_AT).unwrap_or(&[]));
     w.at = CRC_AT;
     w.put(&crc.to_le_bytes());
@@ -471,6 +488,11 @@ pub fn decode(buf: &[u8; RECORD_LEN]) -> Option<(u32, UnitProfile)> {
     });
     let (q0, q1) = (r.f64(), r.f64());
     let q_model = (flags & FLAG_Q_MODEL != 0).then_some(QModel { q0, q1 });
+    let mut law = [0.0; contact_law::VALUES];
+    for v in law.iter_mut() {
+        *v = r.f64();
+    }
+    let contact = (flags & FLAG_CONTACT != 0).then(|| ContactLaw::from_values(&law));
     let record = UnitProfile {
         calibration: PowerLaw {
             a,
@@ -485,6 +507,7 @@ pub fn decode(buf: &[u8; RECORD_LEN]) -> Option<(u32, UnitProfile)> {
         resonance,
         q_model,
         air,
+        contact,
     };
     record.is_valid().then_some((seq, record))
 }
@@ -513,6 +536,14 @@ mod tests {
                 free_q: 41.5,
                 static_capacitance: Farads(210e-12),
                 static_conductance: Siemens(1e-9),
+            }),
+            contact: Some(ContactLaw {
+                free_hz: 232.3,
+                p: [13.44, 9.26, 4.88],
+                cov: [[1e-4, 2e-5, 0.0], [2e-5, 3e-4, -1e-5], [0.0, -1e-5, 5e-4]],
+                model_sigma_hz: 0.004,
+                min_kpa: 140.0,
+                max_kpa: 2700.0,
             }),
         };
         let buf = encode(&rec, 7);

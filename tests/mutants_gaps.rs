@@ -51,6 +51,7 @@ fn unit() -> UnitProfile {
             static_capacitance: Farads(200e-12),
             static_conductance: Siemens(0.0),
         }),
+        contact: None,
     }
 }
 

@@ -15,15 +15,24 @@ use std::time::Duration;
 const TIMEOUT: Duration = Duration::from_secs(180);
 const PHANTOM_B_KPA: f64 = 279.0;
 
-/// The modulus (kPa) where the image's calibration curve `a + b E^c` — the simulated unit's
-/// factory profile, which the QEMU board programs into its store at power-on — equals `f`, by
-/// bisection of `ln E` with `f64::powf`: an independent inverse of the calibration the image
-/// computes on target (with its own `pow`).
+/// The modulus (kPa) where the image's calibration curve — the simulated unit's factory
+/// profile, which the QEMU board programs into its store at power-on: its contact law when the
+/// calibration chose it, else its power law `a + b E^c` — gives `f`, by bisection of `ln E` with
+/// `f64::powf`: an independent inverse of the calibration the image computes on target.
 fn curve_inverse(f: f64) -> f64 {
     let p = pzt_probe::board::sim_factory::profile().expect("factory record");
-    let (a, b, c) = (p.calibration.a, p.calibration.b, p.calibration.c);
-    reference::modulus_by_bisection(a, b, c, f)
-        .unwrap_or_else(|| panic!("{f} Hz outside the curve"))
+    match p.contact {
+        // The factory calibration chose the contact law: the image reads through it.
+        Some(c) => {
+            let [ks, a, b] = c.p.map(f64::exp);
+            reference::modulus_by_contact_law(c.free_hz, ks, a, b, f)
+        }
+        None => {
+            let (a, b, c) = (p.calibration.a, p.calibration.b, p.calibration.c);
+            reference::modulus_by_bisection(a, b, c, f)
+        }
+    }
+    .unwrap_or_else(|| panic!("{f} Hz outside the curve"))
 }
 
 /// Checks a logged reading of phantom B against the references: its resonance against the

@@ -34,6 +34,7 @@ fn record(n: u32) -> UnitProfile {
             static_capacitance: Farads(200e-12 + n as f32 * 1e-12),
             static_conductance: Siemens(n as f32 * 1e-9),
         }),
+        contact: None,
     }
 }
 
@@ -132,7 +133,7 @@ fn bad_geometry_is_refused() {
     );
     // Small sectors: a slot spans several.
     let s = Store::new(SimFlash::<1024, 128, 8>::new(), 0).unwrap();
-    assert_eq!(s.footprint(), 2 * 256);
+    assert_eq!(s.footprint(), 2 * 384);
 }
 
 /// The heart of it: cut the power after every possible number of programmed bytes of a save,

@@ -188,12 +188,13 @@ pub fn calibrate_unit_with(
             on_reading();
         }
     }
-    let (calibration, q_model) = calibrate(&refs[..n]).map_err(SimError::Fit)?;
+    let c = calibrate(&refs[..n], Some(&air)).map_err(SimError::Fit)?;
     Ok(UnitProfile {
-        calibration,
+        calibration: c.law,
         resonance: method.resonance(),
-        q_model: Some(q_model),
+        q_model: Some(c.q_model),
         air: Some(air),
+        contact: c.contact,
     })
 }
 

@@ -112,7 +112,8 @@ pub fn fit_bvd(points: &[SweepPoint], f_start: f64, q_start: f64) -> Result<Bvd,
             let m = Motional::at(f0, q, f);
             let (hr, hi) = (m.h.re, m.h.im);
             // dY/df0 = g dh/df0, dY/dQ = g dh/dQ
-            let (df0, dq) = (m.d_f0(f0, q, f) * g, m.d_q() * g);
+            let (df0, dq) = m.derivatives(f0, q, f);
+            let (df0, dq) = (df0 * g, dq * g);
             let jr = [1.0, 0.0, hr, df0.re, dq.re];
             let ji = [0.0, f / f_ref, hi, df0.im, dq.im];
             let rr = pt.g_s as f64 - (p[0] + g * hr);

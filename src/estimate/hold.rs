@@ -521,7 +521,7 @@ fn evaluate(
     // Steady state h = 1 / (1 + j Q u) and its derivatives (the one model, `super::model`).
     let m = Motional::at(f0, q, f_h);
     let h = C32::new(m.h.re as f32, m.h.im as f32);
-    let (dh_df0, dh_dq) = (m.d_f0(f0, q, f_h), m.d_q());
+    let (dh_df0, dh_dq) = m.derivatives(f0, q, f_h);
     // Transient exponent λ = −π f0/Q + j 2π (f_d − f_h), f_d = f0 sqrt(1 − 1/(4Q²)).
     let root = libm::sqrt((1.0 - 0.25 / (q * q)).max(1e-12));
     let lam64 = C64::new(-PI * f0 / q, 2.0 * PI * (f0 * root - f_h));

@@ -37,15 +37,15 @@ impl Motional {
         }
     }
 
-    /// `∂h/∂f0` at drive frequency `f` (Hz) for a resonance at `f0` with quality `q`, 1/Hz.
-    pub fn d_f0(&self, f0: f64, q: f64, f: f64) -> C64 {
+    /// `(∂h/∂f0, ∂h/∂Q)` at drive frequency `f` (Hz) for a resonance at `f0` with quality `q`:
+    /// `−j Q h² ∂u/∂f0` (1/Hz) and `−j u h²`, with `h²` formed once (the fits call this for
+    /// every point of every iteration; on the target each `f64` operation is software).
+    pub fn derivatives(&self, f0: f64, q: f64, f: f64) -> (C64, C64) {
+        let h2 = self.h * self.h;
         let du_df0 = -f / (f0 * f0) - 1.0 / f;
-        self.h * self.h * C64::new(0.0, -q * du_df0)
-    }
-
-    /// `∂h/∂Q`.
-    pub fn d_q(&self) -> C64 {
-        self.h * self.h * C64::new(0.0, -self.u)
+        // −j x h² = (x Im h², −x Re h²)
+        let minus_j = |x: f64| C64::new(x * h2.im, -x * h2.re);
+        (minus_j(q * du_df0), minus_j(self.u))
     }
 }
 
@@ -87,7 +87,7 @@ mod tests {
                 (Motional::at(f0 + e0, q, f).h - Motional::at(f0 - e0, q, f).h) / (2.0 * e0);
             let num_q =
                 (Motional::at(f0, q + eq, f).h - Motional::at(f0, q - eq, f).h) / (2.0 * eq);
-            let (a, b) = (m.d_f0(f0, q, f), m.d_q());
+            let (a, b) = m.derivatives(f0, q, f);
             assert!((a - num_f0).norm() <= 1e-7 * a.norm(), "{a} {num_f0}");
             assert!((b - num_q).norm() <= 1e-7 * b.norm(), "{b} {num_q}");
         }

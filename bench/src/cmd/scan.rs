@@ -116,7 +116,7 @@ fn default_unit(base: &Scene) -> Result<UnitProfile> {
         20,
         1000,
     )?;
-    unit.calibration = PowerLaw::paper_experiment();
+    unit.use_power_law(PowerLaw::paper_experiment(), m.resonance());
     Ok(unit)
 }
 
@@ -436,7 +436,7 @@ fn spec_of(a: &ScanArgs) -> Result<ScanSpec> {
     spec.unit = calfile::resolve(a.profile.as_deref(), &a.calibration, || {
         let s = Settings::Sweep(method.default_sweep());
         let mut u = crate::unit::simulated(method, &s, noise, 20, 1000)?;
-        u.calibration = PowerLaw::paper_experiment();
+        u.use_power_law(PowerLaw::paper_experiment(), method.resonance());
         Ok(u)
     })?;
     spec.seed = a.seed;

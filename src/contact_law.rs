@@ -1,0 +1,447 @@
+//! The contact law: the probe's resonance on tissue of modulus `E` from the contact mechanics
+//! of paper 003's appendix, as a calibration curve.
+//!
+//! The probe is one mode (stiffness `k1`, mass `m0`, free resonance `f1 = sqrt(k1/m0)/2π`, the
+//! air reference's). Pressed onto tissue at the calibration's preload it gains, through the
+//! tip's series coupling `k_s`, the tissue's Hertz contact stiffness `k_m ∝ E^(2/3)` and a
+//! co-moving tissue mass `m_m ∝ 1/E` (the contact radius `a ∝ E^(−1/3)` at a fixed force, the
+//! stiffness `∝ E a`, the mass `∝ a³`):
+//!
+//! ```text
+//! f(E) = sqrt((K1 + s A E^(2/3)) / (1 + s² B / E)) / 2π,   s = Ks / (Ks + A E^(2/3))
+//! ```
+//!
+//! with `K1 = (2π f1)²`, and three fitted constants per modal mass: `Ks = k_s/m0` (s⁻²),
+//! `A = k_m/(m0 E^(2/3))` (s⁻² kPa^(−2/3)) and `B = m_m E/m0` (kPa), fitted as their logarithms
+//! (all positive). `f` rises from 0 to `sqrt(K1 + Ks)/2π` (the rigid limit); the paper's power
+//! law `f = a + b E^c` is the same rise in three empirical constants.
+//!
+//! Which of the two a unit uses is chosen at calibration by the reference phantoms held out
+//! one at a time ([`crate::profile::calibrate`]): the simulated probe is built on these
+//! mechanics, so there the contact law fits by construction; on a real probe it has to earn its
+//! place the same way. The constants' dependence on the preload (`A ∝ F^(1/3)`, `B ∝ F`) is what
+//! force compensation will use (docs/physics.md).
+
+use crate::calibration::{FitError, Modulus, RefPoint, SPAN_MARGIN};
+use crate::linalg::{damped_solve, spd_inverse};
+use crate::status::Failure;
+use crate::units::Hz;
+use core::f64::consts::PI;
+
+/// The contact law of one unit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ContactLaw {
+    /// Free resonance `f1`, Hz (the air reference's at calibration).
+    pub free_hz: f64,
+    /// `ln Ks`, `ln A`, `ln B`.
+    pub p: [f64; 3],
+    /// Covariance of `p`.
+    pub cov: [[f64; 3]; 3],
+    /// Standard deviation (Hz) of the law's misfit to the reference readings.
+    pub model_sigma_hz: f64,
+    /// Lowest modulus the calibration vouches for, kPa.
+    pub min_kpa: f64,
+    /// Highest modulus the calibration vouches for, kPa.
+    pub max_kpa: f64,
+}
+
+/// The law's constants out of their logarithms, computed once for many evaluations (an
+/// inversion takes about fifty: on the Cortex-M4F every `f64` exponential is software).
+#[derive(Clone, Copy)]
+struct Constants {
+    k1: f64,
+    ks: f64,
+    a: f64,
+    b: f64,
+}
+
+impl Constants {
+    fn of(free_hz: f64, p: &[f64; 3]) -> Self {
+        Self {
+            k1: (2.0 * PI * free_hz) * (2.0 * PI * free_hz),
+            ks: libm::exp(p[0]),
+            a: libm::exp(p[1]),
+            b: libm::exp(p[2]),
+        }
+    }
+
+    /// The law and its slopes at `y = E^(1/3)` (E in kPa): `F = sqrt(N/M)/2π` with
+    /// `N = K1 + s A y²`, `M = 1 + s² B/y³`, `s = Ks/(Ks + A y²)`, and
+    /// `dF = F (dN/N − dM/M)/2` for each variable.
+    fn at_cube_root(&self, y: f64) -> Slopes {
+        let km = self.a * y * y;
+        let s = self.ks / (self.ks + km);
+        let bm = self.b / (y * y * y);
+        let n = self.k1 + s * km;
+        let m = 1.0 + s * s * bm;
+        let f = libm::sqrt(n / m) / (2.0 * PI);
+        let df = |dn: f64, dm: f64| 0.5 * f * (dn / n - dm / m);
+        // y: dkm = 2 km/y, ds = −s (1−s) dkm/km, dbm = −3 bm/y.
+        let ds_dy = -s * (1.0 - s) * 2.0 / y;
+        let df_dy = df(
+            ds_dy * km + s * 2.0 * km / y,
+            2.0 * s * ds_dy * bm - 3.0 * s * s * bm / y,
+        );
+        // ln Ks: ds = s (1−s). ln A: dkm = km, ds = −s (1−s). ln B: dbm = bm.
+        let t = s * (1.0 - s);
+        let df_dp = [
+            df(t * km, 2.0 * s * t * bm),
+            df(s * s * km, -2.0 * s * t * bm),
+            df(0.0, s * s * bm),
+        ];
+        Slopes { f, df_dy, df_dp }
+    }
+
+    /// Resonance (Hz) at modulus `e_kpa`.
+    fn frequency(&self, e_kpa: f64) -> f64 {
+        let km = self.a * libm::cbrt(e_kpa * e_kpa);
+        let s = self.ks / (self.ks + km);
+        libm::sqrt((self.k1 + s * km) / (1.0 + s * s * self.b / e_kpa)) / (2.0 * PI)
+    }
+}
+
+/// The law's value and slopes at one modulus.
+struct Slopes {
+    /// Resonance, Hz.
+    f: f64,
+    /// `dF/dy`, `y = E^(1/3)`.
+    df_dy: f64,
+    /// `dF/d(ln Ks)`, `dF/d(ln A)`, `dF/d(ln B)`.
+    df_dp: [f64; 3],
+}
+
+/// Resonance (Hz) of the law `free_hz`, `p` at modulus `e_kpa`.
+fn frequency_of(free_hz: f64, p: &[f64; 3], e_kpa: f64) -> f64 {
+    Constants::of(free_hz, p).frequency(e_kpa)
+}
+
+/// How many numbers [`ContactLaw::to_values`] gives.
+pub const VALUES: usize = 16;
+
+/// Lowest and highest modulus an inversion searches, kPa.
+const SEARCH_KPA: (f64, f64) = (1.0, 1.0e6);
+
+impl ContactLaw {
+    /// The law as the numbers the store's record and the bench's profile file keep, in this
+    /// order: `free_hz`, `p` (3), `cov` (9, row major), `model_sigma_hz`, `min_kpa`, `max_kpa`.
+    pub fn to_values(&self) -> [f64; VALUES] {
+        let mut v = [0.0; VALUES];
+        v[0] = self.free_hz;
+        v[1..4].copy_from_slice(&self.p);
+        for (i, row) in self.cov.iter().enumerate() {
+            v[4 + 3 * i..7 + 3 * i].copy_from_slice(row);
+        }
+        v[13] = self.model_sigma_hz;
+        v[14] = self.min_kpa;
+        v[15] = self.max_kpa;
+        v
+    }
+
+    /// The law from [`to_values`](Self::to_values)' numbers (not validated: see
+    /// [`is_valid`](Self::is_valid)).
+    pub fn from_values(v: &[f64; VALUES]) -> Self {
+        Self {
+            free_hz: v[0],
+            p: [v[1], v[2], v[3]],
+            cov: [
+                [v[4], v[5], v[6]],
+                [v[7], v[8], v[9]],
+                [v[10], v[11], v[12]],
+            ],
+            model_sigma_hz: v[13],
+            min_kpa: v[14],
+            max_kpa: v[15],
+        }
+    }
+
+    /// Resonance at modulus `e_kpa`, Hz.
+    pub fn frequency(&self, e_kpa: f64) -> f64 {
+        frequency_of(self.free_hz, &self.p, e_kpa)
+    }
+
+    /// The rigid limit `sqrt(K1 + Ks)/2π`, Hz.
+    pub fn rigid_hz(&self) -> f64 {
+        let k1 = (2.0 * PI * self.free_hz) * (2.0 * PI * self.free_hz);
+        libm::sqrt(k1 + libm::exp(self.p[0])) / (2.0 * PI)
+    }
+
+    /// True when every constant is finite, the free resonance positive and the span ordered.
+    pub fn is_valid(&self) -> bool {
+        self.free_hz.is_finite()
+            && self.free_hz > 0.0
+            && self.p.iter().all(|v| v.is_finite())
+            && self.cov.iter().flatten().all(|v| v.is_finite())
+            && self.model_sigma_hz.is_finite()
+            && self.model_sigma_hz >= 0.0
+            && self.min_kpa > 0.0
+            && self.max_kpa > self.min_kpa
+    }
+
+    /// Modulus of a resonance `f ± sigma`, with the law's own uncertainty propagated: as
+    /// [`crate::calibration::PowerLaw::invert`] (the same failures for the same cases).
+    pub fn invert(&self, f: Hz, sigma: Hz) -> Result<Modulus, Failure> {
+        let f = f.0 as f64;
+        let sf = sigma.0 as f64;
+        if !self.is_valid() || !f.is_finite() || !sf.is_finite() || sf < 0.0 {
+            return Err(Failure::BadSettings);
+        }
+        let k = Constants::of(self.free_hz, &self.p);
+        // In y = E^(1/3) the law needs no transcendental but a square root (km = A y²,
+        // B/E = B/y³): Newton steps on y, kept inside a bracket that shrinks with every
+        // evaluation (a bisection step where Newton would leave it). Cost: ~8 evaluations
+        // where a bisection of the range took 64 (docs/firmware.md).
+        let (mut lo, mut hi) = (libm::cbrt(SEARCH_KPA.0), libm::cbrt(SEARCH_KPA.1));
+        if f >= k.at_cube_root(hi).f {
+            return Err(Failure::AboveRange);
+        }
+        if f <= k.at_cube_root(lo).f {
+            return Err(Failure::BelowRange);
+        }
+        let mut y = libm::cbrt(libm::sqrt(self.min_kpa * self.max_kpa));
+        let mut at = k.at_cube_root(y);
+        for _ in 0..60 {
+            if at.f < f {
+                lo = y;
+            } else {
+                hi = y;
+            }
+            let newton = y - (at.f - f) / at.df_dy;
+            let next = if at.df_dy > 0.0 && newton >= lo && newton <= hi {
+                newton
+            } else {
+                0.5 * (lo + hi)
+            };
+            let done = libm::fabs(next - y) <= 1e-12 * y;
+            y = next;
+            at = k.at_cube_root(y);
+            if done {
+                break;
+            }
+        }
+        let e = y * y * y;
+        if e > self.max_kpa {
+            return Err(Failure::AboveRange);
+        }
+        if e < self.min_kpa {
+            return Err(Failure::BelowRange);
+        }
+        // dE/df = 3 y² / (dF/dy); dE/dp = −(∂F/∂p)(dE/df).
+        if !(at.df_dy > 0.0) {
+            return Err(Failure::AboveRange);
+        }
+        let de_df = 3.0 * y * y / at.df_dy;
+        let g = at.df_dp.map(|d| -d * de_df);
+        Ok(Modulus::propagated(
+            e,
+            de_df,
+            sf,
+            self.model_sigma_hz,
+            &g,
+            &self.cov,
+        ))
+    }
+
+    /// Weighted least-squares fit of `(ln Ks, ln A, ln B)` to reference readings with the free
+    /// resonance `free_hz` held (Levenberg–Marquardt from the best of a coarse grid of starts;
+    /// the covariance from the Jacobian at the optimum, scaled by the reduced χ² when it exceeds
+    /// 1; the misfit as the RMS residual corrected for the three constants).
+    pub fn fit(data: &[RefPoint], free_hz: f64) -> Result<ContactLaw, FitError> {
+        if data.len() < 4 {
+            return Err(FitError::TooFewPoints);
+        }
+        let (mut emin, mut emax) = (f64::INFINITY, 0.0f64);
+        for d in data {
+            let (e, f, s) = (d.modulus_kpa, d.resonance_hz, d.sigma_hz);
+            if !(e > 0.0) || !e.is_finite() || !f.is_finite() || !(s > 0.0) || !s.is_finite() {
+                return Err(FitError::BadInput);
+            }
+            emin = emin.min(e);
+            emax = emax.max(e);
+        }
+        if !(free_hz > 0.0) || !free_hz.is_finite() {
+            return Err(FitError::BadInput);
+        }
+        let chi2 = |p: &[f64; 3]| -> f64 {
+            data.iter()
+                .map(|d| {
+                    let r = (d.resonance_hz - frequency_of(free_hz, p, d.modulus_kpa)) / d.sigma_hz;
+                    r * r
+                })
+                .sum()
+        };
+        // Starts: Ks from the rigid limit over the highest reading (its square less K1, times
+        // 1–16), A and B over three decades each about the simulated probe's.
+        let mut p = [0.0; 3];
+        let mut best = f64::INFINITY;
+        let fmax = data.iter().map(|d| d.resonance_hz).fold(0.0, f64::max);
+        let k1 = (2.0 * PI * free_hz) * (2.0 * PI * free_hz);
+        let ks0 = ((2.0 * PI * fmax) * (2.0 * PI * fmax) - k1).max(1.0);
+        for i in 0..5 {
+            for j in 0..7 {
+                for k in 0..7 {
+                    let q = [
+                        libm::log(ks0) + 0.7 * i as f64,
+                        7.0 + 1.15 * j as f64,
+                        5.0 + 1.15 * k as f64,
+                    ];
+                    let c = chi2(&q);
+                    if c < best {
+                        best = c;
+                        p = q;
+                    }
+                }
+            }
+        }
+        let normal = |p: &[f64; 3]| -> ([[f64; 3]; 3], [f64; 3]) {
+            let mut jtj = [[0.0; 3]; 3];
+            let mut jtr = [0.0; 3];
+            for d in data {
+                let w = 1.0 / (d.sigma_hz * d.sigma_hz);
+                let f0 = frequency_of(free_hz, p, d.modulus_kpa);
+                let mut j = [0.0; 3];
+                for (i, ji) in j.iter_mut().enumerate() {
+                    let mut q = *p;
+                    q[i] += 1e-6;
+                    *ji = (frequency_of(free_hz, &q, d.modulus_kpa) - f0) / 1e-6;
+                }
+                let r = d.resonance_hz - f0;
+                for a in 0..3 {
+                    jtr[a] += w * j[a] * r;
+                    for b in 0..3 {
+                        jtj[a][b] += w * j[a] * j[b];
+                    }
+                }
+            }
+            (jtj, jtr)
+        };
+        let mut lambda = 1e-3;
+        for _ in 0..200 {
+            let (jtj, jtr) = normal(&p);
+            let Some(step) = damped_solve(&jtj, &jtr, lambda) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let q = [p[0] + step[0], p[1] + step[1], p[2] + step[2]];
+            let c = chi2(&q);
+            if c < best {
+                let done = best - c < 1e-12 * best.max(1e-300);
+                best = c;
+                p = q;
+                lambda = (lambda * 0.3).max(1e-12);
+                if done {
+                    break;
+                }
+            } else {
+                lambda *= 10.0;
+                if lambda > 1e12 {
+                    break;
+                }
+            }
+        }
+        let (jtj, _) = normal(&p);
+        let mut cov = spd_inverse(&jtj).ok_or(FitError::NotSaturating)?;
+        let dof = data.len().saturating_sub(3).max(1) as f64;
+        let scale = (best / dof).max(1.0);
+        for v in cov.iter_mut().flatten() {
+            *v *= scale;
+        }
+        let ss: f64 = data
+            .iter()
+            .map(|d| {
+                let r = d.resonance_hz - frequency_of(free_hz, &p, d.modulus_kpa);
+                r * r
+            })
+            .sum();
+        let law = ContactLaw {
+            free_hz,
+            p,
+            cov,
+            model_sigma_hz: libm::sqrt(ss / dof),
+            min_kpa: emin * (1.0 - SPAN_MARGIN),
+            max_kpa: emax * (1.0 + SPAN_MARGIN),
+        };
+        if law.is_valid() {
+            Ok(law)
+        } else {
+            Err(FitError::NotSaturating)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The analytic slopes against central differences of the law in E and in each constant.
+    /// Steps 1e-6: truncation below 1e-7 of the slope; rounding of the two ~260 Hz values
+    /// (an ulp, 5.7e-14 Hz, each) over the step 2e-6 is up to 6e-8 Hz per unit.
+    #[test]
+    fn slopes_match_central_differences() {
+        let (free, p) = (232.3, [13.44, 9.26, 4.88]);
+        let k = Constants::of(free, &p);
+        for e in [120.0, 414.0, 2465.0, 20_000.0] {
+            let y = libm::cbrt(e);
+            let at = k.at_cube_root(y);
+            assert!((at.f - frequency_of(free, &p, e)).abs() < 1e-10);
+            let h = 1e-6 * y;
+            let num = (k.at_cube_root(y + h).f - k.at_cube_root(y - h).f) / (2.0 * h);
+            assert!(
+                (at.df_dy / num - 1.0).abs() < 1e-7,
+                "{e}: {} vs {num}",
+                at.df_dy
+            );
+            for i in 0..3 {
+                let (mut up, mut dn) = (p, p);
+                up[i] += 1e-6;
+                dn[i] -= 1e-6;
+                let num = (frequency_of(free, &up, e) - frequency_of(free, &dn, e)) / 2e-6;
+                assert!(
+                    (at.df_dp[i] - num).abs() <= 1e-7 * num.abs() + 6e-8,
+                    "{e}, {i}: {} vs {num}",
+                    at.df_dp[i]
+                );
+            }
+        }
+    }
+
+    /// The law at its limits: the free resonance's square plus the coupling at `E → ∞`; below
+    /// the free resonance and falling towards 0 at small `E` (the co-moving mass dominates).
+    #[test]
+    fn limits() {
+        let law = ContactLaw {
+            free_hz: 232.3,
+            p: [13.44, 9.26, 4.88],
+            cov: [[0.0; 3]; 3],
+            model_sigma_hz: 0.0,
+            min_kpa: 100.0,
+            max_kpa: 3000.0,
+        };
+        let rigid = libm::sqrt((2.0 * PI * 232.3f64).powi(2) + libm::exp(13.44)) / (2.0 * PI);
+        assert!((law.rigid_hz() - rigid).abs() < 1e-9);
+        assert!((law.frequency(1e12) - rigid).abs() < 1e-3);
+        assert!(law.frequency(1e-3) < 1.0);
+        // Rising: every decade from 1 kPa to 1 GPa.
+        let mut prev = 0.0;
+        for k in 0..7 {
+            let f = law.frequency(libm::pow(10.0, k as f64));
+            assert!(f > prev, "{f} at 1e{k} kPa");
+            prev = f;
+        }
+        // Inversion is the inverse within the f32 rounding of the resonance (half an ulp of
+        // 256 Hz, 7.6e-6 Hz) through the slope.
+        for e in [150.0, 414.0, 2465.0] {
+            let f = law.frequency(e) as f32;
+            let m = law.invert(Hz(f), Hz(0.0)).unwrap();
+            let slope = (law.frequency(e * 1.0001) - law.frequency(e * 0.9999)) / (2e-4 * e);
+            let tol = 2.0 * 7.6e-6 / slope;
+            assert!((m.value.0 as f64 - e).abs() <= tol + 1e-6 * e, "{e}: {m:?}");
+        }
+        assert_eq!(
+            law.invert(Hz(rigid as f32 + 0.1), Hz(0.1)),
+            Err(Failure::AboveRange)
+        );
+        assert_eq!(law.invert(Hz(100.0), Hz(0.1)), Err(Failure::BelowRange));
+        assert_eq!(law.invert(Hz(f32::NAN), Hz(0.1)), Err(Failure::BadSettings));
+    }
+}
