@@ -8,7 +8,7 @@
 use crate::events::{Drift, Knocks, LiftOff};
 use crate::frontend::Mains;
 use crate::phantoms;
-use crate::scenes::{NoiseScene, Scene};
+use crate::scenes::{Fault, NoiseScene, Scene};
 use crate::tissue::{SecondMode, Tissue};
 
 /// One scene of the catalogue.
@@ -86,13 +86,9 @@ pub fn catalogue(noise: NoiseScene) -> [Case; SCENES] {
     damped_t.loss_tangent = 0.3;
     let mut clipping = nominal;
     clipping.front_end.tia_ohm *= 5.0;
-    let mut open = nominal;
-    open.pzt.c0_f = 0.0;
-    open.pzt.force_factor_n_v = 0.0;
-    let mut short = nominal;
-    short.pzt.leakage_s = 1e-3;
-    let mut stuck = nominal;
-    stuck.stuck_dac = Some(crate::frontend::MID_CODE);
+    let open = Fault::OpenPzt.apply(nominal);
+    let short = Fault::ShortedPzt.apply(nominal);
+    let stuck = Fault::StuckDac.apply(nominal);
     // Mains pick-up of 0.1 uA per harmonic (about a tenth of the motional current).
     let mut h50 = [0.0; 8];
     h50[3] = 1e-7; // 200 Hz
