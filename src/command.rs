@@ -28,6 +28,7 @@
 //! | `calibrate paper` | use the paper's published calibration |
 //! | `store` | write calibration and air reference to flash |
 //! | `status` | report settings, calibration and counters |
+//! | `selftest` | run the self-test of the analog chain (as at power-on); readings are refused while it fails |
 
 use crate::estimate::ringdown::RingdownSettings;
 use crate::estimate::staged::{Refine, StagedSettings};
@@ -76,6 +77,8 @@ pub enum Command {
     Reload,
     /// List the commands, the methods and the default method.
     Help,
+    /// Run the self-test of the analog chain (as at power-on).
+    SelfTest,
 }
 
 /// Why a line is not a command.
@@ -282,6 +285,7 @@ pub fn parse(line: &[u8], scale: &FrontEndScale) -> Result<Command, CommandError
         "status" => arity(0).map(|_| Command::Status),
         "reload" => arity(0).map(|_| Command::Reload),
         "help" => arity(0).map(|_| Command::Help),
+        "selftest" => arity(0).map(|_| Command::SelfTest),
         "method" => {
             arity(1)?;
             let name = args.first().copied().unwrap_or_default();
@@ -454,6 +458,8 @@ mod tests {
         assert_eq!(p("status"), Ok(Command::Status));
         assert_eq!(p("store"), Ok(Command::Store));
         assert_eq!(p("air"), Ok(Command::Air));
+        assert_eq!(p("selftest"), Ok(Command::SelfTest));
+        assert_eq!(p("selftest now"), Err(CommandError::TooManyArguments));
         // Every method by its name.
         for m in Method::ALL {
             assert_eq!(
