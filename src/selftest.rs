@@ -380,20 +380,6 @@ pub fn classify(raws: &[PointRaw], scale: &FrontEndScale, e: &Expected) -> SelfT
     let mean = |k: fn(&SweepPoint) -> f32| points.iter().map(k).sum::<f32>() / n;
     let (g, b) = (mean(|p| p.g_s), mean(|p| p.b_s));
     let w = 2.0 * core::f32::consts::PI * freq.0;
-    // The capacitive current the reference plate carries per volt.
-    let b_ref = w * e.capacitance.0;
-    // Resistive: the in-phase admittance beyond the reference's exceeds the reference plate's
-    // capacitive one (loss angle above 45 degrees; PZT-5A's dielectric loss is tan d <= 0.02).
-    let resistive = g - e.conductance.0 > b_ref;
-    if let Err(f) = screen(&points) {
-        return fault(match f {
-            Failure::Clipped if resistive => SelfTestFault::ShortedPzt,
-            Failure::Clipped => SelfTestFault::Clipped,
-            Failure::OpenCircuit => SelfTestFault::OpenPzt,
-            Failure::Interference => SelfTestFault::Interference,
-            _ => SelfTestFault::NoSamples,
-        });
-    }
     // The standard uncertainty of the mean susceptance: the points' own (from the sine fits'
     // residuals) or their scatter, whichever is larger.
     let own = libm::sqrtf(points.iter().map(|p| p.sigma_s * p.sigma_s).sum::<f32>()) / n;
@@ -407,16 +393,7 @@ pub fn classify(raws: &[PointRaw], scale: &FrontEndScale, e: &Expected) -> SelfT
     );
     let sigma_c = own.max(scatter) / w;
     let c = b / w;
-    let outcome = if resistive {
-        Err(SelfTestFault::ShortedPzt)
-    } else if !(libm::fabsf(c - e.capacitance.0)
-        <= e.tolerance * e.capacitance.0 + SIGMAS * sigma_c)
-    {
-        Err(SelfTestFault::Capacitance)
-    } else {
-        Ok(())
-    };
-    SelfTestReport {
+    let measured = |outcome| SelfTestReport {
         outcome,
         freq,
         capacitance: Farads(c),
@@ -426,7 +403,31 @@ pub fn classify(raws: &[PointRaw], scale: &FrontEndScale, e: &Expected) -> SelfT
         drive_v: mean(|p| p.drive_v),
         expected: *e,
         probe_time: Seconds(0.0),
+    };
+    // The capacitive current the reference plate carries per volt.
+    let b_ref = w * e.capacitance.0;
+    // Resistive: the in-phase admittance beyond the reference's exceeds the reference plate's
+    // capacitive one (loss angle above 45 degrees; PZT-5A's dielectric loss is tan d <= 0.02).
+    let resistive = g - e.conductance.0 > b_ref;
+    if let Err(f) = screen(&points) {
+        return measured(Err(match f {
+            Failure::Clipped if resistive => SelfTestFault::ShortedPzt,
+            Failure::Clipped => SelfTestFault::Clipped,
+            Failure::OpenCircuit => SelfTestFault::OpenPzt,
+            Failure::Interference => SelfTestFault::Interference,
+            _ => SelfTestFault::NoSamples,
+        }));
     }
+    let outcome = if resistive {
+        Err(SelfTestFault::ShortedPzt)
+    } else if !(libm::fabsf(c - e.capacitance.0)
+        <= e.tolerance * e.capacitance.0 + SIGMAS * sigma_c)
+    {
+        Err(SelfTestFault::Capacitance)
+    } else {
+        Ok(())
+    };
+    measured(outcome)
 }
 
 /// Run the self-test against `src` for `unit`: the plan through the one plan loop, the windows
