@@ -11,10 +11,11 @@ pub const PAINT: u32 = 0xCCCC_CCCC;
 /// The stack's size and the most of it ever used.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct StackUsage {
-    /// Bytes from the top of the stack down to the deepest word written since the end of
-    /// `init` (`repaint`): the tasks and interrupts.
+    /// Bytes from the top of the stack down to the deepest word written since `idle` started
+    /// (`repaint`): the tasks and interrupts.
     pub used_bytes: u32,
-    /// The same during `init` (board bring-up; under QEMU the simulator's set-up).
+    /// The same before: `init` (board bring-up; under QEMU the simulator's set-up) and the
+    /// tasks up to their first wait.
     pub init_bytes: u32,
     /// Bytes of the whole stack region.
     pub size_bytes: u32,
@@ -71,23 +72,27 @@ fn scan() -> (u32, u32) {
     }))
 }
 
-/// At the end of `init` (interrupts still masked): keep `init`'s high-water mark, then paint
-/// the stack again from its bottom up to [`REPAINT_GUARD_WORDS`] below the stack pointer, so
-/// that [`usage`] tells the tasks' and interrupts' depth apart from the bring-up's.
+/// At the start of `idle`, with interrupts masked: keep the boot's high-water mark (`init`,
+/// and the tasks up to their first wait), then paint the stack again from its bottom up to
+/// [`REPAINT_GUARD_WORDS`] below the stack pointer, so that [`usage`] tells the running
+/// tasks' and interrupts' depth apart from the bring-up's. (At the end of `init` its own frame
+/// would still be live and count as used.)
 #[cfg(target_os = "none")]
 pub fn repaint() {
-    let (used, _) = scan();
-    INIT_USED.store(used, core::sync::atomic::Ordering::Relaxed);
-    let (lo, _) = region();
-    let sp = cortex_m::register::msp::read() as usize;
-    let end = sp.saturating_sub(4 * REPAINT_GUARD_WORDS);
-    let mut p = lo;
-    while p + 4 <= end {
-        // SAFETY: [lo, sp - guard) is stack below every live frame (ARM EABI has no red zone)
-        // and interrupts are masked in `init`: nothing else uses these words now.
-        unsafe { core::ptr::write_volatile(p as *mut u32, PAINT) };
-        p += 4;
-    }
+    cortex_m::interrupt::free(|_| {
+        let (used, _) = scan();
+        INIT_USED.store(used, core::sync::atomic::Ordering::Relaxed);
+        let (lo, _) = region();
+        let sp = cortex_m::register::msp::read() as usize;
+        let end = sp.saturating_sub(4 * REPAINT_GUARD_WORDS);
+        let mut p = lo;
+        while p + 4 <= end {
+            // SAFETY: [lo, sp - guard) is stack below every live frame (ARM EABI has no red
+            // zone) and interrupts are masked: nothing else uses these words now.
+            unsafe { core::ptr::write_volatile(p as *mut u32, PAINT) };
+            p += 4;
+        }
+    });
 }
 
 /// The painted stack's usage now (firmware), `None` on the host.

@@ -159,7 +159,9 @@ fn qemu_nominal_scene_passes_and_the_stack_stays_within_its_margin() {
     // SRAM2) below its static RAM (55 148 B at 3419beb, docs/firmware.md): 43 156 B. The
     // QEMU image runs the same tasks with the simulator on top (its set-up in `init` and on
     // every `sim` line inside the sample interrupt, which the STM32 does not have), so its
-    // marks bound the STM32's from above; they must leave 10 % of that stack free.
+    // marks — the running tasks' and interrupts' (`used_bytes`, since `idle` repainted) and
+    // the boot's (`init_bytes`) — bound the STM32's from above; the worst must leave 10 % of
+    // that stack free (docs/firmware.md).
     const STM32_STACK_BYTES: f64 = 96.0 * 1024.0 - 55_148.0;
     const MARGIN: f64 = 0.10;
     let stacks = all(&parsed, "stack");

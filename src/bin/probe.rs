@@ -188,9 +188,6 @@ mod app {
         let (rx_tx, rx_rx) = make_channel!(u8, RX_CAP);
         command::spawn(request_tx, report_tx, done_rx, rx_rx).ok();
 
-        // The stack's high-water mark of the tasks and interrupts apart from init's (`stack` line).
-        pzt_probe::stack::repaint();
-
         (
             Shared {},
             Local {
@@ -211,6 +208,9 @@ mod app {
     /// Runs when no task has work: sleep until the next interrupt.
     #[idle]
     fn idle(_: idle::Context) -> ! {
+        // The stack's high-water mark of the running tasks and interrupts apart from the
+        // boot's (`stack` line): paint again below this frame.
+        pzt_probe::stack::repaint();
         loop {
             cortex_m::asm::wfi();
         }
