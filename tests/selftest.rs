@@ -201,6 +201,7 @@ fn catalogue_scenes_pass_unless_the_plate_is_at_fault() {
             "open-pzt" => assert_eq!(r.outcome, Err(SelfTestFault::OpenPzt)),
             "shorted-pzt" => assert_eq!(r.outcome, Err(SelfTestFault::ShortedPzt)),
             "dac-stuck" => assert_eq!(r.outcome, Err(SelfTestFault::NoDrive)),
+            "adc-rail" => assert_eq!(r.outcome, Err(SelfTestFault::AdcRail(Channel::Current))),
             // C0 ten times the motional conductance's susceptance: a probe of another make.
             "c0-dominant" => assert!(r.outcome.is_err(), "{r:?}"),
             "knocks" => assert!(
