@@ -112,8 +112,8 @@ fn qemu_fault_scenes_end_in_their_selftest_fault_and_refuse_readings() {
 
 /// The nominal scene (phantom B at the bench's noise): the boot self-test passes against the
 /// factory air reference, and its capacitance is the scene's closed-form `Im(Y(f)) / 2 pi f`
-/// within five standard uncertainties plus 0.2 % (the converters' systematic, as on the host:
-/// tests/selftest.rs). The stack's high-water mark over the session (self-test, readings by
+/// within five standard uncertainties plus 0.2 % (the simulated converters' systematic,
+/// measured on the host: tests/selftest.rs). The stack's high-water mark over the session (self-test, readings by
 /// hold and sweep-G, `sim` lines that rebuild the simulated probe in the sample interrupt)
 /// stays below the STM32 image's stack with a margin.
 #[test]

@@ -64,12 +64,14 @@ fn motional_bound_from_the_closed_form() {
 
 /// Every contact passes against the factory air reference, and the measured capacitance is the
 /// scene's closed-form `Im(Y(f)) / (2 pi f)` within five of its own standard uncertainties
-/// plus the converters' quantisation floor (a sixth of a code of the monitor's ~90-code
-/// fundamental after both filters, ~0.2 %, bounds the systematic of the fitted ratio).
+/// plus 0.2 %: a systematic of the simulated converters (sampling and hold of the discretised
+/// chain) that the noise does not explain, at most −0.16 % over these contacts, −0.11/−0.13 % under QEMU
+/// (printed below) — an allowance from measurement, 27 times below the self-test's own 5.35 %.
 #[test]
 fn every_contact_passes_and_measures_the_closed_form_capacitance() {
     let unit = factory();
     let air = unit.air.expect("factory air reference");
+    let mut worst: f64 = 0.0;
     for (i, (name, s)) in contacts().into_iter().enumerate() {
         let r = run(s.with_noise(NoiseScene::Bench), &unit, 100 + i as u64);
         assert_eq!(r.outcome, Ok(()), "{name}: {r:?}");
@@ -82,6 +84,9 @@ fn every_contact_passes_and_measures_the_closed_form_capacitance() {
             (c - truth).abs() <= tol,
             "{name}: {c:e} F, closed form {truth:e} F ± {tol:e}"
         );
+        if (c / truth - 1.0).abs() > worst.abs() {
+            worst = c / truth - 1.0;
+        }
         if i == 0 {
             println!(
                 "free air: C {:.2} pF (sigma {:.3} pF), closed form {:.2} pF, air reference C0 {:.2} pF, G {:.3e} S, i {:.3e} A, v {:.3} V, {:.2} s",
@@ -96,6 +101,10 @@ fn every_contact_passes_and_measures_the_closed_form_capacitance() {
             );
         }
     }
+    println!(
+        "largest deviation from the closed form: {:+.3} %",
+        100.0 * worst
+    );
 }
 
 /// Each fault scene of `hal-sim` ends in its own fault, on tissue and in free air, with the
