@@ -184,7 +184,7 @@ impl SelfTestFault {
             SelfTestFault::ShortedPzt => "self-test: the PZT conducts like a resistor: plate or wiring shorted, check the probe cable",
             SelfTestFault::Clipped => "self-test: sense current at full scale: capacitance far too high or sense gain fault, check the probe cable",
             SelfTestFault::Interference => "self-test disturbed by a knock or interference: hold the probe still and run selftest",
-            SelfTestFault::Capacitance => "self-test: PZT capacitance out of tolerance: cracked plate or another probe; retake air in free air and run selftest",
+            SelfTestFault::Capacitance => "self-test: PZT capacitance out of tolerance: cracked plate or another probe; in free air take air, then run selftest",
         }
     }
 

@@ -209,12 +209,16 @@ impl Session {
 
     /// Serve one command; true when it succeeded (a reading: when it is `ok`).
     pub async fn handle<I: Io>(&mut self, cmd: Command, io: &mut I) -> bool {
-        // Every reading is refused while the last self-test failed.
-        if matches!(
-            cmd,
-            Command::Measure | Command::Air | Command::CalibrateAdd(_)
-        ) && self.refused_by_selftest(io).await
-        {
+        // Every reading is refused while the last self-test failed — but the air reference
+        // when only the capacitance is off: the chain works (no open, short, rail or missing
+        // drive), and `air` re-measures the very C0 it was compared with (a fresh unit's plate
+        // off the nominal one; the self-test then runs against the new reference).
+        let reading = match cmd {
+            Command::Measure | Command::CalibrateAdd(_) => true,
+            Command::Air => self.selftest != Some(Err(SelfTestFault::Capacitance)),
+            _ => false,
+        };
+        if reading && self.refused_by_selftest(io).await {
             return false;
         }
         match cmd {

@@ -353,3 +353,29 @@ fn boot_selftest_passes_on_a_healthy_probe() {
     assert!(r.expected.from_air);
     assert!(send(&mut s, &mut io, "measure"), "{:?}", last_reading(&io));
 }
+
+/// A fresh unit (no air reference) whose plate is 30 % above the nominal 210 pF fails the
+/// boot self-test on its capacitance: `measure` is refused, but `air` is served (the chain
+/// works; the air reference re-measures C0), and the self-test then passes against it.
+#[test]
+fn a_capacitance_fault_lets_the_air_reference_be_retaken() {
+    use pzt_probe::selftest::SelfTestFault;
+    let mut io = SimIo::new(Flash::new());
+    let mut plate = Scene::free_air();
+    plate.pzt.c0_f *= 1.3;
+    io.put_on(plate);
+    let mut s = block_on(Session::boot(&mut io));
+    assert_eq!(s.selftest_outcome(), Some(Err(SelfTestFault::Capacitance)));
+    assert!(!send(&mut s, &mut io, "measure"));
+    assert_eq!(
+        io.events.last(),
+        Some(&Event::Refused(Refusal::SelfTest(
+            SelfTestFault::Capacitance
+        )))
+    );
+    assert!(send(&mut s, &mut io, "air"), "{:?}", io.events.last());
+    let c0 = s.profile().air.expect("air reference").static_capacitance.0 as f64;
+    assert!((c0 / (1.3 * 210e-12) - 1.0).abs() < 0.01, "{c0:e} F");
+    assert!(send(&mut s, &mut io, "selftest"), "{:?}", io.events.last());
+    assert_eq!(s.selftest_outcome(), Some(Ok(())));
+}
