@@ -150,6 +150,16 @@ pub struct Modulus {
     pub sigma_repeat: KPa,
 }
 
+/// A curve's inverse takes a resonance and its standard uncertainty as `f64`: `bad_settings`
+/// when the curve is not `valid` or the input is not finite (or the uncertainty negative).
+pub(crate) fn inversion_input(valid: bool, f: Hz, sigma: Hz) -> Result<(f64, f64), Failure> {
+    let (f, sf) = (f.0 as f64, sigma.0 as f64);
+    if !valid || !f.is_finite() || !sf.is_finite() || sf < 0.0 {
+        return Err(Failure::BadSettings);
+    }
+    Ok((f, sf))
+}
+
 impl Modulus {
     /// The modulus `e_kpa` read through a curve, with its uncertainty (GUM, first order): the
     /// resonance's standard uncertainty `sigma_hz` and the curve's misfit `model_sigma_hz`
@@ -204,7 +214,8 @@ fn misfit_from_r2(a: f64, b: f64, c: f64, r2: f64, moduli: &[f64]) -> f64 {
     libm::sqrt((1.0 - r2) * var)
 }
 
-fn span(min: f64, max: f64) -> (f64, f64) {
+/// The span a calibration vouches for: its reference moduli widened by [`SPAN_MARGIN`].
+pub(crate) fn span(min: f64, max: f64) -> (f64, f64) {
     (min * (1.0 - SPAN_MARGIN), max * (1.0 + SPAN_MARGIN))
 }
 
@@ -220,9 +231,10 @@ fn robust_scale(data: &[RefPoint], law: &PowerLaw) -> f64 {
 }
 
 /// RMS leave-one-out error (Hz) at the interior reference moduli (all but the lowest and the
-/// highest), or `None` with fewer than five distinct moduli or more than 256 readings.
+/// highest), or `None` with fewer than five distinct moduli or more than
+/// [`crate::profile::MAX_REFERENCES`] readings (its scratch copy is on the stack).
 fn interior_loo_sigma(data: &[RefPoint]) -> Option<f64> {
-    if distinct_moduli(data) < 5 || data.len() > 256 {
+    if distinct_moduli(data) < 5 || data.len() > crate::profile::MAX_REFERENCES {
         return None;
     }
     let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
@@ -230,7 +242,7 @@ fn interior_loo_sigma(data: &[RefPoint]) -> Option<f64> {
         lo = lo.min(d.modulus_kpa);
         hi = hi.max(d.modulus_kpa);
     }
-    let mut scratch = [RefPoint::default(); 256];
+    let mut scratch = [RefPoint::default(); crate::profile::MAX_REFERENCES];
     let (mut sum2, mut groups) = (0.0, 0u32);
     let mut done = [0.0f64; 64];
     let mut ndone = 0;
@@ -336,11 +348,7 @@ impl PowerLaw {
 
     /// Modulus of a resonance `f ± sigma`, with the curve's own uncertainty propagated.
     pub fn invert(&self, f: Hz, sigma: Hz) -> Result<Modulus, Failure> {
-        let f = f.0 as f64;
-        let sf = sigma.0 as f64;
-        if !self.is_valid() || !f.is_finite() || !sf.is_finite() || sf < 0.0 {
-            return Err(Failure::BadSettings);
-        }
+        let (f, sf) = inversion_input(self.is_valid(), f, sigma)?;
         if f >= self.a {
             return Err(Failure::AboveRange);
         }
@@ -464,7 +472,7 @@ impl PowerLaw {
 
 /// The modulus span of reference data, `TooFewPoints` with fewer than four readings or three
 /// distinct moduli, `BadInput` on a reading that is not finite and positive.
-fn checked_span(data: &[RefPoint]) -> Result<(f64, f64), FitError> {
+pub(crate) fn checked_span(data: &[RefPoint]) -> Result<(f64, f64), FitError> {
     if data.len() < 4 {
         return Err(FitError::TooFewPoints);
     }

@@ -28,6 +28,7 @@
 //! | `calibrate paper` | use the paper's published calibration |
 //! | `store` | write calibration and air reference to flash |
 //! | `status` | report settings, calibration and counters |
+//! | `selftest` | run the self-test of the analog chain (as at power-on); readings are refused while it fails |
 
 use crate::estimate::ringdown::RingdownSettings;
 use crate::estimate::staged::{Refine, StagedSettings};
@@ -76,6 +77,8 @@ pub enum Command {
     Reload,
     /// List the commands, the methods and the default method.
     Help,
+    /// Run the self-test of the analog chain (as at power-on).
+    SelfTest,
 }
 
 /// Why a line is not a command.
@@ -317,6 +320,7 @@ pub fn parse(line: &[u8], scale: &FrontEndScale) -> Result<Command, CommandError
         "status" => arity(args, 0).map(|_| Command::Status),
         "reload" => arity(args, 0).map(|_| Command::Reload),
         "help" => arity(args, 0).map(|_| Command::Help),
+        "selftest" => arity(args, 0).map(|_| Command::SelfTest),
         "method" => {
             arity(args, 1)?;
             let name = args.first().copied().unwrap_or_default();
@@ -513,6 +517,8 @@ mod tests {
         assert_eq!(p("status"), Ok(Command::Status));
         assert_eq!(p("store"), Ok(Command::Store));
         assert_eq!(p("air"), Ok(Command::Air));
+        assert_eq!(p("selftest"), Ok(Command::SelfTest));
+        assert_eq!(p("selftest now"), Err(CommandError::TooManyArguments));
         // Every method by its name.
         for m in Method::ALL {
             assert_eq!(
@@ -566,6 +572,8 @@ mod tests {
     #[test]
     fn errors() {
         use CommandError::*;
+        use SettingsError as S;
+        let set = Settings;
         // Each line and the error it must give.
         let cases: &[(&str, CommandError)] = &[
             ("", Empty),
@@ -584,59 +592,38 @@ mod tests {
             ("sweep 200 NaN 2 0.02 0.03 5", BadNumber),
             ("sweep 200 inf 2 0.02 0.03 5", BadNumber),
             ("sweep 200 1e39 2 0.02 0.03 5", BadNumber),
-            (
-                "sweep 260 200 2 0.02 0.03 5",
-                Settings(SettingsError::EmptyBand),
-            ),
-            (
-                "sweep 200 260 0 0.02 0.03 5",
-                Settings(SettingsError::StepNotPositive),
-            ),
-            (
-                "sweep 200 260 2 0.02 0.03 500",
-                Settings(SettingsError::DriveOutOfRange),
-            ),
-            (
-                "sweep 200 3000 2 0.02 0.03 5",
-                Settings(SettingsError::TooManyPoints),
-            ),
-            (
-                "sweep 200 260 2 -1 0.03 5",
-                Settings(SettingsError::SettleNegative),
-            ),
+            ("sweep 260 200 2 0.02 0.03 5", set(S::EmptyBand)),
+            ("sweep 200 260 0 0.02 0.03 5", set(S::StepNotPositive)),
+            ("sweep 200 260 2 0.02 0.03 500", set(S::DriveOutOfRange)),
+            ("sweep 200 3000 2 0.02 0.03 5", set(S::TooManyPoints)),
+            ("sweep 200 260 2 -1 0.03 5", set(S::SettleNegative)),
             ("staged 170 290 6 0.02 0.02 5 0.8 3", MissingArgument),
             ("staged 170 290 6 0.02 0.02 5 0.8 3 5 6", TooManyArguments),
             ("staged 170 290 6.5 0.02 0.02 5 0.8 3 5", OutOfRange),
             ("staged 170 290 256 0.02 0.02 5 0.8 3 5", OutOfRange),
             ("staged 170 290 6 0.02 0.02 -1 0.8 3 5", OutOfRange),
             ("staged 170 290 6 0.02 0.02 5 x 3 5", BadNumber),
-            (
-                "staged 290 170 6 0.02 0.02 5 0.8 3 5",
-                Settings(SettingsError::EmptyBand),
-            ),
+            ("staged 290 170 6 0.02 0.02 5 0.8 3 5", set(S::EmptyBand)),
             // Two coarse points suit no refinement; a span of 5 linewidths with one refine point
             // neither (track ignores the span but needs two steps).
             (
                 "staged 170 290 2 0.02 0.02 5 0.8 3 5",
-                Settings(SettingsError::KnobOutOfRange),
+                set(S::KnobOutOfRange),
             ),
-            (
-                "staged 170 290 6 0.02 0.02 1 5 3 5",
-                Settings(SettingsError::KnobOutOfRange),
-            ),
+            ("staged 170 290 6 0.02 0.02 1 5 3 5", set(S::KnobOutOfRange)),
             (
                 "staged 170 290 6 0.02 0.02 5 0.8 3 500",
-                Settings(SettingsError::DriveOutOfRange),
+                set(S::DriveOutOfRange),
             ),
             ("ringdown 170 290 230 0.04 0.04 2 2", MissingArgument),
             (
                 "ringdown 170 290 230 0.04 0.04 5 2 5",
-                Settings(SettingsError::KnobOutOfRange),
+                set(S::KnobOutOfRange),
             ),
             ("ringdown 170 290 230 0.04 0.04 2 2.5 5", OutOfRange),
             (
                 "ringdown 170 290 9000 0.04 0.04 2 2 5",
-                Settings(SettingsError::AboveNyquist),
+                set(S::AboveNyquist),
             ),
             ("calibrate", MissingArgument),
             ("calibrate add", MissingArgument),

@@ -22,8 +22,8 @@
 //! place the same way. The constants' dependence on the preload (`A ∝ F^(1/3)`, `B ∝ F`) is what
 //! force compensation will use (docs/physics.md).
 
-use crate::calibration::{FitError, Modulus, RefPoint, SPAN_MARGIN};
-use crate::linalg::{damped_solve, spd_inverse};
+use crate::calibration::{checked_span, inversion_input, span, FitError, Modulus, RefPoint};
+use crate::linalg::{levenberg_marquardt, spd_inverse, LmStop};
 use crate::status::Failure;
 use crate::units::Hz;
 use core::f64::consts::PI;
@@ -181,11 +181,7 @@ impl ContactLaw {
     /// Modulus of a resonance `f ± sigma`, with the law's own uncertainty propagated: as
     /// [`crate::calibration::PowerLaw::invert`] (the same failures for the same cases).
     pub fn invert(&self, f: Hz, sigma: Hz) -> Result<Modulus, Failure> {
-        let f = f.0 as f64;
-        let sf = sigma.0 as f64;
-        if !self.is_valid() || !f.is_finite() || !sf.is_finite() || sf < 0.0 {
-            return Err(Failure::BadSettings);
-        }
+        let (f, sf) = inversion_input(self.is_valid(), f, sigma)?;
         let k = Constants::of(self.free_hz, &self.p);
         // In y = E^(1/3) the law needs no transcendental but a square root (km = A y²,
         // B/E = B/y³): Newton steps on y, kept inside a bracket that shrinks with every
@@ -247,18 +243,7 @@ impl ContactLaw {
     /// the covariance from the Jacobian at the optimum, scaled by the reduced χ² when it exceeds
     /// 1; the misfit as the RMS residual corrected for the three constants).
     pub fn fit(data: &[RefPoint], free_hz: f64) -> Result<ContactLaw, FitError> {
-        if data.len() < 4 {
-            return Err(FitError::TooFewPoints);
-        }
-        let (mut emin, mut emax) = (f64::INFINITY, 0.0f64);
-        for d in data {
-            let (e, f, s) = (d.modulus_kpa, d.resonance_hz, d.sigma_hz);
-            if !(e > 0.0) || !e.is_finite() || !f.is_finite() || !(s > 0.0) || !s.is_finite() {
-                return Err(FitError::BadInput);
-            }
-            emin = emin.min(e);
-            emax = emax.max(e);
-        }
+        let (emin, emax) = checked_span(data)?;
         if !(free_hz > 0.0) || !free_hz.is_finite() {
             return Err(FitError::BadInput);
         }
@@ -315,30 +300,7 @@ impl ContactLaw {
             }
             (jtj, jtr)
         };
-        let mut lambda = 1e-3;
-        for _ in 0..200 {
-            let (jtj, jtr) = normal(&p);
-            let Some(step) = damped_solve(&jtj, &jtr, lambda) else {
-                lambda *= 10.0;
-                continue;
-            };
-            let q = [p[0] + step[0], p[1] + step[1], p[2] + step[2]];
-            let c = chi2(&q);
-            if c < best {
-                let done = best - c < 1e-12 * best.max(1e-300);
-                best = c;
-                p = q;
-                lambda = (lambda * 0.3).max(1e-12);
-                if done {
-                    break;
-                }
-            } else {
-                lambda *= 10.0;
-                if lambda > 1e12 {
-                    break;
-                }
-            }
-        }
+        let (p, best) = levenberg_marquardt(p, chi2, normal, LmStop::new(200, 1e-12, 1e12));
         let (jtj, _) = normal(&p);
         let mut cov = spd_inverse(&jtj).ok_or(FitError::NotSaturating)?;
         let dof = data.len().saturating_sub(3).max(1) as f64;
@@ -358,8 +320,8 @@ impl ContactLaw {
             p,
             cov,
             model_sigma_hz: libm::sqrt(ss / dof),
-            min_kpa: emin * (1.0 - SPAN_MARGIN),
-            max_kpa: emax * (1.0 + SPAN_MARGIN),
+            min_kpa: span(emin, emax).0,
+            max_kpa: span(emin, emax).1,
         };
         if law.is_valid() {
             Ok(law)

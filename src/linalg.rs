@@ -205,6 +205,66 @@ impl Line {
     }
 }
 
+/// When a Levenberg–Marquardt minimisation stops.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LmStop {
+    /// Most steps.
+    pub iterations: usize,
+    /// An accepted step that lowers χ² by less than this fraction of it is the last.
+    pub rel_tol: f64,
+    /// The damping at which a minimisation that cannot lower χ² gives up.
+    pub max_lambda: f64,
+}
+
+impl LmStop {
+    /// Stop after `iterations` steps, at a step that lowers χ² by less than `rel_tol` of it, or
+    /// when the damping exceeds `max_lambda`.
+    pub const fn new(iterations: usize, rel_tol: f64, max_lambda: f64) -> Self {
+        Self {
+            iterations,
+            rel_tol,
+            max_lambda,
+        }
+    }
+}
+
+/// Levenberg–Marquardt minimisation of `chi2` from `p`: each step solves the damped normal
+/// equations `normal(p)` gives (`JᵀWJ`, `JᵀW r`, [`damped_solve`]); a step that lowers χ² is
+/// taken and the damping divided by 3, one that does not (or a damped system that is not
+/// positive definite) multiplies it by 10. `chi2` may answer `f64::INFINITY` for parameters
+/// outside their domain. Returns the parameters and their χ².
+pub fn levenberg_marquardt<const N: usize>(
+    mut p: [f64; N],
+    chi2: impl Fn(&[f64; N]) -> f64,
+    normal: impl Fn(&[f64; N]) -> ([[f64; N]; N], [f64; N]),
+    stop: LmStop,
+) -> ([f64; N], f64) {
+    let mut best = chi2(&p);
+    let mut lambda = 1e-3;
+    for _ in 0..stop.iterations {
+        let (jtj, jtr) = normal(&p);
+        if let Some(step) = damped_solve(&jtj, &jtr, lambda) {
+            let trial: [f64; N] = core::array::from_fn(|a| p[a] + step[a]);
+            let c = chi2(&trial);
+            if c < best {
+                let done = best - c <= stop.rel_tol * best.max(1e-300);
+                best = c;
+                p = trial;
+                lambda = (lambda * 0.3).max(1e-12);
+                if done {
+                    break;
+                }
+                continue;
+            }
+        }
+        lambda *= 10.0;
+        if lambda > stop.max_lambda {
+            break;
+        }
+    }
+    (p, best)
+}
+
 /// Solve the (Levenberg–Marquardt damped) normal equations `(JᵀWJ + λ diag(JᵀWJ)) x = JᵀW r`
 /// by [`spd_inverse`]; `lambda = 0` is the plain Gauss–Newton step. `None` when the damped
 /// matrix is not positive definite.

@@ -26,7 +26,11 @@
 //! stalled tag=<u16>                                        (error)
 //! overrun late=<u32> ring=<u32> dropped=<u32>              (error; whenever a counter grew)
 //! counters batches=<u32> late=<u32> ring=<u32> dropped=<u32> isr_mean=<u32> isr_max=<u32> unit=<str>
-//! status method=<str> calibration=<str> fallback=<bool> air=<bool> q_model=<bool> references=<u16>
+//! status method=<str> calibration=<str> fallback=<bool> air=<bool> q_model=<bool> references=<u16> selftest=<str>
+//! selftest result=<str> f_hz=<f32> c_pf=<f32> c_sigma_pf=<f32> ref_c_pf=<f32> tol=<f32> ref=<str> g_s=<f32> i_a=<f32> v=<f32> probe_time_s=<f32>
+//! selftest fault=<str> message=<str>                      (error; after a failed self-test)
+//! refused selftest=<str> message=<str>                    (warn; a reading asked for while the self-test fails)
+//! stack used_bytes=<u32> init_bytes=<u32> size_bytes=<u32>   (after status and at exit: the painted stack's high-water marks, tasks and interrupts / init)
 //! help commands=<str> methods=<str> default=<str>
 //! exit ok=<bool>                                           (QEMU script end)
 //! ```
@@ -35,7 +39,10 @@
 //! adaptive, track) `start_hz`/`stop_hz` are the band, `step_hz` is `NaN`, `settle_s` the
 //! coarse settling and `integrate_s` the integration; for ring-down the band, `NaN`, the burst
 //! and the ring. `status` of a reading is `ok` or a failure code of
-//! [`pzt_probe::Failure::code`]. `isr_mean`
+//! [`pzt_probe::Failure::code`]. `selftest` of `status` and `result` of `selftest` are
+//! `passed`, a fault code of [`crate::selftest::SelfTestFault::code`] (`status`: also
+//! `not_run`); `ref` is `air` (the air reference's `C0`) or `nominal` (the nominal plate).
+//! `isr_mean`
 //! and `isr_max` are the sample interrupt's work per batch (plan intake, demodulation, DAC
 //! refill, point hand-off) in `unit`: instructions under QEMU, core cycles on the STM32.
 
@@ -46,7 +53,7 @@ use crate::store::{SlotState, StoreError};
 /// One defmt line per session event (formats in the crate docs).
 pub fn event(e: Event) {
     match e {
-        Event::Loaded(l) => match l.source {
+        Event::Loaded(source) => match source {
             crate::store::LoadSource::Stored { slot, seq, other } => defmt::info!(
                 "store loaded slot={=u8} seq={=u32} other={=str}",
                 slot,
@@ -102,7 +109,7 @@ pub fn event(e: Event) {
         ),
         Event::Help => defmt::info!(
             "help commands={=str} methods={=str} default={=str}",
-            "measure,method,sweep,staged,ringdown,air,calibrate,store,reload,status,help",
+            "measure,method,sweep,staged,ringdown,air,calibrate,store,reload,status,selftest,help",
             crate::measure::METHOD_NAMES,
             crate::measure::DEFAULT_METHOD.name()
         ),
@@ -132,7 +139,13 @@ pub fn event(e: Event) {
             c.min_kpa as f32,
             c.max_kpa as f32
         ),
+        Event::Refused(crate::session::Refusal::SelfTest(f)) => defmt::warn!(
+            "refused selftest={=str} message={=str}",
+            f.code(),
+            f.message()
+        ),
         Event::Refused(why) => defmt::warn!("rejected error={=str}", why.message()),
+        Event::SelfTest(r) => selftest(&r),
         Event::Status {
             method,
             calibration,
@@ -140,15 +153,59 @@ pub fn event(e: Event) {
             air,
             q_model,
             references,
-        } => defmt::info!(
-            "status method={=str} calibration={=str} fallback={=bool} air={=bool} q_model={=bool} references={=u16}",
-            method.name(),
-            calibration.source.name(),
-            fallback,
-            air,
-            q_model,
-            references
-        ),
+            selftest,
+        } => {
+            defmt::info!(
+                "status method={=str} calibration={=str} fallback={=bool} air={=bool} q_model={=bool} references={=u16} selftest={=str}",
+                method.name(),
+                calibration.source.name(),
+                fallback,
+                air,
+                q_model,
+                references,
+                crate::selftest::outcome_code(selftest)
+            );
+            stack();
+        }
+    }
+}
+
+/// The `selftest` line (and, when it failed, the fault's line).
+fn selftest(r: &crate::selftest::SelfTestReport) {
+    let e = &r.expected;
+    defmt::info!(
+        "selftest result={=str} f_hz={=f32} c_pf={=f32} c_sigma_pf={=f32} ref_c_pf={=f32} tol={=f32} ref={=str} g_s={=f32} i_a={=f32} v={=f32} probe_time_s={=f32}",
+        crate::selftest::outcome_code(Some(r.outcome)),
+        r.freq.0,
+        r.capacitance.0 * 1e12,
+        r.capacitance_sigma.0 * 1e12,
+        e.capacitance.0 * 1e12,
+        e.tolerance,
+        if e.from_air { "air" } else { "nominal" },
+        r.conductance.0,
+        r.current_a,
+        r.drive_v,
+        r.probe_time.0
+    );
+    if let Err(f) = r.outcome {
+        defmt::error!(
+            "selftest fault={=str} message={=str}",
+            f.code(),
+            f.message()
+        );
+    }
+}
+
+/// The `stack` line: the painted stack's high-water mark, where the board has one
+/// ([`crate::stack`]).
+pub fn stack() {
+    if let Some(s) = crate::stack::usage() {
+        defmt::info!(
+            "stack used_bytes={=u32} init_bytes={=u32} size_bytes={=u32}",
+            s.used_bytes,
+            s.init_bytes,
+            s.size_bytes
+        );
     }
 }
 
@@ -245,9 +302,6 @@ pub fn overruns_if_grew(seen: &mut crate::counters::Overruns) {
 
 /// Everything the firmware's report task logs: the session's events and the board's own.
 #[derive(Clone, Copy, Debug)]
-// `Event(Loaded)` carries the whole unit profile: the report channel holds `REPORT_CAP` of these
-// (docs/firmware.md has the RAM it takes); no allocator to box into.
-#[allow(clippy::large_enum_variant)]
 pub enum Report {
     /// A session event.
     Event(Event),
@@ -287,6 +341,7 @@ pub fn report(r: Report, unit: &str, seen: &mut crate::counters::Overruns) -> Op
     };
     overruns_if_grew(seen);
     if let Some(ok) = exit {
+        stack();
         defmt::info!("exit ok={=bool}", ok);
     }
     exit

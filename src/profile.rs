@@ -237,29 +237,30 @@ pub fn calibrate(
         };
         *q = (r.modulus_kpa, r.q);
     }
-    let all = fq;
-    let law = PowerLaw::fit_robust(&mut fq[..n])?;
-    let q_model = QModel::fit(&eq[..n]).ok_or(crate::calibration::FitError::TooFewPoints)?;
+    // The contact law and the held-out comparison take every reading as given; the robust
+    // power-law fit (after them) reorders the readings, kept ones first.
     let contact = air.and_then(|a| {
         let free = a.free_resonance.0 as f64;
-        let c = ContactLaw::fit(&all[..n], free).ok()?;
-        let held_contact = held_out_rms(&all[..n], |d| {
+        let c = ContactLaw::fit(&fq[..n], free).ok()?;
+        let held_contact = held_out_rms(&fq[..n], |d| {
             ContactLaw::fit(d, free)
                 .ok()
                 .map(|c| move |e| c.frequency(e))
         })?;
-        let held_power = held_out_rms(&all[..n], |d| {
+        let held_power = held_out_rms(&fq[..n], |d| {
             PowerLaw::fit(d).ok().map(|p| move |e| p.frequency(e))
         })?;
-        // Its misfit is floored at the power law's: the readings' combined σ has so far carried
-        // the systematic errors the error budget does not yet name (the probe's drift since the
-        // air reference, a second mode, mains hum: docs/physics.md), through the power law's
-        // misfit; a better curve must not make those readings look more certain than they are.
-        let model_sigma_hz = c.model_sigma_hz.max(law.model_sigma_hz);
-        (held_contact < held_power).then_some(ContactLaw {
-            model_sigma_hz,
-            ..c
-        })
+        (held_contact < held_power).then_some(c)
+    });
+    let law = PowerLaw::fit_robust(&mut fq[..n])?;
+    let q_model = QModel::fit(&eq[..n]).ok_or(crate::calibration::FitError::TooFewPoints)?;
+    // The contact law's misfit is floored at the power law's: the readings' combined σ has so
+    // far carried the systematic errors the error budget does not yet name (the probe's drift
+    // since the air reference, a second mode, mains hum: docs/physics.md), through the power
+    // law's misfit; a better curve must not make those readings look more certain than they are.
+    let contact = contact.map(|c| ContactLaw {
+        model_sigma_hz: c.model_sigma_hz.max(law.model_sigma_hz),
+        ..c
     });
     Ok(Calibration {
         law,

@@ -75,20 +75,42 @@ pub async fn read<S: PointSource>(
     }
 }
 
-/// Run the measurement `m` of `method` (validated, started at the source's present sample)
-/// plan by plan against `src` under the stall rule, and end it with `unit`: the loop of
-/// [`read`], open to a measurement wrapped for counting (the QEMU cost image).
-pub async fn drive<S: PointSource, M: Measurement>(
+/// What the plan loop ([`run_plans`]) needs of a measurement: its plans, one at a time, and
+/// the windows that answer them. Every [`Measurement`] is one; the power-on self-test
+/// ([`crate::selftest`]) is one without a reading at its end.
+pub trait Plans {
+    /// The next point to ask for, or `None` (done, or waiting for the point in flight).
+    fn next_plan(&mut self) -> Option<PointPlan>;
+    /// Take a finished window; returns it in physical units when it is an admittance point of
+    /// a reading (it then goes to the point sinks).
+    fn accept(&mut self, raw: &PointRaw) -> Option<SweepPoint>;
+    /// True when no more windows are needed.
+    fn is_complete(&self) -> bool;
+}
+
+impl<M: Measurement> Plans for M {
+    fn next_plan(&mut self) -> Option<PointPlan> {
+        Measurement::next_plan(self)
+    }
+    fn accept(&mut self, raw: &PointRaw) -> Option<SweepPoint> {
+        Measurement::accept(self, raw)
+    }
+    fn is_complete(&self) -> bool {
+        Measurement::is_complete(self)
+    }
+}
+
+/// The plan loop under the one stall rule: `m`'s plans handed to `src` one by one, every
+/// window of a plan waited for within [`window_budget_samples`], each accepted by `m`; the
+/// admittance points go to `on_point` and to the source's own sink ([`PointSource::point`]).
+/// The drive is stopped at the end either way. Returns the points accepted, or the stall
+/// with the points accepted before it.
+pub async fn run_plans<S: PointSource, P: Plans>(
     src: &mut S,
-    m: &mut M,
-    method: Method,
-    unit: &UnitProfile,
+    m: &mut P,
     mut on_point: impl FnMut(u16, &SweepPoint),
-    mut on_stop: impl FnMut(Stop),
-) -> Reading {
+) -> Result<u16, (Stop, u16)> {
     let fs = src.scale().sample_rate.0 as f64;
-    let start = src.now_sample();
-    let elapsed = |src: &S| Seconds(src.now_sample().saturating_sub(start) as f32 / fs as f32);
     let mut points: u16 = 0;
     while !m.is_complete() {
         let Some(plan) = m.next_plan() else { break };
@@ -99,8 +121,7 @@ pub async fn drive<S: PointSource, M: Measurement>(
         for _ in 0..plan.windows.max(1) {
             let Some(raw) = src.next(&plan, budget).await else {
                 src.stop().await;
-                on_stop(Stop::Stalled(plan.tag));
-                return Reading::failed(method, Failure::DriveFault, elapsed(src), points);
+                return Err((Stop::Stalled(plan.tag), points));
             };
             if let Some(p) = m.accept(&raw) {
                 points = points.saturating_add(1);
@@ -110,7 +131,30 @@ pub async fn drive<S: PointSource, M: Measurement>(
         }
     }
     src.stop().await;
-    m.finish(unit)
+    Ok(points)
+}
+
+/// Run the measurement `m` of `method` (validated, started at the source's present sample)
+/// plan by plan against `src` under the stall rule ([`run_plans`]), and end it with `unit`:
+/// the loop of [`read`], open to a measurement wrapped for counting (the QEMU cost image).
+pub async fn drive<S: PointSource, M: Measurement>(
+    src: &mut S,
+    m: &mut M,
+    method: Method,
+    unit: &UnitProfile,
+    on_point: impl FnMut(u16, &SweepPoint),
+    mut on_stop: impl FnMut(Stop),
+) -> Reading {
+    let fs = src.scale().sample_rate.0 as f64;
+    let start = src.now_sample();
+    match run_plans(src, m, on_point).await {
+        Ok(_) => m.finish(unit),
+        Err((stop, points)) => {
+            on_stop(stop);
+            let elapsed = Seconds(src.now_sample().saturating_sub(start) as f32 / fs as f32);
+            Reading::failed(method, Failure::DriveFault, elapsed, points)
+        }
+    }
 }
 
 /// Run a future that never waits (every [`PointSource`] call of a [`SyncSource`] completes at

@@ -13,8 +13,9 @@ use crate::command::{Command, CommandError};
 use crate::measure::{Method, Procedure, Reading, Settings, DEFAULT_METHOD};
 use crate::profile::{self, AirReference, Reference, UnitProfile, AIR_SWEEP};
 use crate::reading::{read, PointSource, Stop};
+use crate::selftest::{self, SelfTestFault, SelfTestReport};
 use crate::status::{Failure, Status};
-use crate::store::{Loaded, Saved, StoreError};
+use crate::store::{LoadSource, Loaded, Saved, StoreError};
 use crate::sweep::SweepPoint;
 use crate::units::KPa;
 
@@ -25,12 +26,9 @@ pub const AIR_POINTS: usize = 64;
 
 /// What the session tells the outside world (the firmware logs each as one defmt line).
 #[derive(Clone, Copy, Debug, PartialEq)]
-// `Loaded` carries the whole unit profile (336 bytes): events are made and handled one at a time
-// on the stack, and there is no allocator to box it into.
-#[allow(clippy::large_enum_variant)]
 pub enum Event {
     /// The unit profile was loaded from the store (at power-on or on `reload`).
-    Loaded(Loaded),
+    Loaded(LoadSource),
     /// The active method and its settings.
     Settings(Method, Settings),
     /// An admittance point of the reading in progress, with its plan's tag.
@@ -42,6 +40,8 @@ pub enum Event {
     },
     /// A reading ended.
     Reading(Reading),
+    /// A self-test ended (power-on or `selftest`).
+    SelfTest(SelfTestReport),
     /// What the user can do about the failed reading just reported.
     Hint(Failure),
     /// A window did not arrive in time (plan tag).
@@ -81,6 +81,8 @@ pub enum Event {
         q_model: bool,
         /// Reference readings held.
         references: u16,
+        /// The last self-test: `None` when none ran, else passed or its fault.
+        selftest: Option<Result<(), SelfTestFault>>,
     },
 }
 
@@ -97,6 +99,8 @@ pub enum Refusal {
     ReferencesFull,
     /// The calibration fit failed.
     Fit,
+    /// A reading was asked for while the last self-test failed with this fault.
+    SelfTest(SelfTestFault),
 }
 
 impl Refusal {
@@ -108,6 +112,7 @@ impl Refusal {
             Refusal::NoResonance => "no resonance in the reference reading",
             Refusal::ReferencesFull => "reference list full: fit or clear",
             Refusal::Fit => "calibration fit failed: add references over a wider range",
+            Refusal::SelfTest(f) => f.message(),
         }
     }
 }
@@ -131,18 +136,27 @@ pub struct Session {
     method: Method,
     settings: Settings,
     refs: heapless::Vec<Reference, MAX_REFERENCES>,
+    selftest: Option<Result<(), SelfTestFault>>,
 }
 
 impl Session {
     /// Power-on: load the profile from the store (and say where it came from), with the
-    /// default method.
+    /// default method, then the self-test of the analog chain ([`crate::selftest`]): while it
+    /// has failed, every reading is refused.
     pub async fn boot<I: Io>(io: &mut I) -> Self {
+        let mut s = Self::load(io).await;
+        s.selftest(io).await;
+        s
+    }
+
+    async fn load<I: Io>(io: &mut I) -> Self {
         let loaded = io.load_profile();
-        io.emit(Event::Loaded(loaded)).await;
+        io.emit(Event::Loaded(loaded.source)).await;
         Self::new(&loaded)
     }
 
-    /// A session on what the store loaded, with the default method.
+    /// A session on what the store loaded, with the default method, before any self-test
+    /// (readings are served; [`Session::boot`] runs the self-test first).
     pub fn new(loaded: &Loaded) -> Self {
         Self {
             profile: loaded.record,
@@ -150,6 +164,36 @@ impl Session {
             method: DEFAULT_METHOD,
             settings: DEFAULT_METHOD.default_settings(),
             refs: heapless::Vec::new(),
+            selftest: None,
+        }
+    }
+
+    /// The last self-test's outcome (`None`: none ran).
+    pub fn selftest_outcome(&self) -> Option<Result<(), SelfTestFault>> {
+        self.selftest
+    }
+
+    /// Run the self-test against the profile in use, keep and emit its outcome; true when it
+    /// passed.
+    async fn selftest<I: Io>(&mut self, io: &mut I) -> bool {
+        let mut stalled = None;
+        let r = selftest::run(io, &self.profile, |Stop::Stalled(tag)| stalled = Some(tag)).await;
+        if let Some(tag) = stalled {
+            io.emit(Event::Stalled(tag)).await;
+        }
+        self.selftest = Some(r.outcome);
+        io.emit(Event::SelfTest(r)).await;
+        r.passed()
+    }
+
+    /// Refuse a reading while the last self-test failed: emits the refusal, true when refused.
+    async fn refused_by_selftest<I: Io>(&self, io: &mut I) -> bool {
+        match self.selftest {
+            Some(Err(f)) => {
+                io.emit(Event::Refused(Refusal::SelfTest(f))).await;
+                true
+            }
+            _ => false,
         }
     }
 
@@ -165,7 +209,20 @@ impl Session {
 
     /// Serve one command; true when it succeeded (a reading: when it is `ok`).
     pub async fn handle<I: Io>(&mut self, cmd: Command, io: &mut I) -> bool {
+        // Every reading is refused while the last self-test failed — but the air reference
+        // when only the capacitance is off: the chain works (no open, short, rail or missing
+        // drive), and `air` re-measures the very C0 it was compared with (a fresh unit's plate
+        // off the nominal one; the self-test then runs against the new reference).
+        let reading = match cmd {
+            Command::Measure | Command::CalibrateAdd(_) => true,
+            Command::Air => self.selftest != Some(Err(SelfTestFault::Capacitance)),
+            _ => false,
+        };
+        if reading && self.refused_by_selftest(io).await {
+            return false;
+        }
         match cmd {
+            Command::SelfTest => self.selftest(io).await,
             Command::Measure => {
                 let r = self.reading(io, self.method, self.settings).await;
                 io.emit(Event::Reading(r)).await;
@@ -249,7 +306,10 @@ impl Session {
                 true
             }
             Command::Reload => {
-                *self = Self::boot(io).await;
+                // Discards unsaved changes, not the self-test's verdict on the hardware.
+                let selftest = self.selftest;
+                *self = Self::load(io).await;
+                self.selftest = selftest;
                 true
             }
             Command::Status => {
@@ -260,6 +320,7 @@ impl Session {
                     air: self.profile.air.is_some(),
                     q_model: self.profile.q_model.is_some(),
                     references: self.refs.len() as u16,
+                    selftest: self.selftest,
                 })
                 .await;
                 true

@@ -261,3 +261,121 @@ fn air_with_a_stuck_drive_is_refused_as_a_drive_fault() {
     assert!(send(&mut s, &mut io, "air"), "{:?}", io.events.last());
     assert!(s.profile().air.is_some());
 }
+
+/// Power-on with a fault: the self-test at boot names it, every reading (`measure`, `air`,
+/// `calibrate add`) is refused with its message and no reading is taken, `status` shows it;
+/// the other commands are served. Once the fault is gone a `selftest` passes and phantom B
+/// reads within 3 % again. Each fault scene of `hal-sim` ends in its own fault.
+#[test]
+fn a_failed_selftest_refuses_every_reading_until_one_passes() {
+    use hal_sim::{Fault, StuckAdc};
+    use pzt_probe::selftest::{Channel, SelfTestFault};
+    let factory = pzt_probe::board::sim_factory::profile().expect("factory record");
+    for fault in Fault::ALL {
+        let mut io = SimIo::new(Flash::new());
+        io.store.save(&factory).expect("store the factory profile");
+        io.put_on(fault.apply(Scene::on_phantom(&phantoms::B)));
+        let b = fault.apply(Scene::on_phantom(&phantoms::B));
+        io.board.probe.set_stuck_dac(b.stuck_dac);
+        io.board.probe.set_stuck_adc(b.stuck_adc);
+        let mut s = block_on(Session::boot(&mut io));
+        let want = match fault {
+            Fault::OpenPzt => SelfTestFault::OpenPzt,
+            Fault::ShortedPzt => SelfTestFault::ShortedPzt,
+            Fault::StuckDac => SelfTestFault::NoDrive,
+            Fault::AdcRail => SelfTestFault::AdcRail(Channel::Current),
+        };
+        let report = io.events.iter().find_map(|e| match e {
+            Event::SelfTest(r) => Some(*r),
+            _ => None,
+        });
+        assert_eq!(
+            report.map(|r| r.outcome),
+            Some(Err(want)),
+            "{}",
+            fault.name()
+        );
+        assert_eq!(s.selftest_outcome(), Some(Err(want)));
+        for line in ["measure", "air", "calibrate add 279"] {
+            let before = io.events.len();
+            assert!(!send(&mut s, &mut io, line), "{line}");
+            assert_eq!(
+                &io.events[before..],
+                &[Event::Refused(Refusal::SelfTest(want))],
+                "{}: {line}",
+                fault.name()
+            );
+        }
+        assert!(!Refusal::SelfTest(want).message().is_empty());
+        // Other commands are served; status shows the fault.
+        assert!(send(&mut s, &mut io, "method sweep-g"));
+        assert!(send(&mut s, &mut io, "status"));
+        assert!(matches!(
+            io.events.last(),
+            Some(Event::Status { selftest: Some(Err(f)), .. }) if *f == want
+        ));
+        // `reload` keeps the verdict on the hardware; a self-test on the faulty probe fails
+        // again.
+        assert!(send(&mut s, &mut io, "reload"));
+        assert_eq!(s.selftest_outcome(), Some(Err(want)));
+        assert!(!send(&mut s, &mut io, "selftest"));
+        // Repaired: the self-test passes and readings are served again.
+        io.put_on(Scene::on_phantom(&phantoms::B));
+        io.board.probe.set_stuck_dac(None);
+        io.board.probe.set_stuck_adc(None::<StuckAdc>);
+        assert!(send(&mut s, &mut io, "selftest"), "{:?}", io.events.last());
+        assert_eq!(s.selftest_outcome(), Some(Ok(())));
+        assert!(send(&mut s, &mut io, "method auto"));
+        assert!(send(&mut s, &mut io, "measure"), "{:?}", last_reading(&io));
+        let e = last_reading(&io).modulus.expect("modulus").0 as f64;
+        assert!((e / 279.0 - 1.0).abs() <= 0.03, "{}: {e} kPa", fault.name());
+    }
+}
+
+/// Power-on on a healthy probe: the self-test passes against the stored air reference and
+/// readings are served.
+#[test]
+fn boot_selftest_passes_on_a_healthy_probe() {
+    let factory = pzt_probe::board::sim_factory::profile().expect("factory record");
+    let mut io = SimIo::new(Flash::new());
+    io.store.save(&factory).expect("store");
+    io.put_on(Scene::on_phantom(&phantoms::B));
+    let mut s = block_on(Session::boot(&mut io));
+    assert_eq!(s.selftest_outcome(), Some(Ok(())));
+    let r = io
+        .events
+        .iter()
+        .find_map(|e| match e {
+            Event::SelfTest(r) => Some(*r),
+            _ => None,
+        })
+        .expect("a self-test event");
+    assert!(r.expected.from_air);
+    assert!(send(&mut s, &mut io, "measure"), "{:?}", last_reading(&io));
+}
+
+/// A fresh unit (no air reference) whose plate is 30 % above the nominal 210 pF fails the
+/// boot self-test on its capacitance: `measure` is refused, but `air` is served (the chain
+/// works; the air reference re-measures C0), and the self-test then passes against it.
+#[test]
+fn a_capacitance_fault_lets_the_air_reference_be_retaken() {
+    use pzt_probe::selftest::SelfTestFault;
+    let mut io = SimIo::new(Flash::new());
+    let mut plate = Scene::free_air();
+    plate.pzt.c0_f *= 1.3;
+    io.put_on(plate);
+    let mut s = block_on(Session::boot(&mut io));
+    assert_eq!(s.selftest_outcome(), Some(Err(SelfTestFault::Capacitance)));
+    assert!(!send(&mut s, &mut io, "measure"));
+    assert_eq!(
+        io.events.last(),
+        Some(&Event::Refused(Refusal::SelfTest(
+            SelfTestFault::Capacitance
+        )))
+    );
+    assert!(send(&mut s, &mut io, "air"), "{:?}", io.events.last());
+    let c0 = s.profile().air.expect("air reference").static_capacitance.0 as f64;
+    assert!((c0 / (1.3 * 210e-12) - 1.0).abs() < 0.01, "{c0:e} F");
+    assert!(send(&mut s, &mut io, "selftest"), "{:?}", io.events.last());
+    assert_eq!(s.selftest_outcome(), Some(Ok(())));
+}

@@ -41,6 +41,9 @@ enum Cmd {
     /// Scan a simulated phantom with a lump on a grid (press at 30 mN, read, lift, move) and map
     /// its stiffness with the lump found marked.
     Scan(cmd::scan::ScanArgs),
+    /// The firmware's power-on self-test of the analog chain on the simulated probe, with a
+    /// fault if asked (`--fault open|short|dac-stuck|adc-rail`); a failed test exits non-zero.
+    Selftest(cmd::selftest::SelftestArgs),
     /// Read the firmware's decoded defmt log: the readings as a table, the sweeps and the
     /// reading history as a plot.
     Log(cmd::log::LogArgs),
@@ -65,6 +68,7 @@ fn main() -> ExitCode {
         Cmd::GenerateCaptures(a) => cmd::generate::run(a),
         Cmd::Scan(a) => cmd::scan::run(a),
         Cmd::Log(a) => cmd::log::run(a),
+        Cmd::Selftest(a) => cmd::selftest::run(a),
     };
     match r {
         Ok(()) => ExitCode::SUCCESS,

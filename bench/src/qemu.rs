@@ -87,7 +87,7 @@ pub fn measure(
             "with --qemu the image reads with its own factory profile (src/board/sim_factory.rs)"
         );
     }
-    let mut lines = scene_lines(target, a.preload_n, noise);
+    let mut lines = scene_lines(target, a.scene.preload_n, noise);
     lines.push(format!("method {}", method.name()));
     if *settings != method.default_settings() {
         match SettingsLine::of(settings) {

@@ -31,6 +31,42 @@ pub fn noise_name(n: NoiseScene) -> String {
     }
 }
 
+/// What the simulated probe is pressed on, and how hard: the options `measure` and `selftest`
+/// share.
+#[derive(clap::Args, Clone, Debug)]
+pub struct SceneArgs {
+    /// Phantom to press on: A–E (paper 003), ecoflex-00-10, ecoflex-00-30, dragon-skin-20.
+    #[arg(long)]
+    pub phantom: Option<String>,
+    /// Tissue of this small-strain Young's modulus, kPa.
+    #[arg(long)]
+    pub modulus_kpa: Option<f64>,
+    /// No tissue: the probe in free air.
+    #[arg(long)]
+    pub free_air: bool,
+    /// Contact preload, N.
+    #[arg(long, default_value_t = 0.030)]
+    pub preload_n: f64,
+}
+
+impl SceneArgs {
+    /// The target and its scene under `noise`; without a target option, free air when
+    /// `free_by_default`, else an error. The preload must lie in (0, 1] N.
+    pub fn scene(&self, noise: NoiseScene, free_by_default: bool) -> Result<(Target, Scene)> {
+        let free = self.free_air
+            || (free_by_default && self.phantom.is_none() && self.modulus_kpa.is_none());
+        let target = Target::from_options(self.phantom.as_deref(), self.modulus_kpa, free)?;
+        if !(self.preload_n.is_finite() && self.preload_n > 0.0 && self.preload_n <= 1.0) {
+            bail!("preload {} N is out of range (0 to 1 N)", self.preload_n);
+        }
+        let scene = target
+            .scene()
+            .with_noise(noise)
+            .with_preload_n(self.preload_n);
+        Ok((target, scene))
+    }
+}
+
 /// What the probe is pressed on.
 #[derive(Clone, Copy, Debug)]
 pub enum Target {

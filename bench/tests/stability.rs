@@ -66,7 +66,7 @@ fn sweep_g_and_fit_never_report_a_silent_wrong_number_but_sweep_g_under_drift() 
                 );
             }
         }
-        // 23 scenes × 3 seeds: at most the dielectric-leakage and mains scenes lose readings.
+        // 24 scenes × 3 seeds: at most the dielectric-leakage and mains scenes lose readings.
         println!(
             "{}: {wrong_codes} wrong failure codes of {readings} readings",
             m.name()

@@ -8,7 +8,7 @@
 use crate::events::{Drift, Knocks, LiftOff};
 use crate::frontend::Mains;
 use crate::phantoms;
-use crate::scenes::{NoiseScene, Scene};
+use crate::scenes::{Fault, NoiseScene, Scene};
 use crate::tissue::{SecondMode, Tissue};
 
 /// One scene of the catalogue.
@@ -66,7 +66,7 @@ fn at(e: f64, noise: NoiseScene) -> Scene {
 }
 
 /// Number of scenes in the catalogue.
-pub const SCENES: usize = 23;
+pub const SCENES: usize = 24;
 
 /// Rate of the thermal drift scenes: the free resonance moves by 3 Hz in 10 s (about one reading
 /// of the paper method, 10.9 s).
@@ -86,13 +86,10 @@ pub fn catalogue(noise: NoiseScene) -> [Case; SCENES] {
     damped_t.loss_tangent = 0.3;
     let mut clipping = nominal;
     clipping.front_end.tia_ohm *= 5.0;
-    let mut open = nominal;
-    open.pzt.c0_f = 0.0;
-    open.pzt.force_factor_n_v = 0.0;
-    let mut short = nominal;
-    short.pzt.leakage_s = 1e-3;
-    let mut stuck = nominal;
-    stuck.stuck_dac = Some(crate::frontend::MID_CODE);
+    let open = Fault::OpenPzt.apply(nominal);
+    let short = Fault::ShortedPzt.apply(nominal);
+    let stuck = Fault::StuckDac.apply(nominal);
+    let adc_rail = Fault::AdcRail.apply(nominal);
     // Mains pick-up of 0.1 uA per harmonic (about a tenth of the motional current).
     let mut h50 = [0.0; 8];
     h50[3] = 1e-7; // 200 Hz
@@ -246,6 +243,15 @@ pub fn catalogue(noise: NoiseScene) -> [Case; SCENES] {
             scene: stuck,
             truth_kpa: None,
             accept: &["drive_fault"],
+        },
+        // Every sample of the sense channel at the rail: what a reading sees is a clipped
+        // channel (the power-on self-test names it: `adc_rail_current`).
+        Case {
+            name: "adc-rail",
+            what: "sense ADC stuck at its upper rail",
+            scene: adc_rail,
+            truth_kpa: None,
+            accept: &["clipped"],
         },
         Case {
             name: "preload-60mN",

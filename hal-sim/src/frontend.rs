@@ -19,6 +19,25 @@ pub struct Mains {
     pub harmonic_amplitude_a: [f64; 8],
 }
 
+/// One of the two ADC channels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AdcChannel {
+    /// Sense current (transimpedance amplifier output).
+    Current,
+    /// Drive monitor (divided PZT voltage).
+    Monitor,
+}
+
+/// Fault: an ADC channel that reads one code whatever its input (a converter or its input
+/// stage stuck at a rail).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StuckAdc {
+    /// The channel.
+    pub channel: AdcChannel,
+    /// The code it reads.
+    pub code: u16,
+}
+
 /// Front-end parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FrontEnd {

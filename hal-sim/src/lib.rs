@@ -43,9 +43,9 @@ pub mod tissue;
 
 pub use complex::C64;
 pub use events::{Drift, Knocks, LiftOff};
-pub use frontend::{FrontEnd, Mains};
+pub use frontend::{AdcChannel, FrontEnd, Mains, StuckAdc};
 pub use phantoms::Phantom;
 pub use probe::{AdcPair, SimProbe};
 pub use pzt::Pzt;
-pub use scenes::{Layer, NoiseScene, Scene};
+pub use scenes::{Fault, Layer, NoiseScene, Scene};
 pub use tissue::{Contact, Kelvin, SecondMode, SensorMech, Tissue};

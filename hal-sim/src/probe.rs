@@ -2,7 +2,7 @@
 //! discretised chain.
 
 use crate::events::{Knock, KnockTrain, SCHEDULE_STEP_S};
-use crate::frontend::{FrontEnd, MID_CODE};
+use crate::frontend::{AdcChannel, FrontEnd, StuckAdc, MAX_CODE, MID_CODE};
 use crate::plant::{
     chain, chain_two_modes, Discrete, A1, CHAIN2_STATES, CHAIN_STATES, VELOCITY, Y_I, Y_V,
 };
@@ -95,6 +95,7 @@ pub struct SimProbe {
     mains_phase: f64,
     noise_sigma_a: f64,
     stuck_dac: Option<u16>,
+    stuck_adc: Option<StuckAdc>,
     /// Sample count at which the schedule is next looked at (`u64::MAX`: never).
     next_schedule: u64,
     knocks: Option<KnockTrain>,
@@ -119,6 +120,7 @@ impl SimProbe {
             samples: 0,
             mains_phase,
             stuck_dac: scene.stuck_dac,
+            stuck_adc: scene.stuck_adc,
             next_schedule: u64::MAX,
             knocks,
             next_knock: u64::MAX,
@@ -170,6 +172,10 @@ impl SimProbe {
     /// Fault injection: the DAC output stuck at `code` (or released with `None`).
     pub fn set_stuck_dac(&mut self, code: Option<u16>) {
         self.stuck_dac = code;
+    }
+    /// Fault injection: an ADC channel stuck at one code (or released with `None`).
+    pub fn set_stuck_adc(&mut self, stuck: Option<StuckAdc>) {
+        self.stuck_adc = stuck;
     }
 
     fn rebuild(&mut self) {
@@ -248,6 +254,7 @@ impl SimProbe {
                 noise_sigma_a: self.noise_sigma_a,
                 mains_phase: self.mains_phase,
                 stuck_dac: self.stuck_dac,
+                stuck_adc: self.stuck_adc,
             };
             let (dac, adc) = (&dac[k..k + m], &mut adc[k..k + m]);
             match &mut self.plant {
@@ -279,6 +286,7 @@ struct Run<'a> {
     noise_sigma_a: f64,
     mains_phase: f64,
     stuck_dac: Option<u16>,
+    stuck_adc: Option<StuckAdc>,
 }
 
 impl Run<'_> {
@@ -312,6 +320,17 @@ impl Run<'_> {
                 current: fe.adc_code(i * fe.tia_ohm),
                 monitor: fe.adc_code(plant.x[Y_V] * fe.monitor_gain),
             };
+            match self.stuck_adc {
+                Some(StuckAdc {
+                    channel: AdcChannel::Current,
+                    code,
+                }) => out.current = code.min(MAX_CODE),
+                Some(StuckAdc {
+                    channel: AdcChannel::Monitor,
+                    code,
+                }) => out.monitor = code.min(MAX_CODE),
+                None => {}
+            }
             let c = self.stuck_dac.unwrap_or(*code);
             plant.step(fe.drive_volts(c));
             *self.samples += 1;

@@ -88,6 +88,65 @@ impl NoiseScene {
     }
 }
 
+/// The analog-chain faults a power-on self-test must catch, each put on top of any scene
+/// ([`Fault::apply`]): the stability catalogue's `open-pzt`, `shorted-pzt` and `dac-stuck`, and
+/// the QEMU image's `sim fault ...` lines.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Fault {
+    /// The PZT disconnected: no static capacitance, no motional branch.
+    OpenPzt,
+    /// The PZT shorted through 1 kOhm (a thousand times the plate's 1.3 uS at 1 kHz).
+    ShortedPzt,
+    /// The DAC output stuck at mid-scale: no drive.
+    StuckDac,
+    /// The sense-current ADC channel stuck at its upper rail.
+    AdcRail,
+}
+
+impl Fault {
+    /// Every fault.
+    pub const ALL: [Fault; 4] = [
+        Fault::OpenPzt,
+        Fault::ShortedPzt,
+        Fault::StuckDac,
+        Fault::AdcRail,
+    ];
+
+    /// Short name (`sim fault <name>`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Fault::OpenPzt => "open",
+            Fault::ShortedPzt => "short",
+            Fault::StuckDac => "dac-stuck",
+            Fault::AdcRail => "adc-rail",
+        }
+    }
+
+    /// The fault of a [`name`](Self::name).
+    pub fn from_name(name: &str) -> Option<Fault> {
+        Self::ALL.into_iter().find(|f| f.name() == name)
+    }
+
+    /// `scene` with this fault.
+    pub fn apply(self, mut scene: Scene) -> Scene {
+        match self {
+            Fault::OpenPzt => {
+                scene.pzt.c0_f = 0.0;
+                scene.pzt.force_factor_n_v = 0.0;
+            }
+            Fault::ShortedPzt => scene.pzt.leakage_s = 1e-3,
+            Fault::StuckDac => scene.stuck_dac = Some(crate::frontend::MID_CODE),
+            Fault::AdcRail => {
+                scene.stuck_adc = Some(crate::frontend::StuckAdc {
+                    channel: crate::frontend::AdcChannel::Current,
+                    code: crate::frontend::MAX_CODE,
+                })
+            }
+        }
+        scene
+    }
+}
+
 /// Everything the simulator needs to build a probe.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Scene {
@@ -103,6 +162,8 @@ pub struct Scene {
     pub tissue: Option<Tissue>,
     /// Fault: the DAC output stuck at this code whatever it is sent.
     pub stuck_dac: Option<u16>,
+    /// Fault: an ADC channel stuck at one code.
+    pub stuck_adc: Option<crate::frontend::StuckAdc>,
     /// A second mechanical mode of the probe, or `None`.
     pub second_mode: Option<SecondMode>,
     /// Lift-off during the reading, or `None`.
@@ -123,6 +184,7 @@ impl Scene {
             contact: Contact::default(),
             tissue: None,
             stuck_dac: None,
+            stuck_adc: None,
             second_mode: None,
             lift_off: None,
             drift: None,

@@ -208,6 +208,9 @@ mod app {
     /// Runs when no task has work: sleep until the next interrupt.
     #[idle]
     fn idle(_: idle::Context) -> ! {
+        // The stack's high-water mark of the running tasks and interrupts apart from the
+        // boot's (`stack` line): paint again below this frame.
+        pzt_probe::stack::repaint();
         loop {
             cortex_m::asm::wfi();
         }
@@ -341,7 +344,10 @@ mod app {
             store: cx.local.store,
             scale: *cx.local.scale,
         };
+        // Power-on: the profile, then the self-test (every reading refused while it fails).
         let mut session = Session::boot(&mut io).await;
+        // The QEMU script starts once the boot is done; elsewhere the slot just stays full.
+        let _ = done.try_send(session.selftest_outcome() == Some(Ok(())));
         loop {
             let req = match Mono::timeout_after(FEED_MS.millis(), requests.recv()).await {
                 Ok(Ok(r)) => r,
@@ -386,7 +392,8 @@ mod app {
             let mut cmdline = [0u8; board::CMDLINE_MAX];
             let script = board::boot_script(&mut cmdline).unwrap_or(SCRIPT);
             let mut sim = board::sim_state();
-            let mut ok = true;
+            // After the power-on self-test (on the script's leading `sim` lines' scene).
+            let mut ok = done.recv().await.unwrap_or(false);
             for line in lines(script) {
                 match step(line, &mut sim, &scale) {
                     Step::Sim => board::set_scene(sim.scene(), sim.seed),

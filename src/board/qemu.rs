@@ -105,12 +105,30 @@ pub fn sim_state() -> super::sim_script::SimState {
         preload_n: 0.03,
         noise: hal_sim::NoiseScene::Bench,
         seed: 1,
+        fault: None,
     }
 }
 
 /// The scene at power-on ([`sim_state`]).
 pub fn scene() -> hal_sim::Scene {
     sim_state().scene()
+}
+
+/// The probe at power-on as the boot script has it: [`sim_state`] with the script's leading
+/// `sim` lines (those before its first probe command) applied, so that the power-on self-test
+/// already sees the scene, or the fault, the script starts on. The command task applies them
+/// again in order (a fresh probe on the same scene).
+pub fn boot_state() -> super::sim_script::SimState {
+    let mut state = sim_state();
+    let mut cmdline = [0u8; CMDLINE_MAX];
+    if let Some(script) = boot_script(&mut cmdline) {
+        for line in super::sim_script::lines(script) {
+            if super::sim_script::apply(line, &mut state) != Ok(true) {
+                break;
+            }
+        }
+    }
+    state
 }
 
 /// A new scene and noise stream for the probe, taken by the sample interrupt at its next batch.
@@ -169,7 +187,8 @@ pub struct Parts {
     pub uart: Uart,
 }
 
-/// Set the board up: the simulated probe on [`scene`], and its flash as the factory left it —
+/// Set the board up: the simulated probe on [`boot_state`]'s scene, and its flash as the
+/// factory left it —
 /// the unit's profile ([`super::sim_factory::RECORD`]) programmed into the store's first slot.
 /// Call once, from `init`.
 pub fn init(_core: &mut cortex_m::Peripherals) -> Parts {
@@ -181,8 +200,9 @@ pub fn init(_core: &mut cortex_m::Peripherals) -> Parts {
         STORE_BASE,
         &super::sim_factory::RECORD,
     );
+    let boot = boot_state();
     Parts {
-        stream: Stream::new(SimProbe::new(scene(), 1)),
+        stream: Stream::new(SimProbe::new(boot.scene(), boot.seed)),
         watchdog: Watchdog,
         flash,
         uart: Uart::new(),

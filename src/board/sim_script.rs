@@ -8,14 +8,17 @@
 //! sim preload 0.015                                    contact preload, N
 //! sim noise bench|paper|quiet|<A/sqrt(Hz)>             front-end noise
 //! sim seed 7                                           noise stream (a fresh probe)
+//! sim fault open|short|dac-stuck|adc-rail|none         an analog-chain fault (hal_sim::Fault)
 //! ```
+//!
+//! A fault stays on whatever the probe is moved onto until `sim fault none`.
 //!
 //! Every other line is a probe command for the firmware's own parser. The boot command line is
 //! a list of lines separated by `;`.
 
 use crate::command::{parse, Command, CommandError, MAX_LINE};
 use crate::hal::FrontEndScale;
-use hal_sim::{phantoms, NoiseScene, Scene};
+use hal_sim::{phantoms, Fault, NoiseScene, Scene};
 
 /// What the simulated probe should become.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -28,14 +31,21 @@ pub struct SimState {
     pub noise: NoiseScene,
     /// Noise stream.
     pub seed: u64,
+    /// An analog-chain fault, or `None`.
+    pub fault: Option<Fault>,
 }
 
 impl SimState {
     /// The scene the probe is on.
     pub fn scene(&self) -> Scene {
-        self.base
+        let s = self
+            .base
             .with_noise(self.noise)
-            .with_preload_n(self.preload_n)
+            .with_preload_n(self.preload_n);
+        match self.fault {
+            Some(f) => f.apply(s),
+            None => s,
+        }
     }
 }
 
@@ -54,7 +64,7 @@ impl SimError {
     /// One line for a human.
     pub fn message(self) -> &'static str {
         match self {
-            SimError::Unknown => "sim: phantom, modulus, free-air, preload, noise or seed",
+            SimError::Unknown => "sim: phantom, modulus, free-air, preload, noise, seed or fault",
             SimError::BadArgument => "sim: argument missing or out of range",
             SimError::UnknownPhantom => "sim: unknown phantom",
         }
@@ -102,6 +112,12 @@ pub fn apply(line: &str, state: &mut SimState) -> Result<bool, SimError> {
             }
         }
         Some("seed") => state.seed = number(arg, 0.0, 4e9)? as u64,
+        Some("fault") => {
+            state.fault = match arg {
+                Some("none") => None,
+                a => Some(a.and_then(Fault::from_name).ok_or(SimError::BadArgument)?),
+            }
+        }
         _ => return Err(SimError::Unknown),
     }
     Ok(true)
@@ -152,6 +168,7 @@ mod tests {
             preload_n: 0.03,
             noise: NoiseScene::Bench,
             seed: 1,
+            fault: None,
         }
     }
 
@@ -177,6 +194,28 @@ mod tests {
         assert_eq!(s.seed, 42);
         assert_eq!(apply("sim free-air", &mut s), Ok(true));
         assert!(s.scene().tissue.is_none());
+        // A fault stays on the next scene until `sim fault none`.
+        for f in Fault::ALL {
+            assert_eq!(
+                apply(&std::format!("sim fault {}", f.name()), &mut s),
+                Ok(true)
+            );
+            assert_eq!(
+                s.scene(),
+                f.apply(
+                    Scene::free_air()
+                        .with_noise(NoiseScene::Density(2e-9))
+                        .with_preload_n(0.015)
+                )
+            );
+        }
+        assert_eq!(apply("sim phantom B", &mut s), Ok(true));
+        assert_eq!(
+            s.scene().stuck_adc.map(|a| a.code),
+            Some(hal_sim::frontend::MAX_CODE)
+        );
+        assert_eq!(apply("sim fault none", &mut s), Ok(true));
+        assert_eq!(s.fault, None);
     }
 
     #[test]
@@ -211,6 +250,8 @@ mod tests {
             ("sim noise loud", SimError::BadArgument),
             ("sim seed 1 2", SimError::BadArgument),
             ("sim free-air now", SimError::Unknown),
+            ("sim fault", SimError::BadArgument),
+            ("sim fault melted", SimError::BadArgument),
         ] {
             assert_eq!(apply(line, &mut s), Err(e), "{line}");
             assert_eq!(s, start(), "{line}");

@@ -10,7 +10,7 @@
 
 use super::model::Motional;
 use super::{screen, Estimate};
-use crate::linalg::{damped_solve, spd_inverse, Fit3, Lsq3};
+use crate::linalg::{levenberg_marquardt, spd_inverse, Fit3, LmStop, Lsq3};
 use crate::status::Failure;
 use crate::sweep::SweepPoint;
 use crate::units::Hz;
@@ -127,35 +127,15 @@ pub fn fit_bvd(points: &[SweepPoint], f_start: f64, q_start: f64) -> Result<Bvd,
         }
         (jtj, jtr)
     };
-    let mut lambda = 1e-3;
-    let mut chi2 = chi2_of(&p);
-    for _ in 0..50 {
-        let (jtj, jtr) = normal(&p);
-        let step = damped_solve(&jtj, &jtr, lambda).ok_or(Failure::NoResonance)?;
-        let mut trial = p;
-        for a in 0..5 {
-            trial[a] += step[a];
-        }
-        let c = if trial[3] > 0.0 && trial[4] > 0.0 && trial[2] > 0.0 {
-            chi2_of(&trial)
+    // Parameters outside their domain (g, f0, Q not positive) are no fit.
+    let chi2_in = |p: &[f64; 5]| {
+        if p[3] > 0.0 && p[4] > 0.0 && p[2] > 0.0 {
+            chi2_of(p)
         } else {
             f64::INFINITY
-        };
-        if c < chi2 {
-            let done = (chi2 - c) <= 1e-10 * chi2.max(1e-300);
-            p = trial;
-            chi2 = c;
-            lambda = (lambda * 0.3).max(1e-12);
-            if done {
-                break;
-            }
-        } else {
-            lambda *= 10.0;
-            if lambda > 1e10 {
-                break;
-            }
         }
-    }
+    };
+    let (p, chi2) = levenberg_marquardt(p, chi2_in, normal, LmStop::new(50, 1e-10, 1e10));
     let (jtj, _) = normal(&p);
     let cov = spd_inverse(&jtj).ok_or(Failure::NoResonance)?;
     let dof = (2 * points.len()).saturating_sub(5).max(1) as f64;

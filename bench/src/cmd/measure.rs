@@ -2,7 +2,7 @@
 
 use super::{progress, MethodArgs};
 use crate::calfile;
-use crate::scene::{layer_names, noise_name, parse_noise, Target};
+use crate::scene::{layer_names, noise_name, parse_noise, SceneArgs};
 use crate::{plot, report};
 use anyhow::{bail, Result};
 use clap::Args;
@@ -14,18 +14,9 @@ use std::path::PathBuf;
 
 #[derive(Args)]
 pub struct MeasureArgs {
-    /// Phantom to press on: A–E (paper 003), ecoflex-00-10, ecoflex-00-30, dragon-skin-20.
-    #[arg(long)]
-    pub phantom: Option<String>,
-    /// Tissue of this small-strain Young's modulus, kPa.
-    #[arg(long)]
-    pub modulus_kpa: Option<f64>,
-    /// No tissue: the probe in free air.
-    #[arg(long)]
-    pub free_air: bool,
-    /// Contact preload, N.
-    #[arg(long, default_value_t = 0.030)]
-    pub preload_n: f64,
+    /// What the probe is on, and the preload.
+    #[command(flatten)]
+    pub scene: SceneArgs,
     /// Seed of the simulated noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -62,15 +53,11 @@ pub fn run(a: MeasureArgs) -> Result<()> {
     let method = a.m.method()?;
     let settings = a.m.settings(method);
     let noise = parse_noise(&a.m.noise)?;
-    let target = Target::from_options(a.phantom.as_deref(), a.modulus_kpa, a.free_air)?;
-    if !(a.preload_n.is_finite() && a.preload_n > 0.0 && a.preload_n <= 1.0) {
-        bail!("preload {} N is out of range (0 to 1 N)", a.preload_n);
-    }
+    let (target, scene) = a.scene.scene(noise, false)?;
     if a.repeat == 0 || a.repeat > 10_000 {
         bail!("--repeat must be 1 to 10000");
     }
     // Validate the settings before any work (the firmware does the same).
-    let scene = target.scene().with_noise(noise).with_preload_n(a.preload_n);
     let scale = simboard::scale_of(&scene.front_end);
     Procedure::new(method, &settings, &scale, 0, &UnitProfile::fallback())
         .map_err(|e| anyhow::anyhow!("bad settings: {e}"))?;
@@ -91,7 +78,7 @@ pub fn run(a: MeasureArgs) -> Result<()> {
         );
         println!(
             "  preload {:.0} mN, noise {}, layers: {}",
-            a.preload_n * 1e3,
+            a.scene.preload_n * 1e3,
             noise_name(noise),
             layer_names(&scene)
         );

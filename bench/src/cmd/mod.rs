@@ -8,6 +8,7 @@ pub mod measure;
 pub mod pareto;
 pub mod physics;
 pub mod scan;
+pub mod selftest;
 pub mod stability;
 
 use anyhow::{Context, Result};
