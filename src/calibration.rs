@@ -366,14 +366,8 @@ impl PowerLaw {
             -e / (self.c * self.b),
             -e * libm::log(u) / (self.c * self.c),
         ];
-        Ok(Modulus::propagated(
-            e,
-            de_df,
-            sf,
-            self.model_sigma_hz,
-            &g,
-            &self.cov,
-        ))
+        let (misfit, cov) = (self.model_sigma_hz, &self.cov);
+        Ok(Modulus::propagated(e, de_df, sf, misfit, &g, cov))
     }
 
     /// [`fit`](Self::fit) that discards gross outliers first. Repeatedly, the reading with the

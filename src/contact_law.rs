@@ -228,14 +228,8 @@ impl ContactLaw {
         }
         let de_df = 3.0 * y * y / at.df_dy;
         let g = at.df_dp.map(|d| -d * de_df);
-        Ok(Modulus::propagated(
-            e,
-            de_df,
-            sf,
-            self.model_sigma_hz,
-            &g,
-            &self.cov,
-        ))
+        let (misfit, cov) = (self.model_sigma_hz, &self.cov);
+        Ok(Modulus::propagated(e, de_df, sf, misfit, &g, cov))
     }
 
     /// Weighted least-squares fit of `(ln Ks, ln A, ln B)` to reference readings with the free

@@ -299,6 +299,28 @@ mod tests {
     use crate::dsp::dds::tuning_word;
     use crate::units::AdcCode;
 
+    /// An engine at 10 kHz loaded with the point `f_hz`, `amplitude_codes`, `settle_samples`,
+    /// `cycles` a window, `windows`, `tag`.
+    fn loaded(
+        f_hz: f64,
+        amplitude_codes: u16,
+        settle_samples: u32,
+        cycles: u32,
+        windows: u16,
+        tag: u16,
+    ) -> SampleEngine {
+        let mut e = SampleEngine::new();
+        e.load(PointPlan {
+            ftw: tuning_word(f_hz, 10_000.0),
+            amplitude_codes,
+            settle_samples,
+            cycles,
+            windows,
+            tag,
+        });
+        e
+    }
+
     /// One batch of 50 samples with the DAC looped straight back into both ADC channels.
     fn loopback_batch(e: &mut SampleEngine) -> Option<PointRaw> {
         let mut dac = [DacCode::MID; 50];
@@ -317,16 +339,8 @@ mod tests {
     /// asked number of whole cycles and see a pure sine of the commanded amplitude.
     #[test]
     fn loopback_point() {
-        let mut e = SampleEngine::new();
-        let ftw = tuning_word(237.0, 10_000.0);
-        e.load(PointPlan {
-            ftw,
-            amplitude_codes: 1000,
-            settle_samples: 123,
-            cycles: 10,
-            windows: 1,
-            tag: 1,
-        });
+        // 237 Hz, 1000 codes, settle 123 samples, 10 cycles, one window, tag 1.
+        let mut e = loaded(237.0, 1000, 123, 10, 1, 1);
         let mut got = None;
         for _ in 0..100 {
             if let Some(p) = loopback_batch(&mut e) {
@@ -352,16 +366,8 @@ mod tests {
     /// Consecutive windows follow each other without a gap.
     #[test]
     fn consecutive_windows() {
-        let mut e = SampleEngine::new();
-        let ftw = tuning_word(241.0, 10_000.0);
-        e.load(PointPlan {
-            ftw,
-            amplitude_codes: 800,
-            settle_samples: 10,
-            cycles: 2,
-            windows: 6,
-            tag: 3,
-        });
+        // 241 Hz, 800 codes, settle 10 samples, 2 cycles a window, six windows, tag 3.
+        let mut e = loaded(241.0, 800, 10, 2, 6, 3);
         let mut got = std::vec::Vec::new();
         for _ in 0..40 {
             if let Some(p) = loopback_batch(&mut e) {

@@ -37,6 +37,24 @@ pub const PALETTE: [RGBColor; 8] = [
     RGBColor(90, 90, 90),
 ];
 
+/// The span of `values` (non-finite ones ignored) widened by `pad` of its width on each side;
+/// ±1 about a single value; `empty` without any.
+pub fn padded_range(values: impl Iterator<Item = f64>, pad: f64, empty: (f64, f64)) -> (f64, f64) {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(v), b.max(v))
+        });
+    if hi > lo {
+        let w = pad * (hi - lo);
+        (lo - w, hi + w)
+    } else if lo.is_finite() {
+        (lo - 1.0, lo + 1.0)
+    } else {
+        empty
+    }
+}
+
 /// Draw onto an SVG or a PNG file chosen by the extension of `path` (`.png` → PNG).
 pub fn with_backend(
     path: &Path,

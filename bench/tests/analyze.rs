@@ -39,6 +39,14 @@ fn run(name: &str, method: Method) -> Analysis {
         .unwrap_or_else(|e| panic!("{name}: {e}"))
 }
 
+/// `run`, and the reading must be the failure `f` without a modulus.
+fn refused(name: &str, method: Method, f: Failure) -> Analysis {
+    let a = run(name, method);
+    assert_eq!(a.reading.status, Status::Failed(f), "{name}, {method:?}");
+    assert!(a.reading.modulus.is_none(), "{name}, {method:?}");
+    a
+}
+
 /// Inverse of paper 003 eq. 5, written out independently of `PowerLaw::invert`.
 fn f_e_inverse(f: f64) -> f64 {
     ((266.6 - f) / 2305.0).powf(1.0 / -0.7243)
@@ -190,13 +198,7 @@ fn estimated_noise_matches_the_noise_added() {
 #[test]
 fn out_of_band_capture_is_not_ok() {
     for m in [Method::SweepG, Method::Paper] {
-        let a = run("bvd_1000kpa_below_band_y.csv", m);
-        assert_eq!(
-            a.reading.status,
-            Status::Failed(Failure::OutOfBand),
-            "{m:?}"
-        );
-        assert!(a.reading.modulus.is_none());
+        let a = refused("bvd_1000kpa_below_band_y.csv", m, Failure::OutOfBand);
         // The estimators themselves say so (not only the bench's band guard).
         assert_eq!(m.estimate(&a.capture.points), Err(Failure::OutOfBand));
         let j = analysis_json(&a, "x");
@@ -226,13 +228,8 @@ fn fit_method_does_not_read_ok_without_a_resonance_in_band() {
 #[test]
 fn capture_without_resonance_is_not_ok() {
     for m in [Method::SweepG, Method::Paper] {
-        let a = run("bvd_capacitor_only_y.csv", m);
-        assert_eq!(
-            a.reading.status,
-            Status::Failed(Failure::NoResonance),
-            "{m:?}"
-        );
-        assert!(a.reading.modulus.is_none() && a.reading.resonance.is_none());
+        let a = refused("bvd_capacitor_only_y.csv", m, Failure::NoResonance);
+        assert!(a.reading.resonance.is_none());
         assert_eq!(m.estimate(&a.capture.points), Err(Failure::NoResonance));
     }
 }

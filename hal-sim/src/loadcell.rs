@@ -65,6 +65,19 @@ impl Default for LoadCell {
     }
 }
 
+impl LoadCell {
+    /// The default cell without noise, drift or creep (its offset kept): every conversion is
+    /// the load plus the offset, to the count.
+    pub fn quiet() -> Self {
+        Self {
+            noise_n: 0.0,
+            drift_n_per_s: 0.0,
+            creep_fraction: 0.0,
+            ..Self::default()
+        }
+    }
+}
+
 /// Longest time `PD_SCK` may stay high before the chip powers down, s (datasheet: 60 µs).
 pub const POWER_DOWN_S: f64 = 60e-6;
 /// Conversion periods from power-up (or reset) to the first conversion at 80 SPS (datasheet:
@@ -285,20 +298,11 @@ mod tests {
         Some(((v << 8) as i32) >> 8)
     }
 
-    fn quiet() -> LoadCell {
-        LoadCell {
-            noise_n: 0.0,
-            drift_n_per_s: 0.0,
-            creep_fraction: 0.0,
-            ..LoadCell::default()
-        }
-    }
-
     /// The first conversion comes after the settling time; it is the load plus the offset, in
     /// counts, to the count (noise, drift and creep off).
     #[test]
     fn converts_the_load_after_settling() {
-        let cell = quiet();
+        let cell = LoadCell::quiet();
         let chip = RefCell::new(Hx711Sim::new(cell, 1));
         chip.borrow_mut().advance(0.049, 0.030);
         assert_eq!(read_by_hand(&chip, 1), None, "still settling at 49 ms");
@@ -321,7 +325,7 @@ mod tests {
     /// next conversion comes a settling time after the clock returns low.
     #[test]
     fn a_stretched_clock_pulse_powers_the_chip_down() {
-        let chip = RefCell::new(Hx711Sim::new(quiet(), 2));
+        let chip = RefCell::new(Hx711Sim::new(LoadCell::quiet(), 2));
         chip.borrow_mut().advance(0.1, 0.02);
         let (mut dout, mut sck, mut delay) = (Dout(&chip), Sck(&chip), Delay(&chip));
         assert!(dout.is_low().unwrap());

@@ -1,7 +1,7 @@
 //! `probe-bench log`: the readings and sweeps in a decoded defmt log of the firmware.
 
 use crate::defmt_log::{self, Level, LoggedReading, Session};
-use crate::plot::{with_backend, PALETTE};
+use crate::plot::{padded_range, with_backend, PALETTE};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use plotters::prelude::*;
@@ -289,36 +289,12 @@ where
         .map(|(k, r)| (r.time_s.unwrap_or((k + 1) as f64), r))
         .collect();
     let timed = s.readings.iter().all(|r| r.time_s.is_some());
-    let (x0, x1) = rs
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (x, _)| {
-            (a.min(*x), b.max(*x))
-        });
-    let (x0, x1) = if x1 > x0 {
-        let pad = 0.05 * (x1 - x0);
-        (x0 - pad, x1 + pad)
-    } else if x0.is_finite() {
-        (x0 - 1.0, x0 + 1.0)
-    } else {
-        (0.0, 1.0)
-    };
-    let fr: Vec<f64> = rs
-        .iter()
-        .filter_map(|(_, r)| r.f_hz.map(|f| f as f64))
-        .collect();
-    let (y0, y1) = fr
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &f| {
-            (a.min(f), b.max(f))
-        });
-    let (y0, y1) = if y1 > y0 {
-        let pad = 0.15 * (y1 - y0);
-        (y0 - pad, y1 + pad)
-    } else if y0.is_finite() {
-        (y0 - 1.0, y0 + 1.0)
-    } else {
-        (200.0, 260.0)
-    };
+    let (x0, x1) = padded_range(rs.iter().map(|(x, _)| *x), 0.05, (0.0, 1.0));
+    let (y0, y1) = padded_range(
+        rs.iter().filter_map(|(_, r)| r.f_hz.map(|f| f as f64)),
+        0.15,
+        (200.0, 260.0),
+    );
     let mut hist = ChartBuilder::on(&bottom)
         .caption(
             "reading history: resonance ± standard uncertainty (ok: blue, failed: red)",

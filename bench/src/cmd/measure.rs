@@ -161,51 +161,33 @@ pub fn run(a: MeasureArgs) -> Result<()> {
 
 /// One line describing a method's settings.
 pub fn describe_settings(s: &Settings) -> String {
+    let ms = |t: pzt_probe::Seconds| t.0 * 1e3;
     match s {
-        Settings::Sweep(s) => format!(
-            "sweep {}–{} Hz step {} Hz, settle {} ms, integrate {} ms, drive {} V",
-            s.start.0,
-            s.stop.0,
-            s.step.0,
-            s.settle.0 * 1e3,
-            s.integrate.0 * 1e3,
-            s.drive.0
-        ),
-        Settings::Staged(s) => format!(
-            "band {}–{} Hz, {} coarse points (settle {} ms), {} refine points/steps (span {} linewidths, settle {} tau), integrate {} ms, drive {} V",
-            s.band_start.0,
-            s.band_stop.0,
-            s.coarse_points,
-            s.coarse_settle.0 * 1e3,
-            s.refine_points,
-            s.refine_span,
-            s.settle_tau,
-            s.integrate.0 * 1e3,
-            s.drive.0
-        ),
-        Settings::Ringdown(s) => format!(
-            "band {}–{} Hz, seed {} Hz, {} stage(s) of {} ms burst + {} ms ring, {}-cycle windows, drive {} V",
-            s.band_start.0,
-            s.band_stop.0,
-            s.seed.0,
-            s.stages,
-            s.burst.0 * 1e3,
-            s.ring.0 * 1e3,
-            s.window_cycles,
-            s.drive.0
-        ),
-        Settings::Hold(s) => format!(
-            "band {}–{} Hz, seed {} Hz ({} ms burst + {} ms ring), hold {} ms (first {} ms on the seed), drive {} V, C0 {:.2} pF, G0 {:.3} nS",
-            s.band_start.0,
-            s.band_stop.0,
-            s.seed.0,
-            s.seed_burst.0 * 1e3,
-            s.seed_ring.0 * 1e3,
-            s.hold.0 * 1e3,
-            s.refine.0 * 1e3,
-            s.drive.0,
-            s.static_capacitance.0 * 1e12,
-            s.static_conductance.0 * 1e9
-        ),
+        Settings::Sweep(s) => {
+            let (f0, f1, df, drive) = (s.start.0, s.stop.0, s.step.0, s.drive.0);
+            let (settle, int) = (ms(s.settle), ms(s.integrate));
+            format!("sweep {f0}–{f1} Hz step {df} Hz, settle {settle} ms, integrate {int} ms, drive {drive} V")
+        }
+        Settings::Staged(s) => {
+            let (f0, f1, drive) = (s.band_start.0, s.band_stop.0, s.drive.0);
+            let (coarse, refine) = (s.coarse_points, s.refine_points);
+            let (settle, int) = (ms(s.coarse_settle), ms(s.integrate));
+            let (span, tau) = (s.refine_span, s.settle_tau);
+            format!("band {f0}–{f1} Hz, {coarse} coarse points (settle {settle} ms), {refine} refine points/steps (span {span} linewidths, settle {tau} tau), integrate {int} ms, drive {drive} V")
+        }
+        Settings::Ringdown(s) => {
+            let (f0, f1, seed, drive) = (s.band_start.0, s.band_stop.0, s.seed.0, s.drive.0);
+            let (stages, cycles) = (s.stages, s.window_cycles);
+            let (burst, ring) = (ms(s.burst), ms(s.ring));
+            format!("band {f0}–{f1} Hz, seed {seed} Hz, {stages} stage(s) of {burst} ms burst + {ring} ms ring, {cycles}-cycle windows, drive {drive} V")
+        }
+        Settings::Hold(s) => {
+            let (f0, f1, seed, drive) = (s.band_start.0, s.band_stop.0, s.seed.0, s.drive.0);
+            let (burst, ring) = (ms(s.seed_burst), ms(s.seed_ring));
+            let (hold, refine) = (ms(s.hold), ms(s.refine));
+            let c0 = s.static_capacitance.0 * 1e12;
+            let g0 = s.static_conductance.0 * 1e9;
+            format!("band {f0}–{f1} Hz, seed {seed} Hz ({burst} ms burst + {ring} ms ring), hold {hold} ms (first {refine} ms on the seed), drive {drive} V, C0 {c0:.2} pF, G0 {g0:.3} nS")
+        }
     }
 }

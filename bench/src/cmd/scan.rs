@@ -12,7 +12,7 @@
 
 use super::progress;
 use crate::calfile;
-use crate::plot::with_backend;
+use crate::plot::{padded_range, with_backend};
 use crate::scene::parse_noise;
 use anyhow::{anyhow, bail, Result};
 use clap::{Args, ValueEnum};
@@ -697,23 +697,15 @@ where
     Ok(())
 }
 
-/// The colour scale's span of resonances (Hz): the scan's, or 200–230 Hz without any.
+/// The colour scale's span of resonances (Hz): the scan's (±1 Hz about a single one), or
+/// 200–230 Hz without any.
 fn resonance_span(res: &ScanResult) -> (f64, f64) {
-    let fs: Vec<f64> = res
-        .points
-        .iter()
-        .filter_map(|p| p.reading.resonance.map(|f| f.0 as f64))
-        .collect();
-    let (fmin, fmax) = fs
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &f| {
-            (a.min(f), b.max(f))
-        });
-    if fmin.is_finite() && fmax > fmin {
-        (fmin, fmax)
-    } else {
-        (200.0, 230.0)
-    }
+    let resonances = res.points.iter();
+    padded_range(
+        resonances.filter_map(|p| p.reading.resonance.map(|f| f.0 as f64)),
+        0.0,
+        (200.0, 230.0),
+    )
 }
 
 /// The map's title: the scene, the method and the lump found against the truth.
