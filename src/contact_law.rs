@@ -361,6 +361,61 @@ mod tests {
         }
     }
 
+    /// Every constant must be finite, the free resonance positive, the misfit not negative and
+    /// the span ordered above zero; a law that is not is no curve (`bad_settings`).
+    #[test]
+    fn an_invalid_law_reads_nothing() {
+        let good = ContactLaw {
+            free_hz: 232.3,
+            p: [13.44, 9.26, 4.88],
+            cov: [[1e-4, 0.0, 0.0], [0.0, 1e-4, 0.0], [0.0, 0.0, 1e-4]],
+            model_sigma_hz: 0.1,
+            min_kpa: 100.0,
+            max_kpa: 3000.0,
+        };
+        assert!(good.is_valid());
+        let f = Hz(good.frequency(400.0) as f32);
+        assert!(good.invert(f, Hz(0.01)).is_ok());
+        let bad = [
+            ContactLaw {
+                free_hz: 0.0,
+                ..good
+            },
+            ContactLaw {
+                free_hz: f64::NAN,
+                ..good
+            },
+            ContactLaw {
+                p: [13.44, f64::INFINITY, 4.88],
+                ..good
+            },
+            ContactLaw {
+                cov: [[f64::NAN, 0.0, 0.0], [0.0; 3], [0.0; 3]],
+                ..good
+            },
+            ContactLaw {
+                model_sigma_hz: -0.1,
+                ..good
+            },
+            ContactLaw {
+                model_sigma_hz: f64::NAN,
+                ..good
+            },
+            ContactLaw {
+                min_kpa: 0.0,
+                ..good
+            },
+            ContactLaw {
+                max_kpa: 100.0,
+                ..good
+            },
+        ];
+        for (k, law) in bad.iter().enumerate() {
+            assert!(!law.is_valid(), "{k}");
+            assert_eq!(law.invert(f, Hz(0.01)), Err(Failure::BadSettings), "{k}");
+        }
+    }
+
     /// The law at its limits: the free resonance's square plus the coupling at `E → ∞`; below
     /// the free resonance and falling towards 0 at small `E` (the co-moving mass dominates).
     #[test]

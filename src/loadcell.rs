@@ -20,7 +20,7 @@
 //! slope times the window length): a force that changes during the reading is unstable contact,
 //! not a number. All of it `no_std`, allocation free, panic free.
 
-use crate::units::{Newtons, Seconds};
+use crate::units::Newtons;
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::{InputPin, OutputPin};
 
@@ -216,12 +216,6 @@ impl ForceLog {
     }
 }
 
-/// How long a window [`ForceLog::over`] needs at `rate_hz` conversions per second to hold three
-/// samples.
-pub fn shortest_window(rate_hz: f32) -> Seconds {
-    Seconds(3.0 / rate_hz)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -284,6 +278,12 @@ mod tests {
         );
         assert!(log.over(0, 9, 1.0).is_none(), "the oldest ten are gone");
         assert_eq!(log.over(10, 20, 1.0).unwrap().samples, 11);
+        // Three samples are a window, two are not.
+        assert_eq!(log.over(10, 12, 1.0).unwrap().samples, 3);
+        assert!(log.over(10, 11, 1.0).is_none());
+        log.clear();
+        assert_eq!(log.last(), None);
+        assert!(log.over(0, u64::MAX, 1.0).is_none());
     }
 
     /// Counts to newtons around the tare: within the f32 roundings of the sensitivity and the
@@ -302,5 +302,8 @@ mod tests {
         assert!(LoadCellCounts(LoadCellCounts::FULL).saturated());
         assert!(LoadCellCounts(-LoadCellCounts::FULL - 1).saturated());
         assert!(!LoadCellCounts(0).saturated());
+        // One count inside either rail is a force.
+        assert!(!LoadCellCounts(LoadCellCounts::FULL - 1).saturated());
+        assert!(!LoadCellCounts(-LoadCellCounts::FULL).saturated());
     }
 }

@@ -47,3 +47,72 @@ fn the_contact_law_reads_between_the_phantoms() {
         "the power law's bias this law removes: {worst_power}"
     );
 }
+
+/// The reading's uncertainty through the contact law against an f64 reference of its own: the
+/// modulus by bisection of the law's resonance (and of the law with each constant nudged), the
+/// slopes by central differences, combined as GUM does — the repeatability part `|dE/df| σ_f`
+/// and the combined one with the misfit and the constants' covariance. Within 1e-3 (the f32
+/// the reading carries and the differences' truncation).
+#[test]
+fn the_contact_laws_uncertainty_is_gums() {
+    let free = Scene::free_air().resonance_hz();
+    let refs: Vec<RefPoint> = [150.0, 279.0, 414.0, 1146.0, 2465.0]
+        .iter()
+        .map(|&e| reference(e))
+        .collect();
+    let fitted = ContactLaw::fit(&refs, free).expect("a contact law");
+    // A covariance and a misfit of the size a noisy calibration gives, correlated.
+    let law = ContactLaw {
+        cov: [
+            [4e-6, -2e-6, 1e-6],
+            [-2e-6, 9e-6, 3e-6],
+            [1e-6, 3e-6, 16e-6],
+        ],
+        model_sigma_hz: 0.05,
+        ..fitted
+    };
+    let modulus_at = |l: &ContactLaw, f: f64| {
+        let (mut lo, mut hi) = (10.0f64, 1e5f64);
+        for _ in 0..200 {
+            let mid = (lo * hi).sqrt();
+            if l.frequency(mid) < f {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        (lo * hi).sqrt()
+    };
+    for e in [200.0, 700.0, 2000.0] {
+        let f = law.frequency(e) as f32 as f64;
+        let sf = 0.02;
+        let m = law.invert(Hz(f as f32), Hz(sf as f32)).expect("in span");
+        let h = 1e-4;
+        let de_df = (modulus_at(&law, f + h) - modulus_at(&law, f - h)) / (2.0 * h);
+        let mut g = [0.0; 3];
+        for (i, gi) in g.iter_mut().enumerate() {
+            let (mut up, mut dn) = (law, law);
+            up.p[i] += 1e-5;
+            dn.p[i] -= 1e-5;
+            *gi = (modulus_at(&up, f) - modulus_at(&dn, f)) / 2e-5;
+        }
+        let repeat = de_df.abs() * sf;
+        let mut var = repeat * repeat + (de_df * law.model_sigma_hz).powi(2);
+        for i in 0..3 {
+            for j in 0..3 {
+                var += g[i] * law.cov[i][j] * g[j];
+            }
+        }
+        let combined = var.sqrt();
+        let close = |a: f32, b: f64| (a as f64 / b - 1.0).abs() < 1e-3;
+        assert!(
+            close(m.sigma_repeat.0, repeat),
+            "{e}: {m:?} vs repeat {repeat}"
+        );
+        assert!(
+            close(m.sigma.0, combined),
+            "{e}: {m:?} vs combined {combined}"
+        );
+        assert!((m.value.0 as f64 / modulus_at(&law, f) - 1.0).abs() < 1e-6);
+    }
+}
