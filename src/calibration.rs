@@ -230,10 +230,25 @@ fn robust_scale(data: &[RefPoint], law: &PowerLaw) -> f64 {
     1.4826 * abs[m / 2]
 }
 
-/// RMS leave-one-out error (Hz) at the interior reference moduli (all but the lowest and the
-/// highest), or `None` with fewer than five distinct moduli or more than
-/// [`crate::profile::MAX_REFERENCES`] readings (its scratch copy is on the stack).
+/// RMS leave-one-out error (Hz) of the power law at the interior reference moduli (all but the
+/// lowest and the highest): [`held_out_rms`] with [`PowerLaw::fit_plain`].
 fn interior_loo_sigma(data: &[RefPoint]) -> Option<f64> {
+    held_out_rms(data, true, |d| {
+        PowerLaw::fit_plain(d).ok().map(|p| move |e| p.frequency(e))
+    })
+}
+
+/// RMS (Hz), over the distinct reference moduli of `data` (the first 64; with `interior`, all
+/// but the lowest and the highest), of the mean resonance read at each modulus less what the
+/// curve `fit` makes of the other moduli's readings predicts there. `None` with fewer than five
+/// distinct moduli, more than [`crate::profile::MAX_REFERENCES`] readings (the scratch copy is
+/// on the stack) or a fit that fails. The leave-one-out test of the power law's misfit and of
+/// the choice between the power law and the contact law (`profile::calibrate`).
+pub(crate) fn held_out_rms<F: Fn(f64) -> f64>(
+    data: &[RefPoint],
+    interior: bool,
+    fit: impl Fn(&[RefPoint]) -> Option<F>,
+) -> Option<f64> {
     if distinct_moduli(data) < 5 || data.len() > crate::profile::MAX_REFERENCES {
         return None;
     }
@@ -244,15 +259,18 @@ fn interior_loo_sigma(data: &[RefPoint]) -> Option<f64> {
     }
     let mut scratch = [RefPoint::default(); crate::profile::MAX_REFERENCES];
     let (mut sum2, mut groups) = (0.0, 0u32);
-    let mut done = [0.0f64; 64];
-    let mut ndone = 0;
-    for d in data {
+    // Each modulus once, at its first reading (found by looking back: no list of them on the
+    // stack, which the firmware's calibration runs on), the first 64 of them.
+    let mut distinct = 0;
+    for (i, d) in data.iter().enumerate() {
         let e = d.modulus_kpa;
-        if e == lo || e == hi || done[..ndone].contains(&e) || ndone >= done.len() {
+        if data[..i].iter().any(|x| x.modulus_kpa == e) {
             continue;
         }
-        done[ndone] = e;
-        ndone += 1;
+        distinct += 1;
+        if distinct > 64 || (interior && (e == lo || e == hi)) {
+            continue;
+        }
         let mut n = 0;
         let (mut fsum, mut k) = (0.0, 0.0);
         for x in data {
@@ -264,8 +282,8 @@ fn interior_loo_sigma(data: &[RefPoint]) -> Option<f64> {
                 n += 1;
             }
         }
-        let fit = PowerLaw::fit_plain(&scratch[..n]).ok()?;
-        let r = fsum / k - fit.frequency(e);
+        let curve = fit(&scratch[..n])?;
+        let r = fsum / k - curve(e);
         sum2 += r * r;
         groups += 1;
     }

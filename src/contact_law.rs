@@ -162,8 +162,8 @@ impl ContactLaw {
 
     /// The rigid limit `sqrt(K1 + Ks)/2π`, Hz.
     pub fn rigid_hz(&self) -> f64 {
-        let k1 = (2.0 * PI * self.free_hz) * (2.0 * PI * self.free_hz);
-        libm::sqrt(k1 + libm::exp(self.p[0])) / (2.0 * PI)
+        let k = Constants::of(self.free_hz, &self.p);
+        libm::sqrt(k.k1 + k.ks) / (2.0 * PI)
     }
 
     /// True when every constant is finite, the free resonance positive and the span ordered.
@@ -254,7 +254,7 @@ impl ContactLaw {
         let mut p = [0.0; 3];
         let mut best = f64::INFINITY;
         let fmax = data.iter().map(|d| d.resonance_hz).fold(0.0, f64::max);
-        let k1 = (2.0 * PI * free_hz) * (2.0 * PI * free_hz);
+        let k1 = Constants::of(free_hz, &[0.0; 3]).k1;
         let ks0 = ((2.0 * PI * fmax) * (2.0 * PI * fmax) - k1).max(1.0);
         for i in 0..5 {
             for j in 0..7 {

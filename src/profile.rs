@@ -8,7 +8,7 @@
 //! [`UnitProfile`]; the firmware keeps it in flash ([`crate::store`]), the bench in a file, and
 //! every reading goes through [`crate::pipeline`] with it.
 
-use crate::calibration::{Modulus, PowerLaw, QModel, RefPoint};
+use crate::calibration::{held_out_rms, Modulus, PowerLaw, QModel, RefPoint};
 use crate::contact_law::ContactLaw;
 use crate::estimate::fit::fit_bvd;
 use crate::status::Failure;
@@ -242,12 +242,12 @@ pub fn calibrate(
     let contact = air.and_then(|a| {
         let free = a.free_resonance.0 as f64;
         let c = ContactLaw::fit(&fq[..n], free).ok()?;
-        let held_contact = held_out_rms(&fq[..n], |d| {
+        let held_contact = held_out_rms(&fq[..n], false, |d| {
             ContactLaw::fit(d, free)
                 .ok()
                 .map(|c| move |e| c.frequency(e))
         })?;
-        let held_power = held_out_rms(&fq[..n], |d| {
+        let held_power = held_out_rms(&fq[..n], false, |d| {
             PowerLaw::fit(d).ok().map(|p| move |e| p.frequency(e))
         })?;
         (held_contact < held_power).then_some(c)
@@ -267,42 +267,4 @@ pub fn calibrate(
         q_model,
         contact,
     })
-}
-
-/// RMS (Hz) over the distinct moduli of `data` of the mean resonance at each modulus less the
-/// prediction of the curve `fit` makes from the other moduli's readings; `None` with fewer than
-/// five distinct moduli or when a fit fails.
-fn held_out_rms<F: Fn(f64) -> f64>(
-    data: &[RefPoint],
-    fit: impl Fn(&[RefPoint]) -> Option<F>,
-) -> Option<f64> {
-    let mut moduli = [0.0f64; 16];
-    let mut k = 0;
-    for d in data {
-        if !moduli[..k].contains(&d.modulus_kpa) {
-            *moduli.get_mut(k)? = d.modulus_kpa;
-            k += 1;
-        }
-    }
-    if k < 5 {
-        return None;
-    }
-    let mut rest = [RefPoint::default(); MAX_REFERENCES];
-    let mut sum2 = 0.0;
-    for &e in &moduli[..k] {
-        let (mut m, mut fsum, mut cnt) = (0, 0.0, 0.0);
-        for d in data {
-            if d.modulus_kpa == e {
-                fsum += d.resonance_hz;
-                cnt += 1.0;
-            } else {
-                *rest.get_mut(m)? = *d;
-                m += 1;
-            }
-        }
-        let curve = fit(&rest[..m])?;
-        let r = fsum / cnt - curve(e);
-        sum2 += r * r;
-    }
-    Some(libm::sqrt(sum2 / k as f64))
 }
