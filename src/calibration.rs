@@ -66,36 +66,89 @@ pub struct QModel {
     pub q0: f64,
     /// Slope per unit of `ln(E / kPa)`.
     pub q1: f64,
+    /// Slope per unit of `ln(F / N)` of the contact force (0 when the references were read at
+    /// one force, or without a load cell).
+    pub q2: f64,
 }
+
+/// Least relative spread (max/min) of the references' contact forces for the Q model to fit a
+/// force term: below it the forces are one force.
+pub const FORCE_SPAN_RATIO: f64 = 1.25;
 
 impl QModel {
     /// Largest relative deviation of Q from the curve that still counts as the calibrated
     /// condition. The reference readings scatter by well under 5 %; doubling the preload lowers
-    /// Q by about 30 % in `hal-sim`.
+    /// Q by about 30 % in `hal-sim`, which the force term follows when the references span
+    /// forces.
     pub const TOLERANCE: f64 = 0.2;
 
-    /// Least-squares fit to `(E kPa, Q)` pairs; `None` with fewer than two distinct moduli or
-    /// non-finite input.
-    pub fn fit(data: &[(f64, f64)]) -> Option<QModel> {
-        let mut l = crate::linalg::Line::default();
-        for &(e, q) in data {
-            if e > 0.0 && q > 0.0 {
-                l.add(libm::log(e), q, 1.0);
+    /// Least-squares fit of `Q = q0 + q1 ln E + q2 ln F` to `(E kPa, F N, Q)` triples: with
+    /// the force term when the forces (all measured, positive) span [`FORCE_SPAN_RATIO`], else
+    /// `q2 = 0`. `None` with fewer than two distinct moduli or non-finite input.
+    pub fn fit<I: IntoIterator<Item = (f64, f64, f64)>>(data: I) -> Option<QModel>
+    where
+        I::IntoIter: Clone,
+    {
+        let data = data.into_iter();
+        let ok = |&(e, _, q): &(f64, f64, f64)| e > 0.0 && q > 0.0 && e.is_finite();
+        let (mut fmin, mut fmax) = (f64::INFINITY, 0.0f64);
+        for (_, f, _) in data.clone().filter(ok) {
+            fmin = fmin.min(f);
+            fmax = fmax.max(f);
+        }
+        let with_force = fmin > 0.0 && fmax.is_finite() && fmax >= FORCE_SPAN_RATIO * fmin;
+        if with_force {
+            let mut a = [[0.0; 3]; 3];
+            let mut b = [0.0; 3];
+            for (e, f, q) in data.clone().filter(ok) {
+                let x = [1.0, libm::log(e), libm::log(f)];
+                for i in 0..3 {
+                    b[i] += x[i] * q;
+                    for j in 0..3 {
+                        a[i][j] += x[i] * x[j];
+                    }
+                }
             }
+            let inv = crate::linalg::spd_inverse(&a)?;
+            let c: [f64; 3] =
+                core::array::from_fn(|i| (0..3).map(|j| inv[i][j] * b[j]).sum::<f64>());
+            return c.iter().all(|v| v.is_finite()).then_some(QModel {
+                q0: c[0],
+                q1: c[1],
+                q2: c[2],
+            });
+        }
+        let mut l = crate::linalg::Line::default();
+        for (e, _, q) in data.filter(ok) {
+            l.add(libm::log(e), q, 1.0);
         }
         let f = l.solve()?;
-        (f.a.is_finite() && f.b.is_finite()).then_some(QModel { q0: f.a, q1: f.b })
+        (f.a.is_finite() && f.b.is_finite()).then_some(QModel {
+            q0: f.a,
+            q1: f.b,
+            q2: 0.0,
+        })
     }
 
-    /// Expected Q at `e_kpa`.
-    pub fn q_at(&self, e_kpa: f64) -> f64 {
-        self.q0 + self.q1 * libm::log(e_kpa)
+    /// Expected Q at `e_kpa` and contact force `force_n` (ignored by a model without a force
+    /// term).
+    pub fn q_at(&self, e_kpa: f64, force_n: Option<f64>) -> f64 {
+        let f = match force_n {
+            Some(f) if self.q2 != 0.0 && f > 0.0 => self.q2 * libm::log(f),
+            _ => 0.0,
+        };
+        self.q0 + self.q1 * libm::log(e_kpa) + f
     }
 
-    /// True when `q` at `e_kpa` is within [`Self::TOLERANCE`] of the curve.
-    pub fn holds(&self, e_kpa: f64, q: f64) -> bool {
-        let expect = self.q_at(e_kpa);
+    /// True when `q` at `e_kpa` (and `force_n`) is within [`Self::TOLERANCE`] of the curve.
+    pub fn holds(&self, e_kpa: f64, force_n: Option<f64>, q: f64) -> bool {
+        let expect = self.q_at(e_kpa, force_n);
         expect > 0.0 && libm::fabs(q / expect - 1.0) <= Self::TOLERANCE
+    }
+
+    /// True when every coefficient is finite.
+    pub fn is_valid(&self) -> bool {
+        self.q0.is_finite() && self.q1.is_finite() && self.q2.is_finite()
     }
 }
 
@@ -111,6 +164,8 @@ pub struct RefPoint {
     pub resonance_hz: f64,
     /// Its standard uncertainty, Hz.
     pub sigma_hz: f64,
+    /// The contact force it was read at, N (0: not measured).
+    pub force_n: f64,
 }
 
 /// The calibration curve `f = a + b E^c` with its parameter covariance and valid span.
@@ -234,17 +289,21 @@ fn robust_scale(data: &[RefPoint], law: &PowerLaw) -> f64 {
 /// lowest and the highest): [`held_out_rms`] with [`PowerLaw::fit_plain`].
 fn interior_loo_sigma(data: &[RefPoint]) -> Option<f64> {
     held_out_rms(data, true, |d| {
-        PowerLaw::fit_plain(d).ok().map(|p| move |e| p.frequency(e))
+        PowerLaw::fit_plain(d)
+            .ok()
+            .map(|p| move |r: &RefPoint| p.frequency(r.modulus_kpa))
     })
 }
 
-/// RMS (Hz), over the distinct reference moduli of `data` (the first 64; with `interior`, all
-/// but the lowest and the highest), of the mean resonance read at each modulus less what the
-/// curve `fit` makes of the other moduli's readings predicts there. `None` with fewer than five
-/// distinct moduli, more than [`crate::profile::MAX_REFERENCES`] readings (the scratch copy is
-/// on the stack) or a fit that fails. The leave-one-out test of the power law's misfit and of
-/// the choice between the power law and the contact law (`profile::calibrate`).
-pub(crate) fn held_out_rms<F: Fn(f64) -> f64>(
+/// RMS (Hz), over the groups of readings of `data` at one reference modulus and one contact
+/// force (forces within [`SAME_FORCE`] of each other; the first 64 moduli; with `interior`, all
+/// but the lowest and the highest modulus), of the mean over the group of the resonance read
+/// less what the curve `fit` makes of the other moduli's readings (at every force) predicts
+/// for that reading (at its modulus, and at its force for a curve that takes one). `None` with
+/// fewer than five distinct moduli, more than [`crate::profile::MAX_REFERENCES`] readings (the
+/// scratch copy is on the stack) or a fit that fails. The leave-one-out test of the power law's
+/// misfit and of the choice between the power law and the contact law (`profile::calibrate`).
+pub(crate) fn held_out_rms<F: Fn(&RefPoint) -> f64>(
     data: &[RefPoint],
     interior: bool,
     fit: impl Fn(&[RefPoint]) -> Option<F>,
@@ -257,10 +316,13 @@ pub(crate) fn held_out_rms<F: Fn(f64) -> f64>(
         lo = lo.min(d.modulus_kpa);
         hi = hi.max(d.modulus_kpa);
     }
+    let same_force =
+        |a: f64, b: f64| a == b || (a > 0.0 && b > 0.0 && libm::fabs(a / b - 1.0) <= SAME_FORCE);
     let mut scratch = [RefPoint::default(); crate::profile::MAX_REFERENCES];
     let (mut sum2, mut groups) = (0.0, 0u32);
     // Each modulus once, at its first reading (found by looking back: no list of them on the
-    // stack, which the firmware's calibration runs on), the first 64 of them.
+    // stack, which the firmware's calibration runs on), the first 64 of them; one fit per
+    // modulus, then each of its forces once, the same way.
     let mut distinct = 0;
     for (i, d) in data.iter().enumerate() {
         let e = d.modulus_kpa;
@@ -272,23 +334,41 @@ pub(crate) fn held_out_rms<F: Fn(f64) -> f64>(
             continue;
         }
         let mut n = 0;
-        let (mut fsum, mut k) = (0.0, 0.0);
-        for x in data {
-            if x.modulus_kpa == e {
-                fsum += x.resonance_hz;
-                k += 1.0;
-            } else {
-                scratch[n] = *x;
-                n += 1;
-            }
+        for x in data.iter().filter(|x| x.modulus_kpa != e) {
+            scratch[n] = *x;
+            n += 1;
         }
         let curve = fit(&scratch[..n])?;
-        let r = fsum / k - curve(e);
-        sum2 += r * r;
-        groups += 1;
+        for (j, g) in data.iter().enumerate().skip(i) {
+            let at_e = |x: &&RefPoint| x.modulus_kpa == e;
+            if !at_e(&g)
+                || data[i..j]
+                    .iter()
+                    .filter(at_e)
+                    .any(|x| same_force(x.force_n, g.force_n))
+            {
+                continue;
+            }
+            let (mut rsum, mut k) = (0.0, 0.0);
+            for x in data
+                .iter()
+                .filter(at_e)
+                .filter(|x| same_force(x.force_n, g.force_n))
+            {
+                rsum += x.resonance_hz - curve(x);
+                k += 1.0;
+            }
+            let r = rsum / k;
+            sum2 += r * r;
+            groups += 1;
+        }
     }
     (groups > 0).then(|| libm::sqrt(sum2 / groups as f64))
 }
+
+/// Relative difference of two references' contact forces within which they were read at one
+/// force (the hand's or the stage's scatter about a set force).
+pub const SAME_FORCE: f64 = 0.15;
 
 /// Number of distinct moduli in reference data (counting stops at 64).
 fn distinct_moduli(data: &[RefPoint]) -> usize {
@@ -681,6 +761,7 @@ mod tests {
             modulus_kpa: e,
             resonance_hz: truth.frequency(e),
             sigma_hz: 0.05,
+            force_n: 0.0,
         };
         let data = [157.5, 279.0, 414.0, 1146.0, 2465.0].map(at);
         let fit = PowerLaw::fit(&data).unwrap();
@@ -707,6 +788,7 @@ mod tests {
             modulus_kpa: 1.0,
             resonance_hz: f64::NAN,
             sigma_hz: 0.1,
+            force_n: 0.0,
         }; 5];
         assert_eq!(PowerLaw::fit(&bad), Err(FitError::BadInput));
     }

@@ -19,8 +19,17 @@
 //! Which of the two a unit uses is chosen at calibration by the reference phantoms held out
 //! one at a time ([`crate::profile::calibrate`]): the simulated probe is built on these
 //! mechanics, so there the contact law fits by construction; on a real probe it has to earn its
-//! place the same way. The constants' dependence on the preload (`A ∝ F^(1/3)`, `B ∝ F`) is what
-//! force compensation will use (docs/physics.md).
+//! place the same way.
+//!
+//! # The contact force
+//!
+//! At a force `F` other than the law's reference force `F0` the Hertz contact radius scales as
+//! `a ∝ (F/E)^(1/3)`, so `k_m ∝ E a` gives `A(F) = A (F/F0)^(1/3)` and `m_m ∝ a³` gives
+//! `B(F) = B F/F0` (docs/physics.md): the law covers every force with the same three
+//! constants, and a reading inverts at the force its load cell measured. References read at
+//! several forces are fitted together. The exponents are Hertz's, not fitted: the held-out
+//! references (each modulus at every force, [`crate::profile::calibrate`]) are what tells
+//! whether a probe follows them.
 
 use crate::calibration::{checked_span, inversion_input, span, FitError, Modulus, RefPoint};
 use crate::linalg::{levenberg_marquardt, spd_inverse, LmStop};
@@ -44,6 +53,24 @@ pub struct ContactLaw {
     pub min_kpa: f64,
     /// Highest modulus the calibration vouches for, kPa.
     pub max_kpa: f64,
+    /// The reference force `F0` of `p`, N; 0: the references had no measured force and the law
+    /// holds at the one force they were read at.
+    pub force_n: f64,
+}
+
+/// Exponent of the force in `A` (Hertz: `k_m ∝ E a`, `a ∝ (F/E)^(1/3)`).
+pub const FORCE_EXPONENT_A: f64 = 1.0 / 3.0;
+/// Exponent of the force in `B` (Hertz: `m_m ∝ a³ ∝ F/E`).
+pub const FORCE_EXPONENT_B: f64 = 1.0;
+
+/// The force ratio `F/F0` of a reading at `force_n` on a law of reference force `ref_n`: 1
+/// when either is not a positive force.
+fn force_ratio(ref_n: f64, force_n: f64) -> f64 {
+    if ref_n > 0.0 && force_n > 0.0 && (force_n / ref_n).is_finite() {
+        force_n / ref_n
+    } else {
+        1.0
+    }
 }
 
 /// The law's constants out of their logarithms, computed once for many evaluations (an
@@ -57,12 +84,14 @@ struct Constants {
 }
 
 impl Constants {
-    fn of(free_hz: f64, p: &[f64; 3]) -> Self {
+    /// At the force ratio `ratio = F/F0`.
+    fn of(free_hz: f64, p: &[f64; 3], ratio: f64) -> Self {
+        let l = libm::log(ratio);
         Self {
             k1: (2.0 * PI * free_hz) * (2.0 * PI * free_hz),
             ks: libm::exp(p[0]),
-            a: libm::exp(p[1]),
-            b: libm::exp(p[2]),
+            a: libm::exp(p[1] + FORCE_EXPONENT_A * l),
+            b: libm::exp(p[2] + FORCE_EXPONENT_B * l),
         }
     }
 
@@ -111,20 +140,21 @@ struct Slopes {
     df_dp: [f64; 3],
 }
 
-/// Resonance (Hz) of the law `free_hz`, `p` at modulus `e_kpa`.
-fn frequency_of(free_hz: f64, p: &[f64; 3], e_kpa: f64) -> f64 {
-    Constants::of(free_hz, p).frequency(e_kpa)
+/// Resonance (Hz) of the law `free_hz`, `p` at modulus `e_kpa` and force ratio `ratio`.
+fn frequency_of(free_hz: f64, p: &[f64; 3], e_kpa: f64, ratio: f64) -> f64 {
+    Constants::of(free_hz, p, ratio).frequency(e_kpa)
 }
 
 /// How many numbers [`ContactLaw::to_values`] gives.
-pub const VALUES: usize = 16;
+pub const VALUES: usize = 17;
 
 /// Lowest and highest modulus an inversion searches, kPa.
 const SEARCH_KPA: (f64, f64) = (1.0, 1.0e6);
 
 impl ContactLaw {
     /// The law as the numbers the store's record and the bench's profile file keep, in this
-    /// order: `free_hz`, `p` (3), `cov` (9, row major), `model_sigma_hz`, `min_kpa`, `max_kpa`.
+    /// order: `free_hz`, `p` (3), `cov` (9, row major), `model_sigma_hz`, `min_kpa`, `max_kpa`,
+    /// `force_n`.
     pub fn to_values(&self) -> [f64; VALUES] {
         let mut v = [0.0; VALUES];
         v[0] = self.free_hz;
@@ -135,6 +165,7 @@ impl ContactLaw {
         v[13] = self.model_sigma_hz;
         v[14] = self.min_kpa;
         v[15] = self.max_kpa;
+        v[16] = self.force_n;
         v
     }
 
@@ -152,17 +183,29 @@ impl ContactLaw {
             model_sigma_hz: v[13],
             min_kpa: v[14],
             max_kpa: v[15],
+            force_n: v[16],
         }
     }
 
-    /// Resonance at modulus `e_kpa`, Hz.
+    /// Resonance at modulus `e_kpa` at the reference force, Hz.
     pub fn frequency(&self, e_kpa: f64) -> f64 {
-        frequency_of(self.free_hz, &self.p, e_kpa)
+        frequency_of(self.free_hz, &self.p, e_kpa, 1.0)
+    }
+
+    /// Resonance at modulus `e_kpa` pressed with `force_n` (N), Hz: at the reference force for
+    /// a law without one.
+    pub fn frequency_at(&self, e_kpa: f64, force_n: f64) -> f64 {
+        frequency_of(
+            self.free_hz,
+            &self.p,
+            e_kpa,
+            force_ratio(self.force_n, force_n),
+        )
     }
 
     /// The rigid limit `sqrt(K1 + Ks)/2π`, Hz.
     pub fn rigid_hz(&self) -> f64 {
-        let k = Constants::of(self.free_hz, &self.p);
+        let k = Constants::of(self.free_hz, &self.p, 1.0);
         libm::sqrt(k.k1 + k.ks) / (2.0 * PI)
     }
 
@@ -176,13 +219,24 @@ impl ContactLaw {
             && self.model_sigma_hz >= 0.0
             && self.min_kpa > 0.0
             && self.max_kpa > self.min_kpa
+            && self.force_n.is_finite()
+            && self.force_n >= 0.0
     }
 
-    /// Modulus of a resonance `f ± sigma`, with the law's own uncertainty propagated: as
-    /// [`crate::calibration::PowerLaw::invert`] (the same failures for the same cases).
-    pub fn invert(&self, f: Hz, sigma: Hz) -> Result<Modulus, Failure> {
+    /// Modulus of a resonance `f ± sigma` read at the contact force `force` (mean and standard
+    /// uncertainty, N; `None`: at the reference force), with the law's own uncertainty and the
+    /// force's propagated: as [`crate::calibration::PowerLaw::invert`] (the same failures for
+    /// the same cases). The force's uncertainty counts as the resonance's (`∂f/∂F σ_F` added
+    /// in quadrature): a force read anew each reading scatters with it.
+    pub fn invert(&self, f: Hz, sigma: Hz, force: Option<(f64, f64)>) -> Result<Modulus, Failure> {
         let (f, sf) = inversion_input(self.is_valid(), f, sigma)?;
-        let k = Constants::of(self.free_hz, &self.p);
+        let (ratio, sigma_ln_f) = match force {
+            Some((fm, sfm)) if self.force_n > 0.0 && fm > 0.0 => {
+                (force_ratio(self.force_n, fm), (sfm / fm).max(0.0))
+            }
+            _ => (1.0, 0.0),
+        };
+        let k = Constants::of(self.free_hz, &self.p, ratio);
         // In y = E^(1/3) the law needs no transcendental but a square root (km = A y²,
         // B/E = B/y³): Newton steps on y, kept inside a bracket that shrinks with every
         // evaluation (a bisection step where Newton would leave it). Cost: ~8 evaluations
@@ -228,23 +282,31 @@ impl ContactLaw {
         }
         let de_df = 3.0 * y * y / at.df_dy;
         let g = at.df_dp.map(|d| -d * de_df);
+        // ∂f/∂ln F through A and B.
+        let df_dlnf = FORCE_EXPONENT_A * at.df_dp[1] + FORCE_EXPONENT_B * at.df_dp[2];
+        let sf = libm::sqrt(sf * sf + (df_dlnf * sigma_ln_f) * (df_dlnf * sigma_ln_f));
         let (misfit, cov) = (self.model_sigma_hz, &self.cov);
         Ok(Modulus::propagated(e, de_df, sf, misfit, &g, cov))
     }
 
-    /// Weighted least-squares fit of `(ln Ks, ln A, ln B)` to reference readings with the free
-    /// resonance `free_hz` held (Levenberg–Marquardt from the best of a coarse grid of starts;
-    /// the covariance from the Jacobian at the optimum, scaled by the reduced χ² when it exceeds
-    /// 1; the misfit as the RMS residual corrected for the three constants).
-    pub fn fit(data: &[RefPoint], free_hz: f64) -> Result<ContactLaw, FitError> {
+    /// Weighted least-squares fit of `(ln Ks, ln A, ln B)` at the reference force `force_n` (N;
+    /// 0: the references carry no force) to reference readings, each at its own measured
+    /// force, with the free resonance `free_hz` held (Levenberg–Marquardt from the best of a
+    /// coarse grid of starts; the covariance from the Jacobian at the optimum, scaled by the
+    /// reduced χ² when it exceeds 1; the misfit as the RMS residual corrected for the three
+    /// constants).
+    pub fn fit(data: &[RefPoint], free_hz: f64, force_n: f64) -> Result<ContactLaw, FitError> {
         let (emin, emax) = checked_span(data)?;
-        if !(free_hz > 0.0) || !free_hz.is_finite() {
+        if !(free_hz > 0.0) || !free_hz.is_finite() || !(force_n >= 0.0) || !force_n.is_finite() {
             return Err(FitError::BadInput);
         }
+        let at = |p: &[f64; 3], d: &RefPoint| {
+            frequency_of(free_hz, p, d.modulus_kpa, force_ratio(force_n, d.force_n))
+        };
         let chi2 = |p: &[f64; 3]| -> f64 {
             data.iter()
                 .map(|d| {
-                    let r = (d.resonance_hz - frequency_of(free_hz, p, d.modulus_kpa)) / d.sigma_hz;
+                    let r = (d.resonance_hz - at(p, d)) / d.sigma_hz;
                     r * r
                 })
                 .sum()
@@ -254,7 +316,7 @@ impl ContactLaw {
         let mut p = [0.0; 3];
         let mut best = f64::INFINITY;
         let fmax = data.iter().map(|d| d.resonance_hz).fold(0.0, f64::max);
-        let k1 = Constants::of(free_hz, &[0.0; 3]).k1;
+        let k1 = Constants::of(free_hz, &[0.0; 3], 1.0).k1;
         let ks0 = ((2.0 * PI * fmax) * (2.0 * PI * fmax) - k1).max(1.0);
         for i in 0..5 {
             for j in 0..7 {
@@ -277,12 +339,12 @@ impl ContactLaw {
             let mut jtr = [0.0; 3];
             for d in data {
                 let w = 1.0 / (d.sigma_hz * d.sigma_hz);
-                let f0 = frequency_of(free_hz, p, d.modulus_kpa);
+                let f0 = at(p, d);
                 let mut j = [0.0; 3];
                 for (i, ji) in j.iter_mut().enumerate() {
                     let mut q = *p;
                     q[i] += 1e-6;
-                    *ji = (frequency_of(free_hz, &q, d.modulus_kpa) - f0) / 1e-6;
+                    *ji = (at(&q, d) - f0) / 1e-6;
                 }
                 let r = d.resonance_hz - f0;
                 for a in 0..3 {
@@ -305,7 +367,7 @@ impl ContactLaw {
         let ss: f64 = data
             .iter()
             .map(|d| {
-                let r = d.resonance_hz - frequency_of(free_hz, &p, d.modulus_kpa);
+                let r = d.resonance_hz - at(&p, d);
                 r * r
             })
             .sum();
@@ -316,6 +378,7 @@ impl ContactLaw {
             model_sigma_hz: libm::sqrt(ss / dof),
             min_kpa: span(emin, emax).0,
             max_kpa: span(emin, emax).1,
+            force_n,
         };
         if law.is_valid() {
             Ok(law)
@@ -335,11 +398,11 @@ mod tests {
     #[test]
     fn slopes_match_central_differences() {
         let (free, p) = (232.3, [13.44, 9.26, 4.88]);
-        let k = Constants::of(free, &p);
+        let k = Constants::of(free, &p, 1.0);
         for e in [120.0, 414.0, 2465.0, 20_000.0] {
             let y = libm::cbrt(e);
             let at = k.at_cube_root(y);
-            assert!((at.f - frequency_of(free, &p, e)).abs() < 1e-10);
+            assert!((at.f - frequency_of(free, &p, e, 1.0)).abs() < 1e-10);
             let h = 1e-6 * y;
             let num = (k.at_cube_root(y + h).f - k.at_cube_root(y - h).f) / (2.0 * h);
             assert!(
@@ -351,7 +414,8 @@ mod tests {
                 let (mut up, mut dn) = (p, p);
                 up[i] += 1e-6;
                 dn[i] -= 1e-6;
-                let num = (frequency_of(free, &up, e) - frequency_of(free, &dn, e)) / 2e-6;
+                let num =
+                    (frequency_of(free, &up, e, 1.0) - frequency_of(free, &dn, e, 1.0)) / 2e-6;
                 assert!(
                     (at.df_dp[i] - num).abs() <= 1e-7 * num.abs() + 6e-8,
                     "{e}, {i}: {} vs {num}",
@@ -372,10 +436,11 @@ mod tests {
             model_sigma_hz: 0.1,
             min_kpa: 100.0,
             max_kpa: 3000.0,
+            force_n: 0.0,
         };
         assert!(good.is_valid());
         let f = Hz(good.frequency(400.0) as f32);
-        assert!(good.invert(f, Hz(0.01)).is_ok());
+        assert!(good.invert(f, Hz(0.01), None).is_ok());
         let bad = [
             ContactLaw {
                 free_hz: 0.0,
@@ -409,10 +474,22 @@ mod tests {
                 max_kpa: 100.0,
                 ..good
             },
+            ContactLaw {
+                force_n: -0.03,
+                ..good
+            },
+            ContactLaw {
+                force_n: f64::NAN,
+                ..good
+            },
         ];
         for (k, law) in bad.iter().enumerate() {
             assert!(!law.is_valid(), "{k}");
-            assert_eq!(law.invert(f, Hz(0.01)), Err(Failure::BadSettings), "{k}");
+            assert_eq!(
+                law.invert(f, Hz(0.01), None),
+                Err(Failure::BadSettings),
+                "{k}"
+            );
         }
     }
 
@@ -427,6 +504,7 @@ mod tests {
             model_sigma_hz: 0.0,
             min_kpa: 100.0,
             max_kpa: 3000.0,
+            force_n: 0.0,
         };
         let rigid = libm::sqrt((2.0 * PI * 232.3f64).powi(2) + libm::exp(13.44)) / (2.0 * PI);
         assert!((law.rigid_hz() - rigid).abs() < 1e-9);
@@ -443,16 +521,22 @@ mod tests {
         // 256 Hz, 7.6e-6 Hz) through the slope.
         for e in [150.0, 414.0, 2465.0] {
             let f = law.frequency(e) as f32;
-            let m = law.invert(Hz(f), Hz(0.0)).unwrap();
+            let m = law.invert(Hz(f), Hz(0.0), None).unwrap();
             let slope = (law.frequency(e * 1.0001) - law.frequency(e * 0.9999)) / (2e-4 * e);
             let tol = 2.0 * 7.6e-6 / slope;
             assert!((m.value.0 as f64 - e).abs() <= tol + 1e-6 * e, "{e}: {m:?}");
         }
         assert_eq!(
-            law.invert(Hz(rigid as f32 + 0.1), Hz(0.1)),
+            law.invert(Hz(rigid as f32 + 0.1), Hz(0.1), None),
             Err(Failure::AboveRange)
         );
-        assert_eq!(law.invert(Hz(100.0), Hz(0.1)), Err(Failure::BelowRange));
-        assert_eq!(law.invert(Hz(f32::NAN), Hz(0.1)), Err(Failure::BadSettings));
+        assert_eq!(
+            law.invert(Hz(100.0), Hz(0.1), None),
+            Err(Failure::BelowRange)
+        );
+        assert_eq!(
+            law.invert(Hz(f32::NAN), Hz(0.1), None),
+            Err(Failure::BadSettings)
+        );
     }
 }

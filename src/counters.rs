@@ -12,6 +12,8 @@ pub static LATE: AtomicU32 = AtomicU32::new(0);
 pub static RING: AtomicU32 = AtomicU32::new(0);
 /// Finished points the interrupt could not hand on (channel full).
 pub static DROPPED: AtomicU32 = AtomicU32::new(0);
+/// Load-cell reads that failed (a pin error, or a conversion at a rail).
+pub static LOAD_CELL_ERRORS: AtomicU32 = AtomicU32::new(0);
 /// Mean interrupt work per batch (board unit).
 pub static ISR_MEAN: AtomicU32 = AtomicU32::new(0);
 /// Largest interrupt work per batch (board unit).

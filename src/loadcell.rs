@@ -102,8 +102,8 @@ impl<D: DelayNs, I: InputPin, O: OutputPin> Hx711<D, I, O> {
     }
 }
 
-/// A load cell's calibration: newtons per count, and the zero (tare) taken with the tip in free
-/// air.
+/// A load cell's calibration: newtons per count (from a known weight, [`LoadCellCal::weighed`]),
+/// and the zero (tare) taken with the tip in free air, with the air reference.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct LoadCellCal {
@@ -114,16 +114,164 @@ pub struct LoadCellCal {
 }
 
 impl LoadCellCal {
+    /// The calibration from the cell's counts in free air (`zero`) and under a known weight
+    /// `weight` (counts `loaded`); `None` unless the weight is positive and moved the counts
+    /// by at least a thousand (a cell that does not answer, or a weight it cannot see).
+    pub fn weighed(zero: &RawForce, loaded: &RawForce, weight: Newtons) -> Option<Self> {
+        let span = loaded.mean - zero.mean;
+        let npc = weight.0 as f64 / span;
+        (weight.0 > 0.0 && span >= 1000.0 && npc.is_finite()).then(|| Self {
+            newtons_per_count: npc as f32,
+            tare: zero.counts(),
+        })
+    }
+
     /// The force of `c`.
     pub fn force(&self, c: LoadCellCounts) -> Newtons {
         let d = c.0 as i64 - self.tare.0 as i64;
         Newtons((d as f64 * self.newtons_per_count as f64) as f32)
     }
+
+    /// The contact force of a window of counts.
+    pub fn contact_force(&self, w: &RawForce) -> ContactForce {
+        let k = self.newtons_per_count as f64;
+        ContactForce {
+            mean: Newtons(((w.mean - self.tare.0 as f64) * k) as f32),
+            sigma: Newtons((w.sigma * k) as f32),
+            change: Newtons((w.change * k) as f32),
+            samples: w.samples,
+        }
+    }
+
+    /// A force known by other means (a balance and a stage) as the window of counts this cell
+    /// would have read for it, exactly and steady: for captures taken without the cell.
+    pub fn stated(&self, f: Newtons) -> RawForce {
+        RawForce {
+            mean: self.tare.0 as f64 + f.0 as f64 / self.newtons_per_count as f64,
+            sigma: 0.0,
+            change: 0.0,
+            samples: 0,
+        }
+    }
+
+    /// True when the sensitivity is finite and positive.
+    pub fn is_valid(&self) -> bool {
+        self.newtons_per_count.is_finite() && self.newtons_per_count > 0.0
+    }
 }
 
-/// Force samples a [`ForceLog`] keeps: 1.6 s at 80 SPS, longer than any one reading's window
-/// but the slowest methods' (which see their last 1.6 s).
+/// The contact forces a unit reads at: below `min` a reading is `too_light`, above `max`
+/// `too_hard` (the calibration's force compensation is vouched for inside). Settable
+/// (`force <min mN> <max mN>`), kept with the unit profile.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ForceWindow {
+    /// Lightest press that is a reading.
+    pub min: Newtons,
+    /// Hardest press that is a reading.
+    pub max: Newtons,
+}
+
+/// Why a force window was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ForceWindowError {
+    /// A bound is not a finite number.
+    NotFinite,
+    /// `min` below [`ForceWindow::LIGHTEST`], or `max` above [`ForceWindow::HARDEST`].
+    OutOfRange,
+    /// `min` not below `max`.
+    Empty,
+}
+
+impl ForceWindow {
+    /// The default: 12–55 mN, around the calibration's 15–50 mN (paper 003 pressed at 30 mN).
+    pub const DEFAULT: ForceWindow = ForceWindow {
+        min: Newtons(0.012),
+        max: Newtons(0.055),
+    };
+    /// The lightest bound a window may have: below it the press is no contact
+    /// ([`NO_CONTACT_FORCE`]).
+    pub const LIGHTEST: Newtons = NO_CONTACT_FORCE;
+    /// The hardest bound a window may have: the tip's contact radius reaches the shaft's near
+    /// 0.2 N on the softest calibrated phantom, and the cell's range is 1 N.
+    pub const HARDEST: Newtons = Newtons(0.2);
+
+    /// A window from `min` to `max`, validated.
+    pub fn new(min: Newtons, max: Newtons) -> Result<Self, ForceWindowError> {
+        if !min.0.is_finite() || !max.0.is_finite() {
+            return Err(ForceWindowError::NotFinite);
+        }
+        if min.0 < Self::LIGHTEST.0 || max.0 > Self::HARDEST.0 {
+            return Err(ForceWindowError::OutOfRange);
+        }
+        if !(min.0 < max.0) {
+            return Err(ForceWindowError::Empty);
+        }
+        Ok(Self { min, max })
+    }
+
+    /// True when the window would pass [`Self::new`].
+    pub fn is_valid(&self) -> bool {
+        Self::new(self.min, self.max).is_ok()
+    }
+}
+
+impl Default for ForceWindow {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// Below this contact force the tip is not pressed on anything (free air reads 0 ± the cell's
+/// noise and the tare's age; a touch that light gives no reading): 3 mN.
+pub const NO_CONTACT_FORCE: Newtons = Newtons(0.003);
+
+/// Largest change of the contact force across one reading's window: a press that changes more
+/// moved the resonance during the reading (1.2–1.9 % of modulus per mN on the soft phantoms,
+/// docs/physics.md) and is `force_unstable`, not a number. 2 mN.
+pub const MAX_FORCE_CHANGE: Newtons = Newtons(0.002);
+
+/// Where a reading gets its contact force: the load cell's counts over samples `from..=to` of
+/// the sample engine (`None`: no load cell on this board, or it gave fewer than three
+/// conversions in the window). The board's load-cell task fills a [`ForceLog`]; a board
+/// answers from it.
+pub trait ForceSource {
+    /// The counts over `from..=to`.
+    fn contact_force(&self, from: u64, to: u64) -> Option<RawForce>;
+}
+
+/// Conversions a [`ForceLog`] keeps one by one: 1.6 s at 80 SPS, longer than the default
+/// method's reading.
 pub const FORCE_LOG: usize = 128;
+/// Conversions averaged into one block of a [`ForceLog`]'s long memory: 0.1 s at 80 SPS.
+pub const FORCE_BLOCK: usize = 8;
+/// Block means a [`ForceLog`] keeps: 6.4 s at 80 SPS, the length of the slowest readings
+/// (the stepped sweeps).
+pub const FORCE_BLOCKS: usize = 64;
+
+/// The load cell's counts over a window, before its calibration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RawForce {
+    /// Mean counts.
+    pub mean: f64,
+    /// Standard uncertainty of the mean, counts (the samples' scatter about their line over
+    /// `sqrt(n)`).
+    pub sigma: f64,
+    /// The change across the window, counts: the fitted slope times the window's length.
+    pub change: f64,
+    /// Samples averaged (conversions, or block means for a window longer than the log's
+    /// single conversions reach).
+    pub samples: u16,
+}
+
+impl RawForce {
+    /// The mean as counts (rounded, saturating).
+    pub fn counts(&self) -> LoadCellCounts {
+        LoadCellCounts(libm::round(self.mean) as i32)
+    }
+}
 
 /// The contact force over a window.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -139,10 +287,22 @@ pub struct ContactForce {
     pub samples: u16,
 }
 
-/// The last [`FORCE_LOG`] force samples, each at a sample count of the engine.
+/// The load cell's recent conversions, each at a sample count of the engine: the last
+/// [`FORCE_LOG`] one by one, and the last [`FORCE_BLOCKS`] means of [`FORCE_BLOCK`]
+/// consecutive ones, so that a window is covered whole whether it is a 0.4 s hold or a 6 s
+/// sweep (in 1.5 KiB). Counts, not newtons: the calibration is unit data
+/// ([`crate::profile::UnitProfile`]) and applies in the reading's pipeline. Each entry keeps the
+/// low 32 bits of its sample count: a count is recovered against the window asked for, exact
+/// while the entries lie within 2³² samples (5 days at 10 kHz) of it.
 #[derive(Clone, Debug, Default)]
 pub struct ForceLog {
-    samples: heapless::Deque<(u64, f32), FORCE_LOG>,
+    samples: heapless::Deque<(u32, i32), FORCE_LOG>,
+    blocks: heapless::Deque<(u32, f32), FORCE_BLOCKS>,
+    /// The block being filled: conversions, the sum of their counts and of their sample
+    /// counts' offsets from the first one's, and the first one's.
+    block: (u8, i64, u64, u64),
+    /// True once a conversion was dropped from the single ones.
+    dropped: bool,
 }
 
 impl ForceLog {
@@ -150,70 +310,118 @@ impl ForceLog {
     pub const fn new() -> Self {
         Self {
             samples: heapless::Deque::new(),
+            blocks: heapless::Deque::new(),
+            block: (0, 0, 0, 0),
+            dropped: false,
         }
     }
 
-    /// Add the force `f` taken at sample count `at` (the oldest sample goes when full).
-    pub fn push(&mut self, at: u64, f: Newtons) {
+    /// Add the conversion `c` taken at sample count `at` (the oldest goes when full).
+    pub fn push(&mut self, at: u64, c: LoadCellCounts) {
         if self.samples.is_full() {
             self.samples.pop_front();
+            self.dropped = true;
         }
-        let _ = self.samples.push_back((at, f.0));
+        let _ = self.samples.push_back((at as u32, c.0));
+        let (n, sum, offsets, first) = &mut self.block;
+        if *n == 0 {
+            *first = at;
+        }
+        *n += 1;
+        *sum += c.0 as i64;
+        *offsets += at.saturating_sub(*first);
+        if *n as usize == FORCE_BLOCK {
+            let k = FORCE_BLOCK as u64;
+            let mid = *first + *offsets / k;
+            let mean = (*sum as f64 / k as f64) as f32;
+            if self.blocks.is_full() {
+                self.blocks.pop_front();
+            }
+            let _ = self.blocks.push_back((mid as u32, mean));
+            self.block = (0, 0, 0, 0);
+        }
     }
 
     /// Forget every sample (the probe was lifted, the cell re-tared).
     pub fn clear(&mut self) {
-        self.samples.clear();
+        *self = Self::new();
     }
 
-    /// The most recent sample and its sample count.
-    pub fn last(&self) -> Option<(u64, Newtons)> {
-        self.samples.back().map(|&(at, f)| (at, Newtons(f)))
+    /// The most recent conversion and the low 32 bits of its sample count.
+    pub fn last(&self) -> Option<(u32, LoadCellCounts)> {
+        self.samples.back().map(|&(at, c)| (at, LoadCellCounts(c)))
     }
 
-    /// The force over samples `from..=to` of the engine at `sample_rate` Hz: mean, its standard
-    /// uncertainty and the change across the window, from a least-squares line through the
-    /// samples. `None` with fewer than three samples in the window (the cell is not being read,
-    /// or the window is shorter than three conversions).
-    pub fn over(&self, from: u64, to: u64, sample_rate: f32) -> Option<ContactForce> {
+    /// The counts over samples `from..=to` of the engine at `sample_rate` Hz: mean, its
+    /// standard uncertainty and the change across the window, from a least-squares line
+    /// through the conversions — the single ones when they reach back to the window's start,
+    /// else the block means (whose scatter is the conversions' over `sqrt(FORCE_BLOCK)`, and
+    /// which the same line fits). `None` with fewer than three of them in the window (the cell
+    /// is not being read, or the window is shorter than three conversions).
+    pub fn over(&self, from: u64, to: u64, sample_rate: f32) -> Option<RawForce> {
         if !(sample_rate > 0.0) || to < from {
             return None;
         }
-        let fs = sample_rate as f64;
-        let inside = || {
-            self.samples
-                .iter()
-                .filter(move |(at, f)| (from..=to).contains(at) && f.is_finite())
-        };
-        let n = inside().count();
-        if n < 3 {
-            return None;
+        // Each entry's full sample count: as far before `to` as its low bits say (an entry
+        // "after" `to` wraps to far before it and falls outside).
+        let full = move |at: u32| to.wrapping_sub((to as u32).wrapping_sub(at) as u64);
+        let reaches_back = !self.dropped
+            || self
+                .samples
+                .front()
+                .is_some_and(|&(at, _)| full(at) <= from);
+        if reaches_back {
+            let fine = || {
+                self.samples
+                    .iter()
+                    .map(move |&(at, c)| (full(at), c as f64))
+            };
+            line_over(fine, from, to, sample_rate)
+        } else {
+            let coarse = || self.blocks.iter().map(move |&(at, c)| (full(at), c as f64));
+            line_over(coarse, from, to, sample_rate)
         }
-        let nf = n as f64;
-        let t = |at: u64| (at - from) as f64 / fs;
-        let tm = inside().map(|&(at, _)| t(at)).sum::<f64>() / nf;
-        let ym = inside().map(|&(_, f)| f as f64).sum::<f64>() / nf;
-        let (mut stt, mut sty) = (0.0, 0.0);
-        for &(at, f) in inside() {
-            let dt = t(at) - tm;
-            stt += dt * dt;
-            sty += dt * (f as f64 - ym);
-        }
-        let slope = if stt > 0.0 { sty / stt } else { 0.0 };
-        let mut ss = 0.0;
-        for &(at, f) in inside() {
-            let r = f as f64 - ym - slope * (t(at) - tm);
-            ss += r * r;
-        }
-        let scatter = libm::sqrt(ss / (nf - 2.0));
-        let window = (to - from) as f64 / fs;
-        Some(ContactForce {
-            mean: Newtons(ym as f32),
-            sigma: Newtons((scatter / libm::sqrt(nf)) as f32),
-            change: Newtons((slope * window) as f32),
-            samples: n.min(u16::MAX as usize) as u16,
-        })
     }
+}
+
+/// The least-squares line through the points `(at, y)` with `at` in `from..=to`: mean, its
+/// standard uncertainty and the change across the window ([`ForceLog::over`]).
+fn line_over<I: Iterator<Item = (u64, f64)>>(
+    points: impl Fn() -> I,
+    from: u64,
+    to: u64,
+    sample_rate: f32,
+) -> Option<RawForce> {
+    let fs = sample_rate as f64;
+    let inside = || points().filter(|(at, _)| (from..=to).contains(at));
+    let n = inside().count();
+    if n < 3 {
+        return None;
+    }
+    let nf = n as f64;
+    let t = |at: u64| (at - from) as f64 / fs;
+    let tm = inside().map(|(at, _)| t(at)).sum::<f64>() / nf;
+    let ym = inside().map(|(_, y)| y).sum::<f64>() / nf;
+    let (mut stt, mut sty) = (0.0, 0.0);
+    for (at, y) in inside() {
+        let dt = t(at) - tm;
+        stt += dt * dt;
+        sty += dt * (y - ym);
+    }
+    let slope = if stt > 0.0 { sty / stt } else { 0.0 };
+    let mut ss = 0.0;
+    for (at, y) in inside() {
+        let r = y - ym - slope * (t(at) - tm);
+        ss += r * r;
+    }
+    let scatter = libm::sqrt(ss / (nf - 2.0));
+    let window = (to - from) as f64 / fs;
+    Some(RawForce {
+        mean: ym,
+        sigma: scatter / libm::sqrt(nf),
+        change: slope * window,
+        samples: n.min(u16::MAX as usize) as u16,
+    })
 }
 
 #[cfg(test)]
@@ -227,36 +435,35 @@ mod tests {
     fn window_statistics_in_closed_form() {
         let mut log = ForceLog::new();
         let fs = 10_000.0;
-        // 80 SPS: a sample every 125 engine samples; 0.030 N rising 1 mN/s; ±0.1 mN.
-        let e = 1e-4;
+        // 80 SPS: a conversion every 125 engine samples; 30 000 counts rising 6 400 counts/s
+        // (80 a conversion); ±100 counts.
+        let e = 100.0;
         for k in 0..40u64 {
-            let t = k as f64 / 80.0;
-            let f = 0.030 + 1e-3 * t + if k % 2 == 0 { e } else { -e };
-            log.push(k * 125, Newtons(f as f32));
+            let c = 30_000 + 80 * k as i32 + if k % 2 == 0 { 100 } else { -100 };
+            log.push(k * 125, LoadCellCounts(c));
         }
-        // Samples 8..=31 (24 of them: whole pairs).
+        // Conversions 8..=31 (24 of them: whole pairs).
         let w = log.over(8 * 125, 31 * 125, fs).unwrap();
         assert_eq!(w.samples, 24);
         let t_mean = (8.0 + 31.0) / 2.0 / 80.0;
-        assert!((w.mean.0 as f64 - (0.030 + 1e-3 * t_mean)).abs() < 1e-8);
-        // The ±e pattern tilts the fitted line by a little: its projection on the centred time
-        // over whole pairs is −e/2 per sample, so the slope is 1e-3 − 12 e / Σ dt² · (1/80).
+        assert!((w.mean - (30_000.0 + 6_400.0 * t_mean)).abs() < 1e-8);
+        // The ±e pattern tilts the fitted line by a little: its projection on the centred time.
         let n = 24.0;
         let dt = |k: f64| (k - 19.5) / 80.0;
         let stt: f64 = (8..32).map(|k| dt(k as f64) * dt(k as f64)).sum();
         let sty_pattern: f64 = (8..32)
             .map(|k| dt(k as f64) * if k % 2 == 0 { e } else { -e })
             .sum();
-        let slope = 1e-3 + sty_pattern / stt;
+        let slope = 6_400.0 + sty_pattern / stt;
         let window = (31.0 - 8.0) * 125.0 / 10_000.0f64;
-        assert!((w.change.0 as f64 - slope * window).abs() < 1e-8, "{:?}", w);
+        assert!((w.change - slope * window).abs() < 1e-8, "{:?}", w);
         // Residuals: the pattern less its projection on the line, Σr² = n e² − sty²/stt.
         let scatter = ((n * e * e - sty_pattern * sty_pattern / stt) / (n - 2.0)).sqrt();
         let sigma = scatter / n.sqrt();
         assert!(
-            (w.sigma.0 as f64 / sigma - 1.0).abs() < 1e-4,
+            (w.sigma / sigma - 1.0).abs() < 1e-9,
             "{} vs {sigma}",
-            w.sigma.0
+            w.sigma
         );
         // Too few samples, empty or inverted windows: no force.
         assert!(log.over(0, 250, fs).is_some());
@@ -270,11 +477,11 @@ mod tests {
     fn the_log_keeps_the_newest() {
         let mut log = ForceLog::new();
         for k in 0..(FORCE_LOG as u64 + 10) {
-            log.push(k, Newtons(k as f32));
+            log.push(k, LoadCellCounts(k as i32));
         }
         assert_eq!(
             log.last(),
-            Some((FORCE_LOG as u64 + 9, Newtons((FORCE_LOG + 9) as f32)))
+            Some((FORCE_LOG as u32 + 9, LoadCellCounts((FORCE_LOG + 9) as i32)))
         );
         assert!(log.over(0, 9, 1.0).is_none(), "the oldest ten are gone");
         assert_eq!(log.over(10, 20, 1.0).unwrap().samples, 11);
@@ -284,6 +491,78 @@ mod tests {
         log.clear();
         assert_eq!(log.last(), None);
         assert!(log.over(0, u64::MAX, 1.0).is_none());
+    }
+
+    /// A window longer than the single conversions reach is read from the block means: a ramp
+    /// over 4 s (three times the single ones' reach) gives back its mean and change exactly.
+    #[test]
+    fn long_windows_use_the_block_means() {
+        let mut log = ForceLog::new();
+        // 400 conversions (5 s at 80 SPS), 30 000 counts rising 8 a conversion.
+        for k in 0..400u64 {
+            log.push(k * 125, LoadCellCounts(30_000 + 8 * k as i32));
+        }
+        // Blocks of conversions 8j..8j+7: mid-point 8j + 3 (the offsets' mean, 3.5, floored at
+        // the engine's sample resolution: 437 of 437.5 samples), mean 30 000 + 8 (8j + 3.5).
+        let (from, to) = (80 * 125, 400 * 125);
+        let w = log.over(from, to, 10_000.0).unwrap();
+        assert_eq!(w.samples, 40, "{w:?}");
+        let mean_k = (10.0 + 49.0) / 2.0 * 8.0 + 3.5;
+        assert!((w.mean - (30_000.0 + 8.0 * mean_k)).abs() < 1e-6, "{w:?}");
+        // The slope is 8 counts per 125 samples exactly; the window is 320 conversions long.
+        assert!((w.change - 8.0 * 320.0).abs() < 1e-3, "{w:?}");
+        // The last 1.6 s still come from the single conversions.
+        let w = log.over(300 * 125, 400 * 125, 10_000.0).unwrap();
+        assert_eq!(w.samples, 100);
+    }
+
+    /// Sample counts past 2³²: entries on either side of a wrap of the low 32 bits are found in
+    /// their window, an entry after the window is not in it.
+    #[test]
+    fn sample_counts_past_32_bits() {
+        let mut log = ForceLog::new();
+        let base = (1u64 << 32) - 250;
+        for k in 0..5u64 {
+            log.push(base + 125 * k, LoadCellCounts(1000 + k as i32));
+        }
+        // Entries 0..=3 (base .. base + 375, across the wrap at base + 250).
+        let w = log.over(base, base + 375, 10_000.0).unwrap();
+        assert_eq!(w.samples, 4);
+        assert!((w.mean - 1001.5).abs() < 1e-12, "{w:?}");
+        // Entries 2..=4 only.
+        let w = log.over(base + 250, base + 500, 10_000.0).unwrap();
+        assert_eq!(w.samples, 3);
+        assert!((w.mean - 1003.0).abs() < 1e-12, "{w:?}");
+    }
+
+    /// A window's counts to newtons: the mean about the tare, σ and change by the sensitivity;
+    /// the sensitivity from a known weight; a weight the cell cannot see gives no calibration.
+    #[test]
+    fn windows_to_newtons_and_weighing() {
+        let raw = |mean: f64| RawForce {
+            mean,
+            sigma: 36.0,
+            change: -72.0,
+            samples: 12,
+        };
+        let zero = raw(7200.4);
+        let cal = LoadCellCal::weighed(&zero, &raw(7200.4 + 3.6e5), Newtons(0.1)).unwrap();
+        assert_eq!(cal.tare, LoadCellCounts(7200));
+        assert!((cal.newtons_per_count as f64 * 3.6e6 - 1.0).abs() < 1e-6);
+        let f = cal.contact_force(&raw(7200.0 + 1.08e5));
+        assert!((f.mean.0 - 0.030).abs() < 1e-7, "{:?}", f);
+        assert!((f.sigma.0 - 1e-5).abs() < 1e-10);
+        assert!((f.change.0 + 2e-5).abs() < 1e-10);
+        assert_eq!(f.samples, 12);
+        assert!(LoadCellCal::weighed(&zero, &raw(7200.4 + 999.0), Newtons(0.1)).is_none());
+        assert!(LoadCellCal::weighed(&zero, &raw(7200.4 + 3.6e5), Newtons(0.0)).is_none());
+        assert!(LoadCellCal::weighed(&zero, &raw(f64::NAN), Newtons(0.1)).is_none());
+        assert!(cal.is_valid());
+        assert!(!LoadCellCal {
+            newtons_per_count: 0.0,
+            ..cal
+        }
+        .is_valid());
     }
 
     /// Counts to newtons around the tare: within the f32 roundings of the sensitivity and the

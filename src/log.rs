@@ -17,7 +17,7 @@
 //! store error=<str>                                        (error)
 //! settings method=<str> start_hz=<f32> stop_hz=<f32> step_hz=<f32> settle_s=<f32> integrate_s=<f32> drive_v=<f32>
 //! point tag=<u16> f_hz=<f32> g_s=<f32> b_s=<f32> sigma_s=<f32>
-//! reading status=<str> f_hz=<f32> f_sigma_hz=<f32> e_kpa=<f32> e_sigma_kpa=<f32> e_repeat_kpa=<f32> q=<f32> probe_time_s=<f32> points=<u16> method=<str>
+//! reading status=<str> f_hz=<f32> f_sigma_hz=<f32> e_kpa=<f32> e_sigma_kpa=<f32> e_repeat_kpa=<f32> q=<f32> probe_time_s=<f32> points=<u16> method=<str> force_n=<f32> force_sigma_n=<f32>
 //! air f_hz=<f32> q=<f32>
 //! reference e_kpa=<f32> f_hz=<f32> f_sigma_hz=<f32> n=<u16>
 //! calibration source=<str> a=<f32> b=<f32> c=<f32> min_kpa=<f32> max_kpa=<f32>
@@ -25,7 +25,7 @@
 //! rejected error=<str>                                     (warn)
 //! stalled tag=<u16>                                        (error)
 //! overrun late=<u32> ring=<u32> dropped=<u32>              (error; whenever a counter grew)
-//! counters batches=<u32> late=<u32> ring=<u32> dropped=<u32> isr_mean=<u32> isr_max=<u32> unit=<str>
+//! counters batches=<u32> late=<u32> ring=<u32> dropped=<u32> isr_mean=<u32> isr_max=<u32> unit=<str> load_cell_errors=<u32>
 //! status method=<str> calibration=<str> fallback=<bool> air=<bool> q_model=<bool> references=<u16> selftest=<str>
 //! selftest result=<str> f_hz=<f32> c_pf=<f32> c_sigma_pf=<f32> ref_c_pf=<f32> tol=<f32> ref=<str> g_s=<f32> i_a=<f32> v=<f32> probe_time_s=<f32>
 //! selftest fault=<str> message=<str>                      (error; after a failed self-test)
@@ -90,7 +90,7 @@ pub fn event(e: Event) {
             point.sigma_s
         ),
         Event::Reading(r) => defmt::info!(
-            "reading status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} e_repeat_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str}",
+            "reading status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} e_repeat_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str} force_n={=f32} force_sigma_n={=f32}",
             r.status.code(),
             nan_or(r.resonance.map(|v| v.0)),
             nan_or(r.resonance_sigma.map(|v| v.0)),
@@ -100,7 +100,9 @@ pub fn event(e: Event) {
             nan_or(r.q),
             r.probe_time.0,
             r.points,
-            r.method.name()
+            r.method.name(),
+            nan_or(r.force.map(|w| w.mean.0)),
+            nan_or(r.force.map(|w| w.sigma.0))
         ),
         Event::Hint(f) => defmt::warn!(
             "hint code={=str} message={=str}",
@@ -275,14 +277,15 @@ pub fn counters(unit: &str) {
     use crate::counters::*;
     use core::sync::atomic::Ordering::Relaxed;
     defmt::info!(
-        "counters batches={=u32} late={=u32} ring={=u32} dropped={=u32} isr_mean={=u32} isr_max={=u32} unit={=str}",
+        "counters batches={=u32} late={=u32} ring={=u32} dropped={=u32} isr_mean={=u32} isr_max={=u32} unit={=str} load_cell_errors={=u32}",
         BATCHES.load(Relaxed),
         LATE.load(Relaxed),
         RING.load(Relaxed),
         DROPPED.load(Relaxed),
         ISR_MEAN.load(Relaxed),
         ISR_MAX.load(Relaxed),
-        unit
+        unit,
+        LOAD_CELL_ERRORS.load(Relaxed)
     );
 }
 

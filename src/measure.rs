@@ -11,6 +11,7 @@ use crate::estimate::ringdown::{Ringdown, RingdownSettings};
 use crate::estimate::staged::{Refine, Staged, StagedSettings};
 use crate::estimate::{self, Estimate};
 use crate::hal::FrontEndScale;
+use crate::loadcell::RawForce;
 use crate::pipeline::conclude;
 use crate::profile::UnitProfile;
 use crate::status::{Failure, Status};
@@ -243,6 +244,9 @@ pub struct Reading {
     pub probe_time: Seconds,
     /// Points measured.
     pub points: u16,
+    /// The contact force over the reading's window, when the unit has a load cell and it
+    /// answered (also on failed readings that got as far as the force).
+    pub force: Option<crate::loadcell::ContactForce>,
 }
 
 impl Reading {
@@ -259,6 +263,7 @@ impl Reading {
             q: None,
             probe_time,
             points,
+            force: None,
         }
     }
 }
@@ -458,14 +463,16 @@ impl SweepMeasurement {
         }
     }
 
-    /// The reading, through the one [`pipeline`](crate::pipeline) with the unit's profile.
-    pub fn finish(&self, unit: &UnitProfile) -> Reading {
+    /// The reading, through the one [`pipeline`](crate::pipeline) with the unit's profile and
+    /// the load cell's counts over the reading's window.
+    pub fn finish(&self, unit: &UnitProfile, force: Option<RawForce>) -> Reading {
         conclude(
             self.method,
             self.estimate(),
             unit,
             self.probe_time(),
             self.points.len() as u16,
+            force,
         )
     }
 }
@@ -478,8 +485,10 @@ pub trait Measurement {
     fn accept(&mut self, raw: &PointRaw) -> Option<SweepPoint>;
     /// True when no more points are needed.
     fn is_complete(&self) -> bool;
-    /// The reading, through the one [`pipeline`](crate::pipeline) with the unit's profile.
-    fn finish(&self, unit: &UnitProfile) -> Reading;
+    /// The reading, through the one [`pipeline`](crate::pipeline) with the unit's profile and
+    /// the load cell's counts over the reading's window (`None`: no load cell, or it was
+    /// silent).
+    fn finish(&self, unit: &UnitProfile, force: Option<RawForce>) -> Reading;
 }
 
 impl Measurement for SweepMeasurement {
@@ -492,8 +501,8 @@ impl Measurement for SweepMeasurement {
     fn is_complete(&self) -> bool {
         SweepMeasurement::is_complete(self)
     }
-    fn finish(&self, unit: &UnitProfile) -> Reading {
-        SweepMeasurement::finish(self, unit)
+    fn finish(&self, unit: &UnitProfile, force: Option<RawForce>) -> Reading {
+        SweepMeasurement::finish(self, unit, force)
     }
 }
 
@@ -727,7 +736,7 @@ impl Measurement for Procedure {
         }
     }
 
-    fn finish(&self, unit: &UnitProfile) -> Reading {
+    fn finish(&self, unit: &UnitProfile, force: Option<RawForce>) -> Reading {
         let t = self.probe_time();
         let (method, est, points) = match &self.inner {
             Inner::Sweep(m) => (self.method, m.estimate(), m.points().len() as u16),
@@ -756,6 +765,6 @@ impl Measurement for Procedure {
                 ),
             },
         };
-        conclude(method, est, unit, t, points)
+        conclude(method, est, unit, t, points, force)
     }
 }

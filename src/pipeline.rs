@@ -1,8 +1,10 @@
 //! One reading, from an estimate to the number a user gets: the only way to a modulus.
 //!
 //! ```text
-//! estimate ─▶ air reference present? ─▶ Q measured? ─▶ contact (against the air reference)
-//!          ─▶ the curve maps this method's resonance ─▶ calibration with range check ─▶ contact condition (Q against the Q model)
+//! estimate ─▶ air reference present? ─▶ Q measured? ─▶ contact force (with a load cell: present,
+//!          above no-contact, inside the force window, steady) ─▶ contact (against the air
+//!          reference) ─▶ the curve maps this method's resonance ─▶ calibration at the measured
+//!          force with range check ─▶ contact condition (Q against the Q model at that force)
 //!          ─▶ repeatability small enough to tell tissue apart ─▶ Reading
 //! ```
 //!
@@ -12,6 +14,7 @@
 //! reference, no Q model, no Q) is a failure with its own code, never a skipped check.
 
 use crate::estimate::Estimate;
+use crate::loadcell::{RawForce, MAX_FORCE_CHANGE, NO_CONTACT_FORCE};
 use crate::measure::{Method, Reading};
 use crate::profile::UnitProfile;
 use crate::status::{Failure, Status};
@@ -24,15 +27,25 @@ use crate::units::Seconds;
 /// in the bench noise and below 1 % in the paper's (`docs/speed-accuracy.md`).
 pub const MAX_RELATIVE_REPEATABILITY: f32 = 0.10;
 
-/// Conclude a reading by `method` from its estimate with the unit's profile.
+/// Conclude a reading by `method` from its estimate with the unit's profile and the load
+/// cell's counts over the reading's window (`raw_force`; ignored by a unit without a load
+/// cell).
 pub fn conclude(
     method: Method,
     est: Result<Estimate, Failure>,
     unit: &UnitProfile,
     probe_time: Seconds,
     points: u16,
+    raw_force: Option<RawForce>,
 ) -> Reading {
-    let fail = |f| Reading::failed(method, f, probe_time, points);
+    let force = unit
+        .load_cell
+        .zip(raw_force)
+        .map(|(cal, w)| cal.contact_force(&w));
+    let fail = |f| Reading {
+        force,
+        ..Reading::failed(method, f, probe_time, points)
+    };
     let est = match est {
         Ok(e) => e,
         Err(f) => return fail(f),
@@ -48,6 +61,7 @@ pub fn conclude(
         q: est.q,
         probe_time,
         points,
+        force,
     };
     let Some(air) = unit.air else {
         r.status = Status::Failed(Failure::NoAirReference);
@@ -58,6 +72,30 @@ pub fn conclude(
         r.status = Status::Failed(Failure::LowSnr);
         return r;
     };
+    // The contact force, with a load cell: there, pressing, inside the window, steady.
+    if unit.load_cell.is_some() {
+        let Some(w) = force else {
+            r.status = Status::Failed(Failure::NoForce);
+            return r;
+        };
+        let fail = if !(w.mean.0.is_finite() && w.change.0.is_finite()) {
+            Some(Failure::NoForce)
+        } else if w.mean.0 < NO_CONTACT_FORCE.0 {
+            Some(Failure::NoContact)
+        } else if w.mean.0 < unit.force_window.min.0 {
+            Some(Failure::TooLight)
+        } else if w.mean.0 > unit.force_window.max.0 {
+            Some(Failure::TooHard)
+        } else if libm::fabsf(w.change.0) > MAX_FORCE_CHANGE.0 {
+            Some(Failure::ForceUnstable)
+        } else {
+            None
+        };
+        if let Some(f) = fail {
+            r.status = Status::Failed(f);
+            return r;
+        }
+    }
     if air.looks_free(est.resonance, q) {
         r.status = Status::Failed(Failure::NoContact);
         return r;
@@ -68,7 +106,7 @@ pub fn conclude(
         r.status = Status::Failed(Failure::Uncalibrated);
         return r;
     }
-    let m = match unit.invert(est.resonance, est.sigma) {
+    let m = match unit.invert(est.resonance, est.sigma, force.as_ref()) {
         Ok(m) => m,
         Err(f) => {
             r.status = Status::Failed(f);
@@ -79,7 +117,8 @@ pub fn conclude(
         r.status = Status::Failed(Failure::Uncalibrated);
         return r;
     };
-    if !q_model.holds(m.value.0 as f64, q as f64) {
+    let force_n = force.map(|w| w.mean.0 as f64);
+    if !q_model.holds(m.value.0 as f64, force_n, q as f64) {
         r.status = Status::Failed(Failure::BadContact);
         return r;
     }

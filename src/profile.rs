@@ -11,6 +11,7 @@
 use crate::calibration::{held_out_rms, Modulus, PowerLaw, QModel, RefPoint};
 use crate::contact_law::ContactLaw;
 use crate::estimate::fit::fit_bvd;
+use crate::loadcell::{ContactForce, ForceWindow, LoadCellCal};
 use crate::status::Failure;
 use crate::sweep::{SweepPoint, SweepSettings};
 use crate::units::{Farads, Hz, Seconds, Siemens, Volts};
@@ -113,10 +114,23 @@ pub struct UnitProfile {
     /// Air reference, once taken. Without it no reading is given (`no_air_reference`).
     pub air: Option<AirReference>,
     /// The contact law, when the calibration chose it over the power law (it predicted the
-    /// held-out reference moduli better, [`calibrate`]): readings then invert through it. The
-    /// power law stays the curve a user recognises and compares.
+    /// held-out reference moduli better, [`calibrate`]): readings then invert through it, at
+    /// the contact force each reading measured. The power law stays the curve a user
+    /// recognises and compares (at the nominal force, [`NOMINAL_FORCE`]).
     pub contact: Option<ContactLaw>,
+    /// The load cell's calibration (sensitivity from a known weight, zero tared with the air
+    /// reference). With it every reading needs its contact force (`no_force` without one) and
+    /// takes it inside `force_window`; without it (a unit with no load cell) readings carry no
+    /// force and the Q model alone judges the contact.
+    pub load_cell: Option<LoadCellCal>,
+    /// The contact forces readings are taken at (with a load cell).
+    pub force_window: ForceWindow,
 }
+
+/// The force the paper calibrated at, and the power law's: 30 mN (paper 003, a balance and a
+/// motorised stage). References read at it (within [`crate::calibration::SAME_FORCE`]), or
+/// without a measured force, make the power law.
+pub const NOMINAL_FORCE: crate::units::Newtons = crate::units::Newtons(0.030);
 
 impl UnitProfile {
     /// The profile of a unit that was never calibrated: the paper's experimental curve, no
@@ -129,6 +143,8 @@ impl UnitProfile {
             q_model: None,
             air: None,
             contact: None,
+            load_cell: None,
+            force_window: ForceWindow::DEFAULT,
         }
     }
 
@@ -140,11 +156,17 @@ impl UnitProfile {
         self.contact = None;
     }
 
-    /// The modulus of a resonance `f ± sigma` by the unit's curve: the contact law when the
-    /// calibration chose it, else the power law.
-    pub fn invert(&self, f: crate::units::Hz, sigma: crate::units::Hz) -> Result<Modulus, Failure> {
+    /// The modulus of a resonance `f ± sigma` read at the contact force `force` by the unit's
+    /// curve: the contact law at that force when the calibration chose it, else the power law
+    /// (which holds at [`NOMINAL_FORCE`] alone).
+    pub fn invert(
+        &self,
+        f: crate::units::Hz,
+        sigma: crate::units::Hz,
+        force: Option<&ContactForce>,
+    ) -> Result<Modulus, Failure> {
         match &self.contact {
-            Some(c) => c.invert(f, sigma),
+            Some(c) => c.invert(f, sigma, force.map(|w| (w.mean.0 as f64, w.sigma.0 as f64))),
             None => self.calibration.invert(f, sigma),
         }
     }
@@ -156,11 +178,11 @@ impl UnitProfile {
             && self.calibration.cov.iter().flatten().all(|v| v.is_finite())
             && self.calibration.model_sigma_hz.is_finite()
             && self.calibration.model_sigma_hz >= 0.0
-            && self
-                .q_model
-                .is_none_or(|m| m.q0.is_finite() && m.q1.is_finite())
+            && self.q_model.is_none_or(|m| m.is_valid())
             && self.air.is_none_or(|a| a.is_valid())
             && self.contact.is_none_or(|c| c.is_valid())
+            && self.load_cell.is_none_or(|c| c.is_valid())
+            && self.force_window.is_valid()
     }
 }
 
@@ -177,13 +199,22 @@ pub struct Reference {
     pub sigma_hz: f64,
     /// Its quality factor.
     pub q: f64,
+    /// The contact force it was read at, N (0: not measured).
+    pub force_n: f64,
 }
 
 impl Reference {
     /// The reference a reading on a phantom of `modulus` gives, when it has a resonance with
-    /// its uncertainty and a Q (its status does not matter: the uncalibrated unit refuses the
-    /// modulus, not the resonance).
+    /// its uncertainty and a Q, and — with a load cell — a steady force inside the window
+    /// (its status does not matter otherwise: the uncalibrated unit refuses the modulus, not
+    /// the resonance; a reference pressed too lightly, too hard, unsteadily or not at all is
+    /// no reference).
     pub fn of(modulus: crate::units::KPa, r: &crate::measure::Reading) -> Option<Reference> {
+        if let crate::status::Status::Failed(f) = r.status {
+            if f.is_press() {
+                return None;
+            }
+        }
         match (r.resonance, r.resonance_sigma, r.q) {
             (Some(f), Some(s), Some(q)) if f.0.is_finite() && s.0.is_finite() && q > 0.0 => {
                 Some(Reference {
@@ -191,6 +222,11 @@ impl Reference {
                     resonance_hz: f.0 as f64,
                     sigma_hz: (s.0 as f64).max(1e-4),
                     q: q as f64,
+                    force_n: r
+                        .force
+                        .map(|w| w.mean.0 as f64)
+                        .filter(|f| f.is_finite() && *f > 0.0)
+                        .unwrap_or(0.0),
                 })
             }
             _ => None,
@@ -213,47 +249,70 @@ pub struct Calibration {
 }
 
 /// Calibrate a unit from its reference readings: the robust weighted fit of `f = a + b E^c`
-/// ([`PowerLaw::fit_robust`]), the contact condition `Q(E)` ([`QModel::fit`]) of the same
-/// readings and, with the air reference's free resonance, the contact law
-/// ([`ContactLaw::fit`]). The contact law is kept only when it predicts the references better
-/// held out: each distinct reference modulus in turn is left out, both curves are fitted to the
-/// rest, and the RMS over the moduli of the difference between the left-out readings' mean
-/// resonance and each curve's prediction decides. The one calibration procedure of the
-/// firmware's `calibrate fit` and the bench's `calibrate`. Uses the first [`MAX_REFERENCES`]
-/// readings. The contact law's misfit is floored at the power law's (the combined σ keeps
-/// covering what it covered).
+/// ([`PowerLaw::fit_robust`]) on the readings at the nominal force ([`NOMINAL_FORCE`], or all
+/// of them when none has a measured force), the contact condition `Q(E, F)` ([`QModel::fit`])
+/// and, with the air reference's free resonance, the contact law ([`ContactLaw::fit`]) of
+/// every reading at its own force. The contact law is kept only when it predicts the
+/// references better held out: each distinct reference modulus in turn is left out (at every
+/// force it was read at), both curves are fitted to the rest, and the RMS over the moduli of
+/// the mean difference between the left-out readings and each curve's prediction for them
+/// decides. The one calibration procedure of the firmware's `calibrate fit` and the bench's
+/// `calibrate`. Uses the first [`MAX_REFERENCES`] readings. The contact law's misfit is
+/// floored at the power law's (the combined σ keeps covering what it covered).
+// Not inlined: its scratch (the references, 4 KiB) then sits on the stack only while a
+// calibration runs, not in every caller's frame (the firmware's session handles every command).
+#[inline(never)]
 pub fn calibrate(
     refs: &[Reference],
     air: Option<&AirReference>,
 ) -> Result<Calibration, crate::calibration::FitError> {
     let n = refs.len().min(MAX_REFERENCES);
-    let mut fq = [RefPoint::default(); MAX_REFERENCES];
-    let mut eq = [(0.0f64, 0.0f64); MAX_REFERENCES];
-    for ((d, q), r) in fq.iter_mut().zip(eq.iter_mut()).zip(refs) {
+    let refs = &refs[..n];
+    let mut points = [RefPoint::default(); MAX_REFERENCES];
+    for (d, r) in points.iter_mut().zip(refs) {
         *d = RefPoint {
             modulus_kpa: r.modulus_kpa,
             resonance_hz: r.resonance_hz,
             sigma_hz: r.sigma_hz,
+            force_n: r.force_n,
         };
-        *q = (r.modulus_kpa, r.q);
     }
-    // The contact law and the held-out comparison take every reading as given; the robust
-    // power-law fit (after them) reorders the readings, kept ones first.
+    let any_force = refs.iter().any(|d| d.force_n > 0.0);
+    let f0 = if any_force {
+        NOMINAL_FORCE.0 as f64
+    } else {
+        0.0
+    };
+    // The contact law and the held-out comparison take every reading as given.
+    let all = &points[..n];
     let contact = air.and_then(|a| {
         let free = a.free_resonance.0 as f64;
-        let c = ContactLaw::fit(&fq[..n], free).ok()?;
-        let held_contact = held_out_rms(&fq[..n], false, |d| {
-            ContactLaw::fit(d, free)
+        let c = ContactLaw::fit(all, free, f0).ok()?;
+        let held_contact = held_out_rms(all, false, |d| {
+            ContactLaw::fit(d, free, f0)
                 .ok()
-                .map(|c| move |e| c.frequency(e))
+                .map(|c| move |r: &RefPoint| c.frequency_at(r.modulus_kpa, r.force_n))
         })?;
-        let held_power = held_out_rms(&fq[..n], false, |d| {
-            PowerLaw::fit(d).ok().map(|p| move |e| p.frequency(e))
+        let held_power = held_out_rms(all, false, |d| {
+            PowerLaw::fit(d)
+                .ok()
+                .map(|p| move |r: &RefPoint| p.frequency(r.modulus_kpa))
         })?;
         (held_contact < held_power).then_some(c)
     });
-    let law = PowerLaw::fit_robust(&mut fq[..n])?;
-    let q_model = QModel::fit(&eq[..n]).ok_or(crate::calibration::FitError::TooFewPoints)?;
+    // The power law holds at one force: the nominal one's references (all, without forces),
+    // moved to the front; its robust fit reorders them, kept ones first.
+    let mut m = 0;
+    for i in 0..n {
+        let d = points[i];
+        if !any_force || libm::fabs(d.force_n / f0 - 1.0) <= crate::calibration::SAME_FORCE {
+            points.swap(i, m);
+            m += 1;
+        }
+    }
+    let law = PowerLaw::fit_robust(&mut points[..m])?;
+    let q_model = QModel::fit(refs.iter().map(|r| (r.modulus_kpa, r.force_n, r.q)))
+        .ok_or(crate::calibration::FitError::TooFewPoints)?;
     // The contact law's misfit is floored at the power law's: the readings' combined σ has so
     // far carried the systematic errors the error budget does not yet name (the probe's drift
     // since the air reference, a second mode, mains hum: docs/physics.md), through the power

@@ -7,6 +7,7 @@
 
 use crate::engine::{PointPlan, PointRaw, SampleEngine};
 use crate::hal::{AdcFrame, FrontEndScale, SampleStream, StreamError};
+use crate::loadcell::{ForceSource, RawForce};
 use crate::measure::{Measurement, Method, Procedure, Reading, Settings};
 use crate::profile::UnitProfile;
 use crate::status::Failure;
@@ -43,6 +44,9 @@ pub trait PointSource {
     async fn next(&mut self, plan: &PointPlan, budget: u64) -> Option<PointRaw>;
     /// Stop the drive.
     async fn stop(&mut self);
+    /// The load cell's counts over the engine's samples `from..=to` (`None`: no load cell, or
+    /// it was silent).
+    fn contact_force(&mut self, from: u64, to: u64) -> Option<RawForce>;
     /// An admittance point of the reading in progress, with its plan's tag, as it comes (the
     /// firmware logs it; the default ignores it).
     async fn point(&mut self, tag: u16, point: &SweepPoint) {
@@ -148,7 +152,7 @@ pub async fn drive<S: PointSource, M: Measurement>(
     let fs = src.scale().sample_rate.0 as f64;
     let start = src.now_sample();
     match run_plans(src, m, on_point).await {
-        Ok(_) => m.finish(unit),
+        Ok(_) => m.finish(unit, src.contact_force(start, src.now_sample())),
         Err((stop, points)) => {
             on_stop(stop);
             let elapsed = Seconds(src.now_sample().saturating_sub(start) as f32 / fs as f32);
@@ -191,7 +195,7 @@ impl<'a, S: SampleStream> SyncSource<'a, S> {
     }
 }
 
-impl<S: SampleStream> PointSource for SyncSource<'_, S> {
+impl<S: SampleStream + ForceSource> PointSource for SyncSource<'_, S> {
     fn scale(&self) -> FrontEndScale {
         self.stream.scale()
     }
@@ -226,5 +230,8 @@ impl<S: SampleStream> PointSource for SyncSource<'_, S> {
     }
     async fn stop(&mut self) {
         self.engine.stop();
+    }
+    fn contact_force(&mut self, from: u64, to: u64) -> Option<RawForce> {
+        self.stream.contact_force(from, to)
     }
 }

@@ -3,6 +3,7 @@
 
 use crate::engine::SampleEngine;
 use crate::hal::{SampleStream, StreamError};
+use crate::loadcell::ForceSource;
 use crate::measure::{Method, Reading, Settings};
 use crate::profile::UnitProfile;
 use crate::reading::{block_on, read, Stop, SyncSource};
@@ -21,7 +22,7 @@ pub enum RunError {
 
 /// One reading with `method` and `settings` on `stream`, calling `on_point` for every measured
 /// admittance point, concluded with the unit's profile.
-pub fn run_reading<S: SampleStream>(
+pub fn run_reading<S: SampleStream + ForceSource>(
     stream: &mut S,
     engine: &mut SampleEngine,
     method: Method,

@@ -95,6 +95,9 @@ pub enum Refusal {
     Air(Failure),
     /// The reference reading has no resonance with Q.
     NoResonance,
+    /// The reference reading's contact force was missing, outside the window or unsteady (the
+    /// reading's code).
+    BadReference(Failure),
     /// [`MAX_REFERENCES`] are held already.
     ReferencesFull,
     /// The calibration fit failed.
@@ -110,6 +113,7 @@ impl Refusal {
             Refusal::Settings(e) => e.message(),
             Refusal::Air(f) => f.message(),
             Refusal::NoResonance => "no resonance in the reference reading",
+            Refusal::BadReference(f) => f.message(),
             Refusal::ReferencesFull => "reference list full: fit or clear",
             Refusal::Fit => "calibration fit failed: add references over a wider range",
             Refusal::SelfTest(f) => f.message(),
@@ -360,9 +364,12 @@ impl Session {
     }
 
     /// The one air-reference procedure: a sweep of the free probe and a BVD fit of its points
-    /// ([`profile::air_from_points`], which refuses a probe that touches something).
+    /// ([`profile::air_from_points`], which refuses a probe that touches something), and the
+    /// load cell's tare: its counts over the sweep are zero force (when the unit has a load
+    /// cell and it answered; a silent cell keeps its tare, and readings say `no_force`).
     async fn air<I: Io>(&mut self, io: &mut I) -> bool {
         let mut pts: heapless::Vec<SweepPoint, AIR_POINTS> = heapless::Vec::new();
+        let start = io.now_sample();
         let r = self
             .reading_with(io, Method::SweepG, Settings::Sweep(AIR_SWEEP), |p| {
                 let _ = pts.push(*p);
@@ -372,9 +379,13 @@ impl Session {
             Status::Failed(f @ (Failure::DriveFault | Failure::BadSettings)) => Err(f),
             _ => profile::air_from_points(&pts),
         };
+        let zero = io.contact_force(start, io.now_sample());
         match air {
             Ok(a) => {
                 self.profile.air = Some(a);
+                if let (Some(cal), Some(z)) = (self.profile.load_cell.as_mut(), zero) {
+                    cal.tare = z.counts();
+                }
                 io.emit(Event::Air(a)).await;
                 true
             }
@@ -402,7 +413,10 @@ impl Session {
                 }
                 Err(_) => Refusal::ReferencesFull,
             },
-            None => Refusal::NoResonance,
+            None => match r.status {
+                Status::Failed(f) if f.is_press() => Refusal::BadReference(f),
+                _ => Refusal::NoResonance,
+            },
         };
         io.emit(Event::Refused(why)).await;
         false

@@ -44,11 +44,19 @@ pub enum Failure {
     Uncalibrated,
     /// The resonance moved during the reading (drift, a creeping contact).
     Unstable,
+    /// The unit reads with a load cell and it gave no force for the reading.
+    NoForce,
+    /// Pressed more lightly than the unit's force window.
+    TooLight,
+    /// Pressed harder than the unit's force window.
+    TooHard,
+    /// The contact force changed during the reading.
+    ForceUnstable,
 }
 
 impl Failure {
     /// Every code, in declaration order.
-    pub const ALL: [Failure; 18] = [
+    pub const ALL: [Failure; 22] = [
         Failure::NoContact,
         Failure::ContactLost,
         Failure::BelowRange,
@@ -67,6 +75,10 @@ impl Failure {
         Failure::NoAirReference,
         Failure::Uncalibrated,
         Failure::Unstable,
+        Failure::NoForce,
+        Failure::TooLight,
+        Failure::TooHard,
+        Failure::ForceUnstable,
     ];
 
     /// Stable snake_case code, as used in JSON and logs.
@@ -90,6 +102,10 @@ impl Failure {
             Failure::NoAirReference => "no_air_reference",
             Failure::Uncalibrated => "uncalibrated",
             Failure::Unstable => "unstable",
+            Failure::NoForce => "no_force",
+            Failure::TooLight => "too_light",
+            Failure::TooHard => "too_hard",
+            Failure::ForceUnstable => "force_unstable",
         }
     }
 
@@ -112,9 +128,26 @@ impl Failure {
             Failure::BadSettings => "invalid settings",
             Failure::BadContact => "contact unlike calibration: press at the calibrated force (Q off its curve), or retake the air reference",
             Failure::Unstable => "the resonance moved during the reading: hold the probe still and retry",
+            Failure::NoForce => "the load cell gave no contact force: check its cable, or retake the air reference",
+            Failure::TooLight => "pressed too lightly: press harder, into the force window",
+            Failure::TooHard => "pressed too hard: press more lightly, into the force window",
+            Failure::ForceUnstable => "the contact force changed during the reading: hold the probe still and retry",
             Failure::NoAirReference => "no air reference: lift the probe into free air and take one (air)",
             Failure::Uncalibrated => "unit not calibrated (for this method): calibrate it on reference phantoms with this method",
         }
+    }
+
+    /// True for a failure of the press itself, which the load cell tells before the resonance
+    /// is read: no contact, no force, too light, too hard, a force that changed.
+    pub const fn is_press(self) -> bool {
+        matches!(
+            self,
+            Failure::NoContact
+                | Failure::NoForce
+                | Failure::TooLight
+                | Failure::TooHard
+                | Failure::ForceUnstable
+        )
     }
 
     /// Parse a [`code`](Self::code).

@@ -13,7 +13,7 @@
 //! | 4 | 2 | format version ([`FORMAT_VERSION`]) |
 //! | 6 | 2 | record length ([`RECORD_LEN`]) |
 //! | 8 | 4 | sequence number |
-//! | 12 | 1 | flags (bit 0: air reference present, bit 1: Q model present, bit 2: contact law present) |
+//! | 12 | 1 | flags (bit 0: air reference present, bit 1: Q model present, bit 2: contact law present, bit 3: load cell present) |
 //! | 13 | 1 | calibration source (0 paper-simulation, 1 paper-experiment, 2 fitted) |
 //! | 14 | 1 | the resonance the curve maps (0 motional, 1 impedance dip) |
 //! | 15 | 1 | zero |
@@ -28,8 +28,12 @@
 //! | 176 | 24 | contact law: `ln Ks`, `ln A`, `ln B` (f64) |
 //! | 200 | 72 | contact law: their covariance, row major (f64) |
 //! | 272 | 24 | contact law: `model_sigma_hz`, `min_kpa`, `max_kpa` (f64) |
-//! | 296 | 20 | zero |
-//! | 316 | 4 | CRC-32 (IEEE) of bytes 0..316 |
+//! | 296 | 8 | contact law: its reference force, N (f64) |
+//! | 304 | 8 | Q model `q2` (per `ln F`, f64) |
+//! | 312 | 8 | load cell: newtons per count (f32), tare counts (i32) |
+//! | 320 | 8 | force window: `min`, `max`, N (f32) |
+//! | 328 | 52 | zero |
+//! | 380 | 4 | CRC-32 (IEEE) of bytes 0..380 |
 //!
 //! [`Store::save`] writes the slot that does **not** hold the newest valid record (erase, program,
 //! read back and compare), with the sequence number one above the newest. The newest valid record
@@ -45,19 +49,22 @@
 
 use crate::calibration::{PowerLaw, QModel, Source};
 use crate::contact_law::{self, ContactLaw};
+use crate::loadcell::{ForceWindow, LoadCellCal, LoadCellCounts};
 pub use crate::profile::{AirReference, UnitProfile};
-use crate::units::{Farads, Hz, Siemens};
+use crate::units::{Farads, Hz, Newtons, Siemens};
 use embedded_storage::nor_flash::NorFlash;
 
 /// Bytes of one record (a multiple of every common program word: 1, 2, 4, 8, 16, 32).
-pub const RECORD_LEN: usize = 320;
-/// Format version written into every record (4: the contact law).
-pub const FORMAT_VERSION: u16 = 4;
+pub const RECORD_LEN: usize = 384;
+/// Format version written into every record (4: the contact law; 5: the contact force — the
+/// law's reference force, the Q model's force term, the load cell, the force window).
+pub const FORMAT_VERSION: u16 = 5;
 const MAGIC: [u8; 4] = *b"PZTC";
 const CRC_AT: usize = RECORD_LEN - 4;
 const FLAG_AIR: u8 = 1;
 const FLAG_Q_MODEL: u8 = 2;
 const FLAG_CONTACT: u8 = 4;
+const FLAG_LOAD_CELL: u8 = 8;
 
 /// State of one slot as found by a scan.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -402,6 +409,11 @@ pub fn encode(record: &UnitProfile, seq: u32) -> [u8; RECORD_LEN] {
                 FLAG_CONTACT
             } else {
                 0
+            }
+            | if record.load_cell.is_some() {
+                FLAG_LOAD_CELL
+            } else {
+                0
             },
         source_code(c.source),
         match record.resonance {
@@ -439,6 +451,14 @@ pub fn encode(record: &UnitProfile, seq: u32) -> [u8; RECORD_LEN] {
     for v in law {
         w.put(&v.to_le_bytes());
     }
+    w.put(&record.q_model.map_or(0.0, |m| m.q2).to_le_bytes());
+    let (npc, tare) = record
+        .load_cell
+        .map_or((0.0f32, 0i32), |c| (c.newtons_per_count, c.tare.0));
+    w.put(&npc.to_le_bytes());
+    w.put(&tare.to_le_bytes());
+    w.put(&record.force_window.min.0.to_le_bytes());
+    w.put(&record.force_window.max.0.to_le_bytes());
     let crc = crc32(w.buf.get(..CRC_AT).unwrap_or(&[]));
     w.at = CRC_AT;
     w.put(&crc.to_le_bytes());
@@ -487,12 +507,22 @@ pub fn decode(buf: &[u8; RECORD_LEN]) -> Option<(u32, UnitProfile)> {
         static_conductance: Siemens(g0),
     });
     let (q0, q1) = (r.f64(), r.f64());
-    let q_model = (flags & FLAG_Q_MODEL != 0).then_some(QModel { q0, q1 });
     let mut law = [0.0; contact_law::VALUES];
     for v in law.iter_mut() {
         *v = r.f64();
     }
     let contact = (flags & FLAG_CONTACT != 0).then(|| ContactLaw::from_values(&law));
+    let q2 = r.f64();
+    let q_model = (flags & FLAG_Q_MODEL != 0).then_some(QModel { q0, q1, q2 });
+    let (npc, tare) = (r.f32(), i32::from_le_bytes(r.take()));
+    let load_cell = (flags & FLAG_LOAD_CELL != 0).then_some(LoadCellCal {
+        newtons_per_count: npc,
+        tare: LoadCellCounts(tare),
+    });
+    let force_window = ForceWindow {
+        min: Newtons(r.f32()),
+        max: Newtons(r.f32()),
+    };
     let record = UnitProfile {
         calibration: PowerLaw {
             a,
@@ -508,6 +538,8 @@ pub fn decode(buf: &[u8; RECORD_LEN]) -> Option<(u32, UnitProfile)> {
         q_model,
         air,
         contact,
+        load_cell,
+        force_window,
     };
     record.is_valid().then_some((seq, record))
 }
@@ -530,7 +562,11 @@ mod tests {
         let rec = UnitProfile {
             calibration: cal,
             resonance: crate::measure::Resonance::ImpedanceDip,
-            q_model: Some(QModel { q0: 2.5, q1: 1.25 }),
+            q_model: Some(QModel {
+                q0: 2.5,
+                q1: 1.25,
+                q2: -4.5,
+            }),
             air: Some(AirReference {
                 free_resonance: Hz(232.3),
                 free_q: 41.5,
@@ -544,7 +580,16 @@ mod tests {
                 model_sigma_hz: 0.004,
                 min_kpa: 140.0,
                 max_kpa: 2700.0,
+                force_n: 0.03,
             }),
+            load_cell: Some(LoadCellCal {
+                newtons_per_count: 2.8e-7,
+                tare: LoadCellCounts(-7123),
+            }),
+            force_window: ForceWindow {
+                min: Newtons(0.015),
+                max: Newtons(0.06),
+            },
         };
         let buf = encode(&rec, 7);
         assert_eq!(decode(&buf), Some((7, rec)));

@@ -13,6 +13,7 @@ fn reference(e_kpa: f64) -> RefPoint {
         modulus_kpa: e_kpa,
         resonance_hz: Scene::on_modulus_kpa(e_kpa).resonance_hz(),
         sigma_hz: 0.01,
+        force_n: 0.0,
     }
 }
 
@@ -26,16 +27,21 @@ fn the_contact_law_reads_between_the_phantoms() {
                 modulus_kpa: p.modulus_kpa,
                 resonance_hz: Scene::on_phantom(&p).resonance_hz(),
                 sigma_hz: 0.01,
+                force_n: 0.0,
             }
         })
         .collect();
     let free = Scene::free_air().resonance_hz();
-    let law = ContactLaw::fit(&refs, free).expect("a contact law");
+    let law = ContactLaw::fit(&refs, free, 0.0).expect("a contact law");
     let power = PowerLaw::fit(&refs).expect("a power law");
     let (mut worst_law, mut worst_power) = (0.0f64, 0.0f64);
     for e in [200.0, 350.0, 500.0, 700.0, 1000.0, 1500.0, 2000.0] {
         let f = Hz(reference(e).resonance_hz as f32);
-        let m = law.invert(f, Hz(0.0)).expect("inside the span").value.0 as f64;
+        let m = law
+            .invert(f, Hz(0.0), None)
+            .expect("inside the span")
+            .value
+            .0 as f64;
         let p = power.invert(f, Hz(0.0)).expect("inside the span").value.0 as f64;
         worst_law = worst_law.max((m / e - 1.0).abs());
         worst_power = worst_power.max((p / e - 1.0).abs());
@@ -60,7 +66,7 @@ fn the_contact_laws_uncertainty_is_gums() {
         .iter()
         .map(|&e| reference(e))
         .collect();
-    let fitted = ContactLaw::fit(&refs, free).expect("a contact law");
+    let fitted = ContactLaw::fit(&refs, free, 0.0).expect("a contact law");
     // A covariance and a misfit of the size a noisy calibration gives, correlated.
     let law = ContactLaw {
         cov: [
@@ -86,7 +92,9 @@ fn the_contact_laws_uncertainty_is_gums() {
     for e in [200.0, 700.0, 2000.0] {
         let f = law.frequency(e) as f32 as f64;
         let sf = 0.02;
-        let m = law.invert(Hz(f as f32), Hz(sf as f32)).expect("in span");
+        let m = law
+            .invert(Hz(f as f32), Hz(sf as f32), None)
+            .expect("in span");
         let h = 1e-4;
         let de_df = (modulus_at(&law, f + h) - modulus_at(&law, f - h)) / (2.0 * h);
         let mut g = [0.0; 3];

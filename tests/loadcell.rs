@@ -40,11 +40,11 @@ fn reads_the_cell_through_the_pins() {
                 tare_n += 1;
             }
             Some(c) => {
-                let cal = *cal.get_or_insert(LoadCellCal {
+                cal.get_or_insert(LoadCellCal {
                     newtons_per_count: (1.0 / cell.counts_per_n) as f32,
                     tare: LoadCellCounts((tare_sum / tare_n) as i32),
                 });
-                log.push(ms * 10, cal.force(c));
+                log.push(ms * 10, c);
             }
         }
     }
@@ -54,9 +54,11 @@ fn reads_the_cell_through_the_pins() {
     let expected = ((3.0 - SETTLING_PERIODS / cell.rate_hz) * cell.rate_hz) as u64;
     assert!(made.abs_diff(expected) <= 1, "{made} conversions");
     assert!(nones > 2000, "polls without data answer at once");
-    let w = log
-        .over(15_000, 30_000, fs)
-        .expect("force over the last 1.5 s");
+    let cal = cal.expect("loaded conversions");
+    let w = cal.contact_force(
+        &log.over(15_000, 30_000, fs)
+            .expect("force over the last 1.5 s"),
+    );
     assert!((w.samples as i64 - 120).abs() <= 1, "{}", w.samples);
     // Creep after 1.0..2.5 s under load is between (1 − e^-1) and (1 − e^-2.5) of its full
     // 0.5 %; the tare's own noise (36 conversions) and the window's both count.

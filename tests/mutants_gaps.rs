@@ -35,6 +35,7 @@ fn q_model() -> QModel {
     QModel {
         q0: -10.0,
         q1: 10.0 / std::f64::consts::LN_10,
+        q2: 0.0,
     }
 }
 
@@ -52,6 +53,8 @@ fn unit() -> UnitProfile {
             static_conductance: Siemens(0.0),
         }),
         contact: None,
+        load_cell: None,
+        force_window: pzt_probe::loadcell::ForceWindow::DEFAULT,
     }
 }
 
@@ -65,7 +68,7 @@ fn estimate(f: f64, sigma: f64, q: Option<f32>) -> Estimate {
 }
 
 fn status(est: Estimate, unit: &UnitProfile) -> Status {
-    conclude(Method::SweepG, Ok(est), unit, Seconds(1.0), 10).status
+    conclude(Method::SweepG, Ok(est), unit, Seconds(1.0), 10, None).status
 }
 
 /// The verdict on resonance `f` (Hz) with uncertainty `sigma` and quality `q` for [`unit`].
@@ -84,6 +87,7 @@ fn a_good_reading_on_the_curve_gives_its_modulus() {
         &unit(),
         Seconds(1.0),
         10,
+        None,
     );
     assert_eq!(r.status, Status::Ok);
     let m = r.modulus.expect("a modulus").0 as f64;
@@ -134,16 +138,16 @@ fn unresolved_q_is_low_snr() {
 #[test]
 fn contact_condition_holds_within_twenty_percent() {
     let m = q_model();
-    assert!((m.q_at(1000.0) - 20.0).abs() < 1e-12);
-    assert!((m.q_at(100.0) - 10.0).abs() < 1e-12);
-    assert!(m.holds(1000.0, 20.0));
-    assert!(m.holds(1000.0, 23.9)); // +19.5 %
-    assert!(m.holds(1000.0, 16.1)); // −19.5 %
-    assert!(!m.holds(1000.0, 24.1)); // +20.5 %
-    assert!(!m.holds(1000.0, 15.9)); // −20.5 %
-                                     // Where the model expects no positive Q (E below e^1 = 2.7 kPa here), nothing holds.
-    assert!(m.q_at(2.0) < 0.0);
-    assert!(!m.holds(2.0, m.q_at(2.0)));
+    assert!((m.q_at(1000.0, None) - 20.0).abs() < 1e-12);
+    assert!((m.q_at(100.0, None) - 10.0).abs() < 1e-12);
+    assert!(m.holds(1000.0, None, 20.0));
+    assert!(m.holds(1000.0, None, 23.9)); // +19.5 %
+    assert!(m.holds(1000.0, None, 16.1)); // −19.5 %
+    assert!(!m.holds(1000.0, None, 24.1)); // +20.5 %
+    assert!(!m.holds(1000.0, None, 15.9)); // −20.5 %
+                                           // Where the model expects no positive Q (E below e^1 = 2.7 kPa here), nothing holds.
+    assert!(m.q_at(2.0, None) < 0.0);
+    assert!(!m.holds(2.0, None, m.q_at(2.0, None)));
 
     // Through the pipeline: off-condition contact is `bad_contact`, not a modulus.
     let f = f_of(1000.0);
@@ -163,7 +167,7 @@ fn contact_condition_holds_within_twenty_percent() {
 #[test]
 fn q_model_fit_ignores_non_positive_pairs() {
     let check = |data: &[(f64, f64)]| {
-        let m = QModel::fit(data).expect("two distinct moduli");
+        let m = QModel::fit(data.iter().map(|&(e, q)| (e, 0.0, q))).expect("two distinct moduli");
         assert!((m.q0 + 10.0).abs() < 1e-9, "{data:?}: q0 {}", m.q0);
         assert!(
             (m.q1 - 10.0 / std::f64::consts::LN_10).abs() < 1e-9,
@@ -198,6 +202,7 @@ fn fit_with_more_than_64_distinct_moduli() {
                 modulus_kpa: e,
                 resonance_hz: f_of(e),
                 sigma_hz: 0.05,
+                force_n: 0.0,
             }
         })
         .collect();
@@ -309,11 +314,13 @@ fn profile_with_non_finite_q_model_is_invalid() {
     p.q_model = Some(QModel {
         q0: f64::NAN,
         q1: 1.0,
+        q2: 0.0,
     });
     assert!(!p.is_valid());
     p.q_model = Some(QModel {
         q0: 1.0,
         q1: f64::INFINITY,
+        q2: 0.0,
     });
     assert!(!p.is_valid());
 }
@@ -334,6 +341,7 @@ fn reference_of_a_reading_needs_finite_values_and_positive_q() {
             &UnitProfile::fallback(),
             Seconds(1.0),
             10,
+            None,
         )
     };
     let e = pzt_probe::KPa(1000.0);

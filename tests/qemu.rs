@@ -19,13 +19,19 @@ const PHANTOM_B_KPA: f64 = 279.0;
 /// profile, which the QEMU board programs into its store at power-on: its contact law when the
 /// calibration chose it, else its power law `a + b E^c` — gives `f`, by bisection of `ln E` with
 /// `f64::powf`: an independent inverse of the calibration the image computes on target.
-fn curve_inverse(f: f64) -> f64 {
+fn curve_inverse(f: f64, force_n: f64) -> f64 {
     let p = pzt_probe::board::sim_factory::profile().expect("factory record");
     match p.contact {
-        // The factory calibration chose the contact law: the image reads through it.
+        // The factory calibration chose the contact law: the image reads through it, at the
+        // reading's contact force (Hertz: A ∝ F^(1/3), B ∝ F about the law's reference force).
         Some(c) => {
             let [ks, a, b] = c.p.map(f64::exp);
-            reference::modulus_by_contact_law(c.free_hz, ks, a, b, f)
+            let r = if c.force_n > 0.0 && force_n > 0.0 {
+                force_n / c.force_n
+            } else {
+                1.0
+            };
+            reference::modulus_by_contact_law(c.free_hz, ks, a * r.cbrt(), b * r, f)
         }
         None => {
             let (a, b, c) = (p.calibration.a, p.calibration.b, p.calibration.c);
@@ -55,7 +61,11 @@ fn check_reading(who: &str, r: &HashMap<String, String>, f0: f64, tol_hz: f64) {
         "{who} read phantom B's resonance as {f} Hz, closed form {f0} Hz ± {tol_hz} Hz"
     );
     const U: f64 = 1.0 / 16_777_216.0;
-    let (e_lo, e_hi) = (curve_inverse(f * (1.0 - U)), curve_inverse(f * (1.0 + U)));
+    let force = num(r, "force_n");
+    let (e_lo, e_hi) = (
+        curve_inverse(f * (1.0 - U), force),
+        curve_inverse(f * (1.0 + U), force),
+    );
     assert!(
         (e_lo * (1.0 - U)..=e_hi * (1.0 + U)).contains(&e),
         "{who}: {e} kPa at {f} Hz, the image's curve gives {e_lo}…{e_hi} kPa"

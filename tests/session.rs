@@ -66,6 +66,9 @@ impl PointSource for SimIo {
     async fn stop(&mut self) {
         self.source().stop().await
     }
+    fn contact_force(&mut self, from: u64, to: u64) -> Option<pzt_probe::loadcell::RawForce> {
+        pzt_probe::loadcell::ForceSource::contact_force(&self.board, from, to)
+    }
     async fn point(&mut self, tag: u16, point: &pzt_probe::sweep::SweepPoint) {
         self.events.push(Event::Point { tag, point: *point });
     }

@@ -210,6 +210,7 @@ fn random_input_never_panics() {
                 modulus_kpa: wild(&mut r) as f64,
                 resonance_hz: wild(&mut r) as f64,
                 sigma_hz: wild(&mut r) as f64,
+                force_n: wild(&mut r) as f64,
             })
             .collect();
         if let Ok(p) = PowerLaw::fit(&d) {

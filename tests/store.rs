@@ -27,6 +27,7 @@ fn record(n: u32) -> UnitProfile {
         q_model: Some(QModel {
             q0: 4.0 + n as f64,
             q1: 1.0,
+            q2: -0.5 * n as f64,
         }),
         air: Some(AirReference {
             free_resonance: Hz(232.0 + n as f32),
@@ -35,6 +36,14 @@ fn record(n: u32) -> UnitProfile {
             static_conductance: Siemens(n as f32 * 1e-9),
         }),
         contact: None,
+        load_cell: (!n.is_multiple_of(3)).then_some(pzt_probe::loadcell::LoadCellCal {
+            newtons_per_count: 2.8e-7,
+            tare: pzt_probe::loadcell::LoadCellCounts(7200 - n as i32),
+        }),
+        force_window: pzt_probe::loadcell::ForceWindow {
+            min: pzt_probe::Newtons(0.010 + n as f32 * 1e-4),
+            max: pzt_probe::Newtons(0.060),
+        },
     }
 }
 
@@ -128,7 +137,7 @@ fn bad_geometry_is_refused() {
     );
     // A program word that does not divide the record.
     assert_eq!(
-        Store::new(SimFlash::<4096, 2048, 128>::new(), 0).err(),
+        Store::new(SimFlash::<4096, 2048, 256>::new(), 0).err(),
         Some(StoreError::Geometry)
     );
     // Small sectors: a slot spans several.
@@ -138,10 +147,14 @@ fn bad_geometry_is_refused() {
 
 /// The heart of it: cut the power after every possible number of programmed bytes of a save,
 /// for saves into either slot, then power up and load. The result must be the previous record
-/// (or the new one once every byte is in), never the fallback, never a mixture.
+/// (or the new one once every byte is in), never the fallback, never a mixture. A byte whose
+/// value is the erased one (0xFF) is "in" without being programmed: a cut that leaves only such
+/// bytes out has written the whole record (the last byte of the CRC is 0xFF in one record of
+/// 256), and the new record is what loads.
 #[test]
 fn power_loss_at_every_program_byte_keeps_a_valid_record() {
     for previous in 1..=3u32 {
+        let full = pzt_probe::store::encode(&record(previous + 1), previous + 1);
         for cut in 0..=RECORD_LEN {
             let mut s = store_after(previous);
             s.flash_mut().cut_power_after_program(cut);
@@ -151,7 +164,15 @@ fn power_loss_at_every_program_byte_keeps_a_valid_record() {
             let mut s = store_with(flash);
             let l = s.load();
             assert!(!l.is_fallback(), "previous {previous} cut {cut}: fallback");
-            if cut < RECORD_LEN {
+            let written = full[cut.min(RECORD_LEN)..].iter().all(|&b| b == 0xFF);
+            if cut < RECORD_LEN && written {
+                assert_eq!(res, Err(StoreError::Program), "cut {cut}");
+                assert_eq!(
+                    l.record,
+                    record(previous + 1),
+                    "previous {previous} cut {cut}"
+                );
+            } else if cut < RECORD_LEN {
                 assert_eq!(res, Err(StoreError::Program), "cut {cut}");
                 assert_eq!(l.record, record(previous), "previous {previous} cut {cut}");
                 match l.source {
@@ -173,7 +194,7 @@ fn power_loss_at_every_program_byte_keeps_a_valid_record() {
             }
             // And the store recovers: the next save completes and becomes the newest.
             let saved = s.save(&record(100)).expect("save after recovery");
-            let newest = if cut < RECORD_LEN {
+            let newest = if cut < RECORD_LEN && !written {
                 previous
             } else {
                 previous + 1

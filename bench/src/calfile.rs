@@ -5,13 +5,14 @@
 use anyhow::{bail, Context, Result};
 use pzt_probe::calibration::{PowerLaw, QModel, Source};
 use pzt_probe::contact_law::{self, ContactLaw};
+use pzt_probe::loadcell::{ForceWindow, LoadCellCal, LoadCellCounts};
 use pzt_probe::measure::Resonance;
 use pzt_probe::profile::{AirReference, UnitProfile};
 
 fn motional() -> String {
     Resonance::Motional.name().to_owned()
 }
-use pzt_probe::{Farads, Hz, Siemens};
+use pzt_probe::{Farads, Hz, Newtons, Siemens};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -96,13 +97,34 @@ pub struct AirFile {
     pub static_conductance_s: f32,
 }
 
-/// The on-disk form of the contact condition `Q = q0 + q1 ln(E / kPa)`.
+/// The on-disk form of the contact condition `Q = q0 + q1 ln(E / kPa) + q2 ln(F / N)`.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct QModelFile {
     /// Intercept.
     pub q0: f64,
     /// Slope per unit of `ln(E / kPa)`.
     pub q1: f64,
+    /// Slope per unit of `ln(F / N)` (0: no force term).
+    #[serde(default)]
+    pub q2: f64,
+}
+
+/// The on-disk form of the load cell's calibration and the force window.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct LoadCellFile {
+    /// Newtons per count (from a known weight).
+    pub newtons_per_count: f32,
+    /// Counts of zero force (tared with the air reference).
+    pub tare_counts: i32,
+}
+
+/// The on-disk form of the force window.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct ForceWindowFile {
+    /// Lightest press, N.
+    pub min_n: f32,
+    /// Hardest press, N.
+    pub max_n: f32,
 }
 
 /// The on-disk form of a unit profile.
@@ -120,9 +142,16 @@ pub struct ProfileFile {
     pub air: Option<AirFile>,
     /// The contact law, when the calibration chose it (readings invert through it), as
     /// `ContactLaw::to_values` orders its numbers: free resonance (Hz), `ln Ks`, `ln A`, `ln B`,
-    /// their covariance (9, row major), misfit (Hz), lowest and highest modulus (kPa).
+    /// their covariance (9, row major), misfit (Hz), lowest and highest modulus (kPa), the
+    /// reference force (N).
     #[serde(default)]
     pub contact_law: Option<[f64; contact_law::VALUES]>,
+    /// The load cell's calibration, when the unit has one.
+    #[serde(default)]
+    pub load_cell: Option<LoadCellFile>,
+    /// The force window readings are taken in (default 12–55 mN).
+    #[serde(default)]
+    pub force_window: Option<ForceWindowFile>,
     /// How and when the profile was taken (free text: method, noise, repeats, seeds).
     #[serde(default)]
     pub taken: String,
@@ -134,7 +163,11 @@ impl ProfileFile {
         Self {
             calibration: CalFile::from_law(&p.calibration, method),
             resonance: p.resonance.name().to_owned(),
-            q_model: p.q_model.map(|m| QModelFile { q0: m.q0, q1: m.q1 }),
+            q_model: p.q_model.map(|m| QModelFile {
+                q0: m.q0,
+                q1: m.q1,
+                q2: m.q2,
+            }),
             air: p.air.map(|a| AirFile {
                 free_resonance_hz: a.free_resonance.0,
                 free_q: a.free_q,
@@ -142,6 +175,14 @@ impl ProfileFile {
                 static_conductance_s: a.static_conductance.0,
             }),
             contact_law: p.contact.map(|c| c.to_values()),
+            load_cell: p.load_cell.map(|c| LoadCellFile {
+                newtons_per_count: c.newtons_per_count,
+                tare_counts: c.tare.0,
+            }),
+            force_window: Some(ForceWindowFile {
+                min_n: p.force_window.min.0,
+                max_n: p.force_window.max.0,
+            }),
             taken,
         }
     }
@@ -156,7 +197,11 @@ impl ProfileFile {
         let p = UnitProfile {
             calibration: self.calibration.to_law()?,
             resonance,
-            q_model: self.q_model.as_ref().map(|m| QModel { q0: m.q0, q1: m.q1 }),
+            q_model: self.q_model.as_ref().map(|m| QModel {
+                q0: m.q0,
+                q1: m.q1,
+                q2: m.q2,
+            }),
             air: self.air.as_ref().map(|a| AirReference {
                 free_resonance: Hz(a.free_resonance_hz),
                 free_q: a.free_q,
@@ -164,9 +209,20 @@ impl ProfileFile {
                 static_conductance: Siemens(a.static_conductance_s),
             }),
             contact: self.contact_law.as_ref().map(ContactLaw::from_values),
+            load_cell: self.load_cell.as_ref().map(|c| LoadCellCal {
+                newtons_per_count: c.newtons_per_count,
+                tare: LoadCellCounts(c.tare_counts),
+            }),
+            force_window: self
+                .force_window
+                .as_ref()
+                .map_or(ForceWindow::DEFAULT, |w| ForceWindow {
+                    min: Newtons(w.min_n),
+                    max: Newtons(w.max_n),
+                }),
         };
         if !p.is_valid() {
-            bail!("the profile's Q model, air reference or contact law is not valid");
+            bail!("the profile's Q model, air reference, contact law, load cell or force window is not valid");
         }
         Ok(p)
     }
@@ -215,7 +271,20 @@ pub fn describe(p: &PowerLaw) -> String {
 /// The profile for humans.
 pub fn describe_profile(p: &UnitProfile) -> String {
     let q = p.q_model.map_or("no Q model".to_owned(), |m| {
-        format!("Q = {:.2} + {:.3} ln E", m.q0, m.q1)
+        if m.q2 != 0.0 {
+            format!("Q = {:.2} + {:.3} ln E {:+.3} ln F", m.q0, m.q1, m.q2)
+        } else {
+            format!("Q = {:.2} + {:.3} ln E", m.q0, m.q1)
+        }
+    });
+    let cell = p.load_cell.map_or("no load cell".to_owned(), |c| {
+        format!(
+            "load cell {:.4e} N/count, tare {} counts, force window {:.0}–{:.0} mN",
+            c.newtons_per_count,
+            c.tare.0,
+            p.force_window.min.0 * 1e3,
+            p.force_window.max.0 * 1e3
+        )
     });
     let air = p.air.map_or("no air reference".to_owned(), |a| {
         format!(
@@ -227,14 +296,15 @@ pub fn describe_profile(p: &UnitProfile) -> String {
     });
     let law = match p.contact {
         Some(c) => format!(
-            "; readings through the contact law (held out it predicts A–E better): free {:.3} Hz, rigid limit {:.3} Hz, misfit {:.4} Hz",
+            "; readings through the contact law at their measured force (held out it predicts A–E better): free {:.3} Hz, rigid limit {:.3} Hz, misfit {:.4} Hz, reference force {:.0} mN",
             c.free_hz,
             c.rigid_hz(),
-            c.model_sigma_hz
+            c.model_sigma_hz,
+            c.force_n * 1e3
         ),
         None => String::new(),
     };
-    format!("{}{law}; {q}; {air}", describe(&p.calibration))
+    format!("{}{law}; {q}; {air}; {cell}", describe(&p.calibration))
 }
 
 /// The profile a command reads with: the file given with `--profile`, else the simulated

@@ -29,7 +29,7 @@ pub const TEMPLATES: &[&str] = &[
     "store error={=str}",
     "settings method={=str} start_hz={=f32} stop_hz={=f32} step_hz={=f32} settle_s={=f32} integrate_s={=f32} drive_v={=f32}",
     "point tag={=u16} f_hz={=f32} g_s={=f32} b_s={=f32} sigma_s={=f32}",
-    "reading status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} e_repeat_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str}",
+    "reading status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} e_repeat_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str} force_n={=f32} force_sigma_n={=f32}",
     "air f_hz={=f32} q={=f32}",
     "reference e_kpa={=f32} f_hz={=f32} f_sigma_hz={=f32} n={=u16}",
     "calibration source={=str} a={=f32} b={=f32} c={=f32} min_kpa={=f32} max_kpa={=f32}",
@@ -37,7 +37,7 @@ pub const TEMPLATES: &[&str] = &[
     "rejected error={=str}",
     "stalled tag={=u16}",
     "overrun late={=u32} ring={=u32} dropped={=u32}",
-    "counters batches={=u32} late={=u32} ring={=u32} dropped={=u32} isr_mean={=u32} isr_max={=u32} unit={=str}",
+    "counters batches={=u32} late={=u32} ring={=u32} dropped={=u32} isr_mean={=u32} isr_max={=u32} unit={=str} load_cell_errors={=u32}",
     "status method={=str} calibration={=str} fallback={=bool} air={=bool} q_model={=bool} references={=u16} selftest={=str}",
     "help commands={=str} methods={=str} default={=str}",
     "exit ok={=bool}",
@@ -511,6 +511,10 @@ pub struct LoggedReading {
     pub points: u32,
     /// Method.
     pub method: String,
+    /// Contact force, N.
+    pub force_n: Option<f32>,
+    /// Its standard uncertainty, N.
+    pub force_sigma_n: Option<f32>,
     /// Index of its sweep, when points were logged.
     pub sweep: Option<usize>,
 }
@@ -565,6 +569,12 @@ impl LoggedReading {
             q: self.q,
             probe_time: Seconds(self.probe_time_s.unwrap_or(f32::NAN)),
             points: self.points.min(u16::MAX as u32) as u16,
+            force: self.force_n.map(|f| pzt_probe::loadcell::ContactForce {
+                mean: pzt_probe::units::Newtons(f),
+                sigma: pzt_probe::units::Newtons(self.force_sigma_n.unwrap_or(f32::NAN)),
+                change: pzt_probe::units::Newtons(f32::NAN),
+                samples: 0,
+            }),
         })
     }
 }
@@ -646,6 +656,8 @@ pub fn parse_log(text: &str) -> Session {
                     probe_time_s: m.f32("probe_time_s"),
                     points: m.uint("points").unwrap_or(0),
                     method: m.str("method").unwrap_or_default().to_owned(),
+                    force_n: m.f32("force_n"),
+                    force_sigma_n: m.f32("force_sigma_n"),
                     sweep,
                 });
             }

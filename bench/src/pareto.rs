@@ -306,10 +306,28 @@ pub fn crb_hz(scene: &Scene, drive_v: f64, t_s: f64) -> f64 {
     1.0 / (2.0 * PI * tau * (2.0 * (c / n0) * t_eff.max(1e-12)).sqrt())
 }
 
-/// The bound of [`crb_hz`] as a relative modulus error (%) through `cal`'s slope.
+/// The bound of [`crb_hz`] as a relative modulus error (%) through `cal`'s slope, with the load
+/// cell's own limit added in quadrature: a reading inverts at the force it measured, whose mean
+/// over `t_s` scatters by the cell's conversion noise over the square root of its conversions
+/// ([`force_floor_hz`]).
 pub fn crb_pct(cal: &PowerLaw, e: f64, noise: NoiseScene, drive_v: f64, t_s: f64) -> f64 {
     let scene = Scene::on_modulus_kpa(e).with_noise(noise);
-    100.0 * crb_hz(&scene, drive_v, t_s) / cal.slope(e) / e
+    let f = crb_hz(&scene, drive_v, t_s).hypot(force_floor_hz(&scene, t_s));
+    100.0 * f / cal.slope(e) / e
+}
+
+/// The resonance-equivalent (Hz) of the load cell's noise in a reading of `t_s` seconds on
+/// `scene`: `|∂f/∂F| σ_cell / sqrt(rate t_s)`, the slope from the scene's closed-form resonance
+/// at ±1 mN about its preload (0 without a load cell or its noise).
+pub fn force_floor_hz(scene: &Scene, t_s: f64) -> f64 {
+    let Some(cell) = scene.load_cell else {
+        return 0.0;
+    };
+    let conversions = (cell.rate_hz * t_s).max(1.0);
+    let f0 = scene.contact.preload_n;
+    let at = |df: f64| scene.with_preload_n(f0 + df).resonance_hz();
+    let slope = (at(1e-3) - at(-1e-3)) / 2e-3;
+    (slope * cell.noise_n / conversions.sqrt()).abs()
 }
 
 /// Time constant τ = Q/(π f0) of the scene at modulus `e`, ms.

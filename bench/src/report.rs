@@ -24,6 +24,8 @@ pub fn reading_json(r: &Reading) -> Value {
         "q_factor": opt(r.q),
         "probe_time_ms": r.probe_time.0 * 1e3,
         "points": r.points,
+        "contact_force_n": opt(r.force.map(|w| w.mean.0)),
+        "contact_force_sigma_n": opt(r.force.map(|w| w.sigma.0)),
     })
 }
 
@@ -44,6 +46,9 @@ pub fn reading_line(r: &Reading) -> String {
     }
     if let Some(q) = r.q {
         s += &format!("  Q = {q:.2}");
+    }
+    if let Some(w) = r.force {
+        s += &format!("  F = {:.2} ± {:.2} mN", w.mean.0 * 1e3, w.sigma.0 * 1e3);
     }
     s += &format!(
         "  probe time {:.2} s  points {}  [{}]",

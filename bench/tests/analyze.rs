@@ -8,6 +8,7 @@ use hal_sim::{phantoms, Scene};
 use probe_bench::capture::{self, CaptureError, DemodOptions, Layout, SweepShape};
 use probe_bench::cmd::analyze::{analysis_json, analyze, offline_method, Analysis};
 use probe_bench::gen;
+use pzt_probe::profile::NOMINAL_FORCE;
 use pzt_probe::{Failure, Method, Status};
 use std::path::PathBuf;
 
@@ -35,8 +36,14 @@ fn unit(method: Method) -> pzt_probe::profile::UnitProfile {
 }
 
 fn run(name: &str, method: Method) -> Analysis {
-    analyze(&read(name), method, &unit(method), &DemodOptions::default())
-        .unwrap_or_else(|e| panic!("{name}: {e}"))
+    analyze(
+        &read(name),
+        method,
+        &unit(method),
+        &DemodOptions::default(),
+        NOMINAL_FORCE,
+    )
+    .unwrap_or_else(|e| panic!("{name}: {e}"))
 }
 
 /// `run`, and the reading must be the failure `f` without a modulus.
@@ -210,7 +217,7 @@ fn out_of_band_capture_is_not_ok() {
     let pts = gen::closed_form(&scene, 236.0, 290.0, 1.0, 0.0, 0);
     let text = capture::write_admittance_csv(&[], &pts);
     for m in [Method::SweepG, Method::Paper] {
-        let a = analyze(&text, m, &unit(m), &DemodOptions::default()).unwrap();
+        let a = analyze(&text, m, &unit(m), &DemodOptions::default(), NOMINAL_FORCE).unwrap();
         assert_ne!(a.reading.status, Status::Ok, "{m:?}");
         assert!(a.reading.modulus.is_none());
     }
@@ -320,6 +327,7 @@ fn continuous_sweep_reads_the_resonance() {
             Method::SweepG,
             &unit(Method::SweepG),
             &DemodOptions::default(),
+            NOMINAL_FORCE,
         )
         .unwrap();
         assert_eq!(a.capture.shape, Some(SweepShape::Continuous));
@@ -825,7 +833,14 @@ fn heavy_c0_auto_is_within_twice_the_scipy_fit() {
         let f_scipy: f64 = row[2].parse().unwrap();
         assert_eq!(truth, c.f0, "{}", c.name);
         let text = std::fs::read_to_string(heavy_c0_path(c.name)).unwrap();
-        let a = analyze(&text, Method::Auto, &unit, &DemodOptions::default()).unwrap();
+        let a = analyze(
+            &text,
+            Method::Auto,
+            &unit,
+            &DemodOptions::default(),
+            NOMINAL_FORCE,
+        )
+        .unwrap();
         let r = a.reading;
         assert_eq!(r.method, Method::Fit, "{}", c.name);
         assert_eq!(r.status, Status::Ok, "{}", c.name);

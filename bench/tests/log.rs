@@ -195,12 +195,18 @@ fn qemu_log_reconstructs_the_firmwares_reading() {
         est.resonance.0
     );
     assert!((est.sigma.0 / r.f_sigma_hz.unwrap() - 1.0).abs() < 1e-3);
-    // And the image's calibration (its factory profile) maps it to the logged modulus.
-    let cal = pzt_probe::board::sim_factory::profile()
-        .expect("factory record")
-        .calibration;
-    let m = cal.invert(Hz(f), Hz(0.0)).unwrap();
-    assert!((m.value.0 / r.e_kpa.unwrap() - 1.0).abs() < 1e-4);
+    // And the image's calibration (its factory profile: its curve at the logged contact
+    // force) maps it to the logged modulus.
+    let unit = pzt_probe::board::sim_factory::profile().expect("factory record");
+    let force = r.to_reading().and_then(|x| x.force);
+    assert!(force.is_some(), "the reading logs its contact force");
+    let m = unit.invert(Hz(f), Hz(0.0), force.as_ref()).unwrap();
+    assert!(
+        (m.value.0 / r.e_kpa.unwrap() - 1.0).abs() < 1e-4,
+        "{} vs {:?}",
+        m.value.0,
+        r.e_kpa
+    );
 }
 
 #[test]
@@ -227,6 +233,8 @@ fn readings_sweeps_and_events_of_a_longer_log() {
             Value::F32(1.2),
             Value::Uint(n),
             Value::Str("sweep-g".into()),
+            Value::F32(0.030),
+            Value::F32(1e-5),
         ];
         format!("{t:.6} [INFO ] {}", render(TEMPLATES[7], &v).unwrap())
     };
@@ -286,7 +294,7 @@ fn cli_table_stdin_plot_and_errors() {
     let out = run_ok(bin().arg("log").arg(&log).arg("--plot").arg(&svg));
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
-        stdout.contains("227.966 ± 0.044") && stdout.contains("279.2 ± 1.8"),
+        stdout.contains("227.966 ± 0.044") && stdout.contains("280.2 ± 1.8"),
         "{stdout}"
     );
     assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));

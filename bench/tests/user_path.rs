@@ -129,3 +129,65 @@ fn the_firmware_in_qemu_agrees_with_the_host() {
         }
     }
 }
+
+/// The contact force (issue #13), through the main job's own path (the unit profile
+/// `probe-bench measure` makes, `board::sim::read` on the scene its options build): phantoms
+/// A–D pressed at 15–50 mN read `ok` within 0.5 % of the truth (measured worst 0.29 %, A at
+/// 15 mN; the issue asks 2 %), the truth within 3 reported σ, and the contact force reported
+/// within 1 % of the scene's (measured −0.36 % at 15 mN: the tare's drift; the issue asks 5 %).
+/// 5 mN is `too_light`, 100 mN `too_hard`.
+#[test]
+fn every_press_inside_the_force_window_reads_its_phantom() {
+    use hal_sim::{phantoms, NoiseScene, Scene};
+    let unit = probe_bench::unit::default_for(Method::Auto).expect("the simulated unit");
+    let settings = Method::Auto.default_settings();
+    for p in [phantoms::A, phantoms::B, phantoms::C, phantoms::D] {
+        let truth = p.modulus_kpa;
+        let read = |force: f64, seed: u64| {
+            let scene = Scene::on_phantom(&p)
+                .with_noise(NoiseScene::Bench)
+                .with_preload_n(force);
+            pzt_probe::board::sim::read(&scene, seed, Method::Auto, settings, &unit, |_| {})
+                .expect("a reading")
+        };
+        for force in [0.015, 0.020, 0.030, 0.040, 0.045, 0.050] {
+            for seed in 1..=2 {
+                let r = read(force, seed);
+                let at = format!("{} at {} mN, seed {seed}", p.name, force * 1e3);
+                assert_eq!(r.status, pzt_probe::Status::Ok, "{at}: {r:?}");
+                let e = r.modulus.expect("a modulus").0 as f64;
+                let s = r.modulus_sigma.expect("its sigma").0 as f64;
+                assert!((e / truth - 1.0).abs() <= 0.005, "{at}: {e} kPa");
+                assert!((e - truth).abs() <= 3.0 * s, "{at}: {e} ± {s} kPa");
+                let f = r.force.expect("the contact force").mean.0 as f64;
+                assert!((f / force - 1.0).abs() <= 0.01, "{at}: {f} N");
+            }
+        }
+        let refused = |force: f64, code: &str| {
+            let r = read(force, 1);
+            assert_eq!(r.status.code(), code, "{} at {force} N: {r:?}", p.name);
+            assert!(r.modulus.is_none());
+        };
+        refused(0.005, "too_light");
+        refused(0.100, "too_hard");
+    }
+}
+
+/// The same through the command line: B pressed at 15 mN (where the reading was 20 % off
+/// before the load cell) reads within 0.5 % and reports its force in the JSON.
+#[test]
+fn the_json_reports_the_contact_force() {
+    let r = measure(&["--phantom", "B", "--preload-n", "0.015"]);
+    assert_eq!(r["status"], "ok", "{r}");
+    let e = r["modulus_kpa"].as_f64().unwrap();
+    assert!((e / 279.0 - 1.0).abs() <= 0.005, "{e} kPa");
+    let f = r["contact_force_n"].as_f64().expect("contact_force_n");
+    let sf = r["contact_force_sigma_n"]
+        .as_f64()
+        .expect("contact_force_sigma_n");
+    assert!((f / 0.015 - 1.0).abs() <= 0.01, "{f} N");
+    assert!(sf > 0.0 && sf < 1e-3, "{sf} N");
+    let r = measure(&["--phantom", "B", "--preload-n", "0.1"]);
+    assert_eq!(r["status"], "too_hard", "{r}");
+    assert!(r["modulus_kpa"].is_null());
+}

@@ -5,7 +5,7 @@
 //! Failure codes are the firmware's snake_case codes (`no_contact`, `below_range`, ...), kept as
 //! strings here so that the simulator does not depend on the firmware crate.
 
-use crate::events::{Drift, Knocks, LiftOff};
+use crate::events::{Drift, ForceChange, Knocks, LiftOff};
 use crate::frontend::Mains;
 use crate::phantoms;
 use crate::scenes::{Fault, NoiseScene, Scene};
@@ -66,7 +66,7 @@ fn at(e: f64, noise: NoiseScene) -> Scene {
 }
 
 /// Number of scenes in the catalogue.
-pub const SCENES: usize = 24;
+pub const SCENES: usize = 27;
 
 /// Rate of the thermal drift scenes: the free resonance moves by 3 Hz in 10 s (about one reading
 /// of the paper method, 10.9 s).
@@ -117,7 +117,12 @@ pub fn catalogue(noise: NoiseScene) -> [Case; SCENES] {
     const RANGE_HIGH: &[&str] = &["above_range", "out_of_band"];
     // A much lossier tissue than the references is outside the calibrated contact condition.
     const OK_OR_WEAK: &[&str] = &["low_snr", "no_resonance", "bad_contact"];
-    const LIFT_OFF: &[&str] = &["contact_lost", "no_contact"];
+    const LIFT_OFF: &[&str] = &["contact_lost", "no_contact", "force_unstable", "too_light"];
+    // A press outside the force window, or one that changes during the reading: the load cell
+    // says so before the resonance is read as a modulus (a unit without one: the Q model).
+    const TOO_LIGHT: &[&str] = &["too_light", "no_contact", "bad_contact"];
+    const TOO_HARD: &[&str] = &["too_hard", "bad_contact"];
+    const FORCE_MOVES: &[&str] = &["force_unstable", "unstable", "contact_lost", "bad_contact"];
     // A tracker that keeps following a moving resonance says so.
     const DRIFTING: &[&str] = &["not_locked", "unstable"];
     // A second mode ringing with the first makes a ring-down beat as a tone or a knock does.
@@ -258,7 +263,42 @@ pub fn catalogue(noise: NoiseScene) -> [Case; SCENES] {
             what: "300 kPa pressed at 60 mN instead of 30 mN",
             scene: nominal.with_preload_n(0.060),
             truth_kpa: Some(NOMINAL_KPA),
-            accept: &["bad_contact"],
+            accept: TOO_HARD,
+        },
+        Case {
+            name: "touch-5mN",
+            what: "300 kPa touched at 5 mN, below the force window",
+            scene: nominal.with_preload_n(0.005),
+            truth_kpa: Some(NOMINAL_KPA),
+            accept: TOO_LIGHT,
+        },
+        Case {
+            name: "press-ramp",
+            what: "300 kPa, the press rising from 30 to 48 mN over 1 s from 50 ms",
+            scene: nominal.with_force_change(ForceChange {
+                at_s: 0.05,
+                ramp_s: 1.0,
+                to_fraction: 1.6,
+            }),
+            truth_kpa: Some(NOMINAL_KPA),
+            accept: FORCE_MOVES,
+        },
+        Case {
+            name: "slip-off-edge",
+            what: "300 kPa, the tip sliding down the phantom's edge at 0.1 s: 30 to 9 mN in 30 ms",
+            scene: nominal.with_force_change(ForceChange {
+                at_s: 0.1,
+                ramp_s: 0.03,
+                to_fraction: 0.3,
+            }),
+            truth_kpa: Some(NOMINAL_KPA),
+            accept: &[
+                "force_unstable",
+                "too_light",
+                "unstable",
+                "contact_lost",
+                "bad_contact",
+            ],
         },
         // A reading that ends before the lift-off is a valid reading; one that spans it must say
         // the probe is off the tissue (`contact_lost`, or `no_contact` when what it saw was
@@ -353,6 +393,7 @@ mod tests {
             assert!(c.truth_kpa.is_some() || !c.accept.is_empty(), "{}", c.name);
             let extra = match c.name {
                 "lift-off-0.4s" | "lift-off-2.5s" => Some(Layer::LiftOff),
+                "press-ramp" | "slip-off-edge" => Some(Layer::ForceChange),
                 "knocks" => Some(Layer::Knocks),
                 "drift-up" | "drift-down" => Some(Layer::Drift),
                 "second-mode" => Some(Layer::SecondMode),

@@ -42,6 +42,33 @@ impl LiftOff {
     }
 }
 
+/// The hand presses harder or lighter during the reading, the tip staying on the tissue: from
+/// `at_s` the preload moves linearly to `to_fraction` of its value over `ramp_s`, then stays
+/// (a press that creeps on, a tip that slides down a phantom's edge).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ForceChange {
+    /// Time since the reading started when the preload starts to change, s.
+    pub at_s: f64,
+    /// Duration of the change, s (0: a step).
+    pub ramp_s: f64,
+    /// The preload at the end, as a fraction of the scene's (positive).
+    pub to_fraction: f64,
+}
+
+impl ForceChange {
+    /// Fraction of the scene's preload at `t_s`.
+    pub fn preload_fraction(&self, t_s: f64) -> f64 {
+        let done = if t_s < self.at_s {
+            0.0
+        } else if self.ramp_s > 0.0 && t_s < self.at_s + self.ramp_s {
+            (t_s - self.at_s) / self.ramp_s
+        } else {
+            1.0
+        };
+        1.0 + (self.to_fraction.max(0.0) - 1.0) * done
+    }
+}
+
 /// Thermal drift of the probe's own (free) resonance: the modal stiffness `k1` changes linearly
 /// in time, so the free resonance moves by `rate_hz_s` per second from its nominal value at the
 /// start of the reading (the temperature of the calibration and of the air reference).
@@ -169,5 +196,14 @@ mod tests {
             ramp_s: 0.0,
         };
         assert_eq!(step.preload_fraction(1.0), None);
+        // A press from 1 to 1.6 of the preload between 0.1 and 1.1 s.
+        let press = ForceChange {
+            at_s: 0.1,
+            ramp_s: 1.0,
+            to_fraction: 1.6,
+        };
+        assert_eq!(press.preload_fraction(0.05), 1.0);
+        assert!((press.preload_fraction(0.6) - 1.3).abs() < 1e-12);
+        assert_eq!(press.preload_fraction(2.0), 1.6);
     }
 }

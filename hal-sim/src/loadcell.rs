@@ -113,6 +113,17 @@ pub struct Hx711Sim {
 }
 
 impl Hx711Sim {
+    /// A chip that has been converting for a while, on the instrument: its next conversion
+    /// falls due one conversion period after `t = 0` (no settling wait), its creep settled
+    /// at `load_n` (the force it carries from the start).
+    pub fn running(cell: LoadCell, seed: u64, load_n: f64) -> Self {
+        let mut c = Self::new(cell, seed);
+        c.next_conversion_s = 1.0 / cell.rate_hz;
+        c.load_n = load_n;
+        c.creep_n = cell.creep_fraction * load_n;
+        c
+    }
+
     /// The chip on `cell`, noise drawn from `seed`, powered and settling from `t = 0`.
     pub fn new(cell: LoadCell, seed: u64) -> Self {
         Self {
@@ -161,6 +172,11 @@ impl Hx711Sim {
             self.conversions += 1;
             self.next_conversion_s += 1.0 / self.cell.rate_hz;
         }
+    }
+
+    /// Follow `probe`: time is the probe's, the load its contact force now.
+    pub fn follow(&mut self, probe: &crate::SimProbe) {
+        self.advance(probe.time_s(), probe.contact_force_n());
     }
 
     /// Conversions made and conversions read out so far.

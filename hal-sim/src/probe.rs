@@ -3,6 +3,7 @@
 
 use crate::events::{Knock, KnockTrain, SCHEDULE_STEP_S};
 use crate::frontend::{AdcChannel, FrontEnd, StuckAdc, MAX_CODE, MID_CODE};
+use crate::loadcell::Hx711Sim;
 use crate::plant::{
     chain, chain_two_modes, Discrete, A1, CHAIN2_STATES, CHAIN_STATES, VELOCITY, Y_I, Y_V,
 };
@@ -82,6 +83,9 @@ impl Plant {
     }
 }
 
+/// Mixed into a probe's seed for its load cell's noise stream.
+const LOAD_CELL_STREAM: u64 = 0x10ad_ce11;
+
 /// The simulated probe hardware.
 #[derive(Clone, Debug)]
 pub struct SimProbe {
@@ -101,6 +105,8 @@ pub struct SimProbe {
     knocks: Option<KnockTrain>,
     /// Sample count of the next knock (`u64::MAX`: none).
     next_knock: u64,
+    /// The noise stream's seed (the load cell's is derived from it).
+    seed: u64,
 }
 
 impl SimProbe {
@@ -124,6 +130,7 @@ impl SimProbe {
             next_schedule: u64::MAX,
             knocks,
             next_knock: u64::MAX,
+            seed,
         };
         p.plan_schedule();
         p.plan_knock();
@@ -154,6 +161,23 @@ impl SimProbe {
     /// ADC), A.
     pub fn sense_current_a(&self) -> f64 {
         self.plant.x(Y_I)
+    }
+
+    /// The load cell beside this probe's resonator (`None`: the scene has none): an HX711 that
+    /// has been converting for a while, carrying the contact force of the moment, its noise a
+    /// stream of its own derived from the probe's seed. The board keeps it, advances it with
+    /// [`Hx711Sim::follow`] as the probe's time passes, and the firmware's driver reads it
+    /// through [`crate::loadcell::Dout`], [`crate::loadcell::Sck`] and
+    /// [`crate::loadcell::Delay`].
+    pub fn load_cell(&self) -> Option<Hx711Sim> {
+        self.base
+            .load_cell
+            .map(|c| Hx711Sim::running(c, self.seed ^ LOAD_CELL_STREAM, self.contact_force_n()))
+    }
+
+    /// The force the tip presses on the tissue now, N (the truth the load cell measures).
+    pub fn contact_force_n(&self) -> f64 {
+        self.scene.contact_force_n()
     }
 
     /// Change what is under the probe (lift-off, new tissue), keeping the dynamic state.

@@ -29,6 +29,8 @@ pub enum Layer {
     SecondMode,
     /// Lift-off during the reading (the contact fades out and is lost).
     LiftOff,
+    /// The contact force changes during the reading (the tip stays on the tissue).
+    ForceChange,
     /// Thermal drift of the probe's own resonance during the reading.
     Drift,
     /// Random mechanical and electrical knocks.
@@ -48,13 +50,14 @@ impl Layer {
             Layer::Mains => "mains",
             Layer::SecondMode => "second-mode",
             Layer::LiftOff => "lift-off",
+            Layer::ForceChange => "force-change",
             Layer::Drift => "drift",
             Layer::Knocks => "knocks",
         }
     }
 
     /// Number of layers (the size of the array [`Scene::layers`] fills).
-    pub const COUNT: usize = 11;
+    pub const COUNT: usize = 12;
 }
 
 /// Named front-end noise levels (white current noise density at the TIA input).
@@ -168,14 +171,19 @@ pub struct Scene {
     pub second_mode: Option<SecondMode>,
     /// Lift-off during the reading, or `None`.
     pub lift_off: Option<LiftOff>,
+    /// A change of the contact force during the reading, or `None`.
+    pub force_change: Option<crate::events::ForceChange>,
     /// Thermal drift of the free resonance during the reading, or `None`.
     pub drift: Option<Drift>,
     /// Random knocks, or `None`.
     pub knocks: Option<Knocks>,
+    /// The load cell beside the resonator (it carries the contact force), or `None`: a probe
+    /// without one.
+    pub load_cell: Option<crate::loadcell::LoadCell>,
 }
 
 impl Scene {
-    /// The probe in free air, quiet front end.
+    /// The probe in free air, quiet front end and load cell (no random noise).
     pub fn free_air() -> Self {
         Self {
             mech: SensorMech::default(),
@@ -187,8 +195,13 @@ impl Scene {
             stuck_adc: None,
             second_mode: None,
             lift_off: None,
+            force_change: None,
             drift: None,
             knocks: None,
+            load_cell: Some(crate::loadcell::LoadCell {
+                noise_n: 0.0,
+                ..crate::loadcell::LoadCell::default()
+            }),
         }
     }
     /// Pressed at 30 mN onto `tissue`.
@@ -206,9 +219,16 @@ impl Scene {
     pub fn on_phantom(p: &Phantom) -> Self {
         Self::on_tissue(p.tissue())
     }
-    /// With a named noise level.
+    /// With a named noise level: the front end's current noise, and the load cell's own
+    /// conversion noise (none in the quiet scene, the cell's data-sheet level in any other).
     pub fn with_noise(mut self, noise: NoiseScene) -> Self {
         self.front_end.current_noise_a_rthz = noise.density_a_rthz();
+        if let Some(c) = self.load_cell.as_mut() {
+            c.noise_n = match noise {
+                NoiseScene::Quiet => 0.0,
+                _ => crate::loadcell::LoadCell::default().noise_n,
+            };
+        }
         self
     }
     /// With mains interference.
@@ -231,6 +251,11 @@ impl Scene {
         self.lift_off = Some(lift_off);
         self
     }
+    /// With the contact force changing during the reading.
+    pub fn with_force_change(mut self, change: crate::events::ForceChange) -> Self {
+        self.force_change = Some(change);
+        self
+    }
     /// With the free resonance drifting during the reading.
     pub fn with_drift(mut self, drift: Drift) -> Self {
         self.drift = Some(drift);
@@ -245,7 +270,7 @@ impl Scene {
     /// True when the physics change during the reading (lift-off, drift); knocks change the
     /// state, not the physics.
     pub fn is_time_varying(&self) -> bool {
-        self.lift_off.is_some() || self.drift.is_some()
+        self.lift_off.is_some() || self.drift.is_some() || self.force_change.is_some()
     }
 
     /// The static physics at `t_s` seconds after the reading started: the drift applied to the
@@ -257,6 +282,9 @@ impl Scene {
         if let Some(d) = &self.drift {
             s.mech.free_resonance_hz += d.rate_hz_s * t_s;
         }
+        if let Some(c) = &self.force_change {
+            s.contact.preload_n *= c.preload_fraction(t_s);
+        }
         if let Some(l) = &self.lift_off {
             match l.preload_fraction(t_s) {
                 Some(f) => s.contact.preload_n *= f,
@@ -264,6 +292,16 @@ impl Scene {
             }
         }
         s
+    }
+
+    /// The force the tip presses on the tissue, N: the preload while there is tissue under it,
+    /// zero in free air (what the load cell carries; at `t` ask `at(t)`).
+    pub fn contact_force_n(&self) -> f64 {
+        if self.tissue.is_some() {
+            self.contact.preload_n.max(0.0)
+        } else {
+            0.0
+        }
     }
 
     /// The one-degree-of-freedom mechanics of this scene.
@@ -324,6 +362,9 @@ impl Scene {
         }
         if self.lift_off.is_some() {
             push(Layer::LiftOff);
+        }
+        if self.force_change.is_some() {
+            push(Layer::ForceChange);
         }
         if self.drift.is_some() {
             push(Layer::Drift);

@@ -89,6 +89,7 @@ mod harness {
     use hal_sim::{NoiseScene, Scene, SimProbe};
     use pzt_probe::engine::{PointPlan, PointRaw, SampleEngine};
     use pzt_probe::hal::FrontEndScale;
+    use pzt_probe::loadcell::{ForceLog, RawForce};
     use pzt_probe::measure::{Measurement, Procedure};
     use pzt_probe::profile::UnitProfile;
     use pzt_probe::reading::{block_on, drive, PointSource, BATCH};
@@ -226,6 +227,10 @@ mod harness {
         engine: SampleEngine,
         intake: Option<PointPlan>,
         cost: &'a RefCell<Cost>,
+        /// The board's load cell, read after every batch as the firmware's load-cell task
+        /// reads it (not counted: it is not the reading's work).
+        load_cell: Option<board::LoadCell>,
+        forces: ForceLog,
     }
 
     impl PointSource for CostSource<'_> {
@@ -248,6 +253,9 @@ mod harness {
             while used <= budget {
                 // The plant plays the DAC batch and fills the ADC batch: not counted.
                 let (adc, dac) = self.stream.capture();
+                if let Some(Ok(Some(c))) = self.load_cell.as_mut().map(|hx| hx.read()) {
+                    self.forces.push(self.engine.samples(), c);
+                }
                 compiler_fence(Ordering::SeqCst);
                 let t0 = board::stamp();
                 compiler_fence(Ordering::SeqCst);
@@ -268,6 +276,9 @@ mod harness {
         }
         async fn stop(&mut self) {
             self.engine.stop();
+        }
+        fn contact_force(&mut self, from: u64, to: u64) -> Option<RawForce> {
+            self.forces.over(from, to, self.scale().sample_rate.0)
         }
     }
 
@@ -293,10 +304,10 @@ mod harness {
                 .borrow_mut()
                 .call(Call::IsComplete, || self.m.is_complete())
         }
-        fn finish(&self, unit: &UnitProfile) -> Reading {
+        fn finish(&self, unit: &UnitProfile, force: Option<RawForce>) -> Reading {
             self.cost
                 .borrow_mut()
-                .call(Call::Finish, || self.m.finish(unit))
+                .call(Call::Finish, || self.m.finish(unit, force))
         }
     }
 
@@ -308,6 +319,8 @@ mod harness {
             engine: SampleEngine::new(),
             intake: None,
             cost,
+            load_cell: board::load_cell(),
+            forces: ForceLog::new(),
         };
         src.stream.prefill(&mut src.engine);
         let (method, settings) = (case.method, case.method.default_settings());

@@ -14,6 +14,7 @@
 //! | `measure` | 1 | the session ([`pzt_probe::session`]): profile, settings, the flash store; readings through [`pzt_probe::reading`] |
 //! | `command` | 1 | bytes → lines → [`pzt_probe::command::parse`] → requests to `measure` (QEMU: the boot command line's script or the built-in one, [`pzt_probe::board::sim_script`]) |
 //! | `report` | 1 | the only place that logs: one defmt line per event ([`pzt_probe::log`]) |
+//! | `load_cell` | 1 | every 5 ms: the HX711's conversion, if one is ready (80 a second), into the shared force log, stamped with the sample count |
 //!
 //! Data flow: `command` → requests → `measure` → plans (capacity 2: the double buffer of the
 //! interrupt's settings, validated before they reach it) → `sample` → points → `measure` →
@@ -98,6 +99,7 @@ mod app {
     use pzt_probe::counters::*;
     use pzt_probe::engine::{PointPlan, PointRaw, SampleEngine};
     use pzt_probe::hal::FrontEndScale;
+    use pzt_probe::loadcell::ForceLog;
     use pzt_probe::reading::{PointSource, BATCH};
     use pzt_probe::session::{Event, Io, Session};
     use pzt_probe::store::{Loaded, Saved, Store, StoreError};
@@ -117,6 +119,13 @@ mod app {
     const RX_CAP: usize = 64;
     /// The measurement task feeds the watchdog at least this often while it is alive (ms).
     const FEED_MS: u32 = 100;
+    /// After a `sim` line of the QEMU script, the command task waits this long (ms): two
+    /// batches, so that the sample interrupt has put the probe on its new scene.
+    #[cfg(feature = "qemu")]
+    const SCENE_SETTLE_MS: u32 = 10;
+    /// The load-cell task looks for a conversion this often (ms): above the HX711's 80 a
+    /// second, so each is read before the next overwrites it.
+    const LOAD_CELL_POLL_MS: u32 = 5;
 
     /// The QEMU image has no host link: it runs this script through the same line parser — a
     /// reading with the default method (auto), one with sweep-G over a sweep of its own, back to
@@ -124,8 +133,12 @@ mod app {
     #[cfg(feature = "qemu")]
     const SCRIPT: &str = "status;measure;method sweep-g;sweep 200 260 2 0.02 0.03 5;measure;method auto;staged 180 280 6 0.02 0.03 5 0.8 5 4;store;status";
 
+    /// The load cell's conversions, stamped with the engine's sample count: written by
+    /// `load_cell`, read by `measure` for each reading's window.
     #[shared]
-    struct Shared {}
+    struct Shared {
+        forces: &'static mut ForceLog,
+    }
 
     #[local]
     struct Local {
@@ -139,9 +152,12 @@ mod app {
         scale: FrontEndScale,
         uart: board::Uart,
         rx_tx: Sender<'static, u8, RX_CAP>,
+        load_cell: Option<board::LoadCell>,
     }
 
-    #[init]
+    // The force log lives in init's static (1.5 KiB), not on its stack: the shared resource is
+    // a reference to it.
+    #[init(local = [forces: ForceLog = ForceLog::new()])]
     fn init(mut cx: init::Context) -> (Shared, Local) {
         let parts = board::init(&mut cx.core);
         Mono::start(cx.core.SYST, board::SYSCLK_HZ);
@@ -184,12 +200,15 @@ mod app {
 
         measure::spawn(request_rx, plan_tx, point_rx, report_tx.clone(), done_tx).ok();
         report::spawn(report_rx).ok();
+        load_cell::spawn().ok();
 
         let (rx_tx, rx_rx) = make_channel!(u8, RX_CAP);
         command::spawn(request_tx, report_tx, done_rx, rx_rx).ok();
 
         (
-            Shared {},
+            Shared {
+                forces: cx.local.forces,
+            },
             Local {
                 stream,
                 engine,
@@ -201,6 +220,7 @@ mod app {
                 scale,
                 uart: parts.uart,
                 rx_tx,
+                load_cell: parts.load_cell,
             },
         )
     }
@@ -262,18 +282,48 @@ mod app {
         }
     }
 
+    /// The engine's sample count now: the time base of readings and of the force log.
+    fn now_sample() -> u64 {
+        BATCHES.load(Ordering::Relaxed) as u64 * BATCH as u64
+    }
+
+    /// The load-cell task: a conversion of the HX711, when one is ready, into the force log.
+    /// The read (25 clock pulses, about 50 µs) runs with interrupts masked: a pulse stretched
+    /// past 60 µs by the sample interrupt would power the chip down and lose the conversion
+    /// (`src/loadcell.rs`). Driver errors are counted, never logged from here.
+    #[task(priority = 1, shared = [forces], local = [load_cell])]
+    async fn load_cell(mut cx: load_cell::Context) {
+        let Some(hx) = cx.local.load_cell.as_mut() else {
+            return;
+        };
+        loop {
+            Mono::delay(LOAD_CELL_POLL_MS.millis()).await;
+            match cortex_m::interrupt::free(|_| hx.read()) {
+                Ok(Some(c)) => {
+                    let at = now_sample();
+                    cx.shared.forces.lock(|f| f.push(at, c));
+                }
+                Ok(None) => {}
+                Err(_) => {
+                    LOAD_CELL_ERRORS.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        }
+    }
+
     /// The measurement task's board: the interrupt's channels as the session's point source,
-    /// the flash store, the report channel as its event sink.
-    struct FwIo<'a> {
+    /// the force log, the flash store, the report channel as its event sink.
+    struct FwIo<'a, F> {
         plans: &'a mut Sender<'static, EngineCmd, PLAN_CAP>,
         points: &'a mut Receiver<'static, PointRaw, POINT_CAP>,
         reports: &'a mut Sender<'static, Report, REPORT_CAP>,
         watchdog: &'a mut board::Watchdog,
         store: &'a mut Store<board::StoreFlash>,
         scale: FrontEndScale,
+        forces: F,
     }
 
-    impl PointSource for FwIo<'_> {
+    impl<F: rtic::Mutex<T = &'static mut ForceLog>> PointSource for FwIo<'_, F> {
         fn scale(&self) -> FrontEndScale {
             self.scale
         }
@@ -282,7 +332,7 @@ mod app {
             2
         }
         fn now_sample(&self) -> u64 {
-            BATCHES.load(Ordering::Relaxed) as u64 * BATCH as u64
+            now_sample()
         }
         async fn load(&mut self, plan: PointPlan) -> bool {
             self.plans.send(Some(plan)).await.is_ok()
@@ -303,13 +353,17 @@ mod app {
         async fn stop(&mut self) {
             let _ = self.plans.send(None).await;
         }
+        fn contact_force(&mut self, from: u64, to: u64) -> Option<pzt_probe::loadcell::RawForce> {
+            let fs = self.scale.sample_rate.0;
+            self.forces.lock(|f| f.over(from, to, fs))
+        }
         async fn point(&mut self, tag: u16, point: &pzt_probe::sweep::SweepPoint) {
             let e = Event::Point { tag, point: *point };
             let _ = self.reports.send(Report::Event(e)).await;
         }
     }
 
-    impl Io for FwIo<'_> {
+    impl<F: rtic::Mutex<T = &'static mut ForceLog>> Io for FwIo<'_, F> {
         async fn emit(&mut self, e: Event) {
             // The report task only ends with the image; a closed channel is not an error here.
             let _ = self.reports.send(Report::Event(e)).await;
@@ -327,7 +381,7 @@ mod app {
 
     /// The measurement task: the session (src/session.rs) served one request at a time; it
     /// feeds the watchdog while alive.
-    #[task(priority = 1, local = [watchdog, store, scale])]
+    #[task(priority = 1, shared = [forces], local = [watchdog, store, scale])]
     async fn measure(
         cx: measure::Context,
         mut requests: Receiver<'static, Command, REQUEST_CAP>,
@@ -343,6 +397,7 @@ mod app {
             watchdog: cx.local.watchdog,
             store: cx.local.store,
             scale: *cx.local.scale,
+            forces: cx.shared.forces,
         };
         // Power-on: the profile, then the self-test (every reading refused while it fails).
         let mut session = Session::boot(&mut io).await;
@@ -396,7 +451,13 @@ mod app {
             let mut ok = done.recv().await.unwrap_or(false);
             for line in lines(script) {
                 match step(line, &mut sim, &scale) {
-                    Step::Sim => board::set_scene(sim.scene(), sim.seed),
+                    Step::Sim => {
+                        board::set_scene(sim.scene(), sim.seed);
+                        // The probe is on its new scene from the next batch: the next command's
+                        // reading starts after it (a hand presses, then asks), so its force
+                        // window does not straddle the change.
+                        Mono::delay(SCENE_SETTLE_MS.millis()).await;
+                    }
                     Step::Command(c) if requests.send(c).await.is_ok() => {
                         ok &= done.recv().await.unwrap_or(false);
                     }

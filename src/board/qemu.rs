@@ -23,10 +23,12 @@
 
 use crate::engine::SampleEngine;
 use crate::hal::{AdcFrame, FrontEndScale};
+use crate::loadcell::Hx711;
 use crate::runner::BATCH;
 use crate::units::{AdcCode, DacCode};
 use core::ptr::{addr_of, addr_of_mut, read_volatile, write_volatile};
 use hal_sim::flash::SimFlash;
+use hal_sim::loadcell::{ChipHandle, Delay, Dout, Hx711Sim, Sck};
 use hal_sim::{AdcPair, SimProbe};
 
 /// What RTIC needs of a device crate, for the interrupt lines this image uses.
@@ -185,6 +187,8 @@ pub struct Parts {
     pub flash: StoreFlash,
     /// Host link.
     pub uart: Uart,
+    /// The load cell (`None` when its pins cannot be driven).
+    pub load_cell: Option<LoadCell>,
 }
 
 /// Set the board up: the simulated probe on [`boot_state`]'s scene, and its flash as the
@@ -206,6 +210,7 @@ pub fn init(_core: &mut cortex_m::Peripherals) -> Parts {
         watchdog: Watchdog,
         flash,
         uart: Uart::new(),
+        load_cell: load_cell(),
     }
 }
 
@@ -275,8 +280,10 @@ pub struct Stream {
 }
 
 impl Stream {
-    /// A stream over `probe`, idle until [`start`](Self::start).
+    /// A stream over `probe`, idle until [`start`](Self::start); the probe's load cell, if its
+    /// scene has one, becomes the board's ([`LoadCell`]).
     pub fn new(probe: SimProbe) -> Self {
+        attach_load_cell(&probe);
         let scale = crate::board::sim::scale_of(probe.front_end());
         Self {
             probe,
@@ -328,6 +335,7 @@ impl Stream {
         if let Some((scene, seed)) = cortex_m::interrupt::free(|cs| SCENE_REQUEST.borrow(cs).take())
         {
             self.probe = SimProbe::new(scene, seed);
+            attach_load_cell(&self.probe);
         }
         let h = self.half & 1;
         self.half ^= 1;
@@ -337,6 +345,11 @@ impl Stream {
         }
         let mut pairs = [AdcPair::default(); BATCH];
         self.probe.exchange(&codes, &mut pairs);
+        cortex_m::interrupt::free(|cs| {
+            if let Some(c) = LOAD_CELL_CHIP.borrow(cs).borrow_mut().as_mut() {
+                c.follow(&self.probe);
+            }
+        });
         for (a, p) in self.adc[h].iter_mut().zip(pairs.iter()) {
             *a = AdcFrame {
                 current: AdcCode(p.current),
@@ -399,6 +412,43 @@ impl Uart {
             }
         }
     }
+}
+
+/// The simulated probe's load cell (its HX711), shared by the sample interrupt (which advances
+/// it with the probe's time and contact force, [`Stream::capture`]) and the load-cell task
+/// (which reads it through its pins, [`LoadCell`]).
+static LOAD_CELL_CHIP: cortex_m::interrupt::Mutex<core::cell::RefCell<Option<Hx711Sim>>> =
+    cortex_m::interrupt::Mutex::new(core::cell::RefCell::new(None));
+
+/// The load cell's chip as its pins and delay see it: every access in a critical section.
+#[derive(Clone, Copy)]
+pub struct Chip;
+
+impl ChipHandle for Chip {
+    fn with<R>(&self, f: impl FnOnce(&mut Hx711Sim) -> R) -> R {
+        cortex_m::interrupt::free(|cs| {
+            let mut chip = LOAD_CELL_CHIP.borrow(cs).borrow_mut();
+            match chip.as_mut() {
+                Some(c) => f(c),
+                // No load cell on this scene: a chip that never converts (DOUT stays high).
+                None => f(&mut Hx711Sim::new(hal_sim::loadcell::LoadCell::quiet(), 0)),
+            }
+        })
+    }
+}
+
+/// The load cell: the firmware's HX711 driver on the simulated chip's pins.
+pub type LoadCell = Hx711<Delay<Chip>, Dout<Chip>, Sck<Chip>>;
+
+/// The load cell's driver on the simulated chip's pins (`None` when they cannot be driven).
+pub fn load_cell() -> Option<LoadCell> {
+    Hx711::new(Delay(Chip), Dout(Chip), Sck(Chip)).ok()
+}
+
+/// The probe's load cell for `probe` (its chip follows the probe from now on).
+fn attach_load_cell(probe: &SimProbe) {
+    let chip = probe.load_cell();
+    cortex_m::interrupt::free(|cs| *LOAD_CELL_CHIP.borrow(cs).borrow_mut() = chip);
 }
 
 /// The watchdog stand-in (QEMU's AN386 has no independent watchdog modelled for this image):

@@ -1,24 +1,65 @@
 //! The simulated probe (`hal-sim`) behind the driver traits.
 
 use crate::hal::{AdcFrame, FrontEndScale, SampleStream, StreamError};
+use crate::loadcell::{ForceLog, ForceSource, Hx711, LoadCellError, RawForce};
 use crate::units::{AdcCode, DacCode, Hz};
+use core::cell::RefCell;
+use hal_sim::loadcell::{Delay, Dout, Hx711Sim, Sck};
 use hal_sim::{AdcPair, SimProbe};
 
 /// Largest batch the adapter takes in one call.
 pub const MAX_BATCH: usize = 256;
 
 /// A [`SampleStream`] backed by a [`SimProbe`]: the DAC batch plays and is captured in the same
-/// call (latency 0).
+/// call (latency 0). Its load cell (when the scene has one) is read after every batch by the
+/// firmware's own driver ([`Hx711`]) through the simulated chip's pins into a [`ForceLog`],
+/// stamped with the probe's sample count: the board's load-cell task, polled at the batch
+/// rate (200 Hz, above the chip's 80 conversions a second).
 #[derive(Clone, Debug)]
 pub struct SimBoard {
     /// The simulated hardware.
     pub probe: SimProbe,
+    /// The probe's load cell (its converter), when the scene has one.
+    pub load_cell: Option<RefCell<Hx711Sim>>,
+    /// The load cell's conversions read so far.
+    pub forces: ForceLog,
+    /// The first error the load-cell driver reported.
+    pub load_cell_error: Option<LoadCellError>,
 }
 
 impl SimBoard {
     /// Wrap a simulated probe.
     pub fn new(probe: SimProbe) -> Self {
-        Self { probe }
+        Self {
+            load_cell: probe.load_cell().map(RefCell::new),
+            probe,
+            forces: ForceLog::new(),
+            load_cell_error: None,
+        }
+    }
+
+    /// Read the load cell once, if the scene has one: a finished conversion goes to the log.
+    fn poll_load_cell(&mut self) {
+        let Some(chip) = &self.load_cell else {
+            return;
+        };
+        chip.borrow_mut().follow(&self.probe);
+        let at = self.probe.samples();
+        let got = Hx711::new(Delay(chip), Dout(chip), Sck(chip)).and_then(|mut hx| hx.read());
+        match got {
+            Ok(Some(c)) => self.forces.push(at, c),
+            Ok(None) => {}
+            Err(e) => {
+                self.load_cell_error.get_or_insert(e);
+            }
+        }
+    }
+}
+
+impl ForceSource for SimBoard {
+    fn contact_force(&self, from: u64, to: u64) -> Option<RawForce> {
+        self.forces
+            .over(from, to, self.probe.front_end().sample_rate_hz as f32)
     }
 }
 
@@ -50,6 +91,7 @@ impl SampleStream for SimBoard {
                 monitor: AdcCode(p.monitor),
             };
         }
+        self.poll_load_cell();
         Ok(())
     }
 
@@ -64,12 +106,13 @@ impl SampleStream for SimBoard {
 
 use crate::calibration::FitError;
 use crate::engine::SampleEngine;
+use crate::loadcell::LoadCellCal;
 use crate::measure::{Method, Procedure, Reading, Settings};
 use crate::profile::{air_from_points, calibrate, AirReference, Reference, UnitProfile};
 use crate::runner::{run_reading, RunError};
 use crate::status::Failure;
 use crate::sweep::{SettingsError, SweepPoint};
-use crate::units::KPa;
+use crate::units::{KPa, Newtons};
 use hal_sim::{NoiseScene, Phantom, Scene};
 
 /// Why a simulated reading could not run.
@@ -112,16 +155,25 @@ pub const CALIBRATION_PHANTOMS: [Phantom; 5] = [
     hal_sim::phantoms::E,
 ];
 
-/// Most repeats per phantom [`calibrate_unit`] takes.
+/// Most repeats per phantom [`calibrate_unit_with`] takes.
 pub const MAX_REPEATS: usize = 25;
+
+/// The contact forces the unit is calibrated at, N: the paper's 30 mN first, then the ends of
+/// the force window's calibrated part (15 and 50 mN). A phantom's readings take them in turn.
+pub const CALIBRATION_FORCES: [f64; 3] = [0.030, 0.015, 0.050];
+
+/// The known weight the load cell's sensitivity is taken with: 10 g (98.1 mN), within the
+/// 100 g cell's range and above the force window.
+pub const CALIBRATION_WEIGHT_N: f64 = 0.010 * 9.806_65;
 
 /// Noise stream of the simulated unit's air reference.
 pub const AIR_SEED: u64 = 77;
 
-/// The whole profile of the simulated unit, as a user of the real instrument makes it: the air
-/// reference in free air ([`air_reference`]), then [`calibrate_unit_with`] on A–E × `repeats`
-/// with `method` and `settings` under `noise`. `on_reading` is called after each reference
-/// reading (for progress).
+/// The whole profile of the simulated unit, as a user of the real instrument makes it: the
+/// load cell's sensitivity from a known weight ([`weigh`]), the air reference in free air with
+/// the cell's tare ([`air_reference`]), then [`calibrate_unit_with`] on A–E × `repeats` with
+/// `method` and `settings` under `noise`. `on_reading` is called after each reference reading
+/// (for progress).
 pub fn unit_profile_with(
     method: Method,
     settings: impl Into<Settings>,
@@ -131,8 +183,21 @@ pub fn unit_profile_with(
     on_reading: impl FnMut(),
 ) -> Result<UnitProfile, SimError> {
     let hardware = Scene::free_air();
-    let air = air_reference(&hardware, noise, AIR_SEED)?;
-    calibrate_unit_with(air, method, settings, noise, repeats, seed0, on_reading)
+    let (air, tare) = air_reference(&hardware, noise, AIR_SEED)?;
+    let load_cell = match tare {
+        Some(zero) => {
+            let loaded = weigh(&hardware, CALIBRATION_WEIGHT_N, AIR_SEED + 1)
+                .ok_or(SimError::Air(Failure::NoForce))?;
+            Some(
+                LoadCellCal::weighed(&zero, &loaded, Newtons(CALIBRATION_WEIGHT_N as f32))
+                    .ok_or(SimError::Air(Failure::NoForce))?,
+            )
+        }
+        None => None,
+    };
+    calibrate_unit_with(
+        air, load_cell, method, settings, noise, repeats, seed0, on_reading,
+    )
 }
 
 /// [`unit_profile_with`] without progress.
@@ -146,13 +211,16 @@ pub fn unit_profile(
     unit_profile_with(method, settings, noise, repeats, seed0, || {})
 }
 
-/// Calibrate the simulated unit whose air reference is `air` as the paper calibrated its
-/// prototype: `repeats` readings of each of the phantoms A–E with `method` and `settings`
-/// under `noise`, noise seeds `seed0, seed0 + 1, ...`, and the one calibration procedure
-/// ([`calibrate`]: robust weighted fit of `f = a + b E^c`, and the Q(E) contact condition).
-/// Readings without a resonance or Q are left out.
+/// Calibrate the simulated unit whose air reference is `air` (and load cell `load_cell`) as
+/// the paper calibrated its prototype, and at several contact forces: `repeats` readings of
+/// each of the phantoms A–E with `method` and `settings` under `noise`, pressed in turn at
+/// each of [`CALIBRATION_FORCES`] (with a load cell; at 30 mN without one), noise seeds
+/// `seed0, seed0 + 1, ...`, and the one calibration procedure ([`calibrate`]). Readings
+/// without a resonance or Q are left out.
+#[allow(clippy::too_many_arguments)] // the unit and the procedure, each named
 pub fn calibrate_unit_with(
     air: AirReference,
+    load_cell: Option<LoadCellCal>,
     method: Method,
     settings: impl Into<Settings>,
     noise: NoiseScene,
@@ -167,17 +235,23 @@ pub fn calibrate_unit_with(
         resonance_hz: 0.0,
         sigma_hz: 0.0,
         q: 0.0,
+        force_n: 0.0,
     }; 5 * MAX_REPEATS];
     let mut n = 0;
     // Before the fit the unit has its air reference and no calibration: the pipeline refuses
-    // the modulus (`uncalibrated`) and keeps the resonance and Q the fit needs.
+    // the modulus (`uncalibrated`) and keeps the resonance, Q and force the fit needs.
     let uncalibrated = UnitProfile {
         air: Some(air),
+        load_cell,
         ..UnitProfile::fallback()
     };
     for (pi, p) in CALIBRATION_PHANTOMS.iter().enumerate() {
-        let scene = Scene::on_phantom(p).with_noise(noise);
         for r in 0..repeats {
+            let force = match load_cell {
+                Some(_) => CALIBRATION_FORCES[r % CALIBRATION_FORCES.len()],
+                None => CALIBRATION_FORCES[0],
+            };
+            let scene = Scene::on_phantom(p).with_noise(noise).with_preload_n(force);
             let seed = seed0 + (pi * MAX_REPEATS + r) as u64;
             let reading = read(&scene, seed, method, settings, &uncalibrated, |_| {})?;
             // The reference moduli (paper 003's A–E) are exact in f32.
@@ -195,18 +269,21 @@ pub fn calibrate_unit_with(
         q_model: Some(c.q_model),
         air: Some(air),
         contact: c.contact,
+        load_cell,
+        force_window: crate::loadcell::ForceWindow::DEFAULT,
     })
 }
 
 /// The air reference of a simulated unit, taken as the firmware's `air` command takes it: a
 /// sweep of the free probe ([`crate::profile::AIR_SWEEP`], 9.2 s of probe time) and
-/// [`air_from_points`]. `hardware` is the unit (its PZT and front end; its tissue is ignored),
-/// `seed` the noise stream.
+/// [`air_from_points`], with the load cell's counts over the sweep (its tare; `None` without a
+/// load cell). `hardware` is the unit (its PZT, front end and load cell; its tissue is
+/// ignored), `seed` the noise stream.
 pub fn air_reference(
     hardware: &Scene,
     noise: NoiseScene,
     seed: u64,
-) -> Result<AirReference, SimError> {
+) -> Result<(AirReference, Option<RawForce>), SimError> {
     let scene = Scene {
         tissue: None,
         ..*hardware
@@ -216,20 +293,47 @@ pub fn air_reference(
 }
 
 /// The air-reference procedure on `scene` as it is (a user may take it touching something:
-/// [`air_from_points`] then refuses it).
-pub fn air_reference_on(scene: &Scene, seed: u64) -> Result<AirReference, SimError> {
+/// [`air_from_points`] then refuses it), with the load cell's counts over it.
+pub fn air_reference_on(
+    scene: &Scene,
+    seed: u64,
+) -> Result<(AirReference, Option<RawForce>), SimError> {
     let mut points: heapless::Vec<SweepPoint, 64> = heapless::Vec::new();
-    read(
-        scene,
-        seed,
+    let mut board = SimBoard::new(SimProbe::new(*scene, seed));
+    let mut engine = SampleEngine::new();
+    let settings: Settings = (&crate::profile::AIR_SWEEP).into();
+    run_reading(
+        &mut board,
+        &mut engine,
         Method::SweepG,
-        &crate::profile::AIR_SWEEP,
+        &settings,
         &UnitProfile::fallback(),
         |p| {
             let _ = points.push(*p);
         },
-    )?;
-    air_from_points(&points).map_err(SimError::Air)
+    )
+    .map_err(SimError::Run)?;
+    let air = air_from_points(&points).map_err(SimError::Air)?;
+    Ok((air, board.contact_force(0, board.probe.samples())))
+}
+
+/// The load cell's counts with `weight_n` newtons resting on the tip of the unit `hardware`
+/// (a weight on a steel stud: the tissue rigid), the drive off, over 0.5 s: the factory's
+/// sensitivity step ([`LoadCellCal::weighed`]). `None` without a load cell.
+pub fn weigh(hardware: &Scene, weight_n: f64, seed: u64) -> Option<RawForce> {
+    let scene = Scene {
+        tissue: Some(hal_sim::Tissue::with_modulus_kpa(2.0e8)),
+        ..*hardware
+    }
+    .with_preload_n(weight_n);
+    let mut board = SimBoard::new(SimProbe::new(scene, seed));
+    let dac = [DacCode::MID; crate::reading::BATCH];
+    let mut adc = [AdcFrame::default(); crate::reading::BATCH];
+    let n = (0.5 * scene.front_end.sample_rate_hz) as usize / crate::reading::BATCH;
+    for _ in 0..n {
+        board.exchange(&dac, &mut adc).ok()?;
+    }
+    board.contact_force(0, board.probe.samples())
 }
 
 #[cfg(test)]

@@ -43,7 +43,8 @@
 //! [`stream_faults`] and stops TIM6, so readings stall rather than run on without drive.
 //!
 //! Pins: PA0 sense current (TIA output), PA1 drive monitor, PA4 DAC out to the drive amplifier,
-//! PA3 LPUART1 RX (AF12) from the ST-LINK virtual COM port.
+//! PA3 LPUART1 RX (AF12) from the ST-LINK virtual COM port, PB4 (Arduino D5) the load cell's
+//! HX711 `DOUT` (input, pull-up), PB5 (D4) its `PD_SCK` (push-pull output).
 
 use crate::engine::SampleEngine;
 use crate::hal::{AdcFrame, FrontEndScale};
@@ -907,7 +908,29 @@ pub struct Parts {
     pub flash: StoreFlash,
     /// Host link.
     pub uart: Uart,
+    /// The load cell.
+    pub load_cell: Option<LoadCell>,
 }
+
+/// Microsecond delays by counting core cycles (`cortex_m::asm::delay`, at least the time asked
+/// for): the HX711's clock pulses. embassy's `Delay` needs its time driver, which this RTIC
+/// image does not run, and cortex-m's takes SysTick, which the monotonic owns.
+pub struct CycleDelay;
+
+impl embedded_hal::delay::DelayNs for CycleDelay {
+    fn delay_ns(&mut self, ns: u32) {
+        let cycles = (ns as u64 * SYSCLK_HZ as u64).div_ceil(1_000_000_000);
+        cortex_m::asm::delay(cycles.min(u32::MAX as u64) as u32);
+    }
+}
+
+/// The load cell: the firmware's HX711 driver on PB4 (`DOUT`) and PB5 (`PD_SCK`), embassy's
+/// GPIO drivers through embedded-hal 1.0.
+pub type LoadCell = crate::loadcell::Hx711<
+    CycleDelay,
+    embassy_stm32::gpio::Input<'static>,
+    embassy_stm32::gpio::Output<'static>,
+>;
 
 /// Set the board up: cycle counter; 170 MHz from the 24 MHz HSE crystal through the PLL
 /// (HSI16 if the crystal does not start), range 1 boost; the converters; UART; watchdog
@@ -1026,7 +1049,21 @@ pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
         }
     };
 
+    // The load cell's pins: DOUT with a pull-up (the HX711 drives it; a missing chip reads
+    // "not ready"), PD_SCK low (the chip converts).
+    let load_cell = crate::loadcell::Hx711::new(
+        CycleDelay,
+        embassy_stm32::gpio::Input::new(p.PB4, embassy_stm32::gpio::Pull::Up),
+        embassy_stm32::gpio::Output::new(
+            p.PB5,
+            embassy_stm32::gpio::Level::Low,
+            embassy_stm32::gpio::Speed::Low,
+        ),
+    )
+    .ok();
+
     Parts {
+        load_cell,
         stream: Stream {
             hw,
             frames: [AdcFrame::default(); BATCH],

@@ -11,7 +11,7 @@ use pzt_probe::estimate::Estimate;
 use pzt_probe::measure::Reading;
 use pzt_probe::profile::UnitProfile;
 use pzt_probe::sweep::SweepPoint;
-use pzt_probe::{Failure, Method, Seconds, Status};
+use pzt_probe::{Failure, Method, Newtons, Seconds, Status};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
@@ -50,6 +50,10 @@ pub struct AnalyzeArgs {
     /// Time-domain continuous sweeps: whole drive cycles per demodulation window.
     #[arg(long, default_value_t = capture::DEFAULT_CYCLES_PER_WINDOW)]
     pub cycles_per_window: usize,
+    /// The contact force the capture was taken at, mN (a capture carries no load-cell data:
+    /// the force set by a balance and a stage, as paper 003 set its 30 mN).
+    #[arg(long, default_value_t = 30.0)]
+    pub force_mn: f64,
 }
 
 /// The method called `name`, if it can analyse recorded frequency points
@@ -124,13 +128,15 @@ pub struct Analysis {
 }
 
 /// Analyse capture text with `method` (`auto`: [`auto_method`] for the capture's layout, then
-/// sweep-G when the fit fails as the firmware's `auto` retries) and the unit's profile `unit`.
-/// The reading names the estimator that made it.
+/// sweep-G when the fit fails as the firmware's `auto` retries) and the unit's profile `unit`,
+/// taken at the contact force `force` (set by other means than the unit's load cell). The
+/// reading names the estimator that made it.
 pub fn analyze(
     text: &str,
     method: Method,
     unit: &UnitProfile,
     opts: &DemodOptions,
+    force: Newtons,
 ) -> Result<Analysis, CaptureError> {
     let capture = capture::parse(text, min_points(method), opts)?;
     let pts = &capture.points;
@@ -150,7 +156,8 @@ pub fn analyze(
         _ => Seconds(0.0),
     };
     let n = pts.len().min(u16::MAX as usize) as u16;
-    let reading = pzt_probe::pipeline::conclude(method, est, unit, probe_time, n);
+    let force = unit.load_cell.map(|c| c.stated(force));
+    let reading = pzt_probe::pipeline::conclude(method, est, unit, probe_time, n, force);
     Ok(Analysis { capture, reading })
 }
 
@@ -215,8 +222,17 @@ pub fn run(a: AnalyzeArgs) -> Result<()> {
     };
     let text = std::fs::read_to_string(&a.file)
         .with_context(|| format!("cannot read {}", a.file.display()))?;
-    let an = analyze(&text, method, &unit, &opts)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", a.file.display()))?;
+    if !(a.force_mn.is_finite() && a.force_mn > 0.0 && a.force_mn <= 1000.0) {
+        bail!("--force-mn {} is out of range (0 to 1000 mN)", a.force_mn);
+    }
+    let an = analyze(
+        &text,
+        method,
+        &unit,
+        &opts,
+        Newtons((a.force_mn * 1e-3) as f32),
+    )
+    .map_err(|e| anyhow::anyhow!("{}: {e}", a.file.display()))?;
     let c = &an.capture;
     if a.json {
         println!("{}", analysis_json(&an, &a.file.display().to_string()));
