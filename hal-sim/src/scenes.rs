@@ -2,7 +2,7 @@
 //! is. "Model no more than a scene needs": each scene reports the layers it uses.
 
 use crate::complex::C64;
-use crate::events::{Drift, Knocks, LiftOff};
+use crate::events::{Drift, Knocks, LiftOff, Step};
 use crate::frontend::{FrontEnd, Mains};
 use crate::phantoms::Phantom;
 use crate::pzt::Pzt;
@@ -33,6 +33,8 @@ pub enum Layer {
     Drift,
     /// Random mechanical and electrical knocks.
     Knocks,
+    /// A step in what is under the probe (other tissue, or a new contact after a lift-off).
+    Step,
 }
 
 impl Layer {
@@ -50,11 +52,12 @@ impl Layer {
             Layer::LiftOff => "lift-off",
             Layer::Drift => "drift",
             Layer::Knocks => "knocks",
+            Layer::Step => "step",
         }
     }
 
     /// Number of layers (the size of the array [`Scene::layers`] fills).
-    pub const COUNT: usize = 11;
+    pub const COUNT: usize = 12;
 }
 
 /// Named front-end noise levels (white current noise density at the TIA input).
@@ -172,6 +175,8 @@ pub struct Scene {
     pub drift: Option<Drift>,
     /// Random knocks, or `None`.
     pub knocks: Option<Knocks>,
+    /// A step in what is under the probe, or `None`.
+    pub step: Option<Step>,
 }
 
 impl Scene {
@@ -189,6 +194,7 @@ impl Scene {
             lift_off: None,
             drift: None,
             knocks: None,
+            step: None,
         }
     }
     /// Pressed at 30 mN onto `tissue`.
@@ -236,20 +242,26 @@ impl Scene {
         self.drift = Some(drift);
         self
     }
+    /// With a step in what is under the probe.
+    pub fn with_step(mut self, step: Step) -> Self {
+        self.step = Some(step);
+        self
+    }
     /// With random knocks.
     pub fn with_knocks(mut self, knocks: Knocks) -> Self {
         self.knocks = Some(knocks);
         self
     }
 
-    /// True when the physics change during the reading (lift-off, drift); knocks change the
-    /// state, not the physics.
+    /// True when the physics change during the reading (lift-off, drift, a step); knocks
+    /// change the state, not the physics.
     pub fn is_time_varying(&self) -> bool {
-        self.lift_off.is_some() || self.drift.is_some()
+        self.lift_off.is_some() || self.drift.is_some() || self.step.is_some()
     }
 
     /// The static physics at `t_s` seconds after the reading started: the drift applied to the
-    /// free resonance, the lift-off to the preload (and the tissue gone once the tip is off).
+    /// free resonance, the lift-off to the preload (and the tissue gone once the tip is off),
+    /// and from a step on its tissue at the scene's preload (an earlier lift-off is over).
     /// The time-varying parts stay in the result, so `at(t).at(t2)` is not meaningful; ask the
     /// scene at `t = 0` for anything else.
     pub fn at(&self, t_s: f64) -> Scene {
@@ -262,6 +274,10 @@ impl Scene {
                 Some(f) => s.contact.preload_n *= f,
                 None => s.tissue = None,
             }
+        }
+        if let Some(st) = self.step.filter(|st| t_s >= st.at_s) {
+            s.tissue = st.tissue;
+            s.contact.preload_n = self.contact.preload_n;
         }
         s
     }
@@ -330,6 +346,9 @@ impl Scene {
         }
         if self.knocks.is_some() {
             push(Layer::Knocks);
+        }
+        if self.step.is_some() {
+            push(Layer::Step);
         }
         n
     }
