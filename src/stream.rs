@@ -80,14 +80,15 @@ pub struct TrackerConfig {
 
 impl TrackerConfig {
     /// Band 170–290 Hz seeded at 230 Hz, acquisition 20 + 20 ms seed and 100 ms hold, segments
-    /// of 45 ms (22 readings/s) with the drive half a half-linewidth off the resonance
-    /// alternately, Q prior ±50 %, re-acquire after two unlocked segments, 5 V.
+    /// of 35 ms (four windows of two cycles: 25 readings/s at 240 Hz) with the drive a quarter
+    /// half-linewidth off the resonance alternately, Q prior ±50 %, re-acquire after three
+    /// unlocked segments in a row, 5 V.
     pub const DEFAULT: Self = Self {
         band_start: Hz(170.0),
         band_stop: Hz(290.0),
         seed: Hz(230.0),
         acquire_hold: Seconds(0.1),
-        segment: Seconds(0.045),
+        segment: Seconds(0.035),
         dither: 0.25,
         q_prior: 0.5,
         lost_after: 3,

@@ -223,6 +223,13 @@ mod tests {
                     tissue: Some(phantoms::C.tissue())
                 })
         );
+        // A lift-off after a step lifts the probe off the new tissue.
+        let slide_then_lift = s.with_lift_off(LiftOff {
+            at_s: 0.8,
+            ramp_s: 0.0,
+        });
+        assert_eq!(slide_then_lift.at(0.7).tissue, Some(d));
+        assert_eq!(slide_then_lift.at(0.8).tissue, None);
         let mut p = SimProbe::new(s, 1);
         p.idle(6000);
         let want = Scene::on_phantom(&phantoms::D).resonance_hz();

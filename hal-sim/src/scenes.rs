@@ -261,7 +261,8 @@ impl Scene {
 
     /// The static physics at `t_s` seconds after the reading started: the drift applied to the
     /// free resonance, the lift-off to the preload (and the tissue gone once the tip is off),
-    /// and from a step on its tissue at the scene's preload (an earlier lift-off is over).
+    /// and from a step on its tissue at the scene's preload (a lift-off that started before
+    /// the step is over; one that starts after it lifts the probe off the new tissue).
     /// The time-varying parts stay in the result, so `at(t).at(t2)` is not meaningful; ask the
     /// scene at `t = 0` for anything else.
     pub fn at(&self, t_s: f64) -> Scene {
@@ -269,15 +270,19 @@ impl Scene {
         if let Some(d) = &self.drift {
             s.mech.free_resonance_hz += d.rate_hz_s * t_s;
         }
-        if let Some(l) = &self.lift_off {
+        let stepped = self.step.filter(|st| t_s >= st.at_s);
+        if let Some(st) = stepped {
+            s.tissue = st.tissue;
+        }
+        // A lift-off applies unless a step came after it started (a new contact).
+        if let Some(l) = self
+            .lift_off
+            .filter(|l| stepped.is_none_or(|st| l.at_s > st.at_s))
+        {
             match l.preload_fraction(t_s) {
                 Some(f) => s.contact.preload_n *= f,
                 None => s.tissue = None,
             }
-        }
-        if let Some(st) = self.step.filter(|st| t_s >= st.at_s) {
-            s.tissue = st.tissue;
-            s.contact.preload_n = self.contact.preload_n;
         }
         s
     }

@@ -62,28 +62,34 @@ pub struct StreamArgs {
     pub plot: Option<PathBuf>,
 }
 
-/// What the scene's truth is at a time: the modulus under the probe, or none (lifted off).
-#[derive(Clone, Copy, Debug)]
+/// What the scene's truth is at a time: the modulus under the probe, or none (lifted off): the
+/// starting tissue's, then each event's from its time on.
+#[derive(Clone, Debug, Default)]
 pub struct Truth {
     start_kpa: Option<f64>,
-    step: Option<(f64, f64)>,
-    lift_s: Option<f64>,
-    touch_s: Option<f64>,
+    /// (time, modulus from then on), in time order.
+    events: Vec<(f64, Option<f64>)>,
+    /// When the tip leaves the tissue.
+    pub lift_s: Option<f64>,
+    /// When the probe is put down again.
+    pub touch_s: Option<f64>,
+    /// When the stiffness steps.
+    pub step_s: Option<f64>,
 }
 
 impl Truth {
     /// The modulus under the probe at `t_s` (None: no tissue, or none known).
     pub fn at(&self, t_s: f64) -> Option<f64> {
-        if self.touch_s.is_some_and(|t| t_s >= t) {
-            return self.start_kpa;
-        }
-        if self.lift_s.is_some_and(|l| t_s >= l) {
-            return None;
-        }
-        match self.step {
-            Some((at, e)) if t_s >= at => Some(e),
-            _ => self.start_kpa,
-        }
+        self.events
+            .iter()
+            .rev()
+            .find(|(t, _)| t_s >= *t)
+            .map_or(self.start_kpa, |(_, e)| *e)
+    }
+
+    fn push(&mut self, t: f64, e: Option<f64>) {
+        self.events.push((t, e));
+        self.events.sort_by(|a, b| a.0.total_cmp(&b.0));
     }
 }
 
@@ -96,9 +102,7 @@ pub fn run(a: StreamArgs) -> Result<()> {
     }
     let mut truth = Truth {
         start_kpa: target.modulus_kpa(),
-        step: None,
-        lift_s: None,
-        touch_s: None,
+        ..Truth::default()
     };
     match (&a.step_to, a.step_at_s) {
         (Some(p), Some(at)) => {
@@ -108,7 +112,8 @@ pub fn run(a: StreamArgs) -> Result<()> {
                 at_s: at,
                 tissue: Some(ph.tissue()),
             });
-            truth.step = Some((at, ph.modulus_kpa));
+            truth.push(at, Some(ph.modulus_kpa));
+            truth.step_s = Some(at);
         }
         (None, None) => {}
         _ => bail!("--step-to and --step-at-s go together"),
@@ -123,7 +128,13 @@ pub fn run(a: StreamArgs) -> Result<()> {
             ramp_s: a.lift_off_ramp_s,
         });
         // The tip leaves the tissue at the end of the ramp.
+        if truth.step_s.is_some_and(|s| s >= l) {
+            bail!(
+                "--step-at-s after --lift-off-at-s: use --touch-at-s to put the probe down again"
+            );
+        }
         truth.lift_s = Some(l + a.lift_off_ramp_s);
+        truth.push(l + a.lift_off_ramp_s, None);
     }
     if let Some(t) = a.touch_at_s {
         check_time(t, "--touch-at-s")?;
@@ -135,6 +146,7 @@ pub fn run(a: StreamArgs) -> Result<()> {
             tissue: scene.tissue,
         });
         truth.touch_s = Some(t);
+        truth.push(t, target.modulus_kpa());
     }
     let config = TrackerConfig {
         segment: Seconds(a.segment_s as f32),
@@ -214,10 +226,7 @@ pub fn run(a: StreamArgs) -> Result<()> {
                     .map_or("— (none after it)".to_owned(), |t| format!("{t:.3} s"))
             );
         }
-        for (label, at) in [
-            ("step", truth.step.map(|(t, _)| t)),
-            ("new contact", truth.touch_s),
-        ] {
+        for (label, at) in [("step", truth.step_s), ("new contact", truth.touch_s)] {
             if let Some(at) = at {
                 println!(
                     "  {label} at {at:.3} s: within 3 % of the truth from {}",
@@ -316,8 +325,17 @@ pub fn summarize(readings: &[StreamReading], truth: &Truth, settle_s: f64) -> Su
 /// The time after `at` from which every reading until the next event is ok and within `tol`
 /// of the truth (None: never).
 pub fn settled_after(readings: &[StreamReading], truth: &Truth, at: f64, tol: f64) -> Option<f64> {
+    let next = truth
+        .events
+        .iter()
+        .map(|e| e.0)
+        .find(|t| *t > at)
+        .unwrap_or(f64::INFINITY);
     let mut from = None;
-    for r in readings.iter().filter(|r| r.t_s.0 as f64 >= at) {
+    for r in readings
+        .iter()
+        .filter(|r| (at..next).contains(&(r.t_s.0 as f64)))
+    {
         let t = r.t_s.0 as f64;
         let good = match (truth.at(t), r.reading.modulus, r.reading.status) {
             (Some(x), Some(e), Status::Ok) => (e.0 as f64 / x - 1.0).abs() <= tol,
@@ -404,14 +422,16 @@ where
             .iter()
             .filter_map(|r| truth.at(r.t_s.0 as f64).map(|x| (r.t_s.0 as f64, x)))
             .collect();
+        // A line between consecutive readings under the same tissue.
         c.draw_series(
             steps
-                .iter()
-                .map(|&(t, x)| Circle::new((t, x), 1, tcol.filled())),
+                .windows(2)
+                .filter(|w| w[0].1 == w[1].1)
+                .map(|w| PathElement::new(vec![w[0], w[1]], tcol.stroke_width(2))),
         )
         .map_err(|e| anyhow::anyhow!("{e:?}"))?
         .label("truth")
-        .legend(move |(x, y)| Circle::new((x, y), 3, tcol.filled()));
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], tcol.stroke_width(2)));
         c.draw_series(
             pts.iter().map(|&(t, e, s)| {
                 PathElement::new(vec![(t, e - s), (t, e + s)], col.stroke_width(1))
