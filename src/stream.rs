@@ -487,3 +487,115 @@ pub async fn run<S: PointSource>(
     src.stop().await;
     tracker.seq
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dsp::lockin::LockInSums;
+    use crate::profile::AirReference;
+    use crate::units::{Farads, Siemens};
+
+    fn unit() -> UnitProfile {
+        UnitProfile {
+            air: Some(AirReference {
+                free_resonance: Hz(232.3),
+                free_q: 40.0,
+                static_capacitance: Farads(210e-12),
+                static_conductance: Siemens(1e-9),
+            }),
+            ..UnitProfile::fallback()
+        }
+    }
+
+    #[test]
+    fn knobs_out_of_range_are_refused() {
+        let scale = FrontEndScale::PROBE;
+        let d = TrackerConfig::DEFAULT;
+        assert!(d.validate(&scale, &unit()).is_ok());
+        for bad in [
+            TrackerConfig {
+                segment: Seconds(f32::NAN),
+                ..d
+            },
+            TrackerConfig {
+                segment: Seconds(0.02),
+                ..d
+            },
+            TrackerConfig { dither: 2.5, ..d },
+            TrackerConfig { q_prior: 0.0, ..d },
+            TrackerConfig { lost_after: 0, ..d },
+            TrackerConfig {
+                acquire_hold: Seconds(0.05),
+                ..d
+            },
+            TrackerConfig {
+                drive: Volts(1e3),
+                ..d
+            },
+        ] {
+            assert!(bad.validate(&scale, &unit()).is_err(), "{bad:?}");
+        }
+    }
+
+    /// Arbitrary demodulator sums (a small xorshift generator): whatever the windows hold, the
+    /// tracker never panics, asks for a plan after every reading, and numbers its readings
+    /// from 0 without gaps, each concluded (a failure or a reading with a resonance).
+    #[test]
+    fn arbitrary_windows_never_panic_and_readings_have_no_gaps() {
+        let scale = FrontEndScale::PROBE;
+        let unit = unit();
+        let mut t = TrackerConfig::DEFAULT.validate(&scale, &unit).unwrap();
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let mut sample = 0u64;
+        let mut expect = 0u32;
+        for _ in 0..400 {
+            let plan = t.next_plan().expect("a plan after every reading or plan");
+            for w in 0..plan.windows.max(1) {
+                let mut r = || (next() as i64) >> (next() % 64);
+                let ch = |r: &mut dyn FnMut() -> i64| ChannelSums {
+                    xc: r(),
+                    xs: r(),
+                    x: r(),
+                    xx: r().abs(),
+                };
+                let sums = LockInSums {
+                    current: ch(&mut r),
+                    monitor: ch(&mut r),
+                    reference: ReferenceSums {
+                        cc: r(),
+                        ss: r(),
+                        cs: r(),
+                        c: r(),
+                        s: r(),
+                        n: (next() % 400) as u32,
+                    },
+                    current_rail_hits: (next() % 3 == 0) as u32,
+                    monitor_rail_hits: 0,
+                };
+                sample += 100;
+                let raw = PointRaw {
+                    plan,
+                    sums,
+                    end_sample: sample,
+                    window: w,
+                };
+                if let Some(r) = t.accept(&raw, &scale, &unit) {
+                    assert_eq!(r.seq, expect);
+                    expect += 1;
+                    assert!(r.t_s.0 >= 0.0);
+                    assert!(r.reading.status != Status::Ok || r.reading.modulus.is_some());
+                    break;
+                }
+            }
+        }
+        assert_eq!(t.emitted(), expect);
+        std::eprintln!("{expect} readings");
+        assert!(expect >= 100, "{expect} readings of 400 plans");
+    }
+}
