@@ -65,7 +65,9 @@ pub struct TrackerConfig {
     pub seed: Hz,
     /// The acquisition's hold in all (first half on the seed, second on its estimate).
     pub acquire_hold: Seconds,
-    /// Length of one tracking segment: one reading each (25–1000 ms).
+    /// Length of one tracking segment: one reading each (25–1000 ms). A segment is at least
+    /// four windows of two cycles (hold's fit needs four windows; an engine window must
+    /// outlast a 5 ms batch), 34 ms at 238 Hz: shorter settings get that.
     pub segment: Seconds,
     /// Offset of the drive from the estimate, alternately above and below, in half-linewidths
     /// `f0/(2Q)` (0–2).
@@ -143,8 +145,6 @@ impl TrackerConfig {
         let hold = acquisition.validate(scale)?;
         let amplitude = amplitude_codes(self.drive, scale)?;
         let fs = scale.sample_rate.0 as f64;
-        // The shortest segment must hold four windows of two cycles at the band's top (the
-        // engine's windows must each outlast a batch: 2 cycles at 290 Hz are 6.9 ms).
         Ok(Tracker {
             cfg: *self,
             fs,
