@@ -38,6 +38,7 @@ pub mod session;
 pub mod stack;
 pub mod status;
 pub mod store;
+pub mod stream;
 pub mod sweep;
 pub mod units;
 

@@ -44,6 +44,10 @@ enum Cmd {
     /// The firmware's power-on self-test of the analog chain on the simulated probe, with a
     /// fault if asked (`--fault open|short|dac-stuck|adc-rail`); a failed test exits non-zero.
     Selftest(cmd::selftest::SelftestArgs),
+    /// Continuous reading: one fast acquisition, then the resonance followed without stopping
+    /// the drive, a numbered, time-stamped reading per segment (with a step in stiffness, a
+    /// lift-off and a new contact if asked).
+    Stream(cmd::stream::StreamArgs),
     /// Read the firmware's decoded defmt log: the readings as a table, the sweeps and the
     /// reading history as a plot.
     Log(cmd::log::LogArgs),
@@ -68,6 +72,7 @@ fn main() -> ExitCode {
         Cmd::GenerateCaptures(a) => cmd::generate::run(a),
         Cmd::Scan(a) => cmd::scan::run(a),
         Cmd::Log(a) => cmd::log::run(a),
+        Cmd::Stream(a) => cmd::stream::run(a),
         Cmd::Selftest(a) => cmd::selftest::run(a),
     };
     match r {

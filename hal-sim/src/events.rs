@@ -1,5 +1,6 @@
-//! What changes while a reading runs: lift-off, thermal drift of the probe's own resonance, and
-//! knocks.
+//! What changes while a reading runs: lift-off, a step in what is under the probe (a slide onto
+//! other tissue, or a new contact after a lift-off), thermal drift of the probe's own resonance,
+//! and knocks.
 //!
 //! A scene's static physics ([`crate::Scene`]) holds between events; a time-varying scene names
 //! how it changes, and [`crate::Scene::at`] gives the static physics at any time since the
@@ -67,6 +68,20 @@ impl ForceChange {
         };
         1.0 + (self.to_fraction.max(0.0) - 1.0) * done
     }
+}
+
+/// What is under the probe changes at once: the tip slides onto other tissue, or it is put down
+/// again after a lift-off (at the scene's preload).
+///
+/// From `at_s` on the scene's tissue is `tissue` (`None`: free air) and any earlier lift-off is
+/// over: the physics are piecewise constant, the dynamic state carries over (the simulated
+/// probe re-discretises its plant exactly at the step).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Step {
+    /// Time since the reading started of the step, s.
+    pub at_s: f64,
+    /// What is under the tip from then on.
+    pub tissue: Option<crate::tissue::Tissue>,
 }
 
 /// Thermal drift of the probe's own (free) resonance: the modal stiffness `k1` changes linearly
@@ -205,5 +220,56 @@ mod tests {
         assert_eq!(press.preload_fraction(0.05), 1.0);
         assert!((press.preload_fraction(0.6) - 1.3).abs() < 1e-12);
         assert_eq!(press.preload_fraction(2.0), 1.6);
+    }
+
+    /// A step puts other tissue under the probe at its time, ends a lift-off (a new contact at
+    /// the scene's preload), and the simulated probe follows it: its physics after the step are
+    /// those of a scene on the new tissue.
+    #[test]
+    fn step_changes_the_tissue_and_ends_a_lift_off() {
+        use crate::{phantoms, Scene, SimProbe};
+        let d = phantoms::D.tissue();
+        let s = Scene::on_phantom(&phantoms::B).with_step(Step {
+            at_s: 0.5,
+            tissue: Some(d),
+        });
+        assert_eq!(s.at(0.499).tissue, Some(phantoms::B.tissue()));
+        assert_eq!(s.at(0.5).tissue, Some(d));
+        let back = Scene::on_phantom(&phantoms::C)
+            .with_lift_off(LiftOff {
+                at_s: 0.2,
+                ramp_s: 0.1,
+            })
+            .with_step(Step {
+                at_s: 0.6,
+                tissue: Some(phantoms::C.tissue()),
+            });
+        assert!((back.at(0.25).contact.preload_n - 0.015).abs() < 1e-12);
+        assert_eq!(back.at(0.4).tissue, None);
+        assert_eq!(
+            back.at(0.6),
+            Scene::on_phantom(&phantoms::C)
+                .at(0.0)
+                .with_lift_off(LiftOff {
+                    at_s: 0.2,
+                    ramp_s: 0.1
+                })
+                .with_step(Step {
+                    at_s: 0.6,
+                    tissue: Some(phantoms::C.tissue())
+                })
+        );
+        // A lift-off after a step lifts the probe off the new tissue.
+        let slide_then_lift = s.with_lift_off(LiftOff {
+            at_s: 0.8,
+            ramp_s: 0.0,
+        });
+        assert_eq!(slide_then_lift.at(0.7).tissue, Some(d));
+        assert_eq!(slide_then_lift.at(0.8).tissue, None);
+        let mut p = SimProbe::new(s, 1);
+        p.idle(6000);
+        let want = Scene::on_phantom(&phantoms::D).resonance_hz();
+        assert!((p.scene().resonance_hz() - want).abs() < 1e-9);
+        assert!(p.scene().resonance_hz() > Scene::on_phantom(&phantoms::B).resonance_hz() + 1.0);
     }
 }

@@ -42,7 +42,7 @@ pub mod scenes;
 pub mod tissue;
 
 pub use complex::C64;
-pub use events::{Drift, ForceChange, Knocks, LiftOff};
+pub use events::{Drift, ForceChange, Knocks, LiftOff, Step};
 pub use frontend::{AdcChannel, FrontEnd, Mains, StuckAdc};
 pub use phantoms::Phantom;
 pub use probe::{AdcPair, SimProbe};

@@ -2,7 +2,7 @@
 //! is. "Model no more than a scene needs": each scene reports the layers it uses.
 
 use crate::complex::C64;
-use crate::events::{Drift, Knocks, LiftOff};
+use crate::events::{Drift, Knocks, LiftOff, Step};
 use crate::frontend::{FrontEnd, Mains};
 use crate::phantoms::Phantom;
 use crate::pzt::Pzt;
@@ -35,6 +35,8 @@ pub enum Layer {
     Drift,
     /// Random mechanical and electrical knocks.
     Knocks,
+    /// A step in what is under the probe (other tissue, or a new contact after a lift-off).
+    Step,
 }
 
 impl Layer {
@@ -53,11 +55,12 @@ impl Layer {
             Layer::ForceChange => "force-change",
             Layer::Drift => "drift",
             Layer::Knocks => "knocks",
+            Layer::Step => "step",
         }
     }
 
     /// Number of layers (the size of the array [`Scene::layers`] fills).
-    pub const COUNT: usize = 12;
+    pub const COUNT: usize = 13;
 }
 
 /// Named front-end noise levels (white current noise density at the TIA input).
@@ -180,6 +183,8 @@ pub struct Scene {
     /// The load cell beside the resonator (it carries the contact force), or `None`: a probe
     /// without one.
     pub load_cell: Option<crate::loadcell::LoadCell>,
+    /// A step in what is under the probe, or `None`.
+    pub step: Option<Step>,
 }
 
 impl Scene {
@@ -202,6 +207,7 @@ impl Scene {
                 noise_n: 0.0,
                 ..crate::loadcell::LoadCell::default()
             }),
+            step: None,
         }
     }
     /// Pressed at 30 mN onto `tissue`.
@@ -261,20 +267,30 @@ impl Scene {
         self.drift = Some(drift);
         self
     }
+    /// With a step in what is under the probe.
+    pub fn with_step(mut self, step: Step) -> Self {
+        self.step = Some(step);
+        self
+    }
     /// With random knocks.
     pub fn with_knocks(mut self, knocks: Knocks) -> Self {
         self.knocks = Some(knocks);
         self
     }
 
-    /// True when the physics change during the reading (lift-off, drift); knocks change the
-    /// state, not the physics.
+    /// True when the physics change during the reading (lift-off, drift, a step); knocks
+    /// change the state, not the physics.
     pub fn is_time_varying(&self) -> bool {
-        self.lift_off.is_some() || self.drift.is_some() || self.force_change.is_some()
+        self.lift_off.is_some()
+            || self.drift.is_some()
+            || self.force_change.is_some()
+            || self.step.is_some()
     }
 
     /// The static physics at `t_s` seconds after the reading started: the drift applied to the
-    /// free resonance, the lift-off to the preload (and the tissue gone once the tip is off).
+    /// free resonance, the lift-off to the preload (and the tissue gone once the tip is off),
+    /// and from a step on its tissue at the scene's preload (a lift-off that started before
+    /// the step is over; one that starts after it lifts the probe off the new tissue).
     /// The time-varying parts stay in the result, so `at(t).at(t2)` is not meaningful; ask the
     /// scene at `t = 0` for anything else.
     pub fn at(&self, t_s: f64) -> Scene {
@@ -285,7 +301,15 @@ impl Scene {
         if let Some(c) = &self.force_change {
             s.contact.preload_n *= c.preload_fraction(t_s);
         }
-        if let Some(l) = &self.lift_off {
+        let stepped = self.step.filter(|st| t_s >= st.at_s);
+        if let Some(st) = stepped {
+            s.tissue = st.tissue;
+        }
+        // A lift-off applies unless a step came after it started (a new contact).
+        if let Some(l) = self
+            .lift_off
+            .filter(|l| stepped.is_none_or(|st| l.at_s > st.at_s))
+        {
             match l.preload_fraction(t_s) {
                 Some(f) => s.contact.preload_n *= f,
                 None => s.tissue = None,
@@ -371,6 +395,9 @@ impl Scene {
         }
         if self.knocks.is_some() {
             push(Layer::Knocks);
+        }
+        if self.step.is_some() {
+            push(Layer::Step);
         }
         n
     }

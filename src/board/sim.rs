@@ -146,6 +146,30 @@ pub fn read(
     run_reading(&mut board, &mut engine, method, &settings, unit, on_point).map_err(SimError::Run)
 }
 
+/// A continuous stream on `scene` (noise stream `seed`) with the tracker `config`, concluded
+/// with `unit`: every reading to `on_reading` until the probe time passes `seconds` (the
+/// reading that passes it is the last). Returns the readings taken.
+pub fn stream(
+    scene: &Scene,
+    seed: u64,
+    config: &crate::stream::TrackerConfig,
+    unit: &UnitProfile,
+    seconds: f64,
+    mut on_reading: impl FnMut(&crate::stream::StreamReading),
+) -> Result<u32, SimError> {
+    let mut board = SimBoard::new(SimProbe::new(*scene, seed));
+    let mut engine = SampleEngine::new();
+    let mut tracker = config
+        .validate(&board.scale(), unit)
+        .map_err(SimError::Settings)?;
+    let mut src = crate::reading::SyncSource::new(&mut board, &mut engine);
+    let n = crate::reading::block_on(crate::stream::run(&mut src, &mut tracker, unit, |r| {
+        on_reading(r);
+        (r.t_s.0 as f64) < seconds
+    }));
+    Ok(n)
+}
+
 /// The reference phantoms a unit is calibrated on (paper 003 samples A–E).
 pub const CALIBRATION_PHANTOMS: [Phantom; 5] = [
     hal_sim::phantoms::A,

@@ -171,7 +171,7 @@ impl Default for HoldSettings {
 }
 
 /// Add one window's monitor and reference sums to a segment's (saturating: never overflows).
-fn add_sums(acc: &mut (ChannelSums, ReferenceSums), m: &ChannelSums, r: &ReferenceSums) {
+pub(crate) fn add_sums(acc: &mut (ChannelSums, ReferenceSums), m: &ChannelSums, r: &ReferenceSums) {
     let (a, b) = acc;
     a.xc = a.xc.saturating_add(m.xc);
     a.xs = a.xs.saturating_add(m.xs);

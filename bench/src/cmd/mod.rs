@@ -10,6 +10,7 @@ pub mod physics;
 pub mod scan;
 pub mod selftest;
 pub mod stability;
+pub mod stream;
 
 use anyhow::{Context, Result};
 use clap::Args;

@@ -1,0 +1,493 @@
+//! `probe-bench stream`: continuous reading on the simulated probe (the core's tracker,
+//! `pzt_probe::stream`), with a step in stiffness, a lift-off and a new contact on the way.
+
+use crate::report;
+use crate::scene::{layer_names, noise_name, parse_noise, SceneArgs};
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use hal_sim::{phantoms, LiftOff, Step};
+use plotters::prelude::*;
+use pzt_probe::board::sim as simboard;
+use pzt_probe::stream::{StreamReading, TrackerConfig, METHOD};
+use pzt_probe::{Seconds, Status};
+use serde_json::json;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+#[derive(Args)]
+pub struct StreamArgs {
+    /// What the probe is on, and the preload.
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// Probe time to stream for, s.
+    #[arg(long, default_value_t = 3.0)]
+    pub seconds: f64,
+    /// Slide onto this phantom (A–E, ...) at `--step-at-s`.
+    #[arg(long)]
+    pub step_to: Option<String>,
+    /// Time of the step in stiffness, s.
+    #[arg(long)]
+    pub step_at_s: Option<f64>,
+    /// Lift the probe off the tissue at this time, s.
+    #[arg(long)]
+    pub lift_off_at_s: Option<f64>,
+    /// Time the preload takes to fall to zero at the lift-off, s (0: the tip leaves at once).
+    #[arg(long, default_value_t = 0.0)]
+    pub lift_off_ramp_s: f64,
+    /// Put the probe down again on the same tissue at this time, s (after `--lift-off-at-s`).
+    #[arg(long)]
+    pub touch_at_s: Option<f64>,
+    /// Length of one tracking segment (one reading each), s.
+    #[arg(long, default_value_t = TrackerConfig::DEFAULT.segment.0 as f64)]
+    pub segment_s: f64,
+    /// Offset of the drive from the resonance, alternately above and below, in
+    /// half-linewidths f0/(2Q) (0: on the resonance).
+    #[arg(long, default_value_t = TrackerConfig::DEFAULT.dither as f64)]
+    pub dither: f64,
+    /// Relative standard uncertainty of the previous segment's Q as the next fit's prior.
+    #[arg(long, default_value_t = TrackerConfig::DEFAULT.q_prior as f64)]
+    pub q_prior: f64,
+    /// Front-end noise: `quiet`, `paper`, `bench`, or a current-noise density in A/sqrt(Hz).
+    #[arg(long, default_value = "bench")]
+    pub noise: String,
+    /// Seed of the simulated noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// One JSON object per reading on stdout (seq, t_s, status, resonance_hz, modulus_kpa,
+    /// modulus_sigma_kpa, locked, ...), nothing else.
+    #[arg(long)]
+    pub json: bool,
+    /// Write a plot of modulus and lock against time (SVG, or PNG by extension).
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+}
+
+/// What the scene's truth is at a time: the modulus under the probe, or none (lifted off): the
+/// starting tissue's, then each event's from its time on.
+#[derive(Clone, Debug, Default)]
+pub struct Truth {
+    start_kpa: Option<f64>,
+    /// (time, modulus from then on), in time order.
+    events: Vec<(f64, Option<f64>)>,
+    /// When the tip leaves the tissue.
+    pub lift_s: Option<f64>,
+    /// When the probe is put down again.
+    pub touch_s: Option<f64>,
+    /// When the stiffness steps.
+    pub step_s: Option<f64>,
+}
+
+impl Truth {
+    /// The modulus under the probe at `t_s` (None: no tissue, or none known).
+    pub fn at(&self, t_s: f64) -> Option<f64> {
+        self.events
+            .iter()
+            .rev()
+            .find(|(t, _)| t_s >= *t)
+            .map_or(self.start_kpa, |(_, e)| *e)
+    }
+
+    fn push(&mut self, t: f64, e: Option<f64>) {
+        self.events.push((t, e));
+        self.events.sort_by(|a, b| a.0.total_cmp(&b.0));
+    }
+}
+
+/// Run the subcommand.
+pub fn run(a: StreamArgs) -> Result<()> {
+    let noise = parse_noise(&a.noise)?;
+    let (target, mut scene) = a.scene.scene(noise, false)?;
+    if !(a.seconds > 0.0 && a.seconds <= 600.0) {
+        bail!("--seconds must be in (0, 600]");
+    }
+    let mut truth = Truth {
+        start_kpa: target.modulus_kpa(),
+        ..Truth::default()
+    };
+    match (&a.step_to, a.step_at_s) {
+        (Some(p), Some(at)) => {
+            let ph = phantoms::by_name(p).with_context(|| format!("unknown phantom `{p}`"))?;
+            check_time(at, "--step-at-s")?;
+            scene = scene.with_step(Step {
+                at_s: at,
+                tissue: Some(ph.tissue()),
+            });
+            truth.push(at, Some(ph.modulus_kpa));
+            truth.step_s = Some(at);
+        }
+        (None, None) => {}
+        _ => bail!("--step-to and --step-at-s go together"),
+    }
+    if let Some(l) = a.lift_off_at_s {
+        check_time(l, "--lift-off-at-s")?;
+        if !(a.lift_off_ramp_s >= 0.0 && a.lift_off_ramp_s <= 1.0) {
+            bail!("--lift-off-ramp-s must be in [0, 1]");
+        }
+        scene = scene.with_lift_off(LiftOff {
+            at_s: l,
+            ramp_s: a.lift_off_ramp_s,
+        });
+        // The tip leaves the tissue at the end of the ramp.
+        if truth.step_s.is_some_and(|s| s >= l) {
+            bail!(
+                "--step-at-s after --lift-off-at-s: use --touch-at-s to put the probe down again"
+            );
+        }
+        truth.lift_s = Some(l + a.lift_off_ramp_s);
+        truth.push(l + a.lift_off_ramp_s, None);
+    }
+    if let Some(t) = a.touch_at_s {
+        check_time(t, "--touch-at-s")?;
+        if a.step_to.is_some() || !a.lift_off_at_s.is_some_and(|l| t > l + a.lift_off_ramp_s) {
+            bail!("--touch-at-s needs an earlier --lift-off-at-s (and no --step-to)");
+        }
+        scene = scene.with_step(Step {
+            at_s: t,
+            tissue: scene.tissue,
+        });
+        truth.touch_s = Some(t);
+        truth.push(t, target.modulus_kpa());
+    }
+    let config = TrackerConfig {
+        segment: Seconds(a.segment_s as f32),
+        dither: a.dither as f32,
+        q_prior: a.q_prior as f32,
+        ..TrackerConfig::DEFAULT
+    };
+    let unit = crate::unit::default_for(METHOD)?;
+    if !a.json {
+        println!(
+            "probe-bench stream: simulated probe on {}",
+            target.describe()
+        );
+        println!(
+            "  preload {:.0} mN, noise {}, layers: {}",
+            a.scene.preload_n * 1e3,
+            noise_name(noise),
+            layer_names(&scene)
+        );
+        println!(
+            "  tracker: segments of {:.0} ms, drive ±{} half-linewidths off the resonance; unit profile of the simulated unit ({} calibration)",
+            a.segment_s * 1e3,
+            a.dither,
+            METHOD.name()
+        );
+    }
+    let mut readings: Vec<StreamReading> = Vec::new();
+    let stdout = std::io::stdout();
+    let mut out = stdout.lock();
+    let mut last_progress = -1.0f64;
+    let mut write_err = None;
+    simboard::stream(&scene, a.seed, &config, &unit, a.seconds, |r| {
+        if a.json {
+            if let Err(e) = writeln!(out, "{}", stream_json(r)) {
+                write_err.get_or_insert(e);
+            }
+        } else if r.t_s.0 as f64 - last_progress >= 0.1 {
+            last_progress = r.t_s.0 as f64;
+            eprint!(
+                "\r  t {:6.2} s  seq {:5}  {:12} {:>10}  {}",
+                r.t_s.0,
+                r.seq,
+                r.reading.status.code(),
+                r.reading
+                    .modulus
+                    .map_or("—".to_owned(), |e| format!("{:.1} kPa", e.0)),
+                if r.locked { "locked" } else { "unlocked" }
+            );
+        }
+        readings.push(*r);
+    })
+    .map_err(|e| anyhow::anyhow!("the stream failed: {e:?}"))?;
+    if let Some(e) = write_err {
+        return Err(e.into());
+    }
+    let s = summarize(&readings, &truth, 0.5);
+    if !a.json {
+        eprintln!();
+        println!(
+            "  {} readings in {:.2} s of probe time, {} dropped (gaps in seq)",
+            readings.len(),
+            readings.last().map_or(0.0, |r| r.t_s.0),
+            s.dropped
+        );
+        println!(
+            "  after 0.5 s: {:.1} ok readings/s; {} of {} with a truth ok, RMS error {}",
+            s.ok_per_s,
+            s.ok_with_truth,
+            s.with_truth,
+            s.rms_rel
+                .map_or("—".to_owned(), |e| format!("{:.3} %", 100.0 * e))
+        );
+        if let Some(l) = truth.lift_s {
+            println!(
+                "  lift-off at {l:.3} s: last ok reading at {}",
+                s.last_ok_after_lift
+                    .map_or("— (none after it)".to_owned(), |t| format!("{t:.3} s"))
+            );
+        }
+        for (label, at) in [("step", truth.step_s), ("new contact", truth.touch_s)] {
+            if let Some(at) = at {
+                println!(
+                    "  {label} at {at:.3} s: within 3 % of the truth from {}",
+                    settled_after(&readings, &truth, at, 0.03).map_or(
+                        "— (never)".to_owned(),
+                        |t| format!("{t:.3} s ({:.0} ms after)", (t - at) * 1e3)
+                    )
+                );
+            }
+        }
+    }
+    if let Some(path) = &a.plot {
+        plot(path, &target.describe(), &readings, &truth)?;
+        if !a.json {
+            println!("  plot: {}", path.display());
+        }
+    }
+    Ok(())
+}
+
+fn check_time(t: f64, what: &str) -> Result<()> {
+    if !(0.0..=600.0).contains(&t) {
+        bail!("{what} must be in [0, 600] s");
+    }
+    Ok(())
+}
+
+/// The JSON object of one stream reading: the reading's own fields and seq, t_s, locked.
+pub fn stream_json(r: &StreamReading) -> serde_json::Value {
+    let mut v = report::reading_json(&r.reading);
+    if let Some(o) = v.as_object_mut() {
+        o.insert("seq".into(), json!(r.seq));
+        o.insert("t_s".into(), json!(r.t_s.0));
+        o.insert("locked".into(), json!(r.locked));
+    }
+    v
+}
+
+/// A stream's figures against the scene's truth.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Summary {
+    /// Readings missing from the sequence numbers.
+    pub dropped: u64,
+    /// Ok readings per second of probe time after `settle_s`.
+    pub ok_per_s: f64,
+    /// Readings after `settle_s` with a truth (the probe on tissue).
+    pub with_truth: usize,
+    /// Of them, ok.
+    pub ok_with_truth: usize,
+    /// RMS relative error of the ok readings against the truth.
+    pub rms_rel: Option<f64>,
+    /// Time of the last ok reading after the lift-off.
+    pub last_ok_after_lift: Option<f64>,
+}
+
+/// The figures of `readings` against `truth`, counting from `settle_s`.
+pub fn summarize(readings: &[StreamReading], truth: &Truth, settle_s: f64) -> Summary {
+    let mut s = Summary::default();
+    let mut expect = 0u64;
+    for r in readings {
+        s.dropped += (r.seq as u64).saturating_sub(expect);
+        expect = r.seq as u64 + 1;
+    }
+    let end = readings.last().map_or(0.0, |r| r.t_s.0 as f64);
+    let (mut n_ok, mut sq) = (0usize, 0.0);
+    for r in readings.iter().filter(|r| r.t_s.0 as f64 > settle_s) {
+        let ok = r.reading.status == Status::Ok;
+        if ok {
+            n_ok += 1;
+        }
+        if let Some(t) = truth.at(r.t_s.0 as f64) {
+            s.with_truth += 1;
+            if let (true, Some(e)) = (ok, r.reading.modulus) {
+                s.ok_with_truth += 1;
+                sq += (e.0 as f64 / t - 1.0).powi(2);
+            }
+        }
+    }
+    if end > settle_s {
+        s.ok_per_s = n_ok as f64 / (end - settle_s);
+    }
+    if s.ok_with_truth > 0 {
+        s.rms_rel = Some((sq / s.ok_with_truth as f64).sqrt());
+    }
+    if let Some(l) = truth.lift_s {
+        s.last_ok_after_lift = readings
+            .iter()
+            .filter(|r| r.reading.status == Status::Ok && r.t_s.0 as f64 >= l)
+            .filter(|r| truth.touch_s.is_none_or(|t| (r.t_s.0 as f64) < t))
+            .map(|r| r.t_s.0 as f64)
+            .next_back();
+    }
+    s
+}
+
+/// The time after `at` from which every reading until the next event is ok and within `tol`
+/// of the truth (None: never).
+pub fn settled_after(readings: &[StreamReading], truth: &Truth, at: f64, tol: f64) -> Option<f64> {
+    let next = truth
+        .events
+        .iter()
+        .map(|e| e.0)
+        .find(|t| *t > at)
+        .unwrap_or(f64::INFINITY);
+    let mut from = None;
+    for r in readings
+        .iter()
+        .filter(|r| (at..next).contains(&(r.t_s.0 as f64)))
+    {
+        let t = r.t_s.0 as f64;
+        let good = match (truth.at(t), r.reading.modulus, r.reading.status) {
+            (Some(x), Some(e), Status::Ok) => (e.0 as f64 / x - 1.0).abs() <= tol,
+            _ => false,
+        };
+        match (good, from) {
+            (true, None) => from = Some(t),
+            (false, _) => from = None,
+            _ => {}
+        }
+    }
+    from
+}
+
+/// Modulus (ok readings, with their σ, and the truth) and lock against time.
+fn plot(path: &Path, title: &str, readings: &[StreamReading], truth: &Truth) -> Result<()> {
+    let pts: Vec<(f64, f64, f64)> = readings
+        .iter()
+        .filter(|r| r.reading.status == Status::Ok)
+        .filter_map(|r| {
+            Some((
+                r.t_s.0 as f64,
+                r.reading.modulus?.0 as f64,
+                r.reading.modulus_sigma.map_or(0.0, |s| s.0 as f64),
+            ))
+        })
+        .collect();
+    let t_end = readings.last().map_or(1.0, |r| r.t_s.0 as f64).max(0.1);
+    let truths: Vec<f64> = readings
+        .iter()
+        .filter_map(|r| truth.at(r.t_s.0 as f64))
+        .collect();
+    let (lo, hi) = crate::plot::padded_range(
+        pts.iter().map(|p| p.1).chain(truths.iter().copied()),
+        0.1,
+        (0.0, 1.0),
+    );
+    let title = format!("stream — {title}");
+    let p = Plot {
+        title: &title,
+        readings,
+        truth,
+        pts: &pts,
+        t_end,
+        range: (lo, hi),
+    };
+    crate::plot::with_backend(path, (900, 560), |r| draw(r, &p), |r| draw(r, &p))
+}
+
+struct Plot<'a> {
+    title: &'a str,
+    readings: &'a [StreamReading],
+    truth: &'a Truth,
+    pts: &'a [(f64, f64, f64)],
+    t_end: f64,
+    range: (f64, f64),
+}
+
+fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, plotters::coord::Shift>, p: &Plot) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let (title, readings, truth, pts, t_end) = (p.title, p.readings, p.truth, p.pts, p.t_end);
+    let (lo, hi) = p.range;
+    {
+        root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        let (upper, lower) = root.split_vertically(380);
+        let mut c = ChartBuilder::on(&upper)
+            .caption(title, ("sans-serif", 18))
+            .margin(10)
+            .x_label_area_size(30)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..t_end, lo..hi)
+            .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        c.configure_mesh()
+            .x_desc("probe time, s")
+            .y_desc("modulus, kPa")
+            .draw()
+            .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        let col = crate::plot::PALETTE[1];
+        let tcol = crate::plot::PALETTE[0];
+        // The truth: a step line sampled at the readings' times.
+        let steps: Vec<(f64, f64)> = readings
+            .iter()
+            .filter_map(|r| truth.at(r.t_s.0 as f64).map(|x| (r.t_s.0 as f64, x)))
+            .collect();
+        // A line between consecutive readings under the same tissue.
+        c.draw_series(
+            steps
+                .windows(2)
+                .filter(|w| w[0].1 == w[1].1)
+                .map(|w| PathElement::new(vec![w[0], w[1]], tcol.stroke_width(2))),
+        )
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?
+        .label("truth")
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], tcol.stroke_width(2)));
+        c.draw_series(
+            pts.iter().map(|&(t, e, s)| {
+                PathElement::new(vec![(t, e - s), (t, e + s)], col.stroke_width(1))
+            }),
+        )
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        c.draw_series(
+            pts.iter()
+                .map(|&(t, e, _)| Circle::new((t, e), 2, col.filled())),
+        )
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?
+        .label("ok reading ± σ")
+        .legend(move |(x, y)| Circle::new((x, y), 3, col.filled()));
+        c.configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        let mut l = ChartBuilder::on(&lower)
+            .margin(10)
+            .x_label_area_size(30)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..t_end, -0.2..1.2)
+            .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        l.configure_mesh()
+            .x_desc("probe time, s")
+            .y_desc("locked / ok")
+            .y_labels(2)
+            .draw()
+            .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        let lock: Vec<(f64, f64)> = readings
+            .iter()
+            .map(|r| (r.t_s.0 as f64, if r.locked { 1.0 } else { 0.0 }))
+            .collect();
+        let ok: Vec<(f64, f64)> = readings
+            .iter()
+            .map(|r| {
+                let ok = r.reading.status == Status::Ok;
+                (r.t_s.0 as f64, if ok { 0.9 } else { 0.1 })
+            })
+            .collect();
+        let g = crate::plot::PALETTE[2];
+        l.draw_series(LineSeries::new(lock, g.stroke_width(2)))
+            .map_err(|e| anyhow::anyhow!("{e:?}"))?
+            .label("locked")
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], g));
+        let o = crate::plot::PALETTE[4];
+        l.draw_series(LineSeries::new(ok, o.stroke_width(1)))
+            .map_err(|e| anyhow::anyhow!("{e:?}"))?
+            .label("ok")
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], o));
+        l.configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        Ok(())
+    }
+}

@@ -1,0 +1,631 @@
+//! Continuous reading: one fast acquisition, then the resonance followed without stopping the
+//! drive, a numbered, time-stamped reading per segment.
+//!
+//! ```text
+//! acquire (hold: ring-down seed + short hold) ──ok──▶ track: segment k at f_h,k
+//!    ▲                                                   │ windows → Y − (G0 + j2πf C0)
+//!    │ lost (misses in a row, stall)                      │ hold's fit (f0, Q, g, z)
+//!    └───────────────────────────────────────────────────┤ pipeline::conclude → reading seq k
+//!                                                        └ f_h,k+1 = f0 ± dither · f0/(2Q)
+//! ```
+//!
+//! **Acquisition** is the `hold` method itself ([`crate::estimate::hold`]) with a short hold: a
+//! ring-down seed (searching a quarter band below and above when nothing rings), then a hold on
+//! the seed and one on its estimate. Its estimate is the stream's first reading.
+//!
+//! **Tracking** keeps the drive on: every segment is one [`PointPlan`] of gap-free whole-cycle
+//! windows at one frequency `f_h`, loaded phase-continuously as the previous one ends (a gap of
+//! at most one batch and one cycle). The segment's windows are turned into admittances with the
+//! segment's drive phasor, the air reference's static branch `G0 + j2πf_h C0` is removed, and
+//! the motional remainder is fitted with hold's model (`Y_m (1 − E_k) + z E_k`,
+//! `Y_m = g/(1 + jQu)`): the steady state's phase gives the detuning (`Y_m` is real at
+//! `f_h = f0`), the switch-on transient from the state the previous segment left (`z`) gives
+//! `Q`. Between segments the drive is retuned to the new estimate, offset by `±dither`
+//! half-linewidths `f0/(2Q)` alternately: a drive on the resonance sees almost no transient
+//! when it is retuned by a small fraction of a linewidth, so `Q` — which the pipeline needs for
+//! its contact checks (`no_contact` on lift-off, the Q model) — would rest on the prior alone;
+//! the alternating offset makes every segment's transient measure it.
+//!
+//! **Lock**: a segment whose fit fails, leaves the band, or moves the resonance by more than one
+//! linewidth `f0/Q` from the estimate it was driven from is not locked (its reading fails
+//! `not_locked` or with the fit's failure); the drive still follows a moved estimate, and after
+//! [`TrackerConfig::lost_after`] such segments in a row the tracker acquires again (so a new
+//! contact after a lift-off is found without a command). Every reading, acquisition or segment,
+//! is concluded by the one pipeline ([`crate::pipeline::conclude`], in [`conclude`] here) with
+//! the unit's profile: lift-off becomes `no_contact`, a light touch `bad_contact`, and so on.
+
+use crate::dsp::dds::{frequency_hz, tuning_word};
+use crate::dsp::lockin::{solve, ChannelSums, ReferenceSums};
+use crate::engine::{PointPlan, PointRaw};
+use crate::estimate::hold::{self, Hold, HoldSettings, HoldWindow, MAX_WINDOWS};
+use crate::estimate::Estimate;
+use crate::hal::FrontEndScale;
+use crate::loadcell::RawForce;
+use crate::measure::{Method, Reading};
+use crate::profile::UnitProfile;
+use crate::reading::{window_budget_samples, PointSource};
+use crate::status::{Failure, Status};
+use crate::sweep::{amplitude_codes, Drive, SettingsError};
+use crate::units::{Hz, Seconds, Volts};
+use core::f64::consts::PI;
+use num_complex::Complex64 as C64;
+
+/// The method a stream's readings are concluded as: their resonance is hold's (the motional
+/// resonance of the same fit), so the unit's hold calibration maps it.
+pub const METHOD: Method = Method::Hold;
+
+/// Settings of the continuous tracker (the state is [`Tracker`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TrackerConfig {
+    /// Lowest resonance accepted.
+    pub band_start: Hz,
+    /// Highest resonance accepted.
+    pub band_stop: Hz,
+    /// Where the first acquisition's ring-down bursts.
+    pub seed: Hz,
+    /// The acquisition's hold in all (first half on the seed, second on its estimate).
+    pub acquire_hold: Seconds,
+    /// Length of one tracking segment: one reading each (25–1000 ms). A segment is at least
+    /// four windows of two cycles (hold's fit needs four windows; an engine window must
+    /// outlast a 5 ms batch), 34 ms at 238 Hz: shorter settings get that.
+    pub segment: Seconds,
+    /// Offset of the drive from the estimate, alternately above and below, in half-linewidths
+    /// `f0/(2Q)` (0–2).
+    pub dither: f32,
+    /// Relative standard uncertainty of the previous segment's `Q` as the next fit's prior.
+    pub q_prior: f32,
+    /// Segments in a row without lock before the tracker acquires again (1–20).
+    pub lost_after: u8,
+    /// Drive amplitude at the PZT.
+    pub drive: Volts,
+}
+
+impl TrackerConfig {
+    /// Band 170–290 Hz seeded at 230 Hz, acquisition 20 + 20 ms seed and 100 ms hold, segments
+    /// of 35 ms (four windows of two cycles: 25 readings/s at 240 Hz) with the drive a quarter
+    /// half-linewidth off the resonance alternately, Q prior ±50 %, re-acquire after three
+    /// unlocked segments in a row, 5 V.
+    pub const DEFAULT: Self = Self {
+        band_start: Hz(170.0),
+        band_stop: Hz(290.0),
+        seed: Hz(230.0),
+        acquire_hold: Seconds(0.1),
+        segment: Seconds(0.035),
+        dither: 0.25,
+        q_prior: 0.5,
+        lost_after: 3,
+        drive: Volts(5.0),
+    };
+
+    /// The acquisition's hold settings, seeded at `seed`, with the unit's static admittance.
+    fn acquisition(&self, seed: Hz, unit: &UnitProfile) -> HoldSettings {
+        let mut h = HoldSettings {
+            band_start: self.band_start,
+            band_stop: self.band_stop,
+            seed,
+            hold: self.acquire_hold,
+            refine: Seconds(0.5 * self.acquire_hold.0),
+            drive: self.drive,
+            ..HoldSettings::DEFAULT
+        };
+        if let Some(air) = unit.air {
+            h.static_capacitance = air.static_capacitance;
+            h.static_conductance = air.static_conductance;
+        }
+        h
+    }
+
+    /// Validate for a board and a unit (whose air reference supplies the static admittance;
+    /// without one the readings fail `no_air_reference` in the pipeline).
+    pub fn validate(
+        &self,
+        scale: &FrontEndScale,
+        unit: &UnitProfile,
+    ) -> Result<Tracker, SettingsError> {
+        let finite = [
+            self.segment.0,
+            self.dither,
+            self.q_prior,
+            self.acquire_hold.0,
+        ]
+        .iter()
+        .all(|x| x.is_finite());
+        if !finite {
+            return Err(SettingsError::NotFinite);
+        }
+        let knobs_ok = (0.025..=1.0).contains(&self.segment.0)
+            && (0.0..=2.0).contains(&self.dither)
+            && (0.05..=2.0).contains(&self.q_prior)
+            && (1..=20).contains(&self.lost_after)
+            && self.acquire_hold.0 >= 0.1;
+        if !knobs_ok {
+            return Err(SettingsError::KnobOutOfRange);
+        }
+        let acquisition = self.acquisition(self.seed, unit);
+        let hold = acquisition.validate(scale)?;
+        let amplitude = amplitude_codes(self.drive, scale)?;
+        let fs = scale.sample_rate.0 as f64;
+        Ok(Tracker {
+            cfg: *self,
+            fs,
+            amplitude,
+            static_g: acquisition.static_conductance.0 as f64,
+            static_c: acquisition.static_capacitance.0 as f64,
+            mode: Mode::Acquire(hold),
+            f_est: self.seed.0 as f64,
+            q_est: 0.0,
+            side: 1.0,
+            f_h: 0.0,
+            plan: None,
+            tag: 0,
+            windows: heapless::Vec::new(),
+            monitor: Default::default(),
+            clipped: false,
+            misses: 0,
+            seq: 0,
+            segment_start: 0,
+        })
+    }
+}
+
+impl Default for TrackerConfig {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// One reading of the stream.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StreamReading {
+    /// Number in the stream, from 0 without gaps.
+    pub seq: u32,
+    /// Probe time at the end of the reading's last window (the engine's sample count).
+    pub t_s: Seconds,
+    /// True when the tracker was locked on the resonance for this reading (an acquisition
+    /// that found one, or a segment that stayed within a linewidth of its estimate).
+    pub locked: bool,
+    /// The reading through the one pipeline: status, resonance, modulus and their σ, Q.
+    pub reading: Reading,
+}
+
+/// (No boxing: `no_std` without an allocator; the tracker holds one acquisition's state
+/// either way.)
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Debug)]
+enum Mode {
+    Acquire(Hold),
+    Track,
+}
+
+/// Tags of the tracking plans (the hold's count up from 1 and from 0xC0DE).
+const TRACK_TAG: u16 = 0x5700;
+
+/// A continuous tracker in progress: plans out, windows in, readings out.
+#[derive(Clone, Debug)]
+pub struct Tracker {
+    cfg: TrackerConfig,
+    fs: f64,
+    amplitude: u16,
+    static_g: f64,
+    static_c: f64,
+    mode: Mode,
+    f_est: f64,
+    q_est: f64,
+    side: f64,
+    f_h: f64,
+    plan: Option<PointPlan>,
+    tag: u16,
+    windows: heapless::Vec<HoldWindow, MAX_WINDOWS>,
+    monitor: (ChannelSums, ReferenceSums),
+    clipped: bool,
+    misses: u8,
+    seq: u32,
+    segment_start: u64,
+}
+
+/// The one place a stream's estimate becomes a reading: the pipeline with the unit's profile
+/// and the load cell's counts over the reading's force window ([`force_window`]).
+pub fn conclude(
+    est: Result<Estimate, Failure>,
+    unit: &UnitProfile,
+    took: Seconds,
+    points: u16,
+    force: Option<RawForce>,
+) -> Reading {
+    crate::pipeline::conclude(METHOD, est, unit, took, points, force)
+}
+
+/// Shortest stretch of time a stream reading's contact force is taken over, s: eight of the
+/// load cell's conversions at 80 SPS (a 35 ms segment holds two or three, too few to tell a
+/// steady press from a moving one).
+pub const FORCE_WINDOW_S: f64 = 0.1;
+
+/// The samples `from..=to` a stream reading ending at sample `end` after a segment from
+/// `start` takes its contact force over: the segment, or the last [`FORCE_WINDOW_S`] when the
+/// segment is shorter.
+pub fn force_window(start: u64, end: u64, fs: f64) -> (u64, u64) {
+    let min = (FORCE_WINDOW_S * fs) as u64;
+    (end.saturating_sub(end.saturating_sub(start).max(min)), end)
+}
+
+impl Tracker {
+    /// True while acquiring (the seed and the first holds).
+    pub fn acquiring(&self) -> bool {
+        matches!(self.mode, Mode::Acquire(_))
+    }
+
+    /// Readings emitted so far (the next reading's `seq`).
+    pub fn emitted(&self) -> u32 {
+        self.seq
+    }
+
+    /// The next plan, or `None` while one is running.
+    pub fn next_plan(&mut self) -> Option<PointPlan> {
+        match &mut self.mode {
+            Mode::Acquire(h) => h.next_plan(),
+            Mode::Track => {
+                if self.plan.is_some() {
+                    return None;
+                }
+                let (lo, hi) = (self.cfg.band_start.0 as f64, self.cfg.band_stop.0 as f64);
+                let half_width = self.f_est / (2.0 * self.q_est.max(1.0));
+                let f =
+                    (self.f_est + self.side * self.cfg.dither as f64 * half_width).clamp(lo, hi);
+                self.side = -self.side;
+                let ftw = tuning_word(f, self.fs);
+                self.f_h = frequency_hz(ftw, self.fs);
+                // Windows of whole cycles, at least two, at most MAX_WINDOWS of them.
+                let per_cycle = 1.0 / self.f_h.max(1.0);
+                let seg = self.cfg.segment.0 as f64;
+                let cycles = libm::ceil(seg / per_cycle / MAX_WINDOWS as f64).max(2.0);
+                let n = libm::floor(seg / (cycles * per_cycle)).clamp(4.0, MAX_WINDOWS as f64);
+                self.tag = self.tag.wrapping_add(1);
+                let plan = PointPlan {
+                    ftw,
+                    amplitude_codes: self.amplitude,
+                    settle_samples: 0,
+                    cycles: cycles as u32,
+                    windows: n as u16,
+                    tag: TRACK_TAG | (self.tag & 0xff),
+                };
+                self.plan = Some(plan);
+                self.windows.clear();
+                self.monitor = Default::default();
+                self.clipped = false;
+                Some(plan)
+            }
+        }
+    }
+
+    /// Take a finished window; returns a reading when it ended one, concluded with `unit` and
+    /// the load cell's counts `force(from, to)` over its force window ([`force_window`]).
+    pub fn accept(
+        &mut self,
+        raw: &PointRaw,
+        scale: &FrontEndScale,
+        unit: &UnitProfile,
+        force: impl FnOnce(u64, u64) -> Option<RawForce>,
+    ) -> Option<StreamReading> {
+        let t = raw.end_sample;
+        match &mut self.mode {
+            Mode::Acquire(h) => {
+                h.accept(raw, scale);
+                if !h.is_complete() {
+                    return None;
+                }
+                let est = h.estimate();
+                let points = h.windows().len() as u16;
+                let took = self.seconds(t.saturating_sub(self.segment_start));
+                let locked = match est {
+                    Ok(e) => {
+                        self.f_est = e.resonance.0 as f64;
+                        self.q_est = e.q.map_or(10.0, |q| q as f64).clamp(2.0, 200.0);
+                        self.mode = Mode::Track;
+                        self.plan = None;
+                        self.misses = 0;
+                        self.side = 1.0;
+                        true
+                    }
+                    Err(_) => {
+                        self.reacquire(scale, unit);
+                        false
+                    }
+                };
+                let (from, to) = force_window(self.segment_start, t, self.fs);
+                self.segment_start = t;
+                Some(self.emit(est, unit, t, took, points, locked, force(from, to)))
+            }
+            Mode::Track => {
+                let plan = self.plan?;
+                if raw.plan != plan {
+                    return None;
+                }
+                let s = &raw.sums;
+                self.clipped |= s.current_rail_hits > 0;
+                hold::add_sums(&mut self.monitor, &s.monitor, &s.reference);
+                if let Some(p) = solve(&s.current, &s.reference) {
+                    let ai = scale.amps_per_code as f64;
+                    let len = s.reference.n as f64 / self.fs;
+                    let _ = self.windows.push(HoldWindow {
+                        t0: t as f64 / self.fs - len,
+                        len,
+                        y: p.value * ai,
+                        var: p.variance * ai * ai,
+                    });
+                }
+                if raw.window + 1 < plan.windows {
+                    return None;
+                }
+                self.plan = None;
+                let est = self.segment_estimate(scale);
+                let locked = est.is_ok();
+                self.misses = if locked {
+                    0
+                } else {
+                    self.misses.saturating_add(1)
+                };
+                let took = self.seconds(t.saturating_sub(self.segment_start));
+                let (from, to) = force_window(self.segment_start, t, self.fs);
+                self.segment_start = t;
+                let points = self.windows.len() as u16;
+                let r = self.emit(est, unit, t, took, points, locked, force(from, to));
+                if self.misses >= self.cfg.lost_after {
+                    self.reacquire(scale, unit);
+                }
+                Some(r)
+            }
+        }
+    }
+
+    /// A plan's window did not come (the stream stalled): a `drive_fault` reading, and the
+    /// tracker acquires again.
+    pub fn stalled(
+        &mut self,
+        now_sample: u64,
+        scale: &FrontEndScale,
+        unit: &UnitProfile,
+    ) -> StreamReading {
+        let took = self.seconds(now_sample.saturating_sub(self.segment_start));
+        self.segment_start = now_sample;
+        self.reacquire(scale, unit);
+        self.emit(
+            Err(Failure::DriveFault),
+            unit,
+            now_sample,
+            took,
+            0,
+            false,
+            None,
+        )
+    }
+
+    fn seconds(&self, samples: u64) -> Seconds {
+        Seconds((samples as f64 / self.fs) as f32)
+    }
+
+    #[allow(clippy::too_many_arguments)] // one reading's parts, each named
+    fn emit(
+        &mut self,
+        est: Result<Estimate, Failure>,
+        unit: &UnitProfile,
+        t: u64,
+        took: Seconds,
+        points: u16,
+        locked: bool,
+        force: Option<RawForce>,
+    ) -> StreamReading {
+        let reading = conclude(est, unit, took, points, force);
+        let seq = self.seq;
+        self.seq = self.seq.wrapping_add(1);
+        StreamReading {
+            seq,
+            t_s: self.seconds(t),
+            locked: locked && reading.status != Status::Failed(Failure::NotLocked),
+            reading,
+        }
+    }
+
+    /// Start a new acquisition, seeded at the last estimate when it lies in the band.
+    fn reacquire(&mut self, scale: &FrontEndScale, unit: &UnitProfile) {
+        let (lo, hi) = (self.cfg.band_start.0 as f64, self.cfg.band_stop.0 as f64);
+        let seed = if (lo..=hi).contains(&self.f_est) {
+            Hz(self.f_est as f32)
+        } else {
+            self.cfg.seed
+        };
+        let s = self.cfg.acquisition(seed, unit);
+        // The configuration validated with its own seed; a seed within the band validates too.
+        if let Ok(h) = s
+            .validate(scale)
+            .or_else(|_| self.cfg.acquisition(self.cfg.seed, unit).validate(scale))
+        {
+            self.mode = Mode::Acquire(h);
+        }
+        self.plan = None;
+        self.misses = 0;
+    }
+
+    /// The finished segment's estimate; moves the estimate the drive follows.
+    fn segment_estimate(&mut self, scale: &FrontEndScale) -> Result<Estimate, Failure> {
+        if self.clipped {
+            return Err(Failure::Clipped);
+        }
+        let (m, r) = &self.monitor;
+        let pv = solve(m, r).ok_or(Failure::DriveFault)?;
+        let drive = Drive::from_monitor(&pv, scale).ok_or(Failure::DriveFault)?;
+        for x in self.windows.iter_mut() {
+            let y = drive.admittance(x.y, x.var);
+            (x.y, x.var) = (y.y, y.var);
+        }
+        let y_s = C64::new(self.static_g, 2.0 * PI * self.f_h * self.static_c);
+        let q_sd = self.cfg.q_prior as f64 * self.q_est;
+        let h = hold::fit(&self.windows, self.f_h, y_s, self.f_est, (self.q_est, q_sd))?;
+        let e = h.estimate;
+        let (f0, q) = (e.resonance.0 as f64, e.q.unwrap_or(0.0) as f64);
+        let (lo, hi) = (self.cfg.band_start.0 as f64, self.cfg.band_stop.0 as f64);
+        if !(lo..=hi).contains(&f0) || !(2.0..=200.0).contains(&q) {
+            return Err(Failure::OutOfBand);
+        }
+        let moved = libm::fabs(f0 - self.f_est);
+        // Follow the estimate either way; a jump of more than a linewidth is no lock.
+        self.f_est = f0;
+        self.q_est = q;
+        if moved > f0 / q {
+            return Err(Failure::NotLocked);
+        }
+        Ok(e)
+    }
+}
+
+/// Run `tracker` against `src` until `emit` returns false: plans loaded one by one (the drive
+/// never stops between them), every window waited for under the one stall rule
+/// ([`window_budget_samples`]), every reading handed to `emit`. A stall is a `drive_fault`
+/// reading and a new acquisition. The drive is stopped at the end. Returns the readings
+/// emitted.
+pub async fn run<S: PointSource>(
+    src: &mut S,
+    tracker: &mut Tracker,
+    unit: &UnitProfile,
+    mut emit: impl FnMut(&StreamReading) -> bool,
+) -> u32 {
+    let scale = src.scale();
+    let fs = scale.sample_rate.0 as f64;
+    tracker.segment_start = src.now_sample();
+    // `next_plan` gives a plan whenever the previous one has ended (a plan is taken only after
+    // its last window or a reading); `None` would end the stream rather than spin.
+    'outer: while let Some(plan) = tracker.next_plan() {
+        if !src.load(plan).await {
+            break;
+        }
+        let budget = window_budget_samples(&plan, fs, src.latency_batches());
+        for _ in 0..plan.windows.max(1) {
+            let r = match src.next(&plan, budget).await {
+                Some(raw) => tracker.accept(&raw, &scale, unit, |a, b| src.contact_force(a, b)),
+                None => Some(tracker.stalled(src.now_sample(), &scale, unit)),
+            };
+            if let Some(r) = r {
+                if !emit(&r) {
+                    break 'outer;
+                }
+                // A reading ends its plan (a segment's last window, the acquisition's end, a
+                // stall): the next plan follows at once.
+                continue 'outer;
+            }
+        }
+    }
+    src.stop().await;
+    tracker.seq
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dsp::lockin::LockInSums;
+    use crate::profile::AirReference;
+    use crate::units::{Farads, Siemens};
+
+    fn unit() -> UnitProfile {
+        UnitProfile {
+            air: Some(AirReference {
+                free_resonance: Hz(232.3),
+                free_q: 40.0,
+                static_capacitance: Farads(210e-12),
+                static_conductance: Siemens(1e-9),
+            }),
+            ..UnitProfile::fallback()
+        }
+    }
+
+    #[test]
+    fn knobs_out_of_range_are_refused() {
+        let scale = FrontEndScale::PROBE;
+        let d = TrackerConfig::DEFAULT;
+        assert!(d.validate(&scale, &unit()).is_ok());
+        for bad in [
+            TrackerConfig {
+                segment: Seconds(f32::NAN),
+                ..d
+            },
+            TrackerConfig {
+                segment: Seconds(0.02),
+                ..d
+            },
+            TrackerConfig { dither: 2.5, ..d },
+            TrackerConfig { q_prior: 0.0, ..d },
+            TrackerConfig { lost_after: 0, ..d },
+            TrackerConfig {
+                acquire_hold: Seconds(0.05),
+                ..d
+            },
+            TrackerConfig {
+                drive: Volts(1e3),
+                ..d
+            },
+        ] {
+            assert!(bad.validate(&scale, &unit()).is_err(), "{bad:?}");
+        }
+    }
+
+    /// Arbitrary demodulator sums (a small xorshift generator): whatever the windows hold, the
+    /// tracker never panics, asks for a plan after every reading, and numbers its readings
+    /// from 0 without gaps, each concluded (a failure or a reading with a resonance).
+    #[test]
+    fn arbitrary_windows_never_panic_and_readings_have_no_gaps() {
+        let scale = FrontEndScale::PROBE;
+        let unit = unit();
+        let mut t = TrackerConfig::DEFAULT.validate(&scale, &unit).unwrap();
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let mut sample = 0u64;
+        let mut expect = 0u32;
+        for _ in 0..400 {
+            let plan = t.next_plan().expect("a plan after every reading or plan");
+            for w in 0..plan.windows.max(1) {
+                let mut r = || (next() as i64) >> (next() % 64);
+                let ch = |r: &mut dyn FnMut() -> i64| ChannelSums {
+                    xc: r(),
+                    xs: r(),
+                    x: r(),
+                    xx: r().abs(),
+                };
+                let sums = LockInSums {
+                    current: ch(&mut r),
+                    monitor: ch(&mut r),
+                    reference: ReferenceSums {
+                        cc: r(),
+                        ss: r(),
+                        cs: r(),
+                        c: r(),
+                        s: r(),
+                        n: (next() % 400) as u32,
+                    },
+                    current_rail_hits: (next() % 3 == 0) as u32,
+                    monitor_rail_hits: 0,
+                };
+                sample += 100;
+                let raw = PointRaw {
+                    plan,
+                    sums,
+                    end_sample: sample,
+                    window: w,
+                };
+                if let Some(r) = t.accept(&raw, &scale, &unit, |_, _| None) {
+                    assert_eq!(r.seq, expect);
+                    expect += 1;
+                    assert!(r.t_s.0 >= 0.0);
+                    assert!(r.reading.status != Status::Ok || r.reading.modulus.is_some());
+                    break;
+                }
+            }
+        }
+        assert_eq!(t.emitted(), expect);
+        std::eprintln!("{expect} readings");
+        assert!(expect >= 100, "{expect} readings of 400 plans");
+    }
+}
