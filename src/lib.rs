@@ -40,6 +40,7 @@ pub mod status;
 pub mod store;
 pub mod sweep;
 pub mod units;
+pub mod watchdog;
 
 pub use calibration::PowerLaw;
 pub use measure::{Method, Reading, SweepMeasurement};

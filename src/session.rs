@@ -197,6 +197,11 @@ impl Session {
         }
     }
 
+    /// Reference readings held for the next `calibrate fit` (its cost grows with them).
+    pub fn references(&self) -> usize {
+        self.refs.len()
+    }
+
     /// The unit's profile in use.
     pub fn profile(&self) -> &UnitProfile {
         &self.profile

@@ -32,15 +32,16 @@ use hal_sim::{AdcPair, SimProbe};
 /// What RTIC needs of a device crate, for the interrupt lines this image uses.
 ///
 /// AN386 has 32 external interrupt lines (UARTs 0–5, 12; GPIO 6–7, 16–31; timers 8–10; SPI 11;
-/// ...). The image binds two of them, and names them after the STM32G474 vectors they stand in
+/// ...). The image binds four of them, and names them after the STM32G474 vectors they stand in
 /// for, so one RTIC application (same `binds`, same dispatcher) serves both boards:
 ///
 /// * line 8, CMSDK timer 0, is `DMA1_CHANNEL1`: the batch cadence, in place of the STM32's ADC DMA
 ///   half/full-transfer interrupt;
 /// * line 0, CMSDK UART0 receive, is `LPUART1` (the STM32 LPUART1 vector): host bytes, like the STM32's ST-LINK virtual COM
 ///   port (QEMU's first serial port);
-/// * line 11 (the AN386 SPI controller, unused here) is `SPI3`: the software-task dispatcher,
-///   the same unused vector the STM32 image dispatches on.
+/// * line 11 (the AN386 SPI controller, unused here) is `SPI3` and line 15 (the touch screen,
+///   not modelled) is `SPI2`: the software-task dispatchers (priorities 1 and 2), the same
+///   unused vectors the STM32 image dispatches on.
 pub mod device {
     /// Priority bits RTIC assumes (QEMU implements all eight; the upper three are used, as on
     /// the STM32G4's four-bit NVIC with one bit to spare).
@@ -55,8 +56,11 @@ pub mod device {
         LPUART1 = 0,
         /// CMSDK timer 0: the sample cadence (one batch per period).
         DMA1_CHANNEL1 = 8,
-        /// Line 11: the software-task dispatcher.
+        /// Line 11: the software-task dispatcher (priority 1).
         SPI3 = 11,
+        /// Line 15 (the touch screen's, not modelled by QEMU): the software-task dispatcher
+        /// (priority 2, the watchdog's guard).
+        SPI2 = 15,
     }
 
     pub use self::Interrupt as interrupt;
@@ -77,6 +81,7 @@ pub mod device {
         fn LPUART1();
         fn DMA1_CHANNEL1();
         fn SPI3();
+        fn SPI2();
         fn DefaultHandler();
     }
 
@@ -89,6 +94,7 @@ pub mod device {
         v[0] = Vector(LPUART1);
         v[8] = Vector(DMA1_CHANNEL1);
         v[11] = Vector(SPI3);
+        v[15] = Vector(SPI2);
         v
     };
 }
@@ -260,6 +266,12 @@ pub fn elapsed(start: u32) -> u32 {
     start
         .wrapping_sub(stamp())
         .saturating_mul(INSTRUCTIONS_PER_TICK)
+}
+
+/// Instructions executed since `start` (a [`stamp`]), for spans too long for [`elapsed`]'s
+/// `u32` (over 4.29 G instructions); valid for spans under 171 s.
+pub fn elapsed_long(start: u32) -> u64 {
+    start.wrapping_sub(stamp()) as u64 * INSTRUCTIONS_PER_TICK as u64
 }
 
 /// Unit of [`elapsed`].
