@@ -16,6 +16,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod board;
+pub mod boot;
 pub mod calibration;
 pub mod command;
 pub mod contact_law;

@@ -144,6 +144,11 @@ pub fn event(e: Event) {
             f.code(),
             f.message()
         ),
+        Event::Refused(crate::session::Refusal::Boot(e)) => defmt::warn!(
+            "refused boot={=str} message={=str}",
+            e.code(),
+            e.message()
+        ),
         Event::Refused(why) => defmt::warn!("rejected error={=str}", why.message()),
         Event::SelfTest(r) => selftest(&r),
         Event::Status {
@@ -154,16 +159,18 @@ pub fn event(e: Event) {
             q_model,
             references,
             selftest,
+            boot,
         } => {
             defmt::info!(
-                "status method={=str} calibration={=str} fallback={=bool} air={=bool} q_model={=bool} references={=u16} selftest={=str}",
+                "status method={=str} calibration={=str} fallback={=bool} air={=bool} q_model={=bool} references={=u16} selftest={=str} boot={=str}",
                 method.name(),
                 calibration.source.name(),
                 fallback,
                 air,
                 q_model,
                 references,
-                crate::selftest::outcome_code(selftest)
+                crate::selftest::outcome_code(selftest),
+                boot.map_or("none", crate::boot::BootError::code)
             );
             stack();
         }

@@ -188,7 +188,12 @@ mod app {
         #[cfg(feature = "stm32")]
         if let Some(e) = board::boot_error() {
             let clock = board::clock_source().name();
-            defmt::error!("boot fault={=str} clock={=str}", e.name(), clock);
+            defmt::error!(
+                "boot fault={=str} clock={=str} message={=str}",
+                e.code(),
+                clock,
+                e.message()
+            );
         }
 
         let store = match Store::new(parts.flash, board::STORE_BASE) {
@@ -337,6 +342,9 @@ mod app {
         }
         fn load_profile(&mut self) -> Loaded {
             self.store.load()
+        }
+        fn boot_error(&self) -> Option<pzt_probe::boot::BootError> {
+            board::boot_error()
         }
     }
 

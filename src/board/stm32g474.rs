@@ -119,56 +119,9 @@ pub fn elapsed(start: u32) -> u32 {
 
 // ---- boot errors, clock source, stream faults ---------------------------------------------
 
-/// A bring-up step that failed. The board carries on degraded; [`boot_error`] holds the first.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u8)]
-pub enum BootError {
-    /// FLASH_OPTR.DBANK is 0 (single-bank mode, 4 KiB pages): the store's flash driver is not
-    /// created (embassy's `Flash::new_blocking` would panic) and every store access is refused.
-    FlashSingleBank = 1,
-    /// LPUART1 did not take its configuration: no command line.
-    Uart,
-    /// The DAC's circular DMA transfer did not start: the sample stream is not started.
-    DacStart,
-    /// The DAC output buffer calibration found no trim (CAL_FLAG1 never rose): the DAC is not
-    /// trusted with the drive and the sample stream is not started.
-    DacCalibration,
-    /// The boot before did not get through embassy's clock setup (its waits on HSIRDY, PLLRDY,
-    /// the flash latency and the clock switch have no bound; the watchdog ended it): this boot
-    /// runs on HSI16 at 16 MHz without the PLL and does not start the sample stream.
-    ClockHang,
-    /// The boot before did not get through the converters' setup (embassy's ADC calibration and
-    /// ready waits): TIM6, DAC1 and the ADCs are left alone, the stream is not started.
-    ConverterHang,
-    /// The run before hung in a flash erase or program (embassy's waits on FLASH_SR.BSY): the
-    /// store's flash is not used this boot.
-    FlashHang,
-}
-
-impl BootError {
-    const ALL: [BootError; 7] = [
-        BootError::FlashSingleBank,
-        BootError::Uart,
-        BootError::DacStart,
-        BootError::DacCalibration,
-        BootError::ClockHang,
-        BootError::ConverterHang,
-        BootError::FlashHang,
-    ];
-
-    /// Short name for the log.
-    pub fn name(self) -> &'static str {
-        match self {
-            BootError::FlashSingleBank => "flash_single_bank",
-            BootError::Uart => "uart",
-            BootError::DacStart => "dac_start",
-            BootError::DacCalibration => "dac_calibration",
-            BootError::ClockHang => "clock_hang",
-            BootError::ConverterHang => "converter_hang",
-            BootError::FlashHang => "flash_hang",
-        }
-    }
-}
+/// A bring-up step that failed (portable, so the session's handling of it is tested on the
+/// host). The board carries on degraded; [`boot_error`] holds the first.
+pub use crate::boot::BootError;
 
 /// First boot error (0: none).
 static BOOT_ERROR: AtomicU8 = AtomicU8::new(0);
