@@ -29,11 +29,15 @@ pub enum BootError {
     /// The run before hung in a flash erase or program (embassy's waits on FLASH_SR.BSY): the
     /// store's flash is not used this boot.
     FlashHang,
+    /// The HSE crystal failed while the image ran: the clock security system switched the core
+    /// to HSI16 and its NMI reset the core; this boot runs from HSI16 through the PLL (170 MHz
+    /// at RC accuracy, about ±1 % over temperature) and does not start the HSE again.
+    HseFailure,
 }
 
 impl BootError {
     /// Every boot error, in declaration order.
-    pub const ALL: [BootError; 7] = [
+    pub const ALL: [BootError; 8] = [
         BootError::FlashSingleBank,
         BootError::Uart,
         BootError::DacStart,
@@ -41,6 +45,7 @@ impl BootError {
         BootError::ClockHang,
         BootError::ConverterHang,
         BootError::FlashHang,
+        BootError::HseFailure,
     ];
 
     /// Stable snake_case code for the log and the command line.
@@ -53,6 +58,7 @@ impl BootError {
             BootError::ClockHang => "clock_hang",
             BootError::ConverterHang => "converter_hang",
             BootError::FlashHang => "flash_hang",
+            BootError::HseFailure => "hse_failure",
         }
     }
 
@@ -66,6 +72,7 @@ impl BootError {
             BootError::ClockHang => "boot: the clock setup hung on the boot before: running on HSI16 without converters, readings impossible; power-cycle",
             BootError::ConverterHang => "boot: the ADC/DAC setup hung on the boot before: converters off, readings impossible; power-cycle",
             BootError::FlashHang => "boot: a flash erase or program hung on the run before: calibration store disabled until reset",
+            BootError::HseFailure => "boot: the 24 MHz crystal failed while running (clock security system): running on the internal RC oscillator, frequencies carry its error; check the crystal",
         }
     }
 
