@@ -185,9 +185,11 @@ mod app {
             BATCH as u32
         );
         // A bring-up step that failed (bounded waits, docs/firmware.md): said, not a reset loop.
-        #[cfg(feature = "stm32")]
         if let Some(e) = board::boot_error() {
+            #[cfg(feature = "stm32")]
             let clock = board::clock_source().name();
+            #[cfg(not(feature = "stm32"))]
+            let clock = board::NAME;
             defmt::error!(
                 "boot fault={=str} clock={=str} message={=str}",
                 e.code(),

@@ -112,6 +112,7 @@ pub fn sim_state() -> super::sim_script::SimState {
         noise: hal_sim::NoiseScene::Bench,
         seed: 1,
         fault: None,
+        boot_fault: None,
     }
 }
 
@@ -207,8 +208,14 @@ pub fn init(_core: &mut cortex_m::Peripherals) -> Parts {
         &super::sim_factory::RECORD,
     );
     let boot = boot_state();
+    if let Some(e) = boot.boot_fault {
+        BOOT_FAULT.store(e as u8, core::sync::atomic::Ordering::Relaxed);
+    }
+    let mut stream = Stream::new(SimProbe::new(boot.scene(), boot.seed));
+    // As on the STM32: a failed step that leaves it without converters starts no stream.
+    stream.dead = boot.boot_fault.is_some_and(|e| e.blocks_readings());
     Parts {
-        stream: Stream::new(SimProbe::new(boot.scene(), boot.seed)),
+        stream,
         watchdog: Watchdog,
         flash,
         uart: Uart::new(),
@@ -284,6 +291,9 @@ pub struct Stream {
     adc: [[AdcFrame; BATCH]; 2],
     half: usize,
     scale: FrontEndScale,
+    /// No converters (an emulated boot fault, [`boot_error`]): [`start`](Self::start) starts
+    /// the instruction clock but not the batch timer.
+    dead: bool,
 }
 
 impl Stream {
@@ -296,6 +306,7 @@ impl Stream {
             adc: [[AdcFrame::default(); BATCH]; 2],
             half: 0,
             scale,
+            dead: false,
         }
     }
 
@@ -317,6 +328,9 @@ impl Stream {
     pub fn start(&mut self, engine: &mut SampleEngine) {
         self.prefill(engine);
         start_stamp_clock();
+        if self.dead {
+            return;
+        }
         let period = (SYSCLK_HZ as f32 * BATCH as f32 / self.scale.sample_rate.0) as u32;
         // SAFETY: CMSDK timer 0 registers; the image owns the timer.
         unsafe {
@@ -427,10 +441,17 @@ pub type StoreFlash = SimFlash<4096, 2048, 8>;
 /// Offset of the store's first slot in [`StoreFlash`].
 pub const STORE_BASE: u32 = 0;
 
-/// The first bring-up step that failed: none on this board (its stand-in peripherals cannot
-/// fail to come up).
+/// The bring-up step the boot script's leading `sim boot-fault` line names (0: none). The
+/// board's stand-in peripherals cannot fail to come up by themselves: this emulates a failed
+/// step, so the QEMU tests see its refusals.
+static BOOT_FAULT: core::sync::atomic::AtomicU8 = core::sync::atomic::AtomicU8::new(0);
+
+/// The first bring-up step that failed (emulated: `sim boot-fault`), if any.
 pub fn boot_error() -> Option<crate::boot::BootError> {
-    None
+    let v = BOOT_FAULT.load(core::sync::atomic::Ordering::Relaxed);
+    crate::boot::BootError::ALL
+        .into_iter()
+        .find(|e| *e as u8 == v)
 }
 
 /// End the emulation with success or failure (semihosting `SYS_EXIT`).
