@@ -33,10 +33,11 @@ pub struct Millis(pub u32);
 pub const FIT_MAX_REFERENCES: usize = crate::session::MAX_REFERENCES;
 
 /// The longest `calibrate fit` measured on the Cortex-M4, in ms at 170 MHz (one cycle per
-/// instruction): [`FIT_MAX_REFERENCES`] references on as many moduli, scattered so that the
-/// fits iterate long — 45.6 G instructions under QEMU (`src/bin/cost.rs`, case
-/// `max-scattered`; `docs/firmware.md`).
-pub const FIT_WORST_MS: u32 = 268_329;
+/// instruction), rounded up: [`FIT_MAX_REFERENCES`] references on as many moduli, scattered so
+/// that the fits iterate long — 45.6–45.7 G instructions under QEMU, 268.3–268.9 s
+/// (`src/bin/cost.rs`, case `max-scattered`; the count varies by 0.2 % between builds of the
+/// cost image; `docs/firmware.md`).
+pub const FIT_WORST_MS: u32 = 275_000;
 
 /// What the measurement task promises before a `calibrate fit` of `refs` references: twice the
 /// worst measured fit of [`FIT_MAX_REFERENCES`] references, scaled by `(refs / max)²` — an upper
@@ -126,7 +127,7 @@ mod tests {
     fn the_fit_bound_covers_the_measured_fits_twice() {
         // Measured on the Cortex-M4 (QEMU instruction counts at 170 MHz, docs/firmware.md):
         // (references, ms).
-        for (n, ms) in [(10, 2_241), (16, 34_326), (32, 226_145), (32, 268_329)] {
+        for (n, ms) in [(10, 2_247), (16, 34_401), (32, 226_597), (32, 268_855)] {
             assert!(fit_bound(n).0 >= 2 * ms, "{n}: {:?}", fit_bound(n));
         }
         assert_eq!(fit_bound(32), Millis(2 * FIT_WORST_MS));
