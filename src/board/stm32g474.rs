@@ -155,7 +155,7 @@ enum Step {
     /// A flash erase or program of the store.
     Flash = 3,
     /// Not a step: the clock security system saw the HSE fail while the image ran; its NMI
-    /// ([`NonMaskableInt`]) wrote this and reset the core, and the boot after a software reset
+    /// (`NonMaskableInt`) wrote this and reset the core, and the boot after a software reset
     /// that finds it runs from HSI16 through the PLL ([`BootError::HseFailure`]).
     HseFailed = 4,
 }
@@ -240,7 +240,8 @@ fn interrupted_step() -> Option<Step> {
 pub enum ClockSource {
     /// The NUCLEO-G474RE's 24 MHz crystal (X3) through the PLL: 170 MHz.
     Hse24,
-    /// HSI16 through the PLL (the HSE did not start): 170 MHz, RC accuracy.
+    /// HSI16 through the PLL (the HSE did not start, or failed on the run before:
+    /// [`BootError::HseFailure`]): 170 MHz, RC accuracy.
     Hsi16Pll,
     /// HSI16 directly, 16 MHz, no PLL: the boot before hung in the clock setup
     /// ([`BootError::ClockHang`]); the sample stream is not started.
@@ -385,7 +386,7 @@ fn hse_starts() -> bool {
     // "HSE clock", "Clock security system (CSS)"). HSEBYP stays 0 (crystal). The clock detector
     // turns itself on once the HSE is ready and off when it is stopped: if the crystal does not
     // start, embassy's init (`hse: None`) clears HSEON again and the CSS never arms. A failure
-    // later is the NMI ([`NonMaskableInt`]). embassy's own RCC_CR writes are read-modify-writes
+    // later is the NMI (`NonMaskableInt`). embassy's own RCC_CR writes are read-modify-writes
     // of other fields: CSSON stays set.
     pac::RCC.cr().modify(|w| {
         w.set_hseon(true);
