@@ -370,6 +370,8 @@ mod app {
         loop {
             if LIVENESS.alive(now()) {
                 cx.local.watchdog.feed();
+            } else {
+                cx.local.watchdog.starved();
             }
             Mono::delay(FEED_MS.millis()).await;
         }

@@ -216,7 +216,7 @@ pub fn init(_core: &mut cortex_m::Peripherals) -> Parts {
     stream.dead = boot.boot_fault.is_some_and(|e| e.blocks_readings());
     Parts {
         stream,
-        watchdog: Watchdog,
+        watchdog: Watchdog { last: None },
         flash,
         uart: Uart::new(),
     }
@@ -427,13 +427,45 @@ impl Uart {
     }
 }
 
-/// The watchdog stand-in (QEMU's AN386 has no independent watchdog modelled for this image):
-/// feeding does nothing.
-pub struct Watchdog;
+/// The independent watchdog, emulated: the STM32's IWDG resets the core 500 ms after the last
+/// feed; here a feed that comes later than that after the one before — or a starved watchdog
+/// found by [`Watchdog::starved`] — logs the reset the STM32 would have taken and ends the run
+/// with failure. Time is the instruction clock's (one instruction per virtual nanosecond):
+/// the guard task's 100 ms feeds are monotonic (SysTick) milliseconds of the same virtual time.
+pub struct Watchdog {
+    /// [`stamp`] of the last feed (`None` before the first).
+    last: Option<u32>,
+}
+
+/// The STM32's watchdog timeout in instructions of this machine's clock (500 ms).
+const WATCHDOG_INSTRUCTIONS: u32 = 500_000_000;
 
 impl Watchdog {
-    /// Feed (no-op on QEMU).
-    pub fn feed(&mut self) {}
+    /// Feed; fails the run if the last feed was more than the timeout ago.
+    pub fn feed(&mut self) {
+        self.check();
+        self.last = Some(stamp());
+    }
+
+    /// Not fed this time (the guard found the measurement task's promise broken): fails the
+    /// run once the timeout has passed since the last feed, as the IWDG would reset the core.
+    pub fn starved(&mut self) {
+        self.check();
+    }
+
+    fn check(&self) {
+        if let Some(t) = self.last {
+            let since = elapsed(t);
+            if since > WATCHDOG_INSTRUCTIONS {
+                defmt::error!(
+                    "watchdog reset instructions_since_feed={=u32} timeout={=u32}",
+                    since,
+                    WATCHDOG_INSTRUCTIONS
+                );
+                exit(false);
+            }
+        }
+    }
 }
 
 /// The flash of the calibration store: 4 KiB of simulated NOR, erased at boot.
