@@ -162,16 +162,19 @@ pub fn event(e: Event) {
             boot,
         } => {
             defmt::info!(
-                "status method={=str} calibration={=str} fallback={=bool} air={=bool} q_model={=bool} references={=u16} selftest={=str} boot={=str}",
+                "status method={=str} calibration={=str} fallback={=bool} air={=bool} q_model={=bool} references={=u16} selftest={=str}",
                 method.name(),
                 calibration.source.name(),
                 fallback,
                 air,
                 q_model,
                 references,
-                crate::selftest::outcome_code(selftest),
-                boot.map_or("none", crate::boot::BootError::code)
+                crate::selftest::outcome_code(selftest)
             );
+            // A failed bring-up step, on a line of its own (the status line's format stays).
+            if let Some(b) = boot {
+                defmt::warn!("status boot={=str} message={=str}", b.code(), b.message());
+            }
             stack();
         }
     }

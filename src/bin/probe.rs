@@ -190,12 +190,7 @@ mod app {
             let clock = board::clock_source().name();
             #[cfg(not(feature = "stm32"))]
             let clock = board::NAME;
-            defmt::error!(
-                "boot fault={=str} clock={=str} message={=str}",
-                e.code(),
-                clock,
-                e.message()
-            );
+            defmt::error!("boot fault={=str} clock={=str}", e.code(), clock);
         }
 
         let store = match Store::new(parts.flash, board::STORE_BASE) {
