@@ -105,7 +105,7 @@ fn main() {
         // Default handlers of the interrupt lines the QEMU device module names.
         fs::write(
             out.join("device.x"),
-            "PROVIDE(LPUART1 = DefaultHandler);\nPROVIDE(DMA1_CHANNEL1 = DefaultHandler);\nPROVIDE(SPI3 = DefaultHandler);\n",
+            "PROVIDE(LPUART1 = DefaultHandler);\nPROVIDE(DMA1_CHANNEL1 = DefaultHandler);\nPROVIDE(SPI3 = DefaultHandler);\nPROVIDE(SPI2 = DefaultHandler);\n",
         )
         .expect("write device.x");
     }

@@ -16,6 +16,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod board;
+pub mod boot;
 pub mod calibration;
 pub mod command;
 pub mod contact_law;
@@ -41,6 +42,7 @@ pub mod store;
 pub mod stream;
 pub mod sweep;
 pub mod units;
+pub mod watchdog;
 
 pub use calibration::PowerLaw;
 pub use measure::{Method, Reading, SweepMeasurement};

@@ -146,6 +146,11 @@ pub fn event(e: Event) {
             f.code(),
             f.message()
         ),
+        Event::Refused(crate::session::Refusal::Boot(e)) => defmt::warn!(
+            "refused boot={=str} message={=str}",
+            e.code(),
+            e.message()
+        ),
         Event::Refused(why) => defmt::warn!("rejected error={=str}", why.message()),
         Event::SelfTest(r) => selftest(&r),
         Event::Status {
@@ -156,6 +161,7 @@ pub fn event(e: Event) {
             q_model,
             references,
             selftest,
+            boot,
         } => {
             defmt::info!(
                 "status method={=str} calibration={=str} fallback={=bool} air={=bool} q_model={=bool} references={=u16} selftest={=str}",
@@ -167,6 +173,10 @@ pub fn event(e: Event) {
                 references,
                 crate::selftest::outcome_code(selftest)
             );
+            // A failed bring-up step, on a line of its own (the status line's format stays).
+            if let Some(b) = boot {
+                defmt::warn!("status boot={=str} message={=str}", b.code(), b.message());
+            }
             stack();
         }
     }

@@ -8,6 +8,7 @@
 //! application only binds these to its channels; the host tests drive the same code on the
 //! simulated probe.
 
+use crate::boot::BootError;
 use crate::calibration::PowerLaw;
 use crate::command::{Command, CommandError};
 use crate::measure::{Method, Procedure, Reading, Settings, DEFAULT_METHOD};
@@ -83,6 +84,8 @@ pub enum Event {
         references: u16,
         /// The last self-test: `None` when none ran, else passed or its fault.
         selftest: Option<Result<(), SelfTestFault>>,
+        /// The board's first failed bring-up step, if any ([`Io::boot_error`]).
+        boot: Option<BootError>,
     },
 }
 
@@ -104,6 +107,9 @@ pub enum Refusal {
     Fit,
     /// A reading was asked for while the last self-test failed with this fault.
     SelfTest(SelfTestFault),
+    /// A reading or a self-test was asked for on a board whose bring-up failed at a step that
+    /// leaves it without its sample stream ([`BootError::blocks_readings`]).
+    Boot(BootError),
 }
 
 impl Refusal {
@@ -117,6 +123,7 @@ impl Refusal {
             Refusal::ReferencesFull => "reference list full: fit or clear",
             Refusal::Fit => "calibration fit failed: add references over a wider range",
             Refusal::SelfTest(f) => f.message(),
+            Refusal::Boot(e) => e.message(),
         }
     }
 }
@@ -130,6 +137,11 @@ pub trait Io: PointSource {
     fn save(&mut self, p: &UnitProfile) -> Result<Saved, StoreError>;
     /// Load the newest stored profile (or the fallback).
     fn load_profile(&mut self) -> Loaded;
+    /// The board's first failed bring-up step (none by default: boards that cannot fail to
+    /// come up).
+    fn boot_error(&self) -> Option<BootError> {
+        None
+    }
 }
 
 /// The probe's session state.
@@ -201,6 +213,11 @@ impl Session {
         }
     }
 
+    /// Reference readings held for the next `calibrate fit` (its cost grows with them).
+    pub fn references(&self) -> usize {
+        self.refs.len()
+    }
+
     /// The unit's profile in use.
     pub fn profile(&self) -> &UnitProfile {
         &self.profile
@@ -217,6 +234,17 @@ impl Session {
         // when only the capacitance is off: the chain works (no open, short, rail or missing
         // drive), and `air` re-measures the very C0 it was compared with (a fresh unit's plate
         // off the nominal one; the self-test then runs against the new reference).
+        // A board without its sample stream (a failed bring-up step) can neither read nor
+        // test itself: refused with the step's name, not the self-test's `no_samples`.
+        if let Some(e) = io.boot_error().filter(|e| e.blocks_readings()) {
+            if matches!(
+                cmd,
+                Command::Measure | Command::CalibrateAdd(_) | Command::Air | Command::SelfTest
+            ) {
+                io.emit(Event::Refused(Refusal::Boot(e))).await;
+                return false;
+            }
+        }
         let reading = match cmd {
             Command::Measure | Command::CalibrateAdd(_) => true,
             Command::Air => self.selftest != Some(Err(SelfTestFault::Capacitance)),
@@ -325,6 +353,7 @@ impl Session {
                     q_model: self.profile.q_model.is_some(),
                     references: self.refs.len() as u16,
                     selftest: self.selftest,
+                    boot: io.boot_error(),
                 })
                 .await;
                 true

@@ -342,3 +342,42 @@ fn qemu_session_air_calibrate_store_reload_measure() {
     assert_eq!(help[0]["default"], "auto");
     assert_eq!(all("exit").len(), 1);
 }
+
+/// A `calibrate fit` of 16 references on 16 moduli runs 5.9 G instructions of synchronous work
+/// in the measurement task — 5.9 s of the QEMU machine's virtual time (one instruction per
+/// nanosecond), 34 s on the STM32 — and must not trip the watchdog: the guard task (priority
+/// 2) feeds it through the fit under the measurement task's promise (`src/watchdog.rs`). The
+/// QEMU board's watchdog stand-in fails the run when two feeds are more than the IWDG's 500 ms
+/// apart (`watchdog reset` line, exit with failure): before the guard, when the measurement
+/// task fed the watchdog itself, this fit would have ended there.
+#[test]
+fn qemu_a_long_calibration_fit_keeps_the_watchdog_fed() {
+    require_tools();
+    let elf = build_image("probe");
+    let mut script = vec!["calibrate clear".to_string()];
+    let moduli: Vec<f64> = (0..16)
+        .map(|i| (160.0 * 15f64.powf(i as f64 / 15.0)).round())
+        .collect();
+    for e in &moduli {
+        script.push(format!("sim modulus {e}"));
+        script.push(format!("calibrate add {e}"));
+    }
+    script.extend(["calibrate fit".to_string(), "status".to_string()]);
+    let wall = std::time::Instant::now();
+    let (exited_ok, lines) = run_script(&elf, TIMEOUT, Some(&script.join(";")));
+    println!("({:.1} s of wall time)", wall.elapsed().as_secs_f64());
+    for l in lines.iter().filter(|l| !l.contains(" point ")) {
+        println!("{l}");
+    }
+    assert!(
+        !lines.iter().any(|l| l.contains("watchdog reset")),
+        "the watchdog starved"
+    );
+    let parsed: Vec<_> = lines.iter().filter_map(|l| fields(l)).collect();
+    let refs: Vec<_> = parsed.iter().filter(|(n, _)| n == "reference").collect();
+    assert_eq!(refs.len(), 16, "every reference taken");
+    assert_eq!(last(&parsed, "calibration")["source"], "fitted");
+    assert_eq!(last(&parsed, "status")["references"], "16");
+    assert_eq!(last(&parsed, "exit")["ok"], "true");
+    assert!(exited_ok);
+}

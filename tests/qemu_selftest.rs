@@ -182,3 +182,68 @@ fn qemu_nominal_scene_passes_and_the_stack_stays_within_its_margin() {
         "stack high-water {worst} B leaves less than {MARGIN} of the STM32's {STM32_STACK_BYTES} B"
     );
 }
+
+/// A failed bring-up step, emulated by the QEMU board (`sim boot-fault <code>` among the
+/// script's leading `sim` lines): the boot logs it (`boot fault=<code>`); with
+/// `converter_hang` the board starts no stream, `measure`, `selftest` and `air` are refused with
+/// the boot error and its message (not the self-test's `no_samples`, and no reading is taken),
+/// `status` names it, and the image exits (no hang). With `flash_hang`, which leaves the
+/// stream running, the self-test passes, a reading is served and `status` still names it.
+#[test]
+fn qemu_boot_fault_is_named_in_refusals_and_status() {
+    use pzt_probe::boot::BootError;
+    require_tools();
+    let elf = build_image("probe");
+    for (e, blocks) in [
+        (BootError::ConverterHang, true),
+        (BootError::FlashHang, false),
+    ] {
+        assert_eq!(e.blocks_readings(), blocks);
+        let script = format!("sim boot-fault {};measure;selftest;air;status", e.code());
+        let wall = Instant::now();
+        let (exited_ok, lines) = run_script(&elf, TIMEOUT, Some(&script));
+        println!(
+            "--- sim boot-fault {} ({:.1} s)",
+            e.code(),
+            wall.elapsed().as_secs_f64()
+        );
+        for l in lines.iter().filter(|l| !l.contains(" point ")) {
+            println!("{l}");
+        }
+        let parsed: Vec<Fields> = lines.iter().filter_map(|l| fields(l)).collect();
+        assert!(
+            lines
+                .iter()
+                .any(|l| l.starts_with("ERROR") && l.contains(&format!("boot fault={} ", e.code()))),
+            "{e:?}: the boot's line"
+        );
+        let refused = lines
+            .iter()
+            .filter(|l| {
+                l.contains(&format!(
+                    "refused boot={} message={}",
+                    e.code(),
+                    e.message()
+                ))
+            })
+            .count();
+        assert_eq!(refused, if blocks { 3 } else { 0 }, "{e:?}");
+        // `status`, then its boot line.
+        let status = all(&parsed, "status");
+        assert_eq!(status.len(), 2, "{e:?}: {status:?}");
+        assert!(status[0].contains_key("method"));
+        assert_eq!(status[1]["boot"], e.code(), "{e:?}");
+        assert!(lines.iter().any(|l| l.starts_with("WARN")
+            && l.contains(&format!("status boot={} message={}", e.code(), e.message()))));
+        let readings = all(&parsed, "reading");
+        if blocks {
+            // No reading, and the boot self-test (which still runs) found no samples.
+            assert!(readings.is_empty(), "{e:?}: {readings:?}");
+            assert_eq!(all(&parsed, "selftest")[0]["result"], "no_samples");
+            assert_eq!(last(&parsed, "exit")["ok"], "false");
+            assert!(!exited_ok);
+        } else {
+            assert_eq!(readings[0]["status"], "ok", "{e:?}");
+        }
+    }
+}

@@ -9,6 +9,7 @@
 use hal_sim::flash::SimFlash;
 use hal_sim::{phantoms, NoiseScene, Phantom, Scene, SimProbe};
 use pzt_probe::board::sim::SimBoard;
+use pzt_probe::boot::BootError;
 use pzt_probe::command::parse;
 use pzt_probe::engine::{PointPlan, PointRaw, SampleEngine};
 use pzt_probe::hal::{FrontEndScale, SampleStream};
@@ -25,6 +26,8 @@ struct SimIo {
     engine: SampleEngine,
     store: Store<Flash>,
     events: Vec<Event>,
+    /// The bring-up step the board reports as failed.
+    boot: Option<BootError>,
 }
 
 impl SimIo {
@@ -35,6 +38,7 @@ impl SimIo {
             engine: SampleEngine::new(),
             store: Store::new(flash, 0).expect("store geometry"),
             events: Vec::new(),
+            boot: None,
         }
     }
     fn put_on(&mut self, scene: Scene) {
@@ -83,6 +87,9 @@ impl Io for SimIo {
     }
     fn load_profile(&mut self) -> pzt_probe::store::Loaded {
         self.store.load()
+    }
+    fn boot_error(&self) -> Option<BootError> {
+        self.boot
     }
 }
 
@@ -381,4 +388,55 @@ fn a_capacitance_fault_lets_the_air_reference_be_retaken() {
     assert!((c0 / (1.3 * 210e-12) - 1.0).abs() < 0.01, "{c0:e} F");
     assert!(send(&mut s, &mut io, "selftest"), "{:?}", io.events.last());
     assert_eq!(s.selftest_outcome(), Some(Ok(())));
+}
+
+/// A board whose bring-up left it without its sample stream refuses every reading, `air`,
+/// `calibrate add` and `selftest` with the failed step's typed error and message (not the
+/// self-test's `no_samples`), serves the other commands and shows the step in `status`; a
+/// failed step that leaves the stream running (the store's flash) refuses no reading.
+#[test]
+fn a_failed_boot_step_is_named_in_refusals_and_status() {
+    let factory = pzt_probe::board::sim_factory::profile().expect("factory record");
+    for e in BootError::ALL {
+        let mut io = SimIo::new(Flash::new());
+        io.store.save(&factory).expect("store");
+        io.put_on(Scene::on_phantom(&phantoms::B));
+        io.boot = Some(e);
+        let mut s = Session::new(&io.store.load());
+        for line in ["measure", "air", "calibrate add 279", "selftest"] {
+            let before = io.events.len();
+            let served = send(&mut s, &mut io, line);
+            if e.blocks_readings() {
+                assert!(!served, "{e:?}: {line}");
+                assert_eq!(
+                    &io.events[before..],
+                    &[Event::Refused(Refusal::Boot(e))],
+                    "{e:?}: {line}"
+                );
+                assert_eq!(Refusal::Boot(e).message(), e.message());
+            } else {
+                assert!(
+                    !io.events[before..]
+                        .iter()
+                        .any(|ev| matches!(ev, Event::Refused(Refusal::Boot(_)))),
+                    "{e:?}: {line} is not refused for the boot error"
+                );
+            }
+        }
+        assert!(send(&mut s, &mut io, "method sweep-g"), "{e:?}");
+        assert!(send(&mut s, &mut io, "status"), "{e:?}");
+        assert!(
+            matches!(io.events.last(), Some(Event::Status { boot: Some(b), .. }) if *b == e),
+            "{e:?}: {:?}",
+            io.events.last()
+        );
+    }
+    // A board that came up: `status` says so.
+    let mut io = SimIo::new(Flash::new());
+    let mut s = boot(&mut io);
+    assert!(send(&mut s, &mut io, "status"));
+    assert!(matches!(
+        io.events.last(),
+        Some(Event::Status { boot: None, .. })
+    ));
 }

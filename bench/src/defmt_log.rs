@@ -39,12 +39,14 @@ pub const TEMPLATES: &[&str] = &[
     "overrun late={=u32} ring={=u32} dropped={=u32}",
     "counters batches={=u32} late={=u32} ring={=u32} dropped={=u32} isr_mean={=u32} isr_max={=u32} unit={=str} load_cell_errors={=u32}",
     "status method={=str} calibration={=str} fallback={=bool} air={=bool} q_model={=bool} references={=u16} selftest={=str}",
+    "status boot={=str} message={=str}",
     "help commands={=str} methods={=str} default={=str}",
     "exit ok={=bool}",
     "boot fault={=str} clock={=str}",
     "selftest result={=str} f_hz={=f32} c_pf={=f32} c_sigma_pf={=f32} ref_c_pf={=f32} tol={=f32} ref={=str} g_s={=f32} i_a={=f32} v={=f32} probe_time_s={=f32}",
     "selftest fault={=str} message={=str}",
     "refused selftest={=str} message={=str}",
+    "refused boot={=str} message={=str}",
     "stack used_bytes={=u32} init_bytes={=u32} size_bytes={=u32}",
 ];
 

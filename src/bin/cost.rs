@@ -34,6 +34,7 @@
 //! ```text
 //! budget core_hz=<u32> fs_hz=<f32> batch=<u32> budget_pct=<f32> unit=instructions
 //! cost method=<str> e_kpa=<f32> status=<str> expect=<str> used=<str> e_read_kpa=<f32> probe_time_s=<f32> points=<u16> batches=<u32> engine_mean=<u32> engine_max=<u32> calls=<u32> reading=<u32> call_max=<u32> call_max_in=<str> sample_mean_pct=<f32> sample_max_pct=<f32> reading_pct=<f32> call_max_us=<f32>
+//! fit case=<str> refs=<u16> ok=<bool> contact=<bool> instructions=<u64> ms=<f32> bound_ms=<f32>
 //! exit ok=<bool>
 //! ```
 //!
@@ -408,6 +409,107 @@ mod harness {
         status == case.expect
     }
 
+    /// One `calibrate fit` to measure: how many references, and how they lie.
+    #[derive(Clone, Copy)]
+    pub struct FitCase {
+        /// Name in the log line.
+        pub name: &'static str,
+        /// References, each on its own modulus.
+        pub refs: usize,
+        /// False: on the unit's own curve (±0.3 Hz); true: scattered, so that no curve fits
+        /// and the Levenberg–Marquardt loops run to their iteration bounds.
+        pub scattered: bool,
+    }
+
+    /// The `calibrate fit` cases: the QEMU session test's five moduli (twice each, as it adds
+    /// them), and the session's most references ([`pzt_probe::session::MAX_REFERENCES`]) on as
+    /// many distinct moduli — every one held out in turn —, on the curve and scattered.
+    pub const FIT_CASES: [FitCase; 4] = [
+        FitCase {
+            name: "five-moduli",
+            refs: 10,
+            scattered: false,
+        },
+        FitCase {
+            name: "sixteen-on-curve",
+            refs: 16,
+            scattered: false,
+        },
+        FitCase {
+            name: "max-on-curve",
+            refs: pzt_probe::session::MAX_REFERENCES,
+            scattered: false,
+        },
+        FitCase {
+            name: "max-scattered",
+            refs: pzt_probe::session::MAX_REFERENCES,
+            scattered: true,
+        },
+    ];
+
+    /// Measure one `calibrate fit` ([`pzt_probe::profile::calibrate`] with the unit's air
+    /// reference, as the session calls it) and log its line; true when it took at most half
+    /// the watchdog promise made for it ([`pzt_probe::watchdog::fit_bound`]).
+    pub fn fit_cost(case: &FitCase, unit: &UnitProfile) -> bool {
+        use pzt_probe::profile::{calibrate, Reference};
+        let mut refs: heapless::Vec<Reference, { pzt_probe::session::MAX_REFERENCES }> =
+            heapless::Vec::new();
+        let q_model = unit.q_model;
+        for i in 0..case.refs {
+            // 10 references: the session test's five moduli, two readings each; otherwise one
+            // reading per modulus, log-spaced over 100–3000 kPa.
+            let e = if case.refs == 10 {
+                [157.5, 279.0, 414.0, 1146.0, 2465.0][i / 2]
+            } else {
+                100.0 * libm::pow(30.0, i as f64 / (case.refs - 1) as f64)
+            };
+            // Pressed in turn at the calibration's forces (30, 15, 50 mN), as a unit with a load
+            // cell is calibrated.
+            let forces = pzt_probe::board::sim::CALIBRATION_FORCES;
+            let force = forces[i % forces.len()];
+            let f = match unit.contact {
+                Some(c) => c.frequency_at(e, force),
+                None => unit.calibration.frequency(e),
+            };
+            let wiggle = if i % 2 == 0 { 0.3 } else { -0.3 };
+            // Scattered: every third reading 30 Hz off, alternately up and down.
+            let off = if case.scattered && i % 3 == 0 {
+                if i % 2 == 0 {
+                    30.0
+                } else {
+                    -30.0
+                }
+            } else {
+                0.0
+            };
+            let _ = refs.push(Reference {
+                modulus_kpa: e,
+                resonance_hz: f + wiggle + off,
+                sigma_hz: 0.2,
+                q: q_model.map_or(20.0, |q| q.q_at(e, Some(force))),
+                force_n: force,
+            });
+        }
+        compiler_fence(Ordering::SeqCst);
+        let t0 = board::stamp();
+        let r = calibrate(&refs, unit.air.as_ref());
+        let n = board::elapsed_long(t0);
+        compiler_fence(Ordering::SeqCst);
+        let ms = n as f32 / (CORE_HZ as f32 / 1e3);
+        let bound = pzt_probe::watchdog::fit_bound(case.refs).0 as f32;
+        defmt::info!(
+            "fit case={=str} refs={=u16} ok={=bool} contact={=bool} instructions={=u64} ms={=f32} bound_ms={=f32}",
+            case.name,
+            case.refs as u16,
+            r.is_ok(),
+            r.as_ref().is_ok_and(|c| c.contact.is_some()),
+            n,
+            ms,
+            bound
+        );
+        2.0 * ms <= bound
+    }
+
     /// The image: every case in turn, then exit with success iff all ended as expected.
     #[cortex_m_rt::entry]
     fn main() -> ! {
@@ -450,6 +552,9 @@ mod harness {
             expect: Status::Failed(Failure::OutOfBand).code(),
         };
         ok &= measure(&fallback, &unit, fs);
+        for case in FIT_CASES.iter() {
+            ok &= fit_cost(case, &unit);
+        }
         defmt::info!("exit ok={=bool}", ok);
         board::exit(ok)
     }

@@ -15,6 +15,7 @@
 //! | `command` | 1 | bytes → lines → [`pzt_probe::command::parse`] → requests to `measure` (QEMU: the boot command line's script or the built-in one, [`pzt_probe::board::sim_script`]) |
 //! | `report` | 1 | the only place that logs: one defmt line per event ([`pzt_probe::log`]) |
 //! | `load_cell` | 1 | every 5 ms: the HX711's conversion, if one is ready (80 a second), into the shared force log, stamped with the sample count |
+//! | `guard` | 2 | feeds the independent watchdog every 100 ms while `measure` keeps its liveness promise ([`pzt_probe::watchdog`]) |
 //!
 //! Data flow: `command` → requests → `measure` → plans (capacity 2: the double buffer of the
 //! interrupt's settings, validated before they reach it) → `sample` → points → `measure` →
@@ -87,10 +88,17 @@ mod shared {
     pub type EngineCmd = Option<PointPlan>;
 
     pub use pzt_probe::log::Report;
+
+    use pzt_probe::watchdog::{Liveness, Millis};
+
+    /// The measurement task's liveness promise, kept by `measure`, read by `guard`. The first
+    /// promise covers the boot up to the measurement task's first sign of life (the monotonic
+    /// starts at 0 in `init`).
+    pub static LIVENESS: Liveness = Liveness::new(Millis(1_000));
 }
 
 #[cfg(target_os = "none")]
-#[rtic::app(device = crate::board::device, peripherals = false, dispatchers = [SPI3])]
+#[rtic::app(device = crate::board::device, peripherals = false, dispatchers = [SPI3, SPI2])]
 mod app {
     use crate::board;
     use crate::shared::*;
@@ -103,6 +111,7 @@ mod app {
     use pzt_probe::reading::{PointSource, BATCH};
     use pzt_probe::session::{Event, Io, Session};
     use pzt_probe::store::{Loaded, Saved, Store, StoreError};
+    use pzt_probe::watchdog::{fit_bound, Millis};
     use pzt_probe::UnitProfile;
     use rtic_monotonics::systick::prelude::*;
     use rtic_sync::channel::{Receiver, Sender};
@@ -117,7 +126,8 @@ mod app {
     const DONE_CAP: usize = 1;
     /// Received bytes buffered between the UART interrupt and the command task (STM32).
     const RX_CAP: usize = 64;
-    /// The measurement task feeds the watchdog at least this often while it is alive (ms).
+    /// The guard task feeds the watchdog this often while the measurement task keeps its
+    /// promise; the measurement task wakes at least this often while it waits for requests (ms).
     const FEED_MS: u32 = 100;
     /// After a `sim` line of the QEMU script, the command task waits this long (ms): two
     /// batches, so that the sample interrupt has put the probe on its new scene.
@@ -126,6 +136,10 @@ mod app {
     /// The load-cell task looks for a conversion this often (ms): above the HX711's 80 a
     /// second, so each is read before the next overwrites it.
     const LOAD_CELL_POLL_MS: u32 = 5;
+    /// What the measurement task promises between signs of life outside waits and the fit: a
+    /// measurement call's work (at most 100 ms, `tests/qemu_cost.rs`), a store's flash erase
+    /// and program, and the other priority-1 tasks' turns, with room to spare (ms).
+    const ALIVE_MS: u32 = 3 * FEED_MS;
 
     /// The QEMU image has no host link: it runs this script through the same line parser — a
     /// reading with the default method (auto), one with sweep-G over a sweep of its own, back to
@@ -187,10 +201,12 @@ mod app {
             BATCH as u32
         );
         // A bring-up step that failed (bounded waits, docs/firmware.md): said, not a reset loop.
-        #[cfg(feature = "stm32")]
         if let Some(e) = board::boot_error() {
+            #[cfg(feature = "stm32")]
             let clock = board::clock_source().name();
-            defmt::error!("boot fault={=str} clock={=str}", e.name(), clock);
+            #[cfg(not(feature = "stm32"))]
+            let clock = board::NAME;
+            defmt::error!("boot fault={=str} clock={=str}", e.code(), clock);
         }
 
         let store = match Store::new(parts.flash, board::STORE_BASE) {
@@ -198,6 +214,7 @@ mod app {
             Err(_) => defmt::panic!("store geometry"),
         };
 
+        guard::spawn().ok();
         measure::spawn(request_rx, plan_tx, point_rx, report_tx.clone(), done_tx).ok();
         report::spawn(report_rx).ok();
         load_cell::spawn().ok();
@@ -317,7 +334,6 @@ mod app {
         plans: &'a mut Sender<'static, EngineCmd, PLAN_CAP>,
         points: &'a mut Receiver<'static, PointRaw, POINT_CAP>,
         reports: &'a mut Sender<'static, Report, REPORT_CAP>,
-        watchdog: &'a mut board::Watchdog,
         store: &'a mut Store<board::StoreFlash>,
         scale: FrontEndScale,
         forces: F,
@@ -341,13 +357,14 @@ mod app {
             // The budget in ms, with a watchdog period of margin for this task's own delay.
             let ms = (budget as f32 / self.scale.sample_rate.0 * 1000.0) as u32 + FEED_MS;
             let got = loop {
+                promise(ms + ALIVE_MS);
                 match Mono::timeout_after(ms.millis(), self.points.recv()).await {
                     Ok(Ok(raw)) if raw.plan == *plan => break Some(raw),
                     Ok(Ok(_stale)) => continue,
                     _ => break None,
                 }
             };
-            self.watchdog.feed();
+            promise(ALIVE_MS);
             got
         }
         async fn stop(&mut self) {
@@ -377,11 +394,41 @@ mod app {
         fn load_profile(&mut self) -> Loaded {
             self.store.load()
         }
+        fn boot_error(&self) -> Option<pzt_probe::boot::BootError> {
+            board::boot_error()
+        }
+    }
+
+    /// The monotonic's time in ms (`Mono` ticks at 1 kHz).
+    fn now() -> Millis {
+        use rtic_monotonics::rtic_time::monotonic::TimerQueueBasedInstant;
+        Millis(Mono::now().ticks())
+    }
+
+    /// The measurement task is alive now and promises its next sign of life within `ms`.
+    fn promise(ms: u32) {
+        LIVENESS.promise(now(), Millis(ms));
+    }
+
+    /// The watchdog's guard: every [`FEED_MS`] it feeds the independent watchdog, as long as
+    /// the measurement task keeps its liveness promise ([`pzt_probe::watchdog`]). Above the
+    /// measurement task's priority, so it runs through a long `calibrate fit`; a measurement
+    /// task that hangs breaks its promise, the feeding stops and the watchdog resets the core.
+    #[task(priority = 2, local = [watchdog])]
+    async fn guard(cx: guard::Context) {
+        loop {
+            if LIVENESS.alive(now()) {
+                cx.local.watchdog.feed();
+            } else {
+                cx.local.watchdog.starved();
+            }
+            Mono::delay(FEED_MS.millis()).await;
+        }
     }
 
     /// The measurement task: the session (src/session.rs) served one request at a time; it
-    /// feeds the watchdog while alive.
-    #[task(priority = 1, shared = [forces], local = [watchdog, store, scale])]
+    /// keeps the watchdog's liveness promise (`guard`) while alive.
+    #[task(priority = 1, shared = [forces], local = [store, scale])]
     async fn measure(
         cx: measure::Context,
         mut requests: Receiver<'static, Command, REQUEST_CAP>,
@@ -394,7 +441,6 @@ mod app {
             plans: &mut plans,
             points: &mut points,
             reports: &mut reports,
-            watchdog: cx.local.watchdog,
             store: cx.local.store,
             scale: *cx.local.scale,
             forces: cx.shared.forces,
@@ -404,21 +450,24 @@ mod app {
         // The QEMU script starts once the boot is done; elsewhere the slot just stays full.
         let _ = done.try_send(session.selftest_outcome() == Some(Ok(())));
         loop {
+            promise(FEED_MS + ALIVE_MS);
             let req = match Mono::timeout_after(FEED_MS.millis(), requests.recv()).await {
                 Ok(Ok(r)) => r,
                 Ok(Err(_)) => {
                     // No command source any more: stay alive for the watchdog, serve nothing.
                     loop {
-                        io.watchdog.feed();
+                        promise(FEED_MS + ALIVE_MS);
                         Mono::delay(FEED_MS.millis()).await;
                     }
                 }
-                Err(_) => {
-                    io.watchdog.feed();
-                    continue;
-                }
+                Err(_) => continue,
             };
-            io.watchdog.feed();
+            // The fit's synchronous work grows with the references held: 2.2 s on the M4 for
+            // 10, up to 4.5 minutes for 32 (docs/firmware.md); bounded, so promised.
+            promise(match req {
+                Command::CalibrateFit => fit_bound(session.references()).0,
+                _ => ALIVE_MS,
+            });
             let ok = session.handle(req, &mut io).await;
             // Only the QEMU script waits for this; elsewhere the slot just stays full.
             let _ = done.try_send(ok);

@@ -34,15 +34,16 @@ use hal_sim::{AdcPair, SimProbe};
 /// What RTIC needs of a device crate, for the interrupt lines this image uses.
 ///
 /// AN386 has 32 external interrupt lines (UARTs 0–5, 12; GPIO 6–7, 16–31; timers 8–10; SPI 11;
-/// ...). The image binds two of them, and names them after the STM32G474 vectors they stand in
+/// ...). The image binds four of them, and names them after the STM32G474 vectors they stand in
 /// for, so one RTIC application (same `binds`, same dispatcher) serves both boards:
 ///
 /// * line 8, CMSDK timer 0, is `DMA1_CHANNEL1`: the batch cadence, in place of the STM32's ADC DMA
 ///   half/full-transfer interrupt;
 /// * line 0, CMSDK UART0 receive, is `LPUART1` (the STM32 LPUART1 vector): host bytes, like the STM32's ST-LINK virtual COM
 ///   port (QEMU's first serial port);
-/// * line 11 (the AN386 SPI controller, unused here) is `SPI3`: the software-task dispatcher,
-///   the same unused vector the STM32 image dispatches on.
+/// * line 11 (the AN386 SPI controller, unused here) is `SPI3` and line 15 (the touch screen,
+///   not modelled) is `SPI2`: the software-task dispatchers (priorities 1 and 2), the same
+///   unused vectors the STM32 image dispatches on.
 pub mod device {
     /// Priority bits RTIC assumes (QEMU implements all eight; the upper three are used, as on
     /// the STM32G4's four-bit NVIC with one bit to spare).
@@ -57,8 +58,11 @@ pub mod device {
         LPUART1 = 0,
         /// CMSDK timer 0: the sample cadence (one batch per period).
         DMA1_CHANNEL1 = 8,
-        /// Line 11: the software-task dispatcher.
+        /// Line 11: the software-task dispatcher (priority 1).
         SPI3 = 11,
+        /// Line 15 (the touch screen's, not modelled by QEMU): the software-task dispatcher
+        /// (priority 2, the watchdog's guard).
+        SPI2 = 15,
     }
 
     pub use self::Interrupt as interrupt;
@@ -79,6 +83,7 @@ pub mod device {
         fn LPUART1();
         fn DMA1_CHANNEL1();
         fn SPI3();
+        fn SPI2();
         fn DefaultHandler();
     }
 
@@ -91,6 +96,7 @@ pub mod device {
         v[0] = Vector(LPUART1);
         v[8] = Vector(DMA1_CHANNEL1);
         v[11] = Vector(SPI3);
+        v[15] = Vector(SPI2);
         v
     };
 }
@@ -108,6 +114,7 @@ pub fn sim_state() -> super::sim_script::SimState {
         noise: hal_sim::NoiseScene::Bench,
         seed: 1,
         fault: None,
+        boot_fault: None,
     }
 }
 
@@ -205,9 +212,15 @@ pub fn init(_core: &mut cortex_m::Peripherals) -> Parts {
         &super::sim_factory::RECORD,
     );
     let boot = boot_state();
+    if let Some(e) = boot.boot_fault {
+        BOOT_FAULT.store(e as u8, core::sync::atomic::Ordering::Relaxed);
+    }
+    let mut stream = Stream::new(SimProbe::new(boot.scene(), boot.seed));
+    // As on the STM32: a failed step that leaves it without converters starts no stream.
+    stream.dead = boot.boot_fault.is_some_and(|e| e.blocks_readings());
     Parts {
-        stream: Stream::new(SimProbe::new(boot.scene(), boot.seed)),
-        watchdog: Watchdog,
+        stream,
+        watchdog: Watchdog { last: None },
         flash,
         uart: Uart::new(),
         load_cell: load_cell(),
@@ -267,6 +280,12 @@ pub fn elapsed(start: u32) -> u32 {
         .saturating_mul(INSTRUCTIONS_PER_TICK)
 }
 
+/// Instructions executed since `start` (a [`stamp`]), for spans too long for [`elapsed`]'s
+/// `u32` (over 4.29 G instructions); valid for spans under 171 s.
+pub fn elapsed_long(start: u32) -> u64 {
+    start.wrapping_sub(stamp()) as u64 * INSTRUCTIONS_PER_TICK as u64
+}
+
 /// Unit of [`elapsed`].
 pub const ELAPSED_UNIT: &str = "instructions";
 
@@ -277,6 +296,9 @@ pub struct Stream {
     adc: [[AdcFrame; BATCH]; 2],
     half: usize,
     scale: FrontEndScale,
+    /// No converters (an emulated boot fault, [`boot_error`]): [`start`](Self::start) starts
+    /// the instruction clock but not the batch timer.
+    dead: bool,
 }
 
 impl Stream {
@@ -291,6 +313,7 @@ impl Stream {
             adc: [[AdcFrame::default(); BATCH]; 2],
             half: 0,
             scale,
+            dead: false,
         }
     }
 
@@ -312,6 +335,9 @@ impl Stream {
     pub fn start(&mut self, engine: &mut SampleEngine) {
         self.prefill(engine);
         start_stamp_clock();
+        if self.dead {
+            return;
+        }
         let period = (SYSCLK_HZ as f32 * BATCH as f32 / self.scale.sample_rate.0) as u32;
         // SAFETY: CMSDK timer 0 registers; the image owns the timer.
         unsafe {
@@ -451,19 +477,64 @@ fn attach_load_cell(probe: &SimProbe) {
     cortex_m::interrupt::free(|cs| *LOAD_CELL_CHIP.borrow(cs).borrow_mut() = chip);
 }
 
-/// The watchdog stand-in (QEMU's AN386 has no independent watchdog modelled for this image):
-/// feeding does nothing.
-pub struct Watchdog;
+/// The independent watchdog, emulated: the STM32's IWDG resets the core 500 ms after the last
+/// feed; here a feed that comes later than that after the one before — or a starved watchdog
+/// found by [`Watchdog::starved`] — logs the reset the STM32 would have taken and ends the run
+/// with failure. Time is the instruction clock's (one instruction per virtual nanosecond):
+/// the guard task's 100 ms feeds are monotonic (SysTick) milliseconds of the same virtual time.
+pub struct Watchdog {
+    /// [`stamp`] of the last feed (`None` before the first).
+    last: Option<u32>,
+}
+
+/// The STM32's watchdog timeout in instructions of this machine's clock (500 ms).
+const WATCHDOG_INSTRUCTIONS: u32 = 500_000_000;
 
 impl Watchdog {
-    /// Feed (no-op on QEMU).
-    pub fn feed(&mut self) {}
+    /// Feed; fails the run if the last feed was more than the timeout ago.
+    pub fn feed(&mut self) {
+        self.check();
+        self.last = Some(stamp());
+    }
+
+    /// Not fed this time (the guard found the measurement task's promise broken): fails the
+    /// run once the timeout has passed since the last feed, as the IWDG would reset the core.
+    pub fn starved(&mut self) {
+        self.check();
+    }
+
+    fn check(&self) {
+        if let Some(t) = self.last {
+            let since = elapsed(t);
+            if since > WATCHDOG_INSTRUCTIONS {
+                defmt::error!(
+                    "watchdog reset instructions_since_feed={=u32} timeout={=u32}",
+                    since,
+                    WATCHDOG_INSTRUCTIONS
+                );
+                exit(false);
+            }
+        }
+    }
 }
 
 /// The flash of the calibration store: 4 KiB of simulated NOR, erased at boot.
 pub type StoreFlash = SimFlash<4096, 2048, 8>;
 /// Offset of the store's first slot in [`StoreFlash`].
 pub const STORE_BASE: u32 = 0;
+
+/// The bring-up step the boot script's leading `sim boot-fault` line names (0: none). The
+/// board's stand-in peripherals cannot fail to come up by themselves: this emulates a failed
+/// step, so the QEMU tests see its refusals.
+static BOOT_FAULT: core::sync::atomic::AtomicU8 = core::sync::atomic::AtomicU8::new(0);
+
+/// The first bring-up step that failed (emulated: `sim boot-fault`), if any.
+pub fn boot_error() -> Option<crate::boot::BootError> {
+    let v = BOOT_FAULT.load(core::sync::atomic::Ordering::Relaxed);
+    crate::boot::BootError::ALL
+        .into_iter()
+        .find(|e| *e as u8 == v)
+}
 
 /// End the emulation with success or failure (semihosting `SYS_EXIT`).
 pub fn exit(success: bool) -> ! {

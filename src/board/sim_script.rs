@@ -9,9 +9,13 @@
 //! sim noise bench|paper|quiet|<A/sqrt(Hz)>             front-end noise
 //! sim seed 7                                           noise stream (a fresh probe)
 //! sim fault open|short|dac-stuck|adc-rail|none         an analog-chain fault (hal_sim::Fault)
+//! sim boot-fault <code>|none                           a failed bring-up step (BootError code)
 //! ```
 //!
-//! A fault stays on whatever the probe is moved onto until `sim fault none`.
+//! A fault stays on whatever the probe is moved onto until `sim fault none`. A boot fault acts
+//! only among the script's leading `sim` lines, which the board applies before it comes up:
+//! the QEMU board then reports it as its boot error and, for one that leaves the STM32 without
+//! its sample stream, does not start its stream either.
 //!
 //! Every other line is a probe command for the firmware's own parser. The boot command line is
 //! a list of lines separated by `;`.
@@ -33,6 +37,8 @@ pub struct SimState {
     pub seed: u64,
     /// An analog-chain fault, or `None`.
     pub fault: Option<Fault>,
+    /// A bring-up step the board is to report as failed (at boot only), or `None`.
+    pub boot_fault: Option<crate::boot::BootError>,
 }
 
 impl SimState {
@@ -64,7 +70,9 @@ impl SimError {
     /// One line for a human.
     pub fn message(self) -> &'static str {
         match self {
-            SimError::Unknown => "sim: phantom, modulus, free-air, preload, noise, seed or fault",
+            SimError::Unknown => {
+                "sim: phantom, modulus, free-air, preload, noise, seed, fault or boot-fault"
+            }
             SimError::BadArgument => "sim: argument missing or out of range",
             SimError::UnknownPhantom => "sim: unknown phantom",
         }
@@ -118,6 +126,15 @@ pub fn apply(line: &str, state: &mut SimState) -> Result<bool, SimError> {
                 a => Some(a.and_then(Fault::from_name).ok_or(SimError::BadArgument)?),
             }
         }
+        Some("boot-fault") => {
+            state.boot_fault = match arg {
+                Some("none") => None,
+                a => Some(
+                    a.and_then(crate::boot::BootError::from_code)
+                        .ok_or(SimError::BadArgument)?,
+                ),
+            }
+        }
         _ => return Err(SimError::Unknown),
     }
     Ok(true)
@@ -169,7 +186,23 @@ mod tests {
             noise: NoiseScene::Bench,
             seed: 1,
             fault: None,
+            boot_fault: None,
         }
+    }
+
+    #[test]
+    fn a_boot_fault_line_names_a_boot_error() {
+        use crate::boot::BootError;
+        let mut s = start();
+        assert_eq!(apply("sim boot-fault converter_hang", &mut s), Ok(true));
+        assert_eq!(s.boot_fault, Some(BootError::ConverterHang));
+        assert_eq!(
+            apply("sim boot-fault melted", &mut s),
+            Err(SimError::BadArgument)
+        );
+        assert_eq!(apply("sim boot-fault", &mut s), Err(SimError::BadArgument));
+        assert_eq!(apply("sim boot-fault none", &mut s), Ok(true));
+        assert_eq!(s.boot_fault, None);
     }
 
     #[test]

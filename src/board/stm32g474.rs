@@ -2,7 +2,9 @@
 //! on DMA ring buffers, the bank-2 flash of the calibration store, LPUART1 and the independent
 //! watchdog are embassy drivers, used from RTIC 2 tasks without an embassy executor. Raw
 //! register code remains only where embassy 0.6 lacks the feature: twelve accesses, each
-//! marked `RAW n/12` with the gap and the RM0440 section, listed in `docs/firmware.md`.
+//! marked `RAW n/12` with the gap and the RM0440 section, listed in `docs/firmware.md`. The
+//! HSE runs under the clock security system (CSSON with HSEON in one access); its NMI resets
+//! the core into a boot on HSI16 through the PLL ([`BootError::HseFailure`]).
 //!
 //! # Bring-up ([`init`])
 //!
@@ -120,56 +122,9 @@ pub fn elapsed(start: u32) -> u32 {
 
 // ---- boot errors, clock source, stream faults ---------------------------------------------
 
-/// A bring-up step that failed. The board carries on degraded; [`boot_error`] holds the first.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u8)]
-pub enum BootError {
-    /// FLASH_OPTR.DBANK is 0 (single-bank mode, 4 KiB pages): the store's flash driver is not
-    /// created (embassy's `Flash::new_blocking` would panic) and every store access is refused.
-    FlashSingleBank = 1,
-    /// LPUART1 did not take its configuration: no command line.
-    Uart,
-    /// The DAC's circular DMA transfer did not start: the sample stream is not started.
-    DacStart,
-    /// The DAC output buffer calibration found no trim (CAL_FLAG1 never rose): the DAC is not
-    /// trusted with the drive and the sample stream is not started.
-    DacCalibration,
-    /// The boot before did not get through embassy's clock setup (its waits on HSIRDY, PLLRDY,
-    /// the flash latency and the clock switch have no bound; the watchdog ended it): this boot
-    /// runs on HSI16 at 16 MHz without the PLL and does not start the sample stream.
-    ClockHang,
-    /// The boot before did not get through the converters' setup (embassy's ADC calibration and
-    /// ready waits): TIM6, DAC1 and the ADCs are left alone, the stream is not started.
-    ConverterHang,
-    /// The run before hung in a flash erase or program (embassy's waits on FLASH_SR.BSY): the
-    /// store's flash is not used this boot.
-    FlashHang,
-}
-
-impl BootError {
-    const ALL: [BootError; 7] = [
-        BootError::FlashSingleBank,
-        BootError::Uart,
-        BootError::DacStart,
-        BootError::DacCalibration,
-        BootError::ClockHang,
-        BootError::ConverterHang,
-        BootError::FlashHang,
-    ];
-
-    /// Short name for the log.
-    pub fn name(self) -> &'static str {
-        match self {
-            BootError::FlashSingleBank => "flash_single_bank",
-            BootError::Uart => "uart",
-            BootError::DacStart => "dac_start",
-            BootError::DacCalibration => "dac_calibration",
-            BootError::ClockHang => "clock_hang",
-            BootError::ConverterHang => "converter_hang",
-            BootError::FlashHang => "flash_hang",
-        }
-    }
-}
+/// A bring-up step that failed (portable, so the session's handling of it is tested on the
+/// host). The board carries on degraded; [`boot_error`] holds the first.
+pub use crate::boot::BootError;
 
 /// First boot error (0: none).
 static BOOT_ERROR: AtomicU8 = AtomicU8::new(0);
@@ -189,7 +144,7 @@ pub fn boot_error() -> Option<BootError> {
 
 /// A step whose waits are embassy's own and unbounded. The watchdog runs from the start of
 /// [`init`]; the step in progress is kept in RAM that a reset does not clear, so the boot after
-/// a watchdog reset ([`watchdog_reset`]) knows which step hung and goes around it with a typed
+/// a watchdog reset ([`reset_cause`]) knows which step hung and goes around it with a typed
 /// [`BootError`] instead of hanging again (no reset loop).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(u32)]
@@ -200,6 +155,10 @@ enum Step {
     Converters = 2,
     /// A flash erase or program of the store.
     Flash = 3,
+    /// Not a step: the clock security system saw the HSE fail while the image ran; its NMI
+    /// (`NonMaskableInt`) wrote this and reset the core, and the boot after a software reset
+    /// that finds it runs from HSI16 through the PLL ([`BootError::HseFailure`]).
+    HseFailed = 4,
 }
 
 /// Tag of a valid marker (upper half-word); the second word is the first's complement, so the
@@ -222,17 +181,43 @@ fn set_step(step: Option<Step>) {
     }
 }
 
-/// Whether the independent watchdog caused the last reset; the reset flags are cleared, so the
-/// next boot reads its own cause (they are sticky until RMVF).
+/// What caused the last reset, as far as the boot-step marker cares.
+#[derive(Clone, Copy)]
+struct ResetCause {
+    /// The independent watchdog (IWDGRSTF).
+    watchdog: bool,
+    /// A software reset (SFTRSTF): the clock security system's NMI resets this way.
+    software: bool,
+}
+
+/// What caused the last reset; the reset flags are cleared, so the next boot reads its own
+/// cause (they are sticky until RMVF).
 ///
 /// Gap: embassy-stm32 0.6 has no reset-cause API. RAW 12/12: RCC_CSR read-modify-write,
-/// IWDGRSTF read and RMVF set in one access (RM0440 RCC chapter, RCC_CSR).
-fn watchdog_reset() -> bool {
+/// IWDGRSTF and SFTRSTF read and RMVF set in one access (RM0440 7.4.28 RCC_CSR, numbered by
+/// the register order: see docs/firmware.md).
+fn reset_cause() -> ResetCause {
     pac::RCC.csr().modify(|w| {
-        let iwdg = w.iwdgrstf();
+        let cause = ResetCause {
+            watchdog: w.iwdgrstf(),
+            software: w.sftrstf(),
+        };
         w.set_rmvf(true);
-        iwdg
+        cause
     })
+}
+
+/// The clock security system's NMI (RM0440 7.2, RCC clocks: "Clock security system (CSS)"): the HSE failed
+/// while it clocked the PLL; the hardware has switched SYSCLK to HSI16 (16 MHz, PLL off), under
+/// TIM6, LPUART1 and the monotonic set up for 170 MHz. Rather than run on mis-timed, the core
+/// is reset; the boot after it finds the marker and runs from HSI16 through the PLL at 170 MHz
+/// with [`BootError::HseFailure`] (no reset loop: that boot does not start the HSE again).
+/// The reset also clears the CSS flag (CSSF), which would otherwise re-enter this handler for
+/// ever (RCC_CICR.CSSC is not written: no raw access spent on it).
+#[cortex_m_rt::exception]
+unsafe fn NonMaskableInt() {
+    set_step(Some(Step::HseFailed));
+    cortex_m::peripheral::SCB::sys_reset()
 }
 
 /// The step the run before this boot was in when the watchdog reset it.
@@ -246,7 +231,7 @@ fn interrupted_step() -> Option<Step> {
     if a != !b || a & 0xFFFF_0000 != STEP_MAGIC {
         return None;
     }
-    [Step::Clock, Step::Converters, Step::Flash]
+    [Step::Clock, Step::Converters, Step::Flash, Step::HseFailed]
         .into_iter()
         .find(|s| *s as u32 == a & 0xFFFF)
 }
@@ -256,7 +241,8 @@ fn interrupted_step() -> Option<Step> {
 pub enum ClockSource {
     /// The NUCLEO-G474RE's 24 MHz crystal (X3) through the PLL: 170 MHz.
     Hse24,
-    /// HSI16 through the PLL (the HSE did not start): 170 MHz, RC accuracy.
+    /// HSI16 through the PLL (the HSE did not start, or failed on the run before:
+    /// [`BootError::HseFailure`]): 170 MHz, RC accuracy.
     Hsi16Pll,
     /// HSI16 directly, 16 MHz, no PLL: the boot before hung in the clock setup
     /// ([`BootError::ClockHang`]); the sample stream is not started.
@@ -367,14 +353,14 @@ unsafe impl Binding<interrupt::typelevel::LPUART1, usart::InterruptHandler<perip
 ///
 /// Gap: embassy-stm32 0.6's DMA interrupt handler (`dma_bdma.rs`, `on_irq`) panics on TEIF; the
 /// stream must count a transfer error and stop instead (the hardware has already disabled the
-/// channel: RM0440 DMA chapter, "DMA error management").
+/// channel: RM0440 12, DMA: "DMA error management").
 struct DmaFaults;
 
 impl<I: interrupt::typelevel::Interrupt> Handler<I> for DmaFaults {
     unsafe fn on_interrupt() {
-        // RAW 1/12: DMA1_ISR TEIF1..4 (RM0440 DMA chapter, DMA_ISR).
+        // RAW 1/12: DMA1_ISR TEIF1..4 (RM0440 12, DMA: DMA_ISR).
         let isr = pac::DMA1.isr().read();
-        // RAW 2/12: DMA1_IFCR CTEIF1..4, write-one-to-clear (RM0440 DMA chapter, DMA_IFCR).
+        // RAW 2/12: DMA1_IFCR CTEIF1..4, write-one-to-clear (RM0440 12, DMA: DMA_IFCR).
         let n = pac::DMA1.ifcr().write(|w| {
             let mut n = 0;
             for ch in 0..4 {
@@ -393,13 +379,21 @@ impl<I: interrupt::typelevel::Interrupt> Handler<I> for DmaFaults {
 
 // ---- clocks ----------------------------------------------------------------------------
 
-/// Start the HSE crystal and wait for it, bounded. embassy's `rcc::init` (g4.rs) sets HSEON and
-/// then spins on HSERDY without a bound: it is given the HSE only once it runs.
+/// Start the HSE crystal with its clock security system and wait for it, bounded. embassy's
+/// `rcc::init` (g4.rs) sets HSEON and then spins on HSERDY without a bound: it is given the HSE
+/// only once it runs. embassy 0.6 has no CSS for the G4.
 fn hse_starts() -> bool {
-    // RAW 3/12: RCC_CR.HSEON (RM0440 RCC chapter, RCC_CR; "HSE clock"). HSEBYP stays 0
-    // (crystal). If the crystal does not start, embassy's init (`hse: None`) clears HSEON again.
-    pac::RCC.cr().modify(|w| w.set_hseon(true));
-    // RAW 4/12: RCC_CR.HSERDY, polled with a bound (RM0440 RCC chapter, RCC_CR).
+    // RAW 3/12: RCC_CR.HSEON and CSSON in one read-modify-write (RM0440 7.4.1 RCC_CR; 7.2
+    // "HSE clock", "Clock security system (CSS)"). HSEBYP stays 0 (crystal). The clock detector
+    // turns itself on once the HSE is ready and off when it is stopped: if the crystal does not
+    // start, embassy's init (`hse: None`) clears HSEON again and the CSS never arms. A failure
+    // later is the NMI (`NonMaskableInt`). embassy's own RCC_CR writes are read-modify-writes
+    // of other fields: CSSON stays set.
+    pac::RCC.cr().modify(|w| {
+        w.set_hseon(true);
+        w.set_csson(true);
+    });
+    // RAW 4/12: RCC_CR.HSERDY, polled with a bound (RM0440 7.4.1 RCC_CR).
     spin_until(HSE_TIMEOUT, || pac::RCC.cr().read().hserdy())
 }
 
@@ -510,7 +504,7 @@ impl Stream {
         };
         // The DAC's circular DMA, DAC_BUF → DHR12R1, half-words read and written as words
         // (zero-extended by the DMA): embassy's `DacChannel::write` programs 16-bit peripheral
-        // writes, which the G4's DAC answers with a bus error (RM0440's DAC registers take word
+        // writes, which the G4's DAC answers with a bus error (RM0440 22, DAC: its registers take word
         // accesses only; embassy issue #2783, fixed after 0.6).
         // SAFETY: `DAC_DMA` was filled by `converters` and is used only here; the buffer is
         // static; the DMA reads it for ever while `capture` writes the half the DMA has left.
@@ -567,8 +561,8 @@ impl Stream {
             _ => 0,
         };
 
-        // Gap: embassy 0.6's DAC driver has no underrun check: DAC_SR.DMAUDR1 (RM0440 DAC
-        // chapter, "DMA underrun"), read through [`dac_sr`]. Not cleared: the stream stops on
+        // Gap: embassy 0.6's DAC driver has no underrun check: DAC_SR.DMAUDR1 (RM0440 22, DAC:
+        // "DMA underrun"), read through [`dac_sr`]. Not cleared: the stream stops on
         // the first underrun, which is counted once.
         if !self.dac_underrun && self.hw.is_some() && dac_sr().dmaudr(0) {
             self.dac_underrun = true;
@@ -665,6 +659,10 @@ impl Watchdog {
     pub fn feed(&mut self) {
         self.0.pet();
     }
+
+    /// Not fed this time: nothing to do, the IWDG resets the core by itself once its timeout
+    /// has passed since the last feed (the QEMU board's stand-in checks the same here).
+    pub fn starved(&mut self) {}
 }
 
 // ---- flash -----------------------------------------------------------------------------
@@ -766,14 +764,14 @@ impl NorFlash for InternalFlash {
 /// is to be checked), at 170 MHz.
 const DAC_TRIM_CYCLES: u32 = SYSCLK_HZ / 20_000;
 
-/// DAC_SR (RM0440 DAC chapter, DAC_SR): CAL_FLAG1 for the calibration, DMAUDR1 for the
+/// DAC_SR (RM0440 22, DAC: DAC_SR): CAL_FLAG1 for the calibration, DMAUDR1 for the
 /// stream. Gap: embassy-stm32 0.6's DAC driver reads neither.
 fn dac_sr() -> pac::dac::regs::Sr {
     // RAW 9/12: DAC_SR read.
     pac::DAC1.sr().read()
 }
 
-/// DAC_CR (RM0440 DAC chapter, DAC_CR): CEN1 (calibration mode) and DMAEN1. Gap: embassy-stm32
+/// DAC_CR (RM0440 22, DAC: DAC_CR): CEN1 (calibration mode) and DMAEN1. Gap: embassy-stm32
 /// 0.6 sets DMAEN1 only inside `DacChannel::write`, whose 16-bit DMA the G4's DAC refuses, and
 /// has no calibration.
 fn dac_cr(f: impl FnOnce(&mut pac::dac::regs::Cr)) {
@@ -781,7 +779,7 @@ fn dac_cr(f: impl FnOnce(&mut pac::dac::regs::Cr)) {
     pac::DAC1.cr().modify(f);
 }
 
-/// Calibrate DAC1 channel 1's output buffer offset (RM0440 DAC chapter, "DAC channel output
+/// Calibrate DAC1 channel 1's output buffer offset (RM0440 22, DAC: "DAC channel output
 /// buffer calibration"): with the channel off and in normal buffered mode, CEN1 set, OTRIM1
 /// stepped up from 0, tTRIM after each step, until CAL_FLAG1 reads 1 — the first trim at or
 /// above the offset. 32 steps at most (1.6 ms); false if the flag never rose.
@@ -791,7 +789,7 @@ fn calibrate_dac() -> bool {
     dac_cr(|w| w.set_cen(0, true));
     let mut found = false;
     for trim in 0..32 {
-        // RAW 11/12: DAC_CCR.OTRIM1 (RM0440 DAC chapter, DAC_CCR); OTRIM2 (channel 2, unused)
+        // RAW 11/12: DAC_CCR.OTRIM1 (RM0440 22, DAC: DAC_CCR); OTRIM2 (channel 2, unused)
         // written 0.
         pac::DAC1.ccr().write(|w| w.set_otrim(0, trim));
         cortex_m::asm::delay(DAC_TRIM_CYCLES);
@@ -827,7 +825,8 @@ fn converters(p: ConverterPins) -> Converters {
     let tim = Timer::new(p.tim6);
     tim.set_frequency(Hertz(SAMPLE_RATE_HZ), RoundTo::Faster);
     // Gap: embassy 0.6's low-level timer has no master-mode setter. RAW 7/12: TIM6_CR2.MMS =
-    // update → TRGO (RM0440 basic timers chapter, TIMx_CR2).
+    // update → TRGO (RM0440 "Basic timers (TIM6/TIM7)" chapter, TIMx_CR2;
+    // its number unverified: docs/firmware.md).
     tim.regs_basic()
         .cr2()
         .modify(|w| w.set_mms(pac::timer::vals::Mms::UPDATE));
@@ -846,8 +845,8 @@ fn converters(p: ConverterPins) -> Converters {
         p.pa4,
     );
     // embassy's `new_triggered` selects the trigger (TSEL1) and enables the channel but never
-    // sets TEN1, without which the DAC neither waits for TIM6 nor requests DMA (RM0440 DAC
-    // chapter, "DAC trigger selection", "DMA requests"): `set_mode` turns EN1 off (TEN1 and the
+    // sets TEN1, without which the DAC neither waits for TIM6 nor requests DMA (RM0440 22, DAC:
+    // "DAC trigger selection", "DMA requests"): `set_mode` turns EN1 off (TEN1 and the
     // calibration want the channel off), TEN1 is set, the buffer calibrated, EN1 and DMAEN1
     // set. No trigger comes before TIM6 starts, so no DMA request before the transfer runs.
     dac.set_mode(Mode::NormalExternalBuffered);
@@ -941,18 +940,17 @@ pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
     core.DCB.enable_trace();
     core.DWT.enable_cycle_counter();
     // A step is taken for hung only after a watchdog reset (a reset button pressed during a
-    // step is not a hang).
-    let interrupted = if watchdog_reset() {
-        interrupted_step()
-    } else {
-        None
-    };
+    // step is not a hang); the HSE's failure only after the software reset of the CSS's NMI.
+    let cause = reset_cause();
+    let marker = interrupted_step();
+    let interrupted = marker.filter(|s| cause.watchdog && *s != Step::HseFailed);
+    let hse_failed = cause.software && marker == Some(Step::HseFailed);
     let safe_clock = interrupted == Some(Step::Clock);
 
     // The watchdog before any wait of embassy's: a step that hangs ends in a reset, and the
     // next boot goes around it (`interrupted_step`). Frozen while a debugger halts the core.
     // Gap: embassy 0.6 has no DBGMCU API. RAW 8/12: DBGMCU_APB1FZR1.DBG_IWDG_STOP (RM0440
-    // DBGMCU chapter, DBGMCU_APB1FZR1), before the IWDG starts.
+    // "Debug support (DBG)" chapter, DBGMCU_APB1FZR1; its number unverified: docs/firmware.md), before the IWDG starts.
     pac::DBGMCU.apb1lfzr().modify(|w| w.set_iwdg(true));
     // On HSI16 without the PLL the monotonic (started for 170 MHz) runs 10.6 times slow, and
     // the measurement task's 100 ms feeds come every 1.06 s: the timeout grows with it.
@@ -969,6 +967,9 @@ pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
     let clock = if safe_clock {
         record(BootError::ClockHang);
         ClockSource::Hsi16
+    } else if hse_failed {
+        record(BootError::HseFailure);
+        ClockSource::Hsi16Pll
     } else if hse_starts() {
         ClockSource::Hse24
     } else {

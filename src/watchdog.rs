@@ -1,0 +1,161 @@
+//! The watchdog's liveness rule: the measurement task promises when it will next show signs of
+//! life, and the watchdog is fed only while that promise holds.
+//!
+//! The measurement task (priority 1) serves commands one at a time; some run long stretches of
+//! synchronous code with no await in them — `calibrate fit` ([`crate::profile::calibrate`]: the
+//! contact law's Levenberg–Marquardt fit, once over all references and once per held-out
+//! modulus, in software `f64`) takes 2.2 s on the Cortex-M4 for 10 references on 5 moduli and
+//! 4.5 minutes for 32 on 32 ([`FIT_WORST_MS`]; `docs/firmware.md`, measured under QEMU). Were that task to feed the independent watchdog
+//! itself, a long fit would end in a watchdog reset. Instead:
+//!
+//! * the measurement task makes a [`Liveness::promise`] — "I report again within this many
+//!   ms" — at every sign of life: while it waits for requests (every feed period), at each
+//!   point of a reading (the point's timeout), before a command whose synchronous work is
+//!   bounded by a measured figure ([`fit_bound`] before `calibrate fit`);
+//! * a watchdog task at a higher priority (it preempts a running fit) asks [`Liveness::alive`]
+//!   every feed period and feeds the hardware watchdog only while the last promise has not
+//!   expired.
+//!
+//! A genuine hang — a wait that never ends, a loop that does not terminate, a fit that runs
+//! past its bound — breaks the promise: feeding stops and the hardware watchdog resets the core
+//! its own timeout later. A long but bounded fit keeps its promise and is never reset.
+//!
+//! Time is the monotonic's milliseconds ([`Millis`], wrapping `u32`: the comparison is modular,
+//! correct across the wrap for promises shorter than 24 days).
+
+use core::sync::atomic::{AtomicU32, Ordering};
+
+/// A time or a duration in milliseconds of the monotonic clock (wrapping).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Millis(pub u32);
+
+/// The most references a `calibrate fit` takes in the firmware ([`crate::session::MAX_REFERENCES`]).
+pub const FIT_MAX_REFERENCES: usize = crate::session::MAX_REFERENCES;
+
+/// The longest `calibrate fit` measured on the Cortex-M4, in ms at 170 MHz (one cycle per
+/// instruction), rounded up: [`FIT_MAX_REFERENCES`] references on as many moduli, scattered so
+/// that the fits iterate long — 45.6–45.7 G instructions under QEMU, 268.3–268.9 s
+/// (`src/bin/cost.rs`, case `max-scattered`; the count varies by 0.2 % between builds of the
+/// cost image; `docs/firmware.md`).
+pub const FIT_WORST_MS: u32 = 275_000;
+
+/// What the measurement task promises before a `calibrate fit` of `refs` references: twice the
+/// worst measured fit of [`FIT_MAX_REFERENCES`] references, scaled by `(refs / max)²` — an upper
+/// envelope, since the fit's cost grows faster than the square of the reference count (one
+/// contact-law fit per distinct modulus held out, each over the other references; measured 3.8,
+/// 22.8 and 44.5 M instructions per squared reference at 10, 16 and 32 references) — and at
+/// least one second. More references than the maximum are promised the maximum's bound (the
+/// session keeps no more).
+pub fn fit_bound(refs: usize) -> Millis {
+    let n = refs.min(FIT_MAX_REFERENCES) as u64;
+    let max = FIT_MAX_REFERENCES as u64;
+    let ms = 2 * FIT_WORST_MS as u64 * n * n / (max * max);
+    Millis(ms.max(1_000) as u32)
+}
+
+/// The promise of the task the watchdog guards: the deadline of its next sign of life.
+#[derive(Debug)]
+pub struct Liveness {
+    deadline: AtomicU32,
+}
+
+impl Liveness {
+    /// The first promise: a sign of life by `first` (the monotonic starts at 0 in `init`).
+    /// Until the guarded task promises more, the watchdog is fed up to then and no longer.
+    pub const fn new(first: Millis) -> Self {
+        Self {
+            deadline: AtomicU32::new(first.0),
+        }
+    }
+
+    /// The guarded task is alive at `now` and promises its next sign of life within `within`.
+    /// A new promise replaces the last, shorter or longer.
+    pub fn promise(&self, now: Millis, within: Millis) {
+        self.deadline
+            .store(now.0.wrapping_add(within.0), Ordering::Release);
+    }
+
+    /// Whether the watchdog may be fed at `now`: the last promise has not expired (`now` at or
+    /// before its deadline).
+    pub fn alive(&self, now: Millis) -> bool {
+        let deadline = self.deadline.load(Ordering::Acquire);
+        // Modular: the deadline is ahead of (or at) `now` when the difference, as a signed
+        // number, is not negative.
+        deadline.wrapping_sub(now.0) as i32 >= 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn alive_until_the_deadline_then_not() {
+        let l = Liveness::new(Millis(1_000));
+        assert!(l.alive(Millis(0)) && l.alive(Millis(1_000)));
+        assert!(
+            !l.alive(Millis(1_001)),
+            "no promise after the first: starved"
+        );
+        l.promise(Millis(1_000), Millis(100));
+        assert!(l.alive(Millis(1_100)));
+        assert!(
+            !l.alive(Millis(1_101)),
+            "a broken promise stops the feeding"
+        );
+        assert!(!l.alive(Millis(60_000)));
+        // A sign of life renews it.
+        l.promise(Millis(60_000), Millis(100));
+        assert!(l.alive(Millis(60_050)));
+    }
+
+    #[test]
+    fn a_fit_promise_covers_its_bound_and_no_more() {
+        let l = Liveness::new(Millis(0));
+        let bound = fit_bound(FIT_MAX_REFERENCES);
+        l.promise(Millis(5_000), bound);
+        // The watchdog task asks every 100 ms during the fit.
+        let mut t = 5_000;
+        while t <= 5_000 + bound.0 {
+            assert!(l.alive(Millis(t)), "{t}");
+            t += 100;
+        }
+        assert!(!l.alive(Millis(5_001 + bound.0)));
+    }
+
+    #[test]
+    fn the_fit_bound_covers_the_measured_fits_twice() {
+        // Measured on the Cortex-M4 (QEMU instruction counts at 170 MHz, docs/firmware.md):
+        // (references, ms).
+        for (n, ms) in [(10, 2_247), (16, 34_401), (32, 226_597), (32, 268_855)] {
+            assert!(fit_bound(n).0 >= 2 * ms, "{n}: {:?}", fit_bound(n));
+        }
+        assert_eq!(fit_bound(32), Millis(2 * FIT_WORST_MS));
+        assert_eq!(fit_bound(1_000), fit_bound(32));
+        assert_eq!(fit_bound(0), Millis(1_000));
+        // Monotonic in the count.
+        for n in 1..=FIT_MAX_REFERENCES {
+            assert!(fit_bound(n).0 >= fit_bound(n - 1).0);
+        }
+    }
+
+    #[test]
+    fn the_deadline_wraps_with_the_clock() {
+        let l = Liveness::new(Millis(0));
+        l.promise(Millis(u32::MAX - 50), Millis(100));
+        assert!(l.alive(Millis(u32::MAX)));
+        assert!(l.alive(Millis(49)));
+        assert!(!l.alive(Millis(50)));
+        // A stale deadline far behind `now` (the task hung long ago) stays expired.
+        l.promise(Millis(0), Millis(100));
+        assert!(!l.alive(Millis(1 << 30)));
+    }
+
+    #[test]
+    fn a_shorter_promise_replaces_a_longer_one() {
+        let l = Liveness::new(Millis(0));
+        l.promise(Millis(0), fit_bound(FIT_MAX_REFERENCES));
+        l.promise(Millis(10), Millis(100));
+        assert!(!l.alive(Millis(111)));
+    }
+}
