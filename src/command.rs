@@ -33,9 +33,10 @@
 use crate::estimate::ringdown::RingdownSettings;
 use crate::estimate::staged::{Refine, StagedSettings};
 use crate::hal::FrontEndScale;
+use crate::loadcell::ForceWindow;
 use crate::measure::{Method, Settings};
 use crate::sweep::{SettingsError, SweepSettings};
-use crate::units::{Hz, KPa, Seconds, Volts};
+use crate::units::{Hz, KPa, Newtons, Seconds, Volts};
 
 /// Longest accepted line in bytes (without the terminator).
 pub const MAX_LINE: usize = 96;
@@ -79,7 +80,18 @@ pub enum Command {
     Help,
     /// Run the self-test of the analog chain (as at power-on).
     SelfTest,
+    /// Read only inside this contact-force window (`force <min mN> <max mN>`).
+    ForceWindow(ForceWindow),
+    /// Take the load cell's sensitivity from this known weight resting on the tip
+    /// (`weigh <grams>`, after an air reference gave the zero).
+    Weigh(Newtons),
 }
+
+/// Known weights `weigh` takes, grams: from 1 g (10 mN, a tenth of the window's top) to the
+/// 100 g cell's full scale.
+pub const WEIGH_GRAMS: (f32, f32) = (1.0, 100.0);
+/// Standard gravity, N per gram.
+const NEWTONS_PER_GRAM: f32 = 9.806_65e-3;
 
 /// Why a line is not a command.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -335,6 +347,16 @@ pub fn parse(line: &[u8], scale: &FrontEndScale) -> Result<Command, CommandError
         "staged" => staged(args, scale).map(|s| Command::Settings(Settings::Staged(s))),
         "ringdown" => ringdown(args, scale).map(|s| Command::Settings(Settings::Ringdown(s))),
         "calibrate" => calibrate(args),
+        "force" => force_window(args),
+        "weigh" => {
+            arity(args, 1)?;
+            let g = number(args.first().copied().unwrap_or_default())?;
+            if (WEIGH_GRAMS.0..=WEIGH_GRAMS.1).contains(&g) {
+                Ok(Command::Weigh(Newtons(g * NEWTONS_PER_GRAM)))
+            } else {
+                Err(CommandError::OutOfRange)
+            }
+        }
         _ => Err(CommandError::UnknownCommand),
     }
 }
@@ -434,6 +456,16 @@ fn ringdown(args: &[&str], scale: &FrontEndScale) -> Result<RingdownSettings, Co
 }
 
 /// `calibrate add <kPa> | fit | clear | paper`.
+/// `force <min mN> <max mN>`: the window, validated ([`ForceWindow::new`]).
+fn force_window(args: &[&str]) -> Result<Command, CommandError> {
+    arity(args, 2)?;
+    let min = number(args.first().copied().unwrap_or_default())?;
+    let max = number(args.get(1).copied().unwrap_or_default())?;
+    ForceWindow::new(Newtons(min * 1e-3), Newtons(max * 1e-3))
+        .map(Command::ForceWindow)
+        .map_err(|_| CommandError::OutOfRange)
+}
+
 fn calibrate(args: &[&str]) -> Result<Command, CommandError> {
     let (&sub, rest) = args.split_first().ok_or(CommandError::MissingArgument)?;
     let none = |c: Command| arity(rest, 0).map(|_| c);
@@ -519,6 +551,25 @@ mod tests {
         assert_eq!(p("air"), Ok(Command::Air));
         assert_eq!(p("selftest"), Ok(Command::SelfTest));
         assert_eq!(p("selftest now"), Err(CommandError::TooManyArguments));
+        // The force window in mN, validated: ordered, inside 3–200 mN.
+        assert_eq!(
+            p("force 15 50"),
+            Ok(Command::ForceWindow(
+                ForceWindow::new(Newtons(15.0 * 1e-3), Newtons(50.0 * 1e-3)).unwrap()
+            ))
+        );
+        for bad in ["force 50 15", "force 2 50", "force 15 250", "force 15 15"] {
+            assert_eq!(p(bad), Err(CommandError::OutOfRange), "{bad}");
+        }
+        assert_eq!(p("force 15"), Err(CommandError::MissingArgument));
+        assert_eq!(p("force 15 nan"), Err(CommandError::BadNumber));
+        // A known weight of 1–100 g.
+        assert_eq!(
+            p("weigh 10"),
+            Ok(Command::Weigh(Newtons(10.0 * 9.806_65e-3)))
+        );
+        assert_eq!(p("weigh 0.5"), Err(CommandError::OutOfRange));
+        assert_eq!(p("weigh 101"), Err(CommandError::OutOfRange));
         // Every method by its name.
         for m in Method::ALL {
             assert_eq!(

@@ -19,6 +19,7 @@
 //! point tag=<u16> f_hz=<f32> g_s=<f32> b_s=<f32> sigma_s=<f32>
 //! reading status=<str> f_hz=<f32> f_sigma_hz=<f32> e_kpa=<f32> e_sigma_kpa=<f32> e_repeat_kpa=<f32> q=<f32> probe_time_s=<f32> points=<u16> method=<str> force_n=<f32> force_sigma_n=<f32>
 //! air f_hz=<f32> q=<f32>
+//! loadcell present=<bool> newtons_per_count=<f32> tare=<f32> min_n=<f32> max_n=<f32>   (after force, weigh, air with a load cell, status)
 //! reference e_kpa=<f32> f_hz=<f32> f_sigma_hz=<f32> n=<u16>
 //! calibration source=<str> a=<f32> b=<f32> c=<f32> min_kpa=<f32> max_kpa=<f32>
 //! hint code=<str> message=<str>                           (warn; after a failed reading: what to do)
@@ -111,11 +112,20 @@ pub fn event(e: Event) {
         ),
         Event::Help => defmt::info!(
             "help commands={=str} methods={=str} default={=str}",
-            "measure,method,sweep,staged,ringdown,air,calibrate,store,reload,status,selftest,help",
+            "measure,method,sweep,staged,ringdown,air,calibrate,force,weigh,store,reload,status,selftest,help",
             crate::measure::METHOD_NAMES,
             crate::measure::DEFAULT_METHOD.name()
         ),
         Event::Stalled(tag) => defmt::error!("stalled tag={=u16}", tag),
+        Event::LoadCell { cal, window } => defmt::info!(
+            "loadcell present={=bool} newtons_per_count={=f32} tare={=f32} min_n={=f32} max_n={=f32}",
+            cal.is_some(),
+            nan_or(cal.map(|c| c.newtons_per_count)),
+            // Counts are 24-bit: exact in f32.
+            cal.map_or(f32::NAN, |c| c.tare.0 as f32),
+            window.min.0,
+            window.max.0
+        ),
         Event::Air(a) => defmt::info!(
             "air f_hz={=f32} q={=f32}",
             a.free_resonance.0,

@@ -44,6 +44,9 @@ pub trait PointSource {
     async fn next(&mut self, plan: &PointPlan, budget: u64) -> Option<PointRaw>;
     /// Stop the drive.
     async fn stop(&mut self);
+    /// Let `samples` of the engine's samples pass with the drive stopped (the load cell keeps
+    /// converting): a wait that is time on the probe, for what is measured without a drive.
+    async fn idle(&mut self, samples: u64);
     /// The load cell's counts over the engine's samples `from..=to` (`None`: no load cell, or
     /// it was silent).
     fn contact_force(&mut self, from: u64, to: u64) -> Option<RawForce>;
@@ -230,6 +233,21 @@ impl<S: SampleStream + ForceSource> PointSource for SyncSource<'_, S> {
     }
     async fn stop(&mut self) {
         self.engine.stop();
+    }
+    async fn idle(&mut self, samples: u64) {
+        self.engine.stop();
+        let mut dac = [DacCode::MID; BATCH];
+        let mut adc = [AdcFrame::default(); BATCH];
+        let mut done = 0u64;
+        while done < samples {
+            self.engine.generate(&mut dac);
+            if let Err(e) = self.stream.exchange(&dac, &mut adc) {
+                self.error = Some(e);
+                return;
+            }
+            let _ = self.engine.demodulate(&adc);
+            done += BATCH as u64;
+        }
     }
     fn contact_force(&mut self, from: u64, to: u64) -> Option<RawForce> {
         self.stream.contact_force(from, to)

@@ -11,6 +11,7 @@
 use crate::boot::BootError;
 use crate::calibration::PowerLaw;
 use crate::command::{Command, CommandError};
+use crate::loadcell::{ForceWindow, LoadCellCal, RawForce};
 use crate::measure::{Method, Procedure, Reading, Settings, DEFAULT_METHOD};
 use crate::profile::{self, AirReference, Reference, UnitProfile, AIR_SWEEP};
 use crate::reading::{read, PointSource, Stop};
@@ -18,7 +19,7 @@ use crate::selftest::{self, SelfTestFault, SelfTestReport};
 use crate::status::{Failure, Status};
 use crate::store::{LoadSource, Loaded, Saved, StoreError};
 use crate::sweep::SweepPoint;
-use crate::units::KPa;
+use crate::units::{KPa, Newtons};
 
 /// Reference readings kept for a calibration fit.
 pub const MAX_REFERENCES: usize = 32;
@@ -60,6 +61,14 @@ pub enum Event {
     },
     /// A new calibration is in use.
     Calibration(PowerLaw),
+    /// The load cell's calibration (none: the unit reads without a force) and the force
+    /// window, after `force`, `weigh`, an `air` that tared the cell, and `status`.
+    LoadCell {
+        /// Sensitivity and tare.
+        cal: Option<LoadCellCal>,
+        /// Where readings are taken.
+        window: ForceWindow,
+    },
     /// The profile was stored.
     Saved(Saved),
     /// Storing failed.
@@ -101,6 +110,9 @@ pub enum Refusal {
     /// The reference reading's contact force was missing, outside the window or unsteady (the
     /// reading's code).
     BadReference(Failure),
+    /// `weigh` could not take the load cell's sensitivity: no zero yet (take `air` first), the
+    /// cell gave no counts, or the weight did not move them.
+    Weigh,
     /// [`MAX_REFERENCES`] are held already.
     ReferencesFull,
     /// The calibration fit failed.
@@ -120,6 +132,7 @@ impl Refusal {
             Refusal::Air(f) => f.message(),
             Refusal::NoResonance => "no resonance in the reference reading",
             Refusal::BadReference(f) => f.message(),
+            Refusal::Weigh => "weighing failed: take the air reference first (the zero), rest the weight on the tip, check the load cell",
             Refusal::ReferencesFull => "reference list full: fit or clear",
             Refusal::Fit => "calibration fit failed: add references over a wider range",
             Refusal::SelfTest(f) => f.message(),
@@ -153,7 +166,13 @@ pub struct Session {
     settings: Settings,
     refs: heapless::Vec<Reference, MAX_REFERENCES>,
     selftest: Option<Result<(), SelfTestFault>>,
+    /// The load cell's counts over the last air reference: its zero for `weigh`.
+    zero: Option<RawForce>,
 }
+
+/// How long `weigh` reads the load cell, s: 20 conversions at 80 SPS (the mean to 0.02 % of a
+/// 10 g weight at the cell's 0.1 mN noise).
+pub const WEIGH_S: f32 = 0.25;
 
 impl Session {
     /// Power-on: load the profile from the store (and say where it came from), with the
@@ -181,6 +200,7 @@ impl Session {
             settings: DEFAULT_METHOD.default_settings(),
             refs: heapless::Vec::new(),
             selftest: None,
+            zero: None,
         }
     }
 
@@ -345,6 +365,7 @@ impl Session {
                 true
             }
             Command::Status => {
+                self.emit_load_cell(io).await;
                 io.emit(Event::Status {
                     method: self.method,
                     calibration: self.profile.calibration,
@@ -358,6 +379,12 @@ impl Session {
                 .await;
                 true
             }
+            Command::ForceWindow(w) => {
+                self.profile.force_window = w;
+                self.emit_load_cell(io).await;
+                true
+            }
+            Command::Weigh(w) => self.weigh(io, w).await,
         }
     }
 
@@ -412,14 +439,51 @@ impl Session {
         match air {
             Ok(a) => {
                 self.profile.air = Some(a);
+                self.zero = zero;
                 if let (Some(cal), Some(z)) = (self.profile.load_cell.as_mut(), zero) {
                     cal.tare = z.counts();
                 }
                 io.emit(Event::Air(a)).await;
+                if self.profile.load_cell.is_some() {
+                    self.emit_load_cell(io).await;
+                }
                 true
             }
             Err(f) => {
                 io.emit(Event::Refused(Refusal::Air(f))).await;
+                false
+            }
+        }
+    }
+
+    async fn emit_load_cell<I: Io>(&self, io: &mut I) {
+        io.emit(Event::LoadCell {
+            cal: self.profile.load_cell,
+            window: self.profile.force_window,
+        })
+        .await;
+    }
+
+    /// The load cell's sensitivity from the known weight `w` resting on the tip: its counts
+    /// over [`WEIGH_S`] with the drive off, against the zero of the last air reference
+    /// ([`LoadCellCal::weighed`]). The unit then reads with a load cell.
+    async fn weigh<I: Io>(&mut self, io: &mut I, w: Newtons) -> bool {
+        let fs = io.scale().sample_rate.0 as f64;
+        let start = io.now_sample();
+        io.idle((WEIGH_S as f64 * fs) as u64).await;
+        let loaded = io.contact_force(start, io.now_sample());
+        let cal = self
+            .zero
+            .zip(loaded)
+            .and_then(|(z, l)| LoadCellCal::weighed(&z, &l, w));
+        match cal {
+            Some(c) => {
+                self.profile.load_cell = Some(c);
+                self.emit_load_cell(io).await;
+                true
+            }
+            None => {
+                io.emit(Event::Refused(Refusal::Weigh)).await;
                 false
             }
         }

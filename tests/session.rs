@@ -70,6 +70,9 @@ impl PointSource for SimIo {
     async fn stop(&mut self) {
         self.source().stop().await
     }
+    async fn idle(&mut self, samples: u64) {
+        self.source().idle(samples).await
+    }
     fn contact_force(&mut self, from: u64, to: u64) -> Option<pzt_probe::loadcell::RawForce> {
         pzt_probe::loadcell::ForceSource::contact_force(&self.board, from, to)
     }
@@ -439,4 +442,53 @@ fn a_failed_boot_step_is_named_in_refusals_and_status() {
         io.events.last(),
         Some(Event::Status { boot: None, .. })
     ));
+}
+
+/// The load cell of a fresh unit, through the commands: `weigh` before any air reference has
+/// no zero and is refused; `air` in free air tares the cell, `weigh 10` with 10 g resting on the
+/// tip gives its sensitivity (the simulated cell's 3.6e6 counts/N, within the creep it carries
+/// under the weight: 0.5 % at most); from then on every reading carries its contact force (here
+/// 30 mN within 2 %: the cell's noise and drift), and `force 20 40` narrows the window, so that a
+/// 15 mN press is `too_light`.
+#[test]
+fn the_load_cell_is_weighed_tared_and_bounds_the_readings() {
+    let mut io = SimIo::new(Flash::new());
+    let mut s = boot(&mut io);
+    assert!(s.profile().load_cell.is_none());
+    let weight = Scene::on_modulus_kpa(2.0e8).with_preload_n(10.0 * 9.806_65e-3);
+    io.put_on(weight);
+    assert!(!send(&mut s, &mut io, "weigh 10"));
+    assert_eq!(
+        io.events.last(),
+        Some(&Event::Refused(Refusal::Weigh)),
+        "no zero before an air reference"
+    );
+
+    io.put_on(Scene::free_air());
+    assert!(send(&mut s, &mut io, "air"));
+    io.put_on(weight);
+    assert!(send(&mut s, &mut io, "weigh 10"), "{:?}", io.events.last());
+    let cal = s.profile().load_cell.expect("a load cell calibration");
+    let rel = cal.newtons_per_count as f64 * 3.6e6 - 1.0;
+    assert!((-0.006..=0.001).contains(&rel), "{cal:?}");
+    assert!(matches!(
+        io.events.last(),
+        Some(Event::LoadCell { cal: Some(_), .. })
+    ));
+
+    io.put_on(Scene::on_phantom(&phantoms::B));
+    send(&mut s, &mut io, "measure");
+    let r = last_reading(&io);
+    let f = r.force.expect("the contact force").mean.0 as f64;
+    assert!((f / 0.030 - 1.0).abs() <= 0.02, "{f} N");
+
+    assert!(send(&mut s, &mut io, "force 20 40"));
+    let w = s.profile().force_window;
+    assert!(
+        (w.min.0 - 0.020).abs() < 1e-8 && (w.max.0 - 0.040).abs() < 1e-8,
+        "{w:?}"
+    );
+    io.put_on(Scene::on_phantom(&phantoms::B).with_preload_n(0.015));
+    assert!(!send(&mut s, &mut io, "measure"));
+    assert_eq!(last_reading(&io).status, Status::Failed(Failure::TooLight));
 }

@@ -370,6 +370,13 @@ mod app {
         async fn stop(&mut self) {
             let _ = self.plans.send(None).await;
         }
+        async fn idle(&mut self, samples: u64) {
+            let _ = self.plans.send(None).await;
+            let ms = (samples as f32 / self.scale.sample_rate.0 * 1000.0) as u32;
+            promise(ms + ALIVE_MS);
+            Mono::delay(ms.millis()).await;
+            promise(ALIVE_MS);
+        }
         fn contact_force(&mut self, from: u64, to: u64) -> Option<pzt_probe::loadcell::RawForce> {
             let fs = self.scale.sample_rate.0;
             self.forces.lock(|f| f.over(from, to, fs))
