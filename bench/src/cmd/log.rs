@@ -40,8 +40,16 @@ fn when(r: &LoggedReading) -> String {
 /// The readings as a table (one line each).
 pub fn table(s: &Session) -> Vec<String> {
     let mut out = vec![format!(
-        "{:>3}  {:<12} {:<13} {:>20} {:>18} {:>6} {:>6}  {}",
-        "#", "time", "status", "resonance (Hz)", "modulus (kPa)", "Q", "points", "method"
+        "{:>3}  {:<12} {:<13} {:>20} {:>18} {:>6} {:>14} {:>6}  {}",
+        "#",
+        "time",
+        "status",
+        "resonance (Hz)",
+        "modulus (kPa)",
+        "Q",
+        "force (mN)",
+        "points",
+        "method"
     )];
     for (k, r) in s.readings.iter().enumerate() {
         let f = match (r.f_hz, r.f_sigma_hz) {
@@ -54,14 +62,21 @@ pub fn table(s: &Session) -> Vec<String> {
             (Some(e), None) => format!("{e:.1}"),
             _ => "—".into(),
         };
+        let force = match (r.force_n, r.force_sigma_n) {
+            (Some(f), Some(sf)) if f.is_finite() => {
+                format!("{:.2} ± {:.2}", f * 1e3, sf * 1e3)
+            }
+            _ => "—".into(),
+        };
         out.push(format!(
-            "{:>3}  {:<12} {:<13} {:>20} {:>18} {:>6} {:>6}  {}",
+            "{:>3}  {:<12} {:<13} {:>20} {:>18} {:>6} {:>14} {:>6}  {}",
             k + 1,
             when(r),
             r.status,
             f,
             e,
             fmt_opt(r.q, 2),
+            force,
             r.points,
             r.method
         ));
@@ -81,6 +96,7 @@ fn session_json(s: &Session) -> Value {
                 "modulus_repeatability_kpa": r.e_repeat_kpa,
                 "q_factor": r.q, "probe_time_s": r.probe_time_s,
                 "points": r.points, "method": r.method, "sweep": r.sweep,
+                "contact_force_n": r.force_n, "contact_force_sigma_n": r.force_sigma_n,
             })
         })
         .collect();
