@@ -155,6 +155,21 @@ pub fn stream(
     config: &crate::stream::TrackerConfig,
     unit: &UnitProfile,
     seconds: f64,
+    on_reading: impl FnMut(&crate::stream::StreamReading),
+) -> Result<u32, SimError> {
+    stream_moving(scene, seed, config, unit, seconds, |_| None, on_reading)
+}
+
+/// [`stream`] with the probe moving over the tissue: before every window the tissue under the
+/// tip becomes `tissue_at(t)` at the probe time `t` (s) when it gives one (`Some(None)`: free
+/// air), the probe's dynamic state carried over (the tip sliding over a phantom).
+pub fn stream_moving(
+    scene: &Scene,
+    seed: u64,
+    config: &crate::stream::TrackerConfig,
+    unit: &UnitProfile,
+    seconds: f64,
+    tissue_at: impl FnMut(f64) -> Option<Option<hal_sim::Tissue>>,
     mut on_reading: impl FnMut(&crate::stream::StreamReading),
 ) -> Result<u32, SimError> {
     let mut board = SimBoard::new(SimProbe::new(*scene, seed));
@@ -162,12 +177,61 @@ pub fn stream(
     let mut tracker = config
         .validate(&board.scale(), unit)
         .map_err(SimError::Settings)?;
-    let mut src = crate::reading::SyncSource::new(&mut board, &mut engine);
+    let mut src = Moving {
+        inner: crate::reading::SyncSource::new(&mut board, &mut engine),
+        tissue_at,
+    };
     let n = crate::reading::block_on(crate::stream::run(&mut src, &mut tracker, unit, |r| {
         on_reading(r);
         (r.t_s.0 as f64) < seconds
     }));
     Ok(n)
+}
+
+/// A [`SyncSource`](crate::reading::SyncSource) on a [`SimBoard`] whose tissue follows a path
+/// in time ([`stream_moving`]).
+struct Moving<'a, F> {
+    inner: crate::reading::SyncSource<'a, SimBoard>,
+    tissue_at: F,
+}
+
+impl<F: FnMut(f64) -> Option<Option<hal_sim::Tissue>>> crate::reading::PointSource
+    for Moving<'_, F>
+{
+    fn scale(&self) -> FrontEndScale {
+        self.inner.scale()
+    }
+    fn latency_batches(&self) -> usize {
+        self.inner.latency_batches()
+    }
+    fn now_sample(&self) -> u64 {
+        self.inner.now_sample()
+    }
+    async fn load(&mut self, plan: crate::engine::PointPlan) -> bool {
+        self.inner.load(plan).await
+    }
+    async fn next(
+        &mut self,
+        plan: &crate::engine::PointPlan,
+        budget: u64,
+    ) -> Option<crate::engine::PointRaw> {
+        let probe = &mut self.inner.stream.probe;
+        if let Some(t) = (self.tissue_at)(probe.time_s()) {
+            if probe.scene().tissue != t {
+                probe.set_tissue(t);
+            }
+        }
+        self.inner.next(plan, budget).await
+    }
+    async fn stop(&mut self) {
+        self.inner.stop().await
+    }
+    async fn idle(&mut self, samples: u64) {
+        self.inner.idle(samples).await
+    }
+    fn contact_force(&mut self, from: u64, to: u64) -> Option<RawForce> {
+        self.inner.contact_force(from, to)
+    }
 }
 
 /// The reference phantoms a unit is calibrated on (paper 003 samples A–E).

@@ -9,6 +9,7 @@ pub mod pareto;
 pub mod physics;
 pub mod scan;
 pub mod selftest;
+pub mod slide;
 pub mod stability;
 pub mod stream;
 

@@ -25,6 +25,7 @@ use pzt_probe::profile::UnitProfile;
 use pzt_probe::sweep::SweepSettings;
 use pzt_probe::{Method, PowerLaw, Status};
 use serde_json::{json, Value};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// The phantoms that can be scanned.
@@ -42,6 +43,16 @@ pub struct ScanArgs {
     /// Phantom to scan.
     #[arg(long, value_enum, default_value = "coin")]
     pub scene: ScanScene,
+    /// Slide the probe across the phantom reading continuously (the tracker, as
+    /// `probe-bench stream`) instead of pressing on a grid: along a line through the lump
+    /// (coin: at the coin's y from x = −13.5 to 13.5 mm; ball: along paper 002's path, −4 to
+    /// 24 mm). With several `--speed-mm-s` the plot is the lump's centre error and contrast
+    /// against speed.
+    #[arg(long)]
+    pub continuous: bool,
+    /// Sliding speed(s), mm/s (`--continuous`).
+    #[arg(long, num_args = 1.., default_values_t = [5.0])]
+    pub speed_mm_s: Vec<f64>,
     /// Coin scene: where the coin's centre is, x and y in mm from the disc's centre.
     #[arg(long, num_args = 2, allow_negative_numbers = true, value_names = ["X_MM", "Y_MM"], default_values_t = [1.5, -1.0])]
     pub coin_at_mm: Vec<f64>,
@@ -375,6 +386,9 @@ pub fn away_radius_mm(inc: &Inclusion) -> f64 {
 
 /// Run the subcommand.
 pub fn run(a: ScanArgs) -> Result<()> {
+    if a.continuous {
+        return run_continuous(&a);
+    }
     let spec = spec_of(&a)?;
     let n = spec.grid().len();
     let pb = (!a.json).then(|| progress(n as u64, "scanning"));
@@ -391,6 +405,42 @@ pub fn run(a: ScanArgs) -> Result<()> {
         println!("{}", scan_json(&spec, &res));
     } else {
         print_summary(&a, &spec, &res);
+    }
+    Ok(())
+}
+
+/// `scan --continuous`: one slide per speed through the stream's one driver, with the
+/// simulated unit's profile for the tracker's method ([`super::slide`]).
+fn run_continuous(a: &ScanArgs) -> Result<()> {
+    let spec = spec_of(a)?;
+    let (y, x) = match a.scene {
+        ScanScene::Coin => (a.coin_at_mm[1], (-13.5, 13.5)),
+        ScanScene::Ball => (0.0, (-4.0, 24.0)),
+    };
+    let unit = crate::unit::default_for(pzt_probe::stream::METHOD)?;
+    let config = pzt_probe::stream::TrackerConfig::DEFAULT;
+    let mut results = Vec::new();
+    for (k, &v) in a.speed_mm_s.iter().enumerate() {
+        let s = super::slide::Slide {
+            phantom: spec.phantom,
+            y_mm: y,
+            x_mm: x,
+            speed_mm_s: v,
+            base: spec.base,
+            seed: a.seed + k as u64,
+        };
+        let r = super::slide::slide(&s, &config, &unit)?;
+        let line = if a.json {
+            super::slide::slide_json(&r).to_string()
+        } else {
+            super::slide::summary(&r)
+        };
+        writeln!(std::io::stdout(), "{line}")?;
+        results.push(r);
+    }
+    super::slide::plot(&a.plot, &results)?;
+    if !a.json {
+        writeln!(std::io::stdout(), "plot written to {}", a.plot.display())?;
     }
     Ok(())
 }
