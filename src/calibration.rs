@@ -288,8 +288,9 @@ fn robust_scale(data: &[RefPoint], law: &PowerLaw) -> f64 {
 /// RMS leave-one-out error (Hz) of the power law at the interior reference moduli (all but the
 /// lowest and the highest): [`held_out_rms`] with [`PowerLaw::fit_plain`].
 fn interior_loo_sigma(data: &[RefPoint]) -> Option<f64> {
-    held_out_rms(data, true, |d| {
-        PowerLaw::fit_plain(d)
+    held_out_rms(data, true, |d, e| {
+        let mut scratch = [RefPoint::default(); crate::profile::MAX_REFERENCES];
+        PowerLaw::fit_plain(without(d, e, &mut scratch))
             .ok()
             .map(|p| move |r: &RefPoint| p.frequency(r.modulus_kpa))
     })
@@ -300,13 +301,15 @@ fn interior_loo_sigma(data: &[RefPoint]) -> Option<f64> {
 /// but the lowest and the highest modulus), of the mean over the group of the resonance read
 /// less what the curve `fit` makes of the other moduli's readings (at every force) predicts
 /// for that reading (at its modulus, and at its force for a curve that takes one). `None` with
-/// fewer than five distinct moduli, more than [`crate::profile::MAX_REFERENCES`] readings (the
-/// scratch copy is on the stack) or a fit that fails. The leave-one-out test of the power law's
-/// misfit and of the choice between the power law and the contact law (`profile::calibrate`).
+/// fewer than five distinct moduli, more than [`crate::profile::MAX_REFERENCES`] readings (a
+/// fit's scratch copy is on the stack) or a fit that fails. `fit` is given all of `data` and the
+/// modulus to leave out of its fit ([`without`] copies the others). The leave-one-out test of
+/// the power law's misfit and of the choice between the power law and the contact law
+/// (`profile::calibrate`).
 pub(crate) fn held_out_rms<F: Fn(&RefPoint) -> f64>(
     data: &[RefPoint],
     interior: bool,
-    fit: impl Fn(&[RefPoint]) -> Option<F>,
+    fit: impl Fn(&[RefPoint], f64) -> Option<F>,
 ) -> Option<f64> {
     if distinct_moduli(data) < 5 || data.len() > crate::profile::MAX_REFERENCES {
         return None;
@@ -318,7 +321,6 @@ pub(crate) fn held_out_rms<F: Fn(&RefPoint) -> f64>(
     }
     let same_force =
         |a: f64, b: f64| a == b || (a > 0.0 && b > 0.0 && libm::fabs(a / b - 1.0) <= SAME_FORCE);
-    let mut scratch = [RefPoint::default(); crate::profile::MAX_REFERENCES];
     let (mut sum2, mut groups) = (0.0, 0u32);
     // Each modulus once, at its first reading (found by looking back: no list of them on the
     // stack, which the firmware's calibration runs on), the first 64 of them; one fit per
@@ -333,12 +335,7 @@ pub(crate) fn held_out_rms<F: Fn(&RefPoint) -> f64>(
         if distinct > 64 || (interior && (e == lo || e == hi)) {
             continue;
         }
-        let mut n = 0;
-        for x in data.iter().filter(|x| x.modulus_kpa != e) {
-            scratch[n] = *x;
-            n += 1;
-        }
-        let curve = fit(&scratch[..n])?;
+        let curve = fit(data, e)?;
         for (j, g) in data.iter().enumerate().skip(i) {
             let at_e = |x: &&RefPoint| x.modulus_kpa == e;
             if !at_e(&g)
@@ -366,15 +363,38 @@ pub(crate) fn held_out_rms<F: Fn(&RefPoint) -> f64>(
     (groups > 0).then(|| libm::sqrt(sum2 / groups as f64))
 }
 
+/// The readings of `data` not at modulus `e`, copied to the front of `scratch` (the first
+/// [`crate::profile::MAX_REFERENCES`] of them).
+pub(crate) fn without<'a>(
+    data: &[RefPoint],
+    e: f64,
+    scratch: &'a mut [RefPoint; crate::profile::MAX_REFERENCES],
+) -> &'a [RefPoint] {
+    let mut n = 0;
+    for (s, x) in scratch
+        .iter_mut()
+        .zip(data.iter().filter(|x| x.modulus_kpa != e))
+    {
+        *s = *x;
+        n += 1;
+    }
+    &scratch[..n]
+}
+
 /// Relative difference of two references' contact forces within which they were read at one
 /// force (the hand's or the stage's scatter about a set force).
 pub const SAME_FORCE: f64 = 0.15;
 
 /// Number of distinct moduli in reference data (counting stops at 64).
 fn distinct_moduli(data: &[RefPoint]) -> usize {
+    distinct_moduli_of(data.iter())
+}
+
+/// [`distinct_moduli`] of the readings `data` yields.
+fn distinct_moduli_of<'a>(data: impl Iterator<Item = &'a RefPoint>) -> usize {
     let mut seen = [0.0f64; 64];
     let mut n = 0;
-    for e in data.iter().map(|d| d.modulus_kpa) {
+    for e in data.map(|d| d.modulus_kpa) {
         if n < seen.len() && !seen[..n].contains(&e) {
             seen[n] = e;
             n += 1;
@@ -565,11 +585,18 @@ impl PowerLaw {
 /// The modulus span of reference data, `TooFewPoints` with fewer than four readings or three
 /// distinct moduli, `BadInput` on a reading that is not finite and positive.
 pub(crate) fn checked_span(data: &[RefPoint]) -> Result<(f64, f64), FitError> {
-    if data.len() < 4 {
+    checked_span_of(data.iter())
+}
+
+/// [`checked_span`] of the readings `data` yields.
+pub(crate) fn checked_span_of<'a>(
+    data: impl Iterator<Item = &'a RefPoint> + Clone,
+) -> Result<(f64, f64), FitError> {
+    if data.clone().count() < 4 {
         return Err(FitError::TooFewPoints);
     }
     let (mut emin, mut emax) = (f64::INFINITY, 0.0f64);
-    for d in data {
+    for d in data.clone() {
         let (e, f, s) = (d.modulus_kpa, d.resonance_hz, d.sigma_hz);
         if !(e > 0.0) || !e.is_finite() || !f.is_finite() || !(s > 0.0) || !s.is_finite() {
             return Err(FitError::BadInput);
@@ -577,7 +604,7 @@ pub(crate) fn checked_span(data: &[RefPoint]) -> Result<(f64, f64), FitError> {
         emin = emin.min(e);
         emax = emax.max(e);
     }
-    if distinct_moduli(data) < 3 {
+    if distinct_moduli_of(data) < 3 {
         return Err(FitError::TooFewPoints);
     }
     Ok((emin, emax))

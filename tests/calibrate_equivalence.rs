@@ -207,6 +207,7 @@ fn calibrate_agrees_with_the_implementation_before_the_fast_fit() {
     let golden = std::fs::read_to_string(golden_path).unwrap();
     let golden: Vec<&str> = golden.lines().collect();
     assert_eq!(golden.len(), lines.len());
+    let mut worst: Vec<(String, f64)> = Vec::new();
     for (g, l) in golden.iter().zip(&lines) {
         let gw: Vec<&str> = g.split(' ').collect();
         let lw: Vec<&str> = l.split(' ').collect();
@@ -216,6 +217,16 @@ fn calibrate_agrees_with_the_implementation_before_the_fast_fit() {
             let (kind, want) = a.split_once(':').unwrap();
             let (_, got) = b.split_once(':').unwrap();
             let (want, got): (f64, f64) = (want.parse().unwrap(), got.parse().unwrap());
+            let dev = if kind == "p" {
+                (got - want).abs()
+            } else {
+                (got - want).abs() / want.abs().max(1e-300)
+            };
+            worst
+                .iter_mut()
+                .find(|w| w.0 == kind)
+                .map(|w| w.1 = w.1.max(dev))
+                .unwrap_or_else(|| worst.push((kind.to_string(), dev)));
             assert!(
                 close(kind.chars().next().unwrap(), got, want),
                 "{} value {k} ({kind}): {got:e} vs {want:e}",
@@ -224,4 +235,6 @@ fn calibrate_agrees_with_the_implementation_before_the_fast_fit() {
         }
         println!("{}: agrees", gw[0]);
     }
+    // The largest deviation of each kind (absolute for `p`, relative otherwise).
+    println!("largest deviations: {worst:?}");
 }
