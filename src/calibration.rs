@@ -560,8 +560,9 @@ impl PowerLaw {
 
     fn fit_plain(data: &[RefPoint]) -> Result<PowerLaw, FitError> {
         let (emin, emax) = checked_span(data)?;
-        let c = best_exponent(data)?;
-        let AtExponent { a, b, chi2 } = at_exponent(data, c).ok_or(FitError::NotSaturating)?;
+        let sums = Sums::of(data);
+        let c = best_exponent(&sums)?;
+        let AtExponent { a, b, chi2 } = at_exponent(&sums, c).ok_or(FitError::NotSaturating)?;
         if !(b < 0.0) || !(c < 0.0) || !a.is_finite() {
             return Err(FitError::NotSaturating);
         }
@@ -618,20 +619,84 @@ struct AtExponent {
     chi2: f64,
 }
 
+/// Reference data as the power law's fit sums it: per distinct modulus `E` (up to eight), the
+/// summed weight `W = Σ wᵢ` (`wᵢ = 1/σᵢ²`) and `T = Σ wᵢ fᵢ` of its readings, else per reading
+/// (`W = w`, `T = w f`); and `Σ wᵢ fᵢ²`. At a given exponent every reading at one modulus has
+/// the same `x = E^c`, so the normal equations' sums `Σ w x`, `Σ w x²`, `Σ w x f` are sums over
+/// the moduli of `W x`, `W x²`, `x T`: one power per modulus and exponent where there was one
+/// per reading (each an exponential and a logarithm in software on the M4; a calibration reads
+/// each of five phantoms many times).
+struct Sums<'a> {
+    data: &'a [RefPoint],
+    /// `E`, `W`, `T` per modulus; `len` 0: per reading.
+    moduli: [[f64; 3]; 8],
+    len: usize,
+    /// `Σ wᵢ fᵢ²`.
+    tt: f64,
+}
+
+impl<'a> Sums<'a> {
+    fn of(data: &'a [RefPoint]) -> Self {
+        let mut s = Sums {
+            data,
+            moduli: [[0.0; 3]; 8],
+            len: 0,
+            tt: 0.0,
+        };
+        for d in data {
+            let w = 1.0 / (d.sigma_hz * d.sigma_hz);
+            s.tt += w * d.resonance_hz * d.resonance_hz;
+            if s.len == usize::MAX {
+                continue;
+            }
+            let i = match s.moduli[..s.len].iter().position(|m| m[0] == d.modulus_kpa) {
+                Some(i) => i,
+                None if s.len < s.moduli.len() => {
+                    s.moduli[s.len][0] = d.modulus_kpa;
+                    s.len += 1;
+                    s.len - 1
+                }
+                None => {
+                    s.len = usize::MAX;
+                    continue;
+                }
+            };
+            s.moduli[i][1] += w;
+            s.moduli[i][2] += w * d.resonance_hz;
+        }
+        if s.len == usize::MAX {
+            s.len = 0;
+        }
+        s
+    }
+
+    /// `(E, W, T)` of each modulus, or of each reading.
+    fn each(&self, mut f: impl FnMut(f64, f64, f64)) {
+        if self.len > 0 {
+            for m in &self.moduli[..self.len] {
+                f(m[0], m[1], m[2]);
+            }
+        } else {
+            for d in self.data {
+                let w = 1.0 / (d.sigma_hz * d.sigma_hz);
+                f(d.modulus_kpa, w, w * d.resonance_hz);
+            }
+        }
+    }
+}
+
 /// Weighted 2×2 normal equations of `f = a + b E^c` at exponent `c`; `None` when singular.
-fn at_exponent(data: &[RefPoint], c: f64) -> Option<AtExponent> {
-    let (mut s11, mut s12, mut s22, mut t1, mut t2, mut tt) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-    for d in data {
-        let (f, s) = (d.resonance_hz, d.sigma_hz);
-        let w = 1.0 / (s * s);
-        let x = pow(d.modulus_kpa, c);
+fn at_exponent(data: &Sums, c: f64) -> Option<AtExponent> {
+    let (mut s11, mut s12, mut s22, mut t1, mut t2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    data.each(|e, w, t| {
+        let x = pow(e, c);
         s11 += w;
         s12 += w * x;
         s22 += w * x * x;
-        t1 += w * f;
-        t2 += w * x * f;
-        tt += w * f * f;
-    }
+        t1 += t;
+        t2 += x * t;
+    });
+    let tt = data.tt;
     let det = s11 * s22 - s12 * s12;
     if !(det.abs() > 0.0) {
         return None;
@@ -644,7 +709,7 @@ fn at_exponent(data: &[RefPoint], c: f64) -> Option<AtExponent> {
 
 /// The exponent of least χ² over `[-3, -0.05]`: a scan of 61 values, then 80 golden-section
 /// steps around the best.
-fn best_exponent(data: &[RefPoint]) -> Result<f64, FitError> {
+fn best_exponent(data: &Sums) -> Result<f64, FitError> {
     let (lo, hi) = (-3.0f64, -0.05f64);
     let steps = 60;
     let mut best_c = f64::NAN;

@@ -260,10 +260,21 @@ impl Terms {
 
     /// χ² of the law with constants `k`.
     fn chi2(&self, k: &Constants) -> f64 {
+        self.chi2_below(k, f64::INFINITY)
+    }
+
+    /// χ² of the law with constants `k`, or some partial sum of it not below `bound` once it
+    /// reaches it: every term adds a square (or NaN), so a partial sum at or above `bound` says
+    /// that χ² is not below it either (the grid of starts keeps only a χ² below the best so far,
+    /// and skips the rest of a start that cannot be).
+    fn chi2_below(&self, k: &Constants, bound: f64) -> f64 {
         let mut sum = self.c;
         for &[u, v, w, f] in &self.t[..self.len] {
             let r = f - k.at_term(u, v).f;
             sum += w * r * r;
+            if sum >= bound {
+                break;
+            }
         }
         sum
     }
@@ -494,7 +505,7 @@ impl ContactLaw {
             for j in 0..7 {
                 for k in 0..7 {
                     let c = Constants::with(k1, exps[i][0], exps[j][1], exps[k][2]);
-                    let chi2 = terms.chi2(&c);
+                    let chi2 = terms.chi2_below(&c, best);
                     if chi2 < best {
                         best = chi2;
                         p = [axis(i)[0], axis(j)[1], axis(k)[2]];
@@ -587,6 +598,62 @@ mod tests {
                     "{e}, {i}: {} vs {num}",
                     at.df_dp[i]
                 );
+            }
+        }
+    }
+
+    /// χ² over the terms (one per modulus and force, with the constant `C`) is χ² over the
+    /// readings, and the normal equations are those of the readings' analytic Jacobian: on
+    /// readings with repeated and distinct (modulus, force) pairs, to rounding (1e-12 of the
+    /// sums, or of the sum of the magnitudes of `JᵀW r`'s terms, which cancel).
+    #[test]
+    fn terms_give_the_readings_chi2() {
+        let (free, p, f0) = (232.3, [13.44, 9.26, 4.88], 0.03);
+        let data: [RefPoint; 30] = core::array::from_fn(|i| {
+            let e = [157.5, 414.0, 2465.0][i % 3];
+            let force = if i < 15 { [0.03, 0.015][i % 2] } else { 0.03 + 1e-4 * i as f64 };
+            RefPoint {
+                modulus_kpa: e,
+                resonance_hz: frequency_of(free, &p, e, force / f0) + 0.3 * ((i * 7) % 5) as f64,
+                sigma_hz: 0.1 + 0.05 * (i % 4) as f64,
+                force_n: force,
+            }
+        });
+        let terms = Terms::of(data.iter(), f0).unwrap();
+        assert_eq!(terms.points, 30);
+        assert_eq!(terms.len, 6 + 15);
+        for q in [p, [13.0, 9.0, 5.0], [14.0, 10.0, 4.0]] {
+            let k = Constants::with(
+                Constants::of(free, &q, 1.0).k1,
+                libm::exp(q[0]),
+                libm::exp(q[1]),
+                libm::exp(q[2]),
+            );
+            let (mut chi2, mut jtr, mut jtj) = (0.0, [0.0; 3], [[0.0; 3]; 3]);
+            let mut jtr_abs = [0.0; 3];
+            for d in &data {
+                let ratio = force_ratio(f0, d.force_n);
+                let y = libm::cbrt(d.modulus_kpa);
+                let at = Constants::of(free, &q, ratio).at_cube_root(y);
+                let w = 1.0 / (d.sigma_hz * d.sigma_hz);
+                let r = d.resonance_hz - at.f;
+                chi2 += w * r * r;
+                for a in 0..3 {
+                    jtr[a] += w * at.df_dp[a] * r;
+                    jtr_abs[a] += (w * at.df_dp[a] * r).abs();
+                    for b in 0..3 {
+                        jtj[a][b] += w * at.df_dp[a] * at.df_dp[b];
+                    }
+                }
+            }
+            let got = terms.chi2(&k);
+            assert!((got - chi2).abs() <= 1e-12 * chi2, "{got} vs {chi2}");
+            let (gjtj, gjtr) = terms.normal(&k);
+            for a in 0..3 {
+                assert!((gjtr[a] - jtr[a]).abs() <= 1e-12 * jtr_abs[a], "{a}");
+                for b in 0..3 {
+                    assert!((gjtj[a][b] - jtj[a][b]).abs() <= 1e-12 * jtj[a][b].abs(), "{a} {b}");
+                }
             }
         }
     }
