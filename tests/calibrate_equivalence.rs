@@ -11,8 +11,12 @@
 //! sums its normal equations per modulus instead of per reading (the same sums in another
 //! order): its exponent is the golden-section minimum of χ²(c) = Σwf² − a Σwf − b Σwxf, a
 //! difference of sums of ~1e8 whose rounding (~1e-8) the flat minimum turns into ~1e-7 of `c`
-//! (and of `a`, `b`, which follow it): relative 1e-6 for `a`, `b`, `c`, the misfit, and 1e-4 for
-//! the covariance; the curve itself (what a reading inverts) within 1e-4 Hz over the span. The contact law's constants are
+//! (and of `a`, `b`, which follow it): relative 1e-5 for `a`, `b`, `c`, the misfit, and 1e-4 for
+//! the covariance; the curve itself (what a reading inverts) within 1e-4 Hz over the span (7
+//! f32 ulps of a 260 Hz reading, 1/2000 of a reference's σ). That is the old implementation's
+//! own noise: given the same readings in reverse order (`CALIBRATE_REVERSED=1`), it moved the
+//! power law's misfit by 4e-5 of itself (set power-law-30); this implementation moves it by
+//! 1.4e-6, `c` by 4e-6, the curve by 3e-5 Hz, the contact law's constants by 2e-8. The contact law's constants are
 //! the minimum of the same χ², reached by another path (an analytic Jacobian where the old fit
 //! took forward differences of step 1e-6, whose truncation error is about 1e-6 of each slope);
 //! both stop when a step lowers χ² by less than 1e-12 of it, so the two minima agree to within
