@@ -513,9 +513,8 @@ impl ContactLaw {
                 }
             }
         }
-        let constants = |p: &[f64; 3]| {
-            Constants::with(k1, libm::exp(p[0]), libm::exp(p[1]), libm::exp(p[2]))
-        };
+        let constants =
+            |p: &[f64; 3]| Constants::with(k1, libm::exp(p[0]), libm::exp(p[1]), libm::exp(p[2]));
         let chi2 = |p: &[f64; 3]| terms.chi2(&constants(p));
         // The driver asks for the normal equations again at the same parameters after a step it
         // rejects: the last answer is kept.
@@ -611,7 +610,11 @@ mod tests {
         let (free, p, f0) = (232.3, [13.44, 9.26, 4.88], 0.03);
         let data: [RefPoint; 30] = core::array::from_fn(|i| {
             let e = [157.5, 414.0, 2465.0][i % 3];
-            let force = if i < 15 { [0.03, 0.015][i % 2] } else { 0.03 + 1e-4 * i as f64 };
+            let force = if i < 15 {
+                [0.03, 0.015][i % 2]
+            } else {
+                0.03 + 1e-4 * i as f64
+            };
             RefPoint {
                 modulus_kpa: e,
                 resonance_hz: frequency_of(free, &p, e, force / f0) + 0.3 * ((i * 7) % 5) as f64,
@@ -652,7 +655,10 @@ mod tests {
             for a in 0..3 {
                 assert!((gjtr[a] - jtr[a]).abs() <= 1e-12 * jtr_abs[a], "{a}");
                 for b in 0..3 {
-                    assert!((gjtj[a][b] - jtj[a][b]).abs() <= 1e-12 * jtj[a][b].abs(), "{a} {b}");
+                    assert!(
+                        (gjtj[a][b] - jtj[a][b]).abs() <= 1e-12 * jtj[a][b].abs(),
+                        "{a} {b}"
+                    );
                 }
             }
         }

@@ -67,7 +67,12 @@ fn reference(e: f64, f: f64, sigma: f64, force: f64) -> Reference {
         modulus_kpa: e,
         resonance_hz: f,
         sigma_hz: sigma,
-        q: 12.0 - 1.5 * libm::log(e / 400.0) + if force > 0.0 { 2.0 * libm::log(force / 0.03) } else { 0.0 },
+        q: 12.0 - 1.5 * libm::log(e / 400.0)
+            + if force > 0.0 {
+                2.0 * libm::log(force / 0.03)
+            } else {
+                0.0
+            },
         force_n: force,
     }
 }
@@ -107,7 +112,15 @@ fn sets() -> Vec<(&'static str, Vec<Reference>)> {
                 let e = 100.0 * libm::pow(30.0, i as f64 / 31.0);
                 let force = FORCES[i % 3];
                 let w = if i % 2 == 0 { 0.3 } else { -0.3 };
-                let off = if i % 3 == 0 { if i % 2 == 0 { 30.0 } else { -30.0 } } else { 0.0 };
+                let off = if i % 3 == 0 {
+                    if i % 2 == 0 {
+                        30.0
+                    } else {
+                        -30.0
+                    }
+                } else {
+                    0.0
+                };
                 reference(e, law.frequency_at(e, force) + w + off, 0.2, force)
             })
             .collect(),
@@ -201,7 +214,10 @@ fn close(kind: char, got: f64, want: f64) -> bool {
 
 #[test]
 fn calibrate_agrees_with_the_implementation_before_the_fast_fit() {
-    let golden_path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/calibrate_golden.txt");
+    let golden_path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/calibrate_golden.txt"
+    );
     let mut lines = Vec::new();
     let reversed = std::env::var_os("CALIBRATE_REVERSED").is_some();
     for (name, mut refs) in sets() {
@@ -226,7 +242,12 @@ fn calibrate_agrees_with_the_implementation_before_the_fast_fit() {
         let gw: Vec<&str> = g.split(' ').collect();
         let lw: Vec<&str> = l.split(' ').collect();
         assert_eq!(gw[0], lw[0]);
-        assert_eq!(gw.len(), lw.len(), "{}: the decision differs\n{g}\n{l}", gw[0]);
+        assert_eq!(
+            gw.len(),
+            lw.len(),
+            "{}: the decision differs\n{g}\n{l}",
+            gw[0]
+        );
         for (k, (a, b)) in gw[1..].iter().zip(&lw[1..]).enumerate() {
             let (kind, want) = a.split_once(':').unwrap();
             // The power law's constants, misfit and covariance (values 0–2, 3, 6–14).
@@ -265,7 +286,11 @@ fn calibrate_agrees_with_the_implementation_before_the_fast_fit() {
         for e in [100.0, 157.5, 414.0, 1146.0, 2465.0, 3000.0] {
             let f = |p: &[f64]| p[0] + p[1] * libm::pow(e, p[2]);
             let d = (f(&new) - f(&old)).abs();
-            assert!(d <= 1e-4, "{}: the power law at {e} kPa moved {d:e} Hz", gw[0]);
+            assert!(
+                d <= 1e-4,
+                "{}: the power law at {e} kPa moved {d:e} Hz",
+                gw[0]
+            );
             worst_curve = worst_curve.max(d);
         }
         println!("{}: agrees", gw[0]);
