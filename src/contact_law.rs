@@ -196,8 +196,13 @@ type Normal = ([[f64; 3]; 3], [f64; 3]);
 ///
 /// χ² over the readings is χ² over the terms plus a constant: within a term the law predicts
 /// one value `F` for every reading (it depends on a reading through `u` and `v` alone), and
-/// `Σ wᵢ (fᵢ − F)² = Σ wᵢ ((fᵢ − f̄) + (f̄ − F))² = Σ wᵢ (fᵢ − f̄)² + 2 (f̄ − F) Σ wᵢ (fᵢ − f̄)
-/// + W (f̄ − F)²`, where the middle sum is `Σ wᵢ fᵢ − W f̄ = 0`: so `χ² = C + Σ W (f̄ − F)²` with
+///
+/// ```text
+/// Σ wᵢ (fᵢ − F)² = Σ wᵢ ((fᵢ − f̄) + (f̄ − F))²
+///                = Σ wᵢ (fᵢ − f̄)² + 2 (f̄ − F) Σ wᵢ (fᵢ − f̄) + W (f̄ − F)²,
+/// ```
+///
+/// where the middle sum is `Σ wᵢ fᵢ − W f̄ = 0`: so `χ² = C + Σ W (f̄ − F)²` with
 /// `C = Σ wᵢ (fᵢ − f̄)²`, which does not depend on the constants. The same way `JᵀW r` is
 /// `Σ W J (f̄ − F)` and `JᵀWJ` is `Σ W J Jᵀ`. `C` is kept in χ²: the minimisation's relative
 /// stopping rule and the covariance's scale (χ² per degree of freedom) see the readings' χ².
@@ -606,6 +611,7 @@ mod tests {
     /// readings with repeated and distinct (modulus, force) pairs, to rounding (1e-12 of the
     /// sums, or of the sum of the magnitudes of `JᵀW r`'s terms, which cancel).
     #[test]
+    #[allow(clippy::needless_range_loop)] // the normal equations' index arithmetic
     fn terms_give_the_readings_chi2() {
         let (free, p, f0) = (232.3, [13.44, 9.26, 4.88], 0.03);
         let data: [RefPoint; 30] = core::array::from_fn(|i| {
