@@ -289,8 +289,7 @@ fn robust_scale(data: &[RefPoint], law: &PowerLaw) -> f64 {
 /// lowest and the highest): [`held_out_rms`] with [`PowerLaw::fit_plain`].
 fn interior_loo_sigma(data: &[RefPoint]) -> Option<f64> {
     held_out_rms(data, true, |d, e| {
-        let mut scratch = [RefPoint::default(); crate::profile::MAX_REFERENCES];
-        PowerLaw::fit_plain(without(d, e, &mut scratch))
+        PowerLaw::fit_without(d, e, PowerLaw::fit_plain)
             .ok()
             .map(|p| move |r: &RefPoint| p.frequency(r.modulus_kpa))
     })
@@ -303,7 +302,7 @@ fn interior_loo_sigma(data: &[RefPoint]) -> Option<f64> {
 /// for that reading (at its modulus, and at its force for a curve that takes one). `None` with
 /// fewer than five distinct moduli, more than [`crate::profile::MAX_REFERENCES`] readings (a
 /// fit's scratch copy is on the stack) or a fit that fails. `fit` is given all of `data` and the
-/// modulus to leave out of its fit ([`without`] copies the others). The leave-one-out test of
+/// modulus to leave out of its fit ([`PowerLaw::fit_without`] copies the others). The leave-one-out test of
 /// the power law's misfit and of the choice between the power law and the contact law
 /// (`profile::calibrate`).
 pub(crate) fn held_out_rms<F: Fn(&RefPoint) -> f64>(
@@ -361,24 +360,6 @@ pub(crate) fn held_out_rms<F: Fn(&RefPoint) -> f64>(
         }
     }
     (groups > 0).then(|| libm::sqrt(sum2 / groups as f64))
-}
-
-/// The readings of `data` not at modulus `e`, copied to the front of `scratch` (the first
-/// [`crate::profile::MAX_REFERENCES`] of them).
-pub(crate) fn without<'a>(
-    data: &[RefPoint],
-    e: f64,
-    scratch: &'a mut [RefPoint; crate::profile::MAX_REFERENCES],
-) -> &'a [RefPoint] {
-    let mut n = 0;
-    for (s, x) in scratch
-        .iter_mut()
-        .zip(data.iter().filter(|x| x.modulus_kpa != e))
-    {
-        *s = *x;
-        n += 1;
-    }
-    &scratch[..n]
 }
 
 /// Relative difference of two references' contact forces within which they were read at one
@@ -556,6 +537,28 @@ impl PowerLaw {
             p.model_sigma_hz = p.model_sigma_hz.max(loo);
         }
         Ok(p)
+    }
+
+    /// `fit` (a fit of this law) of the readings of `data` not at modulus `e` (the first
+    /// [`crate::profile::MAX_REFERENCES`] of them), copied to a scratch array: the held-out
+    /// fits of [`held_out_rms`]. Not inlined: the copy (4 KiB) sits on the stack only while it
+    /// runs.
+    #[inline(never)]
+    pub(crate) fn fit_without(
+        data: &[RefPoint],
+        e: f64,
+        fit: fn(&[RefPoint]) -> Result<PowerLaw, FitError>,
+    ) -> Result<PowerLaw, FitError> {
+        let mut scratch = [RefPoint::default(); crate::profile::MAX_REFERENCES];
+        let mut n = 0;
+        for (s, x) in scratch
+            .iter_mut()
+            .zip(data.iter().filter(|x| x.modulus_kpa != e))
+        {
+            *s = *x;
+            n += 1;
+        }
+        fit(&scratch[..n])
     }
 
     fn fit_plain(data: &[RefPoint]) -> Result<PowerLaw, FitError> {

@@ -220,15 +220,10 @@ struct Terms {
 }
 
 impl Terms {
-    /// The terms of `data` for a law of reference force `force_n`; `None` with more distinct
-    /// terms than [`crate::profile::MAX_REFERENCES`].
-    fn of<'a>(data: impl Iterator<Item = &'a RefPoint> + Clone, force_n: f64) -> Option<Self> {
-        let mut terms = Terms {
-            t: [[0.0; 4]; crate::profile::MAX_REFERENCES],
-            len: 0,
-            c: 0.0,
-            points: 0,
-        };
+    /// Fill empty terms with those of `data` for a law of reference force `force_n`; false with
+    /// more distinct terms than [`crate::profile::MAX_REFERENCES`].
+    fn fill<'a>(&mut self, data: impl Iterator<Item = &'a RefPoint> + Clone, force_n: f64) -> bool {
+        let terms = self;
         let uv = |d: &RefPoint| factors(d.modulus_kpa, force_ratio(force_n, d.force_n));
         let find = |t: &Terms, (u, v): (f64, f64)| {
             t.t[..t.len].iter().position(|x| x[0] == u && x[1] == v)
@@ -237,11 +232,14 @@ impl Terms {
         for d in data.clone() {
             let w = 1.0 / (d.sigma_hz * d.sigma_hz);
             let (u, v) = uv(d);
-            let i = match find(&terms, (u, v)) {
+            let i = match find(terms, (u, v)) {
                 Some(i) => i,
                 None => {
                     let i = terms.len;
-                    *terms.t.get_mut(i)? = [u, v, 0.0, 0.0];
+                    let Some(t) = terms.t.get_mut(i) else {
+                        return false;
+                    };
+                    *t = [u, v, 0.0, 0.0];
                     terms.len += 1;
                     i
                 }
@@ -255,12 +253,12 @@ impl Terms {
         }
         for d in data {
             let w = 1.0 / (d.sigma_hz * d.sigma_hz);
-            if let Some(i) = find(&terms, uv(d)) {
+            if let Some(i) = find(terms, uv(d)) {
                 let r = d.resonance_hz - terms.t[i][3];
                 terms.c += w * r * r;
             }
         }
-        Some(terms)
+        true
     }
 
     /// χ² of the law with constants `k`.
@@ -470,6 +468,9 @@ impl ContactLaw {
     /// of (modulus, force) ([`Terms`]); each parameter vector then costs three exponentials
     /// ([`Constants::with`]) and one square root per term, and the Jacobian is the law's
     /// analytic slopes ([`Constants::at_term`]) instead of three more evaluations.
+    // Not inlined: its terms (4 KiB) sit on the stack only while it runs, not in every
+    // caller's frame (`profile::calibrate` calls it for the fit and per held-out modulus).
+    #[inline(never)]
     pub(crate) fn fit_leaving_out(
         data: &[RefPoint],
         free_hz: f64,
@@ -481,7 +482,16 @@ impl ContactLaw {
         if !(free_hz > 0.0) || !free_hz.is_finite() || !(force_n >= 0.0) || !force_n.is_finite() {
             return Err(FitError::BadInput);
         }
-        let terms = Terms::of(data.iter().filter(kept), force_n).ok_or(FitError::BadInput)?;
+        // Filled in place: a 4 KiB value moved through `Option`/`Result` would be copied.
+        let mut terms = Terms {
+            t: [[0.0; 4]; crate::profile::MAX_REFERENCES],
+            len: 0,
+            c: 0.0,
+            points: 0,
+        };
+        if !terms.fill(data.iter().filter(kept), force_n) {
+            return Err(FitError::BadInput);
+        }
         let n_points = terms.points;
         let k1 = Constants::of(free_hz, &[0.0; 3], 1.0).k1;
         // Starts: Ks from the rigid limit over the highest reading (its square less K1, times
@@ -628,7 +638,13 @@ mod tests {
                 force_n: force,
             }
         });
-        let terms = Terms::of(data.iter(), f0).unwrap();
+        let mut terms = Terms {
+            t: [[0.0; 4]; crate::profile::MAX_REFERENCES],
+            len: 0,
+            c: 0.0,
+            points: 0,
+        };
+        assert!(terms.fill(data.iter(), f0));
         assert_eq!(terms.points, 30);
         assert_eq!(terms.len, 6 + 15);
         for q in [p, [13.0, 9.0, 5.0], [14.0, 10.0, 4.0]] {

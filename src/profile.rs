@@ -294,8 +294,7 @@ pub fn calibrate(
                 .map(|c| move |r: &RefPoint| c.frequency_at(r.modulus_kpa, r.force_n))
         })?;
         let held_power = held_out_rms(all, false, |d, e| {
-            let mut scratch = [RefPoint::default(); MAX_REFERENCES];
-            PowerLaw::fit(crate::calibration::without(d, e, &mut scratch))
+            PowerLaw::fit_without(d, e, PowerLaw::fit)
                 .ok()
                 .map(|p| move |r: &RefPoint| p.frequency(r.modulus_kpa))
         })?;
