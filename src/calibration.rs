@@ -288,8 +288,8 @@ fn robust_scale(data: &[RefPoint], law: &PowerLaw) -> f64 {
 /// RMS leave-one-out error (Hz) of the power law at the interior reference moduli (all but the
 /// lowest and the highest): [`held_out_rms`] with [`PowerLaw::fit_plain`].
 fn interior_loo_sigma(data: &[RefPoint]) -> Option<f64> {
-    held_out_rms(data, true, |d| {
-        PowerLaw::fit_plain(d)
+    held_out_rms(data, true, |d, e| {
+        PowerLaw::fit_without(d, e, PowerLaw::fit_plain)
             .ok()
             .map(|p| move |r: &RefPoint| p.frequency(r.modulus_kpa))
     })
@@ -300,13 +300,15 @@ fn interior_loo_sigma(data: &[RefPoint]) -> Option<f64> {
 /// but the lowest and the highest modulus), of the mean over the group of the resonance read
 /// less what the curve `fit` makes of the other moduli's readings (at every force) predicts
 /// for that reading (at its modulus, and at its force for a curve that takes one). `None` with
-/// fewer than five distinct moduli, more than [`crate::profile::MAX_REFERENCES`] readings (the
-/// scratch copy is on the stack) or a fit that fails. The leave-one-out test of the power law's
-/// misfit and of the choice between the power law and the contact law (`profile::calibrate`).
+/// fewer than five distinct moduli, more than [`crate::profile::MAX_REFERENCES`] readings (a
+/// fit's scratch copy is on the stack) or a fit that fails. `fit` is given all of `data` and the
+/// modulus to leave out of its fit ([`PowerLaw::fit_without`] copies the others). The leave-one-out test of
+/// the power law's misfit and of the choice between the power law and the contact law
+/// (`profile::calibrate`).
 pub(crate) fn held_out_rms<F: Fn(&RefPoint) -> f64>(
     data: &[RefPoint],
     interior: bool,
-    fit: impl Fn(&[RefPoint]) -> Option<F>,
+    fit: impl Fn(&[RefPoint], f64) -> Option<F>,
 ) -> Option<f64> {
     if distinct_moduli(data) < 5 || data.len() > crate::profile::MAX_REFERENCES {
         return None;
@@ -318,7 +320,6 @@ pub(crate) fn held_out_rms<F: Fn(&RefPoint) -> f64>(
     }
     let same_force =
         |a: f64, b: f64| a == b || (a > 0.0 && b > 0.0 && libm::fabs(a / b - 1.0) <= SAME_FORCE);
-    let mut scratch = [RefPoint::default(); crate::profile::MAX_REFERENCES];
     let (mut sum2, mut groups) = (0.0, 0u32);
     // Each modulus once, at its first reading (found by looking back: no list of them on the
     // stack, which the firmware's calibration runs on), the first 64 of them; one fit per
@@ -333,12 +334,7 @@ pub(crate) fn held_out_rms<F: Fn(&RefPoint) -> f64>(
         if distinct > 64 || (interior && (e == lo || e == hi)) {
             continue;
         }
-        let mut n = 0;
-        for x in data.iter().filter(|x| x.modulus_kpa != e) {
-            scratch[n] = *x;
-            n += 1;
-        }
-        let curve = fit(&scratch[..n])?;
+        let curve = fit(data, e)?;
         for (j, g) in data.iter().enumerate().skip(i) {
             let at_e = |x: &&RefPoint| x.modulus_kpa == e;
             if !at_e(&g)
@@ -372,9 +368,14 @@ pub const SAME_FORCE: f64 = 0.15;
 
 /// Number of distinct moduli in reference data (counting stops at 64).
 fn distinct_moduli(data: &[RefPoint]) -> usize {
+    distinct_moduli_of(data.iter())
+}
+
+/// [`distinct_moduli`] of the readings `data` yields.
+fn distinct_moduli_of<'a>(data: impl Iterator<Item = &'a RefPoint>) -> usize {
     let mut seen = [0.0f64; 64];
     let mut n = 0;
-    for e in data.iter().map(|d| d.modulus_kpa) {
+    for e in data.map(|d| d.modulus_kpa) {
         if n < seen.len() && !seen[..n].contains(&e) {
             seen[n] = e;
             n += 1;
@@ -538,10 +539,33 @@ impl PowerLaw {
         Ok(p)
     }
 
+    /// `fit` (a fit of this law) of the readings of `data` not at modulus `e` (the first
+    /// [`crate::profile::MAX_REFERENCES`] of them), copied to a scratch array: the held-out
+    /// fits of [`held_out_rms`]. Not inlined: the copy (4 KiB) sits on the stack only while it
+    /// runs.
+    #[inline(never)]
+    pub(crate) fn fit_without(
+        data: &[RefPoint],
+        e: f64,
+        fit: fn(&[RefPoint]) -> Result<PowerLaw, FitError>,
+    ) -> Result<PowerLaw, FitError> {
+        let mut scratch = [RefPoint::default(); crate::profile::MAX_REFERENCES];
+        let mut n = 0;
+        for (s, x) in scratch
+            .iter_mut()
+            .zip(data.iter().filter(|x| x.modulus_kpa != e))
+        {
+            *s = *x;
+            n += 1;
+        }
+        fit(&scratch[..n])
+    }
+
     fn fit_plain(data: &[RefPoint]) -> Result<PowerLaw, FitError> {
         let (emin, emax) = checked_span(data)?;
-        let c = best_exponent(data)?;
-        let AtExponent { a, b, chi2 } = at_exponent(data, c).ok_or(FitError::NotSaturating)?;
+        let sums = Sums::of(data);
+        let c = best_exponent(&sums)?;
+        let AtExponent { a, b, chi2 } = at_exponent(&sums, c).ok_or(FitError::NotSaturating)?;
         if !(b < 0.0) || !(c < 0.0) || !a.is_finite() {
             return Err(FitError::NotSaturating);
         }
@@ -565,11 +589,18 @@ impl PowerLaw {
 /// The modulus span of reference data, `TooFewPoints` with fewer than four readings or three
 /// distinct moduli, `BadInput` on a reading that is not finite and positive.
 pub(crate) fn checked_span(data: &[RefPoint]) -> Result<(f64, f64), FitError> {
-    if data.len() < 4 {
+    checked_span_of(data.iter())
+}
+
+/// [`checked_span`] of the readings `data` yields.
+pub(crate) fn checked_span_of<'a>(
+    data: impl Iterator<Item = &'a RefPoint> + Clone,
+) -> Result<(f64, f64), FitError> {
+    if data.clone().count() < 4 {
         return Err(FitError::TooFewPoints);
     }
     let (mut emin, mut emax) = (f64::INFINITY, 0.0f64);
-    for d in data {
+    for d in data.clone() {
         let (e, f, s) = (d.modulus_kpa, d.resonance_hz, d.sigma_hz);
         if !(e > 0.0) || !e.is_finite() || !f.is_finite() || !(s > 0.0) || !s.is_finite() {
             return Err(FitError::BadInput);
@@ -577,7 +608,7 @@ pub(crate) fn checked_span(data: &[RefPoint]) -> Result<(f64, f64), FitError> {
         emin = emin.min(e);
         emax = emax.max(e);
     }
-    if distinct_moduli(data) < 3 {
+    if distinct_moduli_of(data) < 3 {
         return Err(FitError::TooFewPoints);
     }
     Ok((emin, emax))
@@ -591,20 +622,84 @@ struct AtExponent {
     chi2: f64,
 }
 
+/// Reference data as the power law's fit sums it: per distinct modulus `E` (up to eight), the
+/// summed weight `W = Σ wᵢ` (`wᵢ = 1/σᵢ²`) and `T = Σ wᵢ fᵢ` of its readings, else per reading
+/// (`W = w`, `T = w f`); and `Σ wᵢ fᵢ²`. At a given exponent every reading at one modulus has
+/// the same `x = E^c`, so the normal equations' sums `Σ w x`, `Σ w x²`, `Σ w x f` are sums over
+/// the moduli of `W x`, `W x²`, `x T`: one power per modulus and exponent where there was one
+/// per reading (each an exponential and a logarithm in software on the M4; a calibration reads
+/// each of five phantoms many times).
+struct Sums<'a> {
+    data: &'a [RefPoint],
+    /// `E`, `W`, `T` per modulus; `len` 0: per reading.
+    moduli: [[f64; 3]; 8],
+    len: usize,
+    /// `Σ wᵢ fᵢ²`.
+    tt: f64,
+}
+
+impl<'a> Sums<'a> {
+    fn of(data: &'a [RefPoint]) -> Self {
+        let mut s = Sums {
+            data,
+            moduli: [[0.0; 3]; 8],
+            len: 0,
+            tt: 0.0,
+        };
+        for d in data {
+            let w = 1.0 / (d.sigma_hz * d.sigma_hz);
+            s.tt += w * d.resonance_hz * d.resonance_hz;
+            if s.len == usize::MAX {
+                continue;
+            }
+            let i = match s.moduli[..s.len].iter().position(|m| m[0] == d.modulus_kpa) {
+                Some(i) => i,
+                None if s.len < s.moduli.len() => {
+                    s.moduli[s.len][0] = d.modulus_kpa;
+                    s.len += 1;
+                    s.len - 1
+                }
+                None => {
+                    s.len = usize::MAX;
+                    continue;
+                }
+            };
+            s.moduli[i][1] += w;
+            s.moduli[i][2] += w * d.resonance_hz;
+        }
+        if s.len == usize::MAX {
+            s.len = 0;
+        }
+        s
+    }
+
+    /// `(E, W, T)` of each modulus, or of each reading.
+    fn each(&self, mut f: impl FnMut(f64, f64, f64)) {
+        if self.len > 0 {
+            for m in &self.moduli[..self.len] {
+                f(m[0], m[1], m[2]);
+            }
+        } else {
+            for d in self.data {
+                let w = 1.0 / (d.sigma_hz * d.sigma_hz);
+                f(d.modulus_kpa, w, w * d.resonance_hz);
+            }
+        }
+    }
+}
+
 /// Weighted 2×2 normal equations of `f = a + b E^c` at exponent `c`; `None` when singular.
-fn at_exponent(data: &[RefPoint], c: f64) -> Option<AtExponent> {
-    let (mut s11, mut s12, mut s22, mut t1, mut t2, mut tt) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-    for d in data {
-        let (f, s) = (d.resonance_hz, d.sigma_hz);
-        let w = 1.0 / (s * s);
-        let x = pow(d.modulus_kpa, c);
+fn at_exponent(data: &Sums, c: f64) -> Option<AtExponent> {
+    let (mut s11, mut s12, mut s22, mut t1, mut t2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    data.each(|e, w, t| {
+        let x = pow(e, c);
         s11 += w;
         s12 += w * x;
         s22 += w * x * x;
-        t1 += w * f;
-        t2 += w * x * f;
-        tt += w * f * f;
-    }
+        t1 += t;
+        t2 += x * t;
+    });
+    let tt = data.tt;
     let det = s11 * s22 - s12 * s12;
     if !(det.abs() > 0.0) {
         return None;
@@ -617,7 +712,7 @@ fn at_exponent(data: &[RefPoint], c: f64) -> Option<AtExponent> {
 
 /// The exponent of least χ² over `[-3, -0.05]`: a scan of 61 values, then 80 golden-section
 /// steps around the best.
-fn best_exponent(data: &[RefPoint]) -> Result<f64, FitError> {
+fn best_exponent(data: &Sums) -> Result<f64, FitError> {
     let (lo, hi) = (-3.0f64, -0.05f64);
     let steps = 60;
     let mut best_c = f64::NAN;

@@ -31,7 +31,7 @@
 //! references (each modulus at every force, [`crate::profile::calibrate`]) are what tells
 //! whether a probe follows them.
 
-use crate::calibration::{checked_span, inversion_input, span, FitError, Modulus, RefPoint};
+use crate::calibration::{checked_span_of, inversion_input, span, FitError, Modulus, RefPoint};
 use crate::linalg::{levenberg_marquardt, spd_inverse, LmStop};
 use crate::status::Failure;
 use crate::units::Hz;
@@ -95,23 +95,42 @@ impl Constants {
         }
     }
 
+    /// From the constants themselves (`K1`, `Ks`, `A`, `B` at the reference force).
+    fn with(k1: f64, ks: f64, a: f64, b: f64) -> Self {
+        Self { k1, ks, a, b }
+    }
+
     /// The law and its slopes at `y = E^(1/3)` (E in kPa): `F = sqrt(N/M)/2π` with
     /// `N = K1 + s A y²`, `M = 1 + s² B/y³`, `s = Ks/(Ks + A y²)`, and
     /// `dF = F (dN/N − dM/M)/2` for each variable.
     fn at_cube_root(&self, y: f64) -> Slopes {
-        let km = self.a * y * y;
-        let s = self.ks / (self.ks + km);
-        let bm = self.b / (y * y * y);
-        let n = self.k1 + s * km;
-        let m = 1.0 + s * s * bm;
-        let f = libm::sqrt(n / m) / (2.0 * PI);
-        let df = |dn: f64, dm: f64| 0.5 * f * (dn / n - dm / m);
+        let at = self.at_term(y * y, 1.0 / (y * y * y));
+        let Term { km, bm, s, n, m } = at.term;
+        let df = |dn: f64, dm: f64| 0.5 * at.f * (dn / n - dm / m);
         // y: dkm = 2 km/y, ds = −s (1−s) dkm/km, dbm = −3 bm/y.
         let ds_dy = -s * (1.0 - s) * 2.0 / y;
         let df_dy = df(
             ds_dy * km + s * 2.0 * km / y,
             2.0 * s * ds_dy * bm - 3.0 * s * s * bm / y,
         );
+        Slopes {
+            f: at.f,
+            df_dy,
+            df_dp: at.df_dp,
+        }
+    }
+
+    /// The law and its slopes in the constants at the factors `u = (F/F0)^(1/3) E^(2/3)` and
+    /// `v = (F/F0)/E` of one modulus and force ([`factors`]): `km = A u`, `bm = B v`, the rest
+    /// as [`at_cube_root`](Self::at_cube_root) (one square root, no other transcendental).
+    fn at_term(&self, u: f64, v: f64) -> AtTerm {
+        let km = self.a * u;
+        let s = self.ks / (self.ks + km);
+        let bm = self.b * v;
+        let n = self.k1 + s * km;
+        let m = 1.0 + s * s * bm;
+        let f = libm::sqrt(n / m) / (2.0 * PI);
+        let df = |dn: f64, dm: f64| 0.5 * f * (dn / n - dm / m);
         // ln Ks: ds = s (1−s). ln A: dkm = km, ds = −s (1−s). ln B: dbm = bm.
         let t = s * (1.0 - s);
         let df_dp = [
@@ -119,7 +138,11 @@ impl Constants {
             df(s * s * km, -2.0 * s * t * bm),
             df(0.0, s * s * bm),
         ];
-        Slopes { f, df_dy, df_dp }
+        AtTerm {
+            f,
+            df_dp,
+            term: Term { km, bm, s, n, m },
+        }
     }
 
     /// Resonance (Hz) at modulus `e_kpa`.
@@ -138,6 +161,143 @@ struct Slopes {
     df_dy: f64,
     /// `dF/d(ln Ks)`, `dF/d(ln A)`, `dF/d(ln B)`.
     df_dp: [f64; 3],
+}
+
+/// The intermediate values of the law at one modulus and force (for the slopes in `y`).
+struct Term {
+    km: f64,
+    bm: f64,
+    s: f64,
+    n: f64,
+    m: f64,
+}
+
+/// The law's value and slopes in the constants at one modulus and force.
+struct AtTerm {
+    /// Resonance, Hz.
+    f: f64,
+    /// `dF/d(ln Ks)`, `dF/d(ln A)`, `dF/d(ln B)`.
+    df_dp: [f64; 3],
+    term: Term,
+}
+
+/// The factors of one modulus `e_kpa` and force ratio `ratio` in the law (
+/// [`Constants::at_term`]): `u = cbrt(ratio E²)`, `v = ratio/E`.
+fn factors(e_kpa: f64, ratio: f64) -> (f64, f64) {
+    (libm::cbrt(ratio * e_kpa * e_kpa), ratio / e_kpa)
+}
+
+/// `JᵀWJ` and `JᵀW r` of a fit.
+type Normal = ([[f64; 3]; 3], [f64; 3]);
+
+/// The readings of a fit reduced to what χ² needs, once per fit: one term per distinct pair of
+/// the law's factors `(u, v)` ([`factors`]: a modulus and a force ratio), with the summed weight
+/// `W = Σ wᵢ` (`wᵢ = 1/σᵢ²`) and the weighted mean resonance `f̄ = Σ wᵢ fᵢ / W` of its readings.
+///
+/// χ² over the readings is χ² over the terms plus a constant: within a term the law predicts
+/// one value `F` for every reading (it depends on a reading through `u` and `v` alone), and
+///
+/// ```text
+/// Σ wᵢ (fᵢ − F)² = Σ wᵢ ((fᵢ − f̄) + (f̄ − F))²
+///                = Σ wᵢ (fᵢ − f̄)² + 2 (f̄ − F) Σ wᵢ (fᵢ − f̄) + W (f̄ − F)²,
+/// ```
+///
+/// where the middle sum is `Σ wᵢ fᵢ − W f̄ = 0`: so `χ² = C + Σ W (f̄ − F)²` with
+/// `C = Σ wᵢ (fᵢ − f̄)²`, which does not depend on the constants. The same way `JᵀW r` is
+/// `Σ W J (f̄ − F)` and `JᵀWJ` is `Σ W J Jᵀ`. `C` is kept in χ²: the minimisation's relative
+/// stopping rule and the covariance's scale (χ² per degree of freedom) see the readings' χ².
+/// With readings at measured forces (each its own) there is a term per reading; with set
+/// forces, one per modulus and force.
+struct Terms {
+    /// `u`, `v`, `W`, `f̄` of each term.
+    t: [[f64; 4]; crate::profile::MAX_REFERENCES],
+    /// Terms in `t`.
+    len: usize,
+    /// `C`.
+    c: f64,
+    /// Readings.
+    points: usize,
+}
+
+impl Terms {
+    /// Fill empty terms with those of `data` for a law of reference force `force_n`; false with
+    /// more distinct terms than [`crate::profile::MAX_REFERENCES`].
+    fn fill<'a>(&mut self, data: impl Iterator<Item = &'a RefPoint> + Clone, force_n: f64) -> bool {
+        let terms = self;
+        let uv = |d: &RefPoint| factors(d.modulus_kpa, force_ratio(force_n, d.force_n));
+        let find = |t: &Terms, (u, v): (f64, f64)| {
+            t.t[..t.len].iter().position(|x| x[0] == u && x[1] == v)
+        };
+        // Σ wᵢ and Σ wᵢ fᵢ, then f̄, then C in a second pass (no cancellation).
+        for d in data.clone() {
+            let w = 1.0 / (d.sigma_hz * d.sigma_hz);
+            let (u, v) = uv(d);
+            let i = match find(terms, (u, v)) {
+                Some(i) => i,
+                None => {
+                    let i = terms.len;
+                    let Some(t) = terms.t.get_mut(i) else {
+                        return false;
+                    };
+                    *t = [u, v, 0.0, 0.0];
+                    terms.len += 1;
+                    i
+                }
+            };
+            terms.t[i][2] += w;
+            terms.t[i][3] += w * d.resonance_hz;
+            terms.points += 1;
+        }
+        for x in terms.t[..terms.len].iter_mut() {
+            x[3] /= x[2];
+        }
+        for d in data {
+            let w = 1.0 / (d.sigma_hz * d.sigma_hz);
+            if let Some(i) = find(terms, uv(d)) {
+                let r = d.resonance_hz - terms.t[i][3];
+                terms.c += w * r * r;
+            }
+        }
+        true
+    }
+
+    /// χ² of the law with constants `k`.
+    fn chi2(&self, k: &Constants) -> f64 {
+        self.chi2_below(k, f64::INFINITY)
+    }
+
+    /// χ² of the law with constants `k`, or some partial sum of it not below `bound` once it
+    /// reaches it: every term adds a square (or NaN), so a partial sum at or above `bound` says
+    /// that χ² is not below it either (the grid of starts keeps only a χ² below the best so far,
+    /// and skips the rest of a start that cannot be).
+    fn chi2_below(&self, k: &Constants, bound: f64) -> f64 {
+        let mut sum = self.c;
+        for &[u, v, w, f] in &self.t[..self.len] {
+            let r = f - k.at_term(u, v).f;
+            sum += w * r * r;
+            if sum >= bound {
+                break;
+            }
+        }
+        sum
+    }
+
+    /// `JᵀWJ` and `JᵀW r` of the law with constants `k`, `J` its analytic slopes.
+    fn normal(&self, k: &Constants) -> Normal {
+        let mut jtj = [[0.0; 3]; 3];
+        let mut jtr = [0.0; 3];
+        for &[u, v, w, f] in &self.t[..self.len] {
+            let at = k.at_term(u, v);
+            let (j, r) = (at.df_dp, f - at.f);
+            for a in 0..3 {
+                jtr[a] += w * j[a] * r;
+                for b in 0..3 {
+                    jtj[a][b] += w * j[a] * j[b];
+                }
+            }
+        }
+        (jtj, jtr)
+    }
 }
 
 /// Resonance (Hz) of the law `free_hz`, `p` at modulus `e_kpa` and force ratio `ratio`.
@@ -294,80 +454,111 @@ impl ContactLaw {
     /// force, with the free resonance `free_hz` held (Levenberg–Marquardt from the best of a
     /// coarse grid of starts; the covariance from the Jacobian at the optimum, scaled by the
     /// reduced χ² when it exceeds 1; the misfit as the RMS residual corrected for the three
-    /// constants).
+    /// constants). `BadInput` for readings at more than [`crate::profile::MAX_REFERENCES`]
+    /// distinct pairs of modulus and force.
     pub fn fit(data: &[RefPoint], free_hz: f64, force_n: f64) -> Result<ContactLaw, FitError> {
-        let (emin, emax) = checked_span(data)?;
+        Self::fit_leaving_out(data, free_hz, force_n, None)
+    }
+
+    /// [`fit`](Self::fit) to the readings of `data` not at the modulus `leave_out` (kPa): the
+    /// held-out fits of [`crate::profile::calibrate`], without a copy of the others.
+    ///
+    /// Cost (the firmware's `calibrate fit`, every `f64` operation software on the M4): the
+    /// readings are reduced once to the law's two force-and-modulus factors per distinct pair
+    /// of (modulus, force) ([`Terms`]); each parameter vector then costs three exponentials
+    /// ([`Constants::with`]) and one square root per term, and the Jacobian is the law's
+    /// analytic slopes ([`Constants::at_term`]) instead of three more evaluations.
+    // Not inlined: its terms (4 KiB) sit on the stack only while it runs, not in every
+    // caller's frame (`profile::calibrate` calls it for the fit and per held-out modulus).
+    #[inline(never)]
+    pub(crate) fn fit_leaving_out(
+        data: &[RefPoint],
+        free_hz: f64,
+        force_n: f64,
+        leave_out: Option<f64>,
+    ) -> Result<ContactLaw, FitError> {
+        let kept = |d: &&RefPoint| Some(d.modulus_kpa) != leave_out;
+        let (emin, emax) = checked_span_of(data.iter().filter(kept))?;
         if !(free_hz > 0.0) || !free_hz.is_finite() || !(force_n >= 0.0) || !force_n.is_finite() {
             return Err(FitError::BadInput);
         }
-        let at = |p: &[f64; 3], d: &RefPoint| {
-            frequency_of(free_hz, p, d.modulus_kpa, force_ratio(force_n, d.force_n))
+        // Filled in place: a 4 KiB value moved through `Option`/`Result` would be copied.
+        let mut terms = Terms {
+            t: [[0.0; 4]; crate::profile::MAX_REFERENCES],
+            len: 0,
+            c: 0.0,
+            points: 0,
         };
-        let chi2 = |p: &[f64; 3]| -> f64 {
-            data.iter()
-                .map(|d| {
-                    let r = (d.resonance_hz - at(p, d)) / d.sigma_hz;
-                    r * r
-                })
-                .sum()
-        };
+        if !terms.fill(data.iter().filter(kept), force_n) {
+            return Err(FitError::BadInput);
+        }
+        let n_points = terms.points;
+        let k1 = Constants::of(free_hz, &[0.0; 3], 1.0).k1;
         // Starts: Ks from the rigid limit over the highest reading (its square less K1, times
-        // 1–16), A and B over three decades each about the simulated probe's.
+        // 1–16), A and B over three decades each about the simulated probe's. The grid's
+        // exponentials once per axis value (19, not 3 × 245).
         let mut p = [0.0; 3];
         let mut best = f64::INFINITY;
-        let fmax = data.iter().map(|d| d.resonance_hz).fold(0.0, f64::max);
-        let k1 = Constants::of(free_hz, &[0.0; 3], 1.0).k1;
+        let fmax = data
+            .iter()
+            .filter(kept)
+            .map(|d| d.resonance_hz)
+            .fold(0.0, f64::max);
         let ks0 = ((2.0 * PI * fmax) * (2.0 * PI * fmax) - k1).max(1.0);
+        let axis = |i: usize| {
+            [
+                libm::log(ks0) + 0.7 * i as f64,
+                7.0 + 1.15 * i as f64,
+                5.0 + 1.15 * i as f64,
+            ]
+        };
+        let mut exps = [[0.0; 3]; 7];
+        for (i, e) in exps.iter_mut().enumerate() {
+            *e = axis(i).map(libm::exp);
+        }
         for i in 0..5 {
             for j in 0..7 {
                 for k in 0..7 {
-                    let q = [
-                        libm::log(ks0) + 0.7 * i as f64,
-                        7.0 + 1.15 * j as f64,
-                        5.0 + 1.15 * k as f64,
-                    ];
-                    let c = chi2(&q);
-                    if c < best {
-                        best = c;
-                        p = q;
+                    let c = Constants::with(k1, exps[i][0], exps[j][1], exps[k][2]);
+                    let chi2 = terms.chi2_below(&c, best);
+                    if chi2 < best {
+                        best = chi2;
+                        p = [axis(i)[0], axis(j)[1], axis(k)[2]];
                     }
                 }
             }
         }
-        let normal = |p: &[f64; 3]| -> ([[f64; 3]; 3], [f64; 3]) {
-            let mut jtj = [[0.0; 3]; 3];
-            let mut jtr = [0.0; 3];
-            for d in data {
-                let w = 1.0 / (d.sigma_hz * d.sigma_hz);
-                let f0 = at(p, d);
-                let mut j = [0.0; 3];
-                for (i, ji) in j.iter_mut().enumerate() {
-                    let mut q = *p;
-                    q[i] += 1e-6;
-                    *ji = (at(&q, d) - f0) / 1e-6;
-                }
-                let r = d.resonance_hz - f0;
-                for a in 0..3 {
-                    jtr[a] += w * j[a] * r;
-                    for b in 0..3 {
-                        jtj[a][b] += w * j[a] * j[b];
-                    }
+        let constants =
+            |p: &[f64; 3]| Constants::with(k1, libm::exp(p[0]), libm::exp(p[1]), libm::exp(p[2]));
+        let chi2 = |p: &[f64; 3]| terms.chi2(&constants(p));
+        // The driver asks for the normal equations again at the same parameters after a step it
+        // rejects: the last answer is kept.
+        let last: core::cell::Cell<Option<([f64; 3], Normal)>> = core::cell::Cell::new(None);
+        let normal = |p: &[f64; 3]| -> Normal {
+            if let Some((q, n)) = last.get() {
+                if q == *p {
+                    return n;
                 }
             }
-            (jtj, jtr)
+            let n = terms.normal(&constants(p));
+            last.set(Some((*p, n)));
+            n
         };
         let (p, best) = levenberg_marquardt(p, chi2, normal, LmStop::new(200, 1e-12, 1e12));
         let (jtj, _) = normal(&p);
         let mut cov = spd_inverse(&jtj).ok_or(FitError::NotSaturating)?;
-        let dof = data.len().saturating_sub(3).max(1) as f64;
+        let dof = n_points.saturating_sub(3).max(1) as f64;
         let scale = (best / dof).max(1.0);
         for v in cov.iter_mut().flatten() {
             *v *= scale;
         }
+        let c = constants(&p);
         let ss: f64 = data
             .iter()
+            .filter(kept)
             .map(|d| {
-                let r = d.resonance_hz - at(&p, d);
+                let (u, v) = factors(d.modulus_kpa, force_ratio(force_n, d.force_n));
+                let r = d.resonance_hz - c.at_term(u, v).f;
                 r * r
             })
             .sum();
@@ -421,6 +612,76 @@ mod tests {
                     "{e}, {i}: {} vs {num}",
                     at.df_dp[i]
                 );
+            }
+        }
+    }
+
+    /// χ² over the terms (one per modulus and force, with the constant `C`) is χ² over the
+    /// readings, and the normal equations are those of the readings' analytic Jacobian: on
+    /// readings with repeated and distinct (modulus, force) pairs, to rounding (1e-12 of the
+    /// sums, or of the sum of the magnitudes of `JᵀW r`'s terms, which cancel).
+    #[test]
+    #[allow(clippy::needless_range_loop)] // the normal equations' index arithmetic
+    fn terms_give_the_readings_chi2() {
+        let (free, p, f0) = (232.3, [13.44, 9.26, 4.88], 0.03);
+        let data: [RefPoint; 30] = core::array::from_fn(|i| {
+            let e = [157.5, 414.0, 2465.0][i % 3];
+            let force = if i < 15 {
+                [0.03, 0.015][i % 2]
+            } else {
+                0.03 + 1e-4 * i as f64
+            };
+            RefPoint {
+                modulus_kpa: e,
+                resonance_hz: frequency_of(free, &p, e, force / f0) + 0.3 * ((i * 7) % 5) as f64,
+                sigma_hz: 0.1 + 0.05 * (i % 4) as f64,
+                force_n: force,
+            }
+        });
+        let mut terms = Terms {
+            t: [[0.0; 4]; crate::profile::MAX_REFERENCES],
+            len: 0,
+            c: 0.0,
+            points: 0,
+        };
+        assert!(terms.fill(data.iter(), f0));
+        assert_eq!(terms.points, 30);
+        assert_eq!(terms.len, 6 + 15);
+        for q in [p, [13.0, 9.0, 5.0], [14.0, 10.0, 4.0]] {
+            let k = Constants::with(
+                Constants::of(free, &q, 1.0).k1,
+                libm::exp(q[0]),
+                libm::exp(q[1]),
+                libm::exp(q[2]),
+            );
+            let (mut chi2, mut jtr, mut jtj) = (0.0, [0.0; 3], [[0.0; 3]; 3]);
+            let mut jtr_abs = [0.0; 3];
+            for d in &data {
+                let ratio = force_ratio(f0, d.force_n);
+                let y = libm::cbrt(d.modulus_kpa);
+                let at = Constants::of(free, &q, ratio).at_cube_root(y);
+                let w = 1.0 / (d.sigma_hz * d.sigma_hz);
+                let r = d.resonance_hz - at.f;
+                chi2 += w * r * r;
+                for a in 0..3 {
+                    jtr[a] += w * at.df_dp[a] * r;
+                    jtr_abs[a] += (w * at.df_dp[a] * r).abs();
+                    for b in 0..3 {
+                        jtj[a][b] += w * at.df_dp[a] * at.df_dp[b];
+                    }
+                }
+            }
+            let got = terms.chi2(&k);
+            assert!((got - chi2).abs() <= 1e-12 * chi2, "{got} vs {chi2}");
+            let (gjtj, gjtr) = terms.normal(&k);
+            for a in 0..3 {
+                assert!((gjtr[a] - jtr[a]).abs() <= 1e-12 * jtr_abs[a], "{a}");
+                for b in 0..3 {
+                    assert!(
+                        (gjtj[a][b] - jtj[a][b]).abs() <= 1e-12 * jtj[a][b].abs(),
+                        "{a} {b}"
+                    );
+                }
             }
         }
     }

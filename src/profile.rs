@@ -288,13 +288,13 @@ pub fn calibrate(
     let contact = air.and_then(|a| {
         let free = a.free_resonance.0 as f64;
         let c = ContactLaw::fit(all, free, f0).ok()?;
-        let held_contact = held_out_rms(all, false, |d| {
-            ContactLaw::fit(d, free, f0)
+        let held_contact = held_out_rms(all, false, |d, e| {
+            ContactLaw::fit_leaving_out(d, free, f0, Some(e))
                 .ok()
                 .map(|c| move |r: &RefPoint| c.frequency_at(r.modulus_kpa, r.force_n))
         })?;
-        let held_power = held_out_rms(all, false, |d| {
-            PowerLaw::fit(d)
+        let held_power = held_out_rms(all, false, |d, e| {
+            PowerLaw::fit_without(d, e, PowerLaw::fit)
                 .ok()
                 .map(|p| move |r: &RefPoint| p.frequency(r.modulus_kpa))
         })?;

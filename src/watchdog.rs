@@ -4,9 +4,10 @@
 //! The measurement task (priority 1) serves commands one at a time; some run long stretches of
 //! synchronous code with no await in them — `calibrate fit` ([`crate::profile::calibrate`]: the
 //! contact law's Levenberg–Marquardt fit, once over all references and once per held-out
-//! modulus, in software `f64`) takes 2.2 s on the Cortex-M4 for 10 references on 5 moduli and
-//! 4.5 minutes for 32 on 32 ([`FIT_WORST_MS`]; `docs/firmware.md`, measured under QEMU). Were that task to feed the independent watchdog
-//! itself, a long fit would end in a watchdog reset. Instead:
+//! modulus, and the power law's, in software `f64`) takes 0.24 s on the Cortex-M4 for 10
+//! references on 5 moduli, 0.8–1.1 s for 100 on 5 and 3 minutes for 32 on 32
+//! ([`FIT_WORST_MS`]; `docs/firmware.md`, measured under QEMU). Were that task to feed the
+//! independent watchdog itself, a long fit would end in a watchdog reset. Instead:
 //!
 //! * the measurement task makes a [`Liveness::promise`] — "I report again within this many
 //!   ms" — at every sign of life: while it waits for requests (every feed period), at each
@@ -33,19 +34,20 @@ pub struct Millis(pub u32);
 pub const FIT_MAX_REFERENCES: usize = crate::session::MAX_REFERENCES;
 
 /// The longest `calibrate fit` measured on the Cortex-M4, in ms at 170 MHz (one cycle per
-/// instruction), rounded up: [`FIT_MAX_REFERENCES`] references on as many moduli, scattered so
-/// that the fits iterate long — 45.6–45.7 G instructions under QEMU, 268.3–268.9 s
-/// (`src/bin/cost.rs`, case `max-scattered`; the count varies by 0.2 % between builds of the
-/// cost image; `docs/firmware.md`).
-pub const FIT_WORST_MS: u32 = 275_000;
+/// instruction), rounded up: [`FIT_MAX_REFERENCES`] references on as many moduli — 30.31 G
+/// instructions under QEMU, 178.3 s (`src/bin/cost.rs`, case `max-on-curve`; 177.4 s
+/// scattered; the count varies by about 0.2 % between builds of the cost image;
+/// `docs/firmware.md`). Thirty-two distinct moduli are the power law's worst case: each of its
+/// held-out fits holds out every interior modulus again for its misfit, one power per modulus
+/// and exponent. A factory calibration (100 references on five moduli) takes about a second.
+pub const FIT_WORST_MS: u32 = 180_000;
 
 /// What the measurement task promises before a `calibrate fit` of `refs` references: twice the
 /// worst measured fit of [`FIT_MAX_REFERENCES`] references, scaled by `(refs / max)²` — an upper
-/// envelope, since the fit's cost grows faster than the square of the reference count (one
-/// contact-law fit per distinct modulus held out, each over the other references; measured 3.8,
-/// 22.8 and 44.5 M instructions per squared reference at 10, 16 and 32 references) — and at
-/// least one second. More references than the maximum are promised the maximum's bound (the
-/// session keeps no more).
+/// envelope of the measured fits (on as many moduli as references, one held-out fit per
+/// modulus, each over the other references: 0.41, 13.3 and 29.6 M instructions per squared
+/// reference at 10, 16 and 32 references, `docs/firmware.md`) — and at least one second. More
+/// references than the maximum are promised the maximum's bound (the session keeps no more).
 pub fn fit_bound(refs: usize) -> Millis {
     let n = refs.min(FIT_MAX_REFERENCES) as u64;
     let max = FIT_MAX_REFERENCES as u64;
@@ -127,7 +129,13 @@ mod tests {
     fn the_fit_bound_covers_the_measured_fits_twice() {
         // Measured on the Cortex-M4 (QEMU instruction counts at 170 MHz, docs/firmware.md):
         // (references, ms).
-        for (n, ms) in [(10, 2_247), (16, 34_401), (32, 226_597), (32, 268_855)] {
+        for (n, ms) in [
+            (10, 240),
+            (16, 20_093),
+            (32, 178_268),
+            (32, 177_426),
+            (100, 1_054),
+        ] {
             assert!(fit_bound(n).0 >= 2 * ms, "{n}: {:?}", fit_bound(n));
         }
         assert_eq!(fit_bound(32), Millis(2 * FIT_WORST_MS));

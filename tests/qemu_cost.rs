@@ -335,7 +335,9 @@ fn check_fits(parsed: &[(String, HashMap<String, String>)]) {
             "five-moduli",
             "sixteen-on-curve",
             "max-on-curve",
-            "max-scattered"
+            "max-scattered",
+            "factory-100",
+            "factory-100-measured"
         ]
     );
     println!(

@@ -429,31 +429,52 @@ mod harness {
         /// False: on the unit's own curve (±0.3 Hz); true: scattered, so that no curve fits
         /// and the Levenberg–Marquardt loops run to their iteration bounds.
         pub scattered: bool,
+        /// True: every reading at its own force (the set force ±3 %, as a load cell measures
+        /// it), so that no two readings share a modulus and a force.
+        pub measured_forces: bool,
     }
 
     /// The `calibrate fit` cases: the QEMU session test's five moduli (twice each, as it adds
-    /// them), and the session's most references ([`pzt_probe::session::MAX_REFERENCES`]) on as
-    /// many distinct moduli — every one held out in turn —, on the curve and scattered.
-    pub const FIT_CASES: [FitCase; 4] = [
+    /// them), the session's most references ([`pzt_probe::session::MAX_REFERENCES`]) on as
+    /// many distinct moduli — every one held out in turn —, on the curve and scattered, and a
+    /// unit's factory calibration: A–E × 20 (100 references, `probe-bench calibrate --repeats
+    /// 20`) at the calibration's forces, set and measured.
+    pub const FIT_CASES: [FitCase; 6] = [
         FitCase {
             name: "five-moduli",
             refs: 10,
             scattered: false,
+            measured_forces: false,
         },
         FitCase {
             name: "sixteen-on-curve",
             refs: 16,
             scattered: false,
+            measured_forces: false,
         },
         FitCase {
             name: "max-on-curve",
             refs: pzt_probe::session::MAX_REFERENCES,
             scattered: false,
+            measured_forces: false,
         },
         FitCase {
             name: "max-scattered",
             refs: pzt_probe::session::MAX_REFERENCES,
             scattered: true,
+            measured_forces: false,
+        },
+        FitCase {
+            name: "factory-100",
+            refs: 100,
+            scattered: false,
+            measured_forces: false,
+        },
+        FitCase {
+            name: "factory-100-measured",
+            refs: 100,
+            scattered: false,
+            measured_forces: true,
         },
     ];
 
@@ -462,21 +483,28 @@ mod harness {
     /// the watchdog promise made for it ([`pzt_probe::watchdog::fit_bound`]).
     pub fn fit_cost(case: &FitCase, unit: &UnitProfile) -> bool {
         use pzt_probe::profile::{calibrate, Reference};
-        let mut refs: heapless::Vec<Reference, { pzt_probe::session::MAX_REFERENCES }> =
+        let mut refs: heapless::Vec<Reference, { pzt_probe::profile::MAX_REFERENCES }> =
             heapless::Vec::new();
         let q_model = unit.q_model;
         for i in 0..case.refs {
-            // 10 references: the session test's five moduli, two readings each; otherwise one
-            // reading per modulus, log-spaced over 100–3000 kPa.
+            // 10 references: the session test's five moduli, two readings each; 100: A–E, 20
+            // readings each; otherwise one reading per modulus, log-spaced over 100–3000 kPa.
             let e = if case.refs == 10 {
                 [157.5, 279.0, 414.0, 1146.0, 2465.0][i / 2]
+            } else if case.refs == 100 {
+                [157.5, 279.0, 414.0, 1146.0, 2465.0][i / 20]
             } else {
                 100.0 * libm::pow(30.0, i as f64 / (case.refs - 1) as f64)
             };
             // Pressed in turn at the calibration's forces (30, 15, 50 mN), as a unit with a load
             // cell is calibrated.
             let forces = pzt_probe::board::sim::CALIBRATION_FORCES;
-            let force = forces[i % forces.len()];
+            let force = forces[i % forces.len()]
+                * if case.measured_forces {
+                    1.0 + 0.03 * libm::sin(i as f64)
+                } else {
+                    1.0
+                };
             let f = match unit.contact {
                 Some(c) => c.frequency_at(e, force),
                 None => unit.calibration.frequency(e),
