@@ -359,13 +359,14 @@ where
                 ))
                 .map_err(e)?;
             if sgn > 0.0 {
-                s.label(lbl);
+                s.label(lbl)
+                    .legend(move |(x, y)| PathElement::new([(x - 8, y), (x + 8, y)], col));
             }
         }
     }
     let mods = &b.options.coverage_moduli;
     for (i, m) in mods.iter().enumerate() {
-        let col = PALETTE[i % PALETTE.len()];
+        let col = PALETTE.get(i).copied().unwrap_or(BLACK);
         chart
             .draw_series(
                 pts.iter()
