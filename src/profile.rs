@@ -312,8 +312,9 @@ pub struct Calibration {
 /// the mean difference between the left-out readings and each curve's prediction for them
 /// decides. The one calibration procedure of the firmware's `calibrate fit` and the bench's
 /// `calibrate`. Uses the first [`MAX_REFERENCES`] readings. The contact law's misfit
-/// (`model_sigma_hz`, a term of every reading's σ) is that same held-out RMS
-/// (docs/accuracy.md measures what it covers).
+/// (`model_sigma_hz`, a term of every reading's σ) is the same held-out RMS over the interior
+/// moduli (all but the lowest and the highest: a reading inside the span interpolates; three
+/// more fits of the law) — docs/accuracy.md measures what it covers.
 // Not inlined: its scratch (the references, 4 KiB) then sits on the stack only while a
 // calibration runs, not in every caller's frame (the firmware's session handles every command).
 #[inline(never)]
@@ -353,9 +354,9 @@ pub fn calibrate(
                 .ok()
                 .map(|p| move |r: &RefPoint| p.frequency(r.modulus_kpa))
         })?;
-        // The law's misfit is its held-out one: how far the curve fitted without a modulus
-        // misses that modulus's readings (their mean, at each force), RMS over the moduli —
-        // what a reading between or beside the references is off by, where the in-sample
+        // The law's misfit is its held-out one: how far the curve fitted without an interior
+        // modulus misses that modulus's readings (their mean, at each force), RMS over the
+        // moduli — what a reading between the references is off by, where the in-sample
         // residual is mostly the readings' own noise, already in their repeatability.
         let interior = held_out_rms(all, true, |d| {
             ContactLaw::fit(d, free, f0)
