@@ -106,7 +106,8 @@ pub fn conclude(
         r.status = Status::Failed(Failure::Uncalibrated);
         return r;
     }
-    let m = match unit.invert(est.resonance, est.sigma, force.as_ref()) {
+    let allowance = crate::profile::drift_allowance(probe_time);
+    let m = match unit.invert_with(est.resonance, est.sigma, force.as_ref(), allowance) {
         Ok(m) => m,
         Err(f) => {
             r.status = Status::Failed(f);

@@ -127,6 +127,34 @@ pub struct UnitProfile {
     pub force_window: ForceWindow,
 }
 
+/// The standard uncertainty of the probe's own resonance at a reading against its state at the
+/// air reference and the calibration — a term of every reading's combined σ, through the curve
+/// (the contact law with its free resonance moved by it). Its source: the simulated probe's
+/// thermal drift scenes move the free resonance by 0.3 Hz/s (hal-sim `catalogue::DRIFT_HZ_S`),
+/// 0.11 Hz over a default reading (0.37 s); rounded up to 0.12 Hz so that the catalogue's
+/// second mode, which the calibration never saw and which pulls the resonance by about
+/// 0.33 Hz (1.1 % at 300 kPa), stays within 3σ (the stability statement,
+/// bench/tests/stability.rs) — a choice, not a derivation. A unit whose probe drifts more needs
+/// a fresher air reference. docs/accuracy.md measures what it adds (2–16 % per Hz over
+/// 200–2000 kPa) and its coverage.
+pub const FREE_RESONANCE_ALLOWANCE: Hz = Hz(0.12);
+
+/// How fast the probe's own resonance may move during a reading, Hz/s: the thermal drift the
+/// probe is specified for (the stability catalogue's drift scenes, hal-sim
+/// `catalogue::DRIFT_HZ_S`). A reading of probe time `t` allows `t` times it on top of
+/// [`FREE_RESONANCE_ALLOWANCE`] ([`drift_allowance`]): a long reading (a stepped sweep, the
+/// adaptive and track procedures, 1–6 s) sees more of the drift than the default's 0.37 s.
+pub const FREE_RESONANCE_DRIFT_HZ_S: f32 = 0.3;
+
+/// The free resonance's allowance of a reading that took `probe_time`:
+/// [`FREE_RESONANCE_ALLOWANCE`] and [`FREE_RESONANCE_DRIFT_HZ_S`] × `probe_time` in quadrature.
+pub fn drift_allowance(probe_time: crate::units::Seconds) -> Hz {
+    let d = FREE_RESONANCE_DRIFT_HZ_S * probe_time.0.max(0.0);
+    Hz(libm::sqrtf(
+        FREE_RESONANCE_ALLOWANCE.0 * FREE_RESONANCE_ALLOWANCE.0 + d * d,
+    ))
+}
+
 /// The force the paper calibrated at, and the power law's: 30 mN (paper 003, a balance and a
 /// motorised stage). References read at it (within [`crate::calibration::SAME_FORCE`]), or
 /// without a measured force, make the power law.
@@ -159,16 +187,58 @@ impl UnitProfile {
     /// The modulus of a resonance `f ± sigma` read at the contact force `force` by the unit's
     /// curve: the contact law at that force when the calibration chose it, else the power law
     /// (which holds at [`NOMINAL_FORCE`] alone).
+    ///
+    /// Its combined σ is the curve's ([`crate::calibration::Modulus::propagated`]: the
+    /// resonance's and the force's repeatability, the calibration's parameter covariance and
+    /// its held-out misfit) and the free resonance's allowance [`FREE_RESONANCE_ALLOWANCE`], in
+    /// quadrature.
     pub fn invert(
         &self,
         f: crate::units::Hz,
         sigma: crate::units::Hz,
         force: Option<&ContactForce>,
     ) -> Result<Modulus, Failure> {
-        match &self.contact {
-            Some(c) => c.invert(f, sigma, force.map(|w| (w.mean.0 as f64, w.sigma.0 as f64))),
-            None => self.calibration.invert(f, sigma),
-        }
+        self.invert_with(f, sigma, force, FREE_RESONANCE_ALLOWANCE)
+    }
+
+    /// [`UnitProfile::invert`] with the free resonance's allowance `allowance` (the error
+    /// budget takes the σ apart with it; readings use [`FREE_RESONANCE_ALLOWANCE`]).
+    pub fn invert_with(
+        &self,
+        f: crate::units::Hz,
+        sigma: crate::units::Hz,
+        force: Option<&ContactForce>,
+        allowance: Hz,
+    ) -> Result<Modulus, Failure> {
+        let force = force.map(|w| (w.mean.0 as f64, w.sigma.0 as f64));
+        let u = allowance.0 as f64;
+        // The modulus, and what it would be had the probe's free resonance moved by the
+        // allowance since the air reference: the contact law with its free resonance moved, the
+        // power law (which has none) with the resonance moved by as much.
+        let (m, moved) = match &self.contact {
+            Some(c) => (
+                c.invert(f, sigma, force)?,
+                ContactLaw {
+                    free_hz: c.free_hz + u,
+                    ..*c
+                }
+                .invert(f, sigma, force),
+            ),
+            None => (
+                self.calibration.invert(f, sigma)?,
+                self.calibration.invert(Hz(f.0 - u as f32), sigma),
+            ),
+        };
+        // Near the span's ends the moved inversion may leave it: the allowance then goes by the
+        // slope on the other side (the same to first order).
+        let drift = match moved {
+            Ok(x) if u > 0.0 => libm::fabsf(x.value.0 - m.value.0),
+            _ => 0.0,
+        };
+        Ok(Modulus {
+            sigma: crate::units::KPa(libm::sqrtf(m.sigma.0 * m.sigma.0 + drift * drift)),
+            ..m
+        })
     }
 
     /// True when the profile may be stored and used (valid curve, finite covariance, finite
@@ -257,8 +327,10 @@ pub struct Calibration {
 /// force it was read at), both curves are fitted to the rest, and the RMS over the moduli of
 /// the mean difference between the left-out readings and each curve's prediction for them
 /// decides. The one calibration procedure of the firmware's `calibrate fit` and the bench's
-/// `calibrate`. Uses the first [`MAX_REFERENCES`] readings. The contact law's misfit is
-/// floored at the power law's (the combined σ keeps covering what it covered).
+/// `calibrate`. Uses the first [`MAX_REFERENCES`] readings. The contact law's misfit
+/// (`model_sigma_hz`, a term of every reading's σ) is the same held-out RMS over the interior
+/// moduli (all but the lowest and the highest: a reading inside the span interpolates; three
+/// more fits of the law) — docs/accuracy.md measures what it covers.
 // Not inlined: its scratch (the references, 4 KiB) then sits on the stack only while a
 // calibration runs, not in every caller's frame (the firmware's session handles every command).
 #[inline(never)]
@@ -298,7 +370,19 @@ pub fn calibrate(
                 .ok()
                 .map(|p| move |r: &RefPoint| p.frequency(r.modulus_kpa))
         })?;
-        (held_contact < held_power).then_some(c)
+        // The law's misfit is its held-out one: how far the curve fitted without an interior
+        // modulus misses that modulus's readings (their mean, at each force), RMS over the
+        // moduli — what a reading between the references is off by, where the in-sample
+        // residual is mostly the readings' own noise, already in their repeatability.
+        let interior = held_out_rms(all, true, |d, e| {
+            ContactLaw::fit_leaving_out(d, free, f0, Some(e))
+                .ok()
+                .map(|c| move |r: &RefPoint| c.frequency_at(r.modulus_kpa, r.force_n))
+        })?;
+        (held_contact < held_power).then_some(ContactLaw {
+            model_sigma_hz: interior,
+            ..c
+        })
     });
     // The power law holds at one force: the nominal one's references (all, without forces),
     // moved to the front; its robust fit reorders them, kept ones first.
@@ -313,14 +397,6 @@ pub fn calibrate(
     let law = PowerLaw::fit_robust(&mut points[..m])?;
     let q_model = QModel::fit(refs.iter().map(|r| (r.modulus_kpa, r.force_n, r.q)))
         .ok_or(crate::calibration::FitError::TooFewPoints)?;
-    // The contact law's misfit is floored at the power law's: the readings' combined σ has so
-    // far carried the systematic errors the error budget does not yet name (the probe's drift
-    // since the air reference, a second mode, mains hum: docs/physics.md), through the power
-    // law's misfit; a better curve must not make those readings look more certain than they are.
-    let contact = contact.map(|c| ContactLaw {
-        model_sigma_hz: c.model_sigma_hz.max(law.model_sigma_hz),
-        ..c
-    });
     Ok(Calibration {
         law,
         q_model,

@@ -35,6 +35,9 @@ enum Cmd {
     /// Every method through the scene catalogue where methods break: the stability map
     /// (writes docs/stability.{csv,svg,png}).
     Stability(cmd::stability::StabilityArgs),
+    /// The error budget of a reading: what it is off by, by source, and the measured coverage
+    /// of the σ it reports (writes docs/accuracy.{md,csv,svg,png}).
+    Accuracy(cmd::accuracy::AccuracyArgs),
     /// Analyse a bench capture (impedance analyser or DAQ CSV) with the firmware's estimator and
     /// calibration.
     Analyze(cmd::analyze::AnalyzeArgs),
@@ -68,6 +71,7 @@ fn main() -> ExitCode {
             cmd::physics::list_phantoms();
             Ok(())
         }
+        Cmd::Accuracy(a) => cmd::accuracy::run(a),
         Cmd::Analyze(a) => cmd::analyze::run(a),
         Cmd::GenerateCaptures(a) => cmd::generate::run(a),
         Cmd::Scan(a) => cmd::scan::run(a),

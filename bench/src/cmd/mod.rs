@@ -1,5 +1,6 @@
 //! The subcommands of `probe-bench`, one file each, and what they share.
 
+pub mod accuracy;
 pub mod analyze;
 pub mod calibrate;
 pub mod generate;
