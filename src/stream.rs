@@ -489,6 +489,17 @@ pub async fn run<S: PointSource>(
     unit: &UnitProfile,
     mut emit: impl FnMut(&StreamReading) -> bool,
 ) -> u32 {
+    run_with(src, tracker, unit, |_, r| emit(r)).await
+}
+
+/// [`run`] with the point source lent to `emit` with each reading (the firmware's session
+/// hands the reading to its report channel, which the board holds, without waiting).
+pub async fn run_with<S: PointSource>(
+    src: &mut S,
+    tracker: &mut Tracker,
+    unit: &UnitProfile,
+    mut emit: impl FnMut(&mut S, &StreamReading) -> bool,
+) -> u32 {
     let scale = src.scale();
     let fs = scale.sample_rate.0 as f64;
     tracker.segment_start = src.now_sample();
@@ -505,7 +516,7 @@ pub async fn run<S: PointSource>(
                 None => Some(tracker.stalled(src.now_sample(), &scale, unit)),
             };
             if let Some(r) = r {
-                if !emit(&r) {
+                if !emit(src, &r) {
                     break 'outer;
                 }
                 // A reading ends its plan (a segment's last window, the acquisition's end, a

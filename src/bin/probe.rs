@@ -337,6 +337,10 @@ mod app {
         store: &'a mut Store<board::StoreFlash>,
         scale: FrontEndScale,
         forces: F,
+        /// When the last window arrived (`board::stamp`), until the next plan is loaded.
+        window_at: Option<u32>,
+        /// The most work from a window to the next plan's load ([`Io::take_plan_work`]).
+        plan_work: u32,
     }
 
     impl<F: rtic::Mutex<T = &'static mut ForceLog>> PointSource for FwIo<'_, F> {
@@ -351,6 +355,9 @@ mod app {
             now_sample()
         }
         async fn load(&mut self, plan: PointPlan) -> bool {
+            if let Some(t0) = self.window_at.take() {
+                self.plan_work = self.plan_work.max(board::elapsed(t0));
+            }
             self.plans.send(Some(plan)).await.is_ok()
         }
         async fn next(&mut self, plan: &PointPlan, budget: u64) -> Option<PointRaw> {
@@ -365,6 +372,7 @@ mod app {
                 }
             };
             promise(ALIVE_MS);
+            self.window_at = Some(board::stamp());
             got
         }
         async fn stop(&mut self) {
@@ -388,6 +396,11 @@ mod app {
                 let _ = self.reports.send(Report::Counters).await;
             }
         }
+        fn try_emit(&mut self, e: Event) -> bool {
+            // Never waits: a full channel drops the event (a stream's reading; its seq gap
+            // shows it).
+            self.reports.try_send(Report::Event(e)).is_ok()
+        }
         fn save(&mut self, p: &UnitProfile) -> Result<Saved, StoreError> {
             self.store.save(p)
         }
@@ -396,6 +409,10 @@ mod app {
         }
         fn boot_error(&self) -> Option<pzt_probe::boot::BootError> {
             board::boot_error()
+        }
+        fn take_plan_work(&mut self) -> Option<u32> {
+            self.window_at = None;
+            Some(core::mem::take(&mut self.plan_work))
         }
     }
 
@@ -444,6 +461,8 @@ mod app {
             store: cx.local.store,
             scale: *cx.local.scale,
             forces: cx.shared.forces,
+            window_at: None,
+            plan_work: 0,
         };
         // Power-on: the profile, then the self-test (every reading refused while it fails).
         let mut session = Session::boot(&mut io).await;
