@@ -60,6 +60,12 @@ pub struct StreamArgs {
     /// Write a plot of modulus and lock against time (SVG, or PNG by extension).
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Stream on the firmware image in QEMU instead (its `stream` command with the default
+    /// tracker and its factory profile, the scene and events as `sim` lines): the same
+    /// output, `t_s` counted from the stream's start. Needs qemu-system-arm, defmt-print and
+    /// the thumbv7em-none-eabihf target.
+    #[arg(long)]
+    pub qemu: bool,
 }
 
 /// What the scene's truth is at a time: the modulus under the probe, or none (lifted off): the
@@ -166,19 +172,21 @@ pub fn run(a: StreamArgs) -> Result<()> {
             noise_name(noise),
             layer_names(&scene)
         );
-        println!(
+        if !a.qemu {
+            println!(
             "  tracker: segments of {:.0} ms, drive ±{} half-linewidths off the resonance; unit profile of the simulated unit ({} calibration)",
             a.segment_s * 1e3,
             a.dither,
             METHOD.name()
         );
+        }
     }
     let mut readings: Vec<StreamReading> = Vec::new();
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
     let mut last_progress = -1.0f64;
     let mut write_err = None;
-    simboard::stream(&scene, a.seed, &config, &unit, a.seconds, |r| {
+    let mut each = |r: &StreamReading| {
         if a.json {
             if let Err(e) = writeln!(out, "{}", stream_json(r)) {
                 write_err.get_or_insert(e);
@@ -197,8 +205,15 @@ pub fn run(a: StreamArgs) -> Result<()> {
             );
         }
         readings.push(*r);
-    })
-    .map_err(|e| anyhow::anyhow!("the stream failed: {e:?}"))?;
+    };
+    if a.qemu {
+        for r in crate::qemu::stream(&a, &target, noise)? {
+            each(&r);
+        }
+    } else {
+        simboard::stream(&scene, a.seed, &config, &unit, a.seconds, each)
+            .map_err(|e| anyhow::anyhow!("the stream failed: {e:?}"))?;
+    }
     if let Some(e) = write_err {
         return Err(e.into());
     }
