@@ -87,6 +87,9 @@ pub fn stream(
     {
         bail!("with --qemu the image streams with its default tracker (no --segment-s, --dither, --q-prior)");
     }
+    if a.knocks_hz.is_some() {
+        bail!("with --qemu there are no knocks (the image's script has no knock line)");
+    }
     if a.lift_off_ramp_s != 0.0 {
         bail!("with --qemu the lift-off is a step (no --lift-off-ramp-s)");
     }
@@ -102,6 +105,10 @@ pub fn stream(
     }
     if let Some(t) = a.lift_off_at_s {
         lines.push(format!("sim lift-off {t}"));
+    }
+    if let (Some(f), Some(t)) = (a.press_to, a.press_at_s) {
+        // The image's press is a step.
+        lines.push(format!("sim press {f} {t}"));
     }
     if let Some(t) = a.touch_at_s {
         match target {
