@@ -465,20 +465,22 @@ impl Session {
     /// the log). True when any reading was `ok`.
     async fn stream<I: Io>(&mut self, io: &mut I, seconds: Seconds) -> bool {
         let scale = io.scale();
-        let mut tracker = match TrackerConfig::DEFAULT.validate(&scale, &self.profile) {
-            Ok(t) => t,
-            Err(e) => {
-                let why = Refusal::Settings(CommandError::Settings(e));
-                io.emit(Event::Refused(why)).await;
-                return false;
-            }
+        // Built in place (out of line): not a 4 KiB temporary in the task's frame.
+        let mut slot = None;
+        if let Err(e) = TrackerConfig::DEFAULT.validate_into(&scale, &self.profile, &mut slot) {
+            let why = Refusal::Settings(CommandError::Settings(e));
+            io.emit(Event::Refused(why)).await;
+            return false;
+        }
+        let Some(tracker) = slot.as_mut() else {
+            return false;
         };
         let fs = scale.sample_rate.0 as f64;
         let start = io.now_sample() as f64 / fs;
         let end = start + seconds.0 as f64;
         let (mut ok, mut dropped) = (0u32, 0u32);
         let _ = io.take_plan_work();
-        let readings = crate::stream::run_with(io, &mut tracker, &self.profile, |io, r| {
+        let readings = crate::stream::run_with(io, tracker, &self.profile, |io, r| {
             ok += r.reading.status.is_ok() as u32;
             dropped += !io.try_emit(Event::Stream(*r)) as u32;
             (r.t_s.0 as f64) < end

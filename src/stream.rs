@@ -116,6 +116,21 @@ impl TrackerConfig {
         h
     }
 
+    /// [`TrackerConfig::validate`] into `slot`, out of line: the tracker (about 4 KiB) is
+    /// built in this call's frame and moved into `slot` (the firmware's measurement task keeps
+    /// it in its future), not in the caller's frame, which would grow the stack of every
+    /// command the caller serves.
+    #[inline(never)]
+    pub fn validate_into(
+        &self,
+        scale: &FrontEndScale,
+        unit: &UnitProfile,
+        slot: &mut Option<Tracker>,
+    ) -> Result<(), SettingsError> {
+        *slot = Some(self.validate(scale, unit)?);
+        Ok(())
+    }
+
     /// Validate for a board and a unit (whose air reference supplies the static admittance;
     /// without one the readings fail `no_air_reference` in the pipeline).
     pub fn validate(

@@ -54,15 +54,16 @@ pub struct SimState {
     pub events: SimEvents,
 }
 
-/// What happens during a scene (times from its start).
+/// What happens during a scene (times from its start, s), kept small (the QEMU board copies
+/// its state on the boot stack): resolved into hal-sim's events by [`SimState::scene`].
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SimEvents {
-    /// The probe is lifted off.
-    pub lift_off: Option<LiftOff>,
-    /// What is under the tip changes.
-    pub step: Option<TissueStep>,
-    /// The contact force changes.
-    pub force_change: Option<ForceChange>,
+    /// The probe is lifted off at this time (a step).
+    pub lift_off_s: Option<f32>,
+    /// What is under the tip changes at this time: a phantom's name, or `None` for free air.
+    pub step: Option<(f32, Option<&'static str>)>,
+    /// The contact force steps to this fraction of the preload at this time: (time, fraction).
+    pub press: Option<(f32, f32)>,
 }
 
 impl SimState {
@@ -72,9 +73,20 @@ impl SimState {
             .base
             .with_noise(self.noise)
             .with_preload_n(self.preload_n);
-        s.lift_off = self.events.lift_off;
-        s.step = self.events.step;
-        s.force_change = self.events.force_change;
+        let e = &self.events;
+        s.lift_off = e.lift_off_s.map(|at| LiftOff {
+            at_s: at as f64,
+            ramp_s: 0.0,
+        });
+        s.step = e.step.map(|(at, name)| TissueStep {
+            at_s: at as f64,
+            tissue: name.and_then(phantoms::by_name).map(|p| p.tissue()),
+        });
+        s.force_change = e.press.map(|(at, f)| ForceChange {
+            at_s: at as f64,
+            ramp_s: 0.0,
+            to_fraction: f as f64,
+        });
         match self.fault {
             Some(f) => f.apply(s),
             None => s,
@@ -132,21 +144,17 @@ pub fn apply(line: &str, state: &mut SimState) -> Result<bool, SimError> {
             return Err(SimError::BadArgument);
         }
         if what == Some("step") {
-            let tissue = match arg {
+            let name = match arg {
                 Some("free-air") => None,
                 a => Some(
                     a.and_then(phantoms::by_name)
                         .ok_or(SimError::UnknownPhantom)?
-                        .tissue(),
+                        .name,
                 ),
             };
-            state.events.step = Some(TissueStep { at_s, tissue });
+            state.events.step = Some((at_s as f32, name));
         } else {
-            state.events.force_change = Some(ForceChange {
-                at_s,
-                ramp_s: 0.0,
-                to_fraction: number(arg, 0.01, 10.0)?,
-            });
+            state.events.press = Some((at_s as f32, number(arg, 0.01, 10.0)? as f32));
         }
         return Ok(true);
     }
@@ -157,12 +165,7 @@ pub fn apply(line: &str, state: &mut SimState) -> Result<bool, SimError> {
         state.events = SimEvents::default();
     }
     match what {
-        Some("lift-off") => {
-            state.events.lift_off = Some(LiftOff {
-                at_s: number(arg, 0.0, 600.0)?,
-                ramp_s: 0.0,
-            })
-        }
+        Some("lift-off") => state.events.lift_off_s = Some(number(arg, 0.0, 600.0)? as f32),
         Some("phantom") => {
             let p = arg
                 .and_then(phantoms::by_name)
