@@ -20,7 +20,10 @@
 //! Data flow: `command` → requests → `measure` → plans (capacity 2: the double buffer of the
 //! interrupt's settings, validated before they reach it) → `sample` → points → `measure` →
 //! reports → `report`; the path of one reading is in `docs/architecture.md`, the log lines in
-//! [`pzt_probe::log`].
+//! [`pzt_probe::log`]. A stream's readings (`stream <seconds>`) go to the report channel with
+//! `try_send` ([`Io::try_emit`](pzt_probe::session::Io::try_emit)): a full channel drops the
+//! reading (a gap in its `seq`, counted in the `stream end` line) rather than hold up the
+//! measurement task's next plan; the sample interrupt never waits on anything.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(not(target_os = "none"))]
