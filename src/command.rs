@@ -29,6 +29,7 @@
 //! | `store` | write calibration and air reference to flash |
 //! | `status` | report settings, calibration and counters |
 //! | `selftest` | run the self-test of the analog chain (as at power-on); readings are refused while it fails |
+//! | `stream <seconds>` | read continuously (0.1–600 s): numbered, time-stamped readings ([`crate::stream`]) |
 
 use crate::estimate::ringdown::RingdownSettings;
 use crate::estimate::staged::{Refine, StagedSettings};
@@ -43,6 +44,9 @@ pub const MAX_LINE: usize = 96;
 
 /// Most words in a line (the longest command, `staged`, has ten).
 const MAX_WORDS: usize = 10;
+
+/// Shortest and longest `stream`, s.
+pub const STREAM_SECONDS: (f32, f32) = (0.1, 600.0);
 
 /// Lowest and highest reference modulus `calibrate add` accepts, kPa.
 pub const REFERENCE_KPA: (f32, f32) = (1.0, 100_000.0);
@@ -85,6 +89,9 @@ pub enum Command {
     /// Take the load cell's sensitivity from this known weight resting on the tip
     /// (`weigh <grams>`, after an air reference gave the zero).
     Weigh(Newtons),
+    /// Read continuously for this long ([`crate::stream`]): numbered, time-stamped readings
+    /// until then.
+    Stream(Seconds),
 }
 
 /// Known weights `weigh` takes, grams: from 1 g (10 mN, a tenth of the window's top) to the
@@ -357,6 +364,15 @@ pub fn parse(line: &[u8], scale: &FrontEndScale) -> Result<Command, CommandError
                 Err(CommandError::OutOfRange)
             }
         }
+        "stream" => {
+            arity(args, 1)?;
+            let t = number(args.first().copied().unwrap_or_default())?;
+            if (STREAM_SECONDS.0..=STREAM_SECONDS.1).contains(&t) {
+                Ok(Command::Stream(Seconds(t)))
+            } else {
+                Err(CommandError::OutOfRange)
+            }
+        }
         _ => Err(CommandError::UnknownCommand),
     }
 }
@@ -540,6 +556,19 @@ mod tests {
 
     fn p(s: &str) -> Result<Command, CommandError> {
         parse(s.as_bytes(), &FrontEndScale::PROBE)
+    }
+
+    #[test]
+    fn stream_takes_its_seconds_within_range() {
+        assert_eq!(p("stream 3"), Ok(Command::Stream(Seconds(3.0))));
+        assert_eq!(p("stream 0.1"), Ok(Command::Stream(Seconds(0.1))));
+        assert_eq!(p("stream"), Err(CommandError::MissingArgument));
+        assert_eq!(p("stream 3 4"), Err(CommandError::TooManyArguments));
+        assert_eq!(p("stream x"), Err(CommandError::BadNumber));
+        assert_eq!(p("stream nan"), Err(CommandError::BadNumber));
+        assert_eq!(p("stream 0.05"), Err(CommandError::OutOfRange));
+        assert_eq!(p("stream 601"), Err(CommandError::OutOfRange));
+        assert_eq!(p("stream -1"), Err(CommandError::OutOfRange));
     }
 
     #[test]

@@ -18,6 +18,8 @@
 //! settings method=<str> start_hz=<f32> stop_hz=<f32> step_hz=<f32> settle_s=<f32> integrate_s=<f32> drive_v=<f32>
 //! point tag=<u16> f_hz=<f32> g_s=<f32> b_s=<f32> sigma_s=<f32>
 //! reading status=<str> f_hz=<f32> f_sigma_hz=<f32> e_kpa=<f32> e_sigma_kpa=<f32> e_repeat_kpa=<f32> q=<f32> probe_time_s=<f32> points=<u16> method=<str> force_n=<f32> force_sigma_n=<f32>
+//! stream seq=<u32> t_s=<f32> locked=<bool> status=<str> f_hz=<f32> f_sigma_hz=<f32> e_kpa=<f32> e_sigma_kpa=<f32> e_repeat_kpa=<f32> q=<f32> probe_time_s=<f32> points=<u16> method=<str> force_n=<f32> force_sigma_n=<f32>
+//! stream end start_s=<f32> readings=<u32> ok=<u32> dropped=<u32> plan_work=<u32>   (after `stream <s>`: the tracker's readings, how many ok, how many dropped for a full report channel; the most work from a window to the next plan, in the counters' unit, 0: not measured)
 //! air f_hz=<f32> q=<f32>
 //! loadcell present=<bool> newtons_per_count=<f32> tare=<f32> min_n=<f32> max_n=<f32>   (after force, weigh, air with a load cell, status)
 //! reference e_kpa=<f32> f_hz=<f32> f_sigma_hz=<f32> n=<u16>
@@ -105,6 +107,41 @@ pub fn event(e: Event) {
             nan_or(r.force.map(|w| w.mean.0)),
             nan_or(r.force.map(|w| w.sigma.0))
         ),
+        Event::Stream(x) => {
+            let r = x.reading;
+            defmt::info!(
+                "stream seq={=u32} t_s={=f32} locked={=bool} status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} e_repeat_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str} force_n={=f32} force_sigma_n={=f32}",
+                x.seq,
+                x.t_s.0,
+                x.locked,
+                r.status.code(),
+                nan_or(r.resonance.map(|v| v.0)),
+                nan_or(r.resonance_sigma.map(|v| v.0)),
+                nan_or(r.modulus.map(|v| v.0)),
+                nan_or(r.modulus_sigma.map(|v| v.0)),
+                nan_or(r.modulus_sigma_repeat.map(|v| v.0)),
+                nan_or(r.q),
+                r.probe_time.0,
+                r.points,
+                r.method.name(),
+                nan_or(r.force.map(|w| w.mean.0)),
+                nan_or(r.force.map(|w| w.sigma.0))
+            )
+        }
+        Event::StreamEnd {
+            start,
+            readings,
+            ok,
+            dropped,
+            plan_work,
+        } => defmt::info!(
+            "stream end start_s={=f32} readings={=u32} ok={=u32} dropped={=u32} plan_work={=u32}",
+            start.0,
+            readings,
+            ok,
+            dropped,
+            plan_work.unwrap_or(0)
+        ),
         Event::Hint(f) => defmt::warn!(
             "hint code={=str} message={=str}",
             f.code(),
@@ -112,7 +149,7 @@ pub fn event(e: Event) {
         ),
         Event::Help => defmt::info!(
             "help commands={=str} methods={=str} default={=str}",
-            "measure,method,sweep,staged,ringdown,air,calibrate,force,weigh,store,reload,status,selftest,help",
+            "measure,stream,method,sweep,staged,ringdown,air,calibrate,force,weigh,store,reload,status,selftest,help",
             crate::measure::METHOD_NAMES,
             crate::measure::DEFAULT_METHOD.name()
         ),

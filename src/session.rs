@@ -18,8 +18,9 @@ use crate::reading::{read, PointSource, Stop};
 use crate::selftest::{self, SelfTestFault, SelfTestReport};
 use crate::status::{Failure, Status};
 use crate::store::{LoadSource, Loaded, Saved, StoreError};
+use crate::stream::{StreamReading, TrackerConfig};
 use crate::sweep::SweepPoint;
-use crate::units::{KPa, Newtons};
+use crate::units::{KPa, Newtons, Seconds};
 
 /// Reference readings kept for a calibration fit.
 pub const MAX_REFERENCES: usize = 32;
@@ -77,6 +78,22 @@ pub enum Event {
     Refused(Refusal),
     /// The commands, the methods and the default method.
     Help,
+    /// A reading of a continuous stream (`stream <seconds>`), handed on without waiting:
+    /// one the report channel had no room for is dropped (its `seq` is missing).
+    Stream(StreamReading),
+    /// A stream ended.
+    StreamEnd {
+        /// Probe time when it started.
+        start: Seconds,
+        /// Readings the tracker made (the next `seq`).
+        readings: u32,
+        /// Of those, how many were `ok`.
+        ok: u32,
+        /// Of those, how many could not be handed on (the report channel was full).
+        dropped: u32,
+        /// The most work between a window and the next plan ([`Io::take_plan_work`]).
+        plan_work: Option<u32>,
+    },
     /// The session's state.
     Status {
         /// Active method.
@@ -150,6 +167,16 @@ pub trait Io: PointSource {
     fn save(&mut self, p: &UnitProfile) -> Result<Saved, StoreError>;
     /// Load the newest stored profile (or the fallback).
     fn load_profile(&mut self) -> Loaded;
+    /// Tell the outside world if it has room now, without waiting: false when the event was
+    /// dropped (a stream's readings go this way, so a slow host never holds the measurement
+    /// up).
+    fn try_emit(&mut self, e: Event) -> bool;
+    /// The most work between a window's arrival and the next plan's load since the last call
+    /// (the board's unit: instructions under QEMU, core cycles on the STM32), and start
+    /// again; `None` where the board does not measure it (by default).
+    fn take_plan_work(&mut self) -> Option<u32> {
+        None
+    }
     /// The board's first failed bring-up step (none by default: boards that cannot fail to
     /// come up).
     fn boot_error(&self) -> Option<BootError> {
@@ -259,14 +286,18 @@ impl Session {
         if let Some(e) = io.boot_error().filter(|e| e.blocks_readings()) {
             if matches!(
                 cmd,
-                Command::Measure | Command::CalibrateAdd(_) | Command::Air | Command::SelfTest
+                Command::Measure
+                    | Command::CalibrateAdd(_)
+                    | Command::Air
+                    | Command::SelfTest
+                    | Command::Stream(_)
             ) {
                 io.emit(Event::Refused(Refusal::Boot(e))).await;
                 return false;
             }
         }
         let reading = match cmd {
-            Command::Measure | Command::CalibrateAdd(_) => true,
+            Command::Measure | Command::CalibrateAdd(_) | Command::Stream(_) => true,
             Command::Air => self.selftest != Some(Err(SelfTestFault::Capacitance)),
             _ => false,
         };
@@ -357,6 +388,7 @@ impl Session {
                 io.emit(Event::Help).await;
                 true
             }
+            Command::Stream(t) => self.stream(io, t).await,
             Command::Reload => {
                 // Discards unsaved changes, not the self-test's verdict on the hardware.
                 let selftest = self.selftest;
@@ -487,6 +519,47 @@ impl Session {
                 false
             }
         }
+    }
+
+    /// `stream <seconds>`: the continuous tracker ([`crate::stream`]) with its default
+    /// configuration and the session's profile, until a reading ends `seconds` after the
+    /// start. Every reading is offered to the outside world without waiting
+    /// ([`Io::try_emit`]): the tracker's plans and the sample interrupt never wait on a slow
+    /// host; a reading that finds no room is dropped and counted (its `seq` is missing from
+    /// the log). True when any reading was `ok`.
+    async fn stream<I: Io>(&mut self, io: &mut I, seconds: Seconds) -> bool {
+        let scale = io.scale();
+        // Built in place (out of line): not a 4 KiB temporary in the task's frame.
+        let mut slot = None;
+        if let Err(e) = TrackerConfig::DEFAULT.validate_into(&scale, &self.profile, &mut slot) {
+            let why = Refusal::Settings(CommandError::Settings(e));
+            io.emit(Event::Refused(why)).await;
+            return false;
+        }
+        let Some(tracker) = slot.as_mut() else {
+            return false;
+        };
+        let fs = scale.sample_rate.0 as f64;
+        let start = io.now_sample() as f64 / fs;
+        let end = start + seconds.0 as f64;
+        let (mut ok, mut dropped) = (0u32, 0u32);
+        let _ = io.take_plan_work();
+        let readings = crate::stream::run_with(io, tracker, &self.profile, |io, r| {
+            ok += r.reading.status.is_ok() as u32;
+            dropped += !io.try_emit(Event::Stream(*r)) as u32;
+            (r.t_s.0 as f64) < end
+        })
+        .await;
+        let plan_work = io.take_plan_work();
+        io.emit(Event::StreamEnd {
+            start: Seconds(start as f32),
+            readings,
+            ok,
+            dropped,
+            plan_work,
+        })
+        .await;
+        ok > 0
     }
 
     /// A reference reading on a phantom of modulus `e` for the calibration fit.

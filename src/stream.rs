@@ -116,6 +116,21 @@ impl TrackerConfig {
         h
     }
 
+    /// [`TrackerConfig::validate`] into `slot`, out of line: the tracker (about 4 KiB) is
+    /// built in this call's frame and moved into `slot` (the firmware's measurement task keeps
+    /// it in its future), not in the caller's frame, which would grow the stack of every
+    /// command the caller serves.
+    #[inline(never)]
+    pub fn validate_into(
+        &self,
+        scale: &FrontEndScale,
+        unit: &UnitProfile,
+        slot: &mut Option<Tracker>,
+    ) -> Result<(), SettingsError> {
+        *slot = Some(self.validate(scale, unit)?);
+        Ok(())
+    }
+
     /// Validate for a board and a unit (whose air reference supplies the static admittance;
     /// without one the readings fail `no_air_reference` in the pipeline).
     pub fn validate(
@@ -489,6 +504,17 @@ pub async fn run<S: PointSource>(
     unit: &UnitProfile,
     mut emit: impl FnMut(&StreamReading) -> bool,
 ) -> u32 {
+    run_with(src, tracker, unit, |_, r| emit(r)).await
+}
+
+/// [`run`] with the point source lent to `emit` with each reading (the firmware's session
+/// hands the reading to its report channel, which the board holds, without waiting).
+pub async fn run_with<S: PointSource>(
+    src: &mut S,
+    tracker: &mut Tracker,
+    unit: &UnitProfile,
+    mut emit: impl FnMut(&mut S, &StreamReading) -> bool,
+) -> u32 {
     let scale = src.scale();
     let fs = scale.sample_rate.0 as f64;
     tracker.segment_start = src.now_sample();
@@ -505,7 +531,7 @@ pub async fn run<S: PointSource>(
                 None => Some(tracker.stalled(src.now_sample(), &scale, unit)),
             };
             if let Some(r) = r {
-                if !emit(&r) {
+                if !emit(src, &r) {
                     break 'outer;
                 }
                 // A reading ends its plan (a segment's last window, the acquisition's end, a

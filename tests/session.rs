@@ -28,6 +28,8 @@ struct SimIo {
     events: Vec<Event>,
     /// The bring-up step the board reports as failed.
     boot: Option<BootError>,
+    /// Room for events offered without waiting (`None`: always room): a slow host.
+    room: Option<usize>,
 }
 
 impl SimIo {
@@ -39,6 +41,7 @@ impl SimIo {
             store: Store::new(flash, 0).expect("store geometry"),
             events: Vec::new(),
             boot: None,
+            room: None,
         }
     }
     fn put_on(&mut self, scene: Scene) {
@@ -84,6 +87,20 @@ impl PointSource for SimIo {
 impl Io for SimIo {
     async fn emit(&mut self, e: Event) {
         self.events.push(e);
+    }
+    fn try_emit(&mut self, e: Event) -> bool {
+        match self.room.as_mut() {
+            Some(0) => false,
+            Some(n) => {
+                *n -= 1;
+                self.events.push(e);
+                true
+            }
+            None => {
+                self.events.push(e);
+                true
+            }
+        }
     }
     fn save(&mut self, p: &UnitProfile) -> Result<Saved, StoreError> {
         self.store.save(p)
@@ -491,4 +508,104 @@ fn the_load_cell_is_weighed_tared_and_bounds_the_readings() {
     io.put_on(Scene::on_phantom(&phantoms::B).with_preload_n(0.015));
     assert!(!send(&mut s, &mut io, "measure"));
     assert_eq!(last_reading(&io).status, Status::Failed(Failure::TooLight));
+}
+
+/// A session on the simulated unit's factory profile (as the QEMU image boots with).
+fn factory(io: &mut SimIo) -> Session {
+    let p = pzt_probe::board::sim_factory::profile().expect("factory profile");
+    io.store.save(&p).expect("store the factory profile");
+    boot(io)
+}
+
+fn stream_events(io: &SimIo) -> (Vec<pzt_probe::stream::StreamReading>, Option<Event>) {
+    let readings = io
+        .events
+        .iter()
+        .filter_map(|e| match e {
+            Event::Stream(r) => Some(*r),
+            _ => None,
+        })
+        .collect();
+    let end = io
+        .events
+        .iter()
+        .rev()
+        .find(|e| matches!(e, Event::StreamEnd { .. }))
+        .copied();
+    (readings, end)
+}
+
+/// `stream 1` on phantom C: numbered readings without gaps, ok within 1 % of the truth after
+/// the acquisition, until a reading ends a second after the start; the end says how many.
+#[test]
+fn stream_serves_numbered_readings_until_its_time_is_up() {
+    let mut io = SimIo::new(Flash::new());
+    let mut s = factory(&mut io);
+    io.put_on(Scene::on_phantom(&phantoms::C));
+    assert!(send(&mut s, &mut io, "stream 1"));
+    let (rs, end) = stream_events(&io);
+    let Some(Event::StreamEnd {
+        start,
+        readings,
+        ok,
+        dropped,
+        ..
+    }) = end
+    else {
+        panic!("no stream end: {:?}", io.events.last());
+    };
+    assert_eq!(dropped, 0);
+    assert_eq!(readings as usize, rs.len());
+    for (k, r) in rs.iter().enumerate() {
+        assert_eq!(r.seq as usize, k);
+    }
+    let last = rs.last().expect("readings").t_s.0;
+    assert!(
+        last >= start.0 + 1.0 && last < start.0 + 1.1,
+        "{start:?} {last}"
+    );
+    let oks: Vec<_> = rs.iter().filter(|r| r.reading.status.is_ok()).collect();
+    assert_eq!(ok as usize, oks.len());
+    assert!(oks.len() >= 20, "{} ok of {}", oks.len(), rs.len());
+    for r in &oks {
+        let e = r.reading.modulus.expect("ok has a modulus").0 as f64;
+        assert!((e / phantoms::C.modulus_kpa - 1.0).abs() < 0.03, "{r:?}");
+    }
+}
+
+/// A slow host: the session offers each stream reading without waiting; those that find no
+/// room are dropped and counted, the stream goes on.
+#[test]
+fn stream_drops_and_counts_readings_a_slow_host_has_no_room_for() {
+    let mut io = SimIo::new(Flash::new());
+    let mut s = factory(&mut io);
+    io.put_on(Scene::on_phantom(&phantoms::C));
+    io.room = Some(5);
+    send(&mut s, &mut io, "stream 0.5");
+    let (rs, end) = stream_events(&io);
+    assert_eq!(rs.len(), 5);
+    let Some(Event::StreamEnd {
+        readings, dropped, ..
+    }) = end
+    else {
+        panic!("no stream end");
+    };
+    assert!(readings > 5, "{readings}");
+    assert_eq!(dropped, readings - 5);
+}
+
+/// A failed self-test refuses a stream as it refuses a reading.
+#[test]
+fn stream_is_refused_while_the_selftest_fails() {
+    let mut io = SimIo::new(Flash::new());
+    let mut s = factory(&mut io);
+    io.board
+        .probe
+        .set_scene(hal_sim::Fault::OpenPzt.apply(Scene::free_air()));
+    assert!(!send(&mut s, &mut io, "selftest"));
+    assert!(!send(&mut s, &mut io, "stream 1"));
+    assert!(matches!(
+        io.events.last(),
+        Some(Event::Refused(Refusal::SelfTest(_)))
+    ));
 }

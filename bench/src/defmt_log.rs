@@ -31,6 +31,8 @@ pub const TEMPLATES: &[&str] = &[
     "point tag={=u16} f_hz={=f32} g_s={=f32} b_s={=f32} sigma_s={=f32}",
     "reading status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} e_repeat_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str} force_n={=f32} force_sigma_n={=f32}",
     "loadcell present={=bool} newtons_per_count={=f32} tare={=f32} min_n={=f32} max_n={=f32}",
+    "stream seq={=u32} t_s={=f32} locked={=bool} status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} e_repeat_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str} force_n={=f32} force_sigma_n={=f32}",
+    "stream end start_s={=f32} readings={=u32} ok={=u32} dropped={=u32} plan_work={=u32}",
     "air f_hz={=f32} q={=f32}",
     "reference e_kpa={=f32} f_hz={=f32} f_sigma_hz={=f32} n={=u16}",
     "calibration source={=str} a={=f32} b={=f32} c={=f32} min_kpa={=f32} max_kpa={=f32}",
@@ -535,11 +537,96 @@ pub struct LoggedEvent {
     pub text: String,
 }
 
+/// One logged reading of a continuous stream (`stream seq=…` line).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LoggedStreamReading {
+    /// Number in the stream (from 0; a missing number is a dropped reading).
+    pub seq: u32,
+    /// Probe time at its end, s.
+    pub t_s: f32,
+    /// The tracker was locked.
+    pub locked: bool,
+    /// The reading's fields (its `line`, `status`, modulus, ...; no sweep).
+    pub reading: LoggedReading,
+}
+
+/// The end of a stream (`stream end` line): the firmware's own counts.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LoggedStreamEnd {
+    /// Line.
+    pub line: usize,
+    /// Probe time at the start, s.
+    pub start_s: Option<f32>,
+    /// Readings the tracker made.
+    pub readings: u32,
+    /// Of those, `ok`.
+    pub ok: u32,
+    /// Of those, dropped by the firmware (its report channel was full).
+    pub dropped: u32,
+    /// Most work from a window to the next plan (the counters' unit; 0: not measured).
+    pub plan_work: u32,
+}
+
+/// A continuous stream in the log: its readings, and its end when logged.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LoggedStream {
+    /// The readings, in log order.
+    pub readings: Vec<LoggedStreamReading>,
+    /// Its end line, if logged.
+    pub end: Option<LoggedStreamEnd>,
+}
+
+impl LoggedStream {
+    /// Readings missing from the log: gaps in `seq` (from 0, and up to the end's count when
+    /// the end was logged) — dropped by the firmware or lost on the link.
+    pub fn missing(&self) -> u32 {
+        let mut expect = 0u32;
+        let mut gaps = 0u32;
+        for r in &self.readings {
+            gaps += r.seq.saturating_sub(expect);
+            expect = expect.max(r.seq.saturating_add(1));
+        }
+        if let Some(e) = &self.end {
+            gaps += e.readings.saturating_sub(expect);
+        }
+        gaps
+    }
+    /// Readings logged with status `ok`.
+    pub fn ok(&self) -> usize {
+        self.readings
+            .iter()
+            .filter(|r| r.reading.status == "ok")
+            .count()
+    }
+    /// Probe time of the start (the end line's) or of the first reading's start, s.
+    pub fn start_s(&self) -> Option<f32> {
+        self.end.as_ref().and_then(|e| e.start_s).or_else(|| {
+            self.readings
+                .first()
+                .map(|r| r.t_s - r.reading.probe_time_s.unwrap_or(0.0))
+        })
+    }
+    /// `ok` readings per second of probe time from `after_s` past the start to the last
+    /// reading; `None` without readings then.
+    pub fn ok_per_s(&self, after_s: f32) -> Option<f64> {
+        let from = self.start_s()? + after_s;
+        let last = self.readings.last()?.t_s;
+        let n = self
+            .readings
+            .iter()
+            .filter(|r| r.t_s > from && r.reading.status == "ok")
+            .count();
+        (last > from).then(|| n as f64 / (last - from) as f64)
+    }
+}
+
 /// Everything reconstructed from a log.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Session {
     /// Readings in order.
     pub readings: Vec<LoggedReading>,
+    /// Continuous streams in order.
+    pub streams: Vec<LoggedStream>,
     /// Sweeps in order.
     pub sweeps: Vec<LoggedSweep>,
     /// Warnings and errors, and boots.
@@ -579,6 +666,27 @@ impl LoggedReading {
                 samples: 0,
             }),
         })
+    }
+}
+
+/// The reading fields of a `reading` or `stream` message.
+fn reading_of(m: &Message, sweep: Option<usize>) -> LoggedReading {
+    LoggedReading {
+        line: m.line,
+        time_s: m.time_s,
+        status: m.str("status").unwrap_or_default().to_owned(),
+        f_hz: m.f32("f_hz"),
+        f_sigma_hz: m.f32("f_sigma_hz"),
+        e_kpa: m.f32("e_kpa"),
+        e_sigma_kpa: m.f32("e_sigma_kpa"),
+        e_repeat_kpa: m.f32("e_repeat_kpa"),
+        q: m.f32("q"),
+        probe_time_s: m.f32("probe_time_s"),
+        points: m.uint("points").unwrap_or(0),
+        method: m.str("method").unwrap_or_default().to_owned(),
+        force_n: m.f32("force_n"),
+        force_sigma_n: m.f32("force_sigma_n"),
+        sweep,
     }
 }
 
@@ -646,23 +754,43 @@ pub fn parse_log(text: &str) -> Session {
                     s.sweeps.push(sw);
                     s.sweeps.len() - 1
                 });
-                s.readings.push(LoggedReading {
+                s.readings.push(reading_of(&m, sweep));
+            }
+            "stream" => {
+                let r = LoggedStreamReading {
+                    seq: m.uint("seq").unwrap_or(0),
+                    t_s: m.f32("t_s").unwrap_or(f32::NAN),
+                    locked: m.get("locked") == Some(&Value::Bool(true)),
+                    reading: reading_of(&m, None),
+                };
+                // A new stream after an end, or when the numbering starts again (an end lost).
+                let new = match s.streams.last() {
+                    None => true,
+                    Some(x) => x.end.is_some() || x.readings.last().is_some_and(|p| r.seq <= p.seq),
+                };
+                if new {
+                    s.streams.push(LoggedStream::default());
+                }
+                if let Some(x) = s.streams.last_mut() {
+                    x.readings.push(r);
+                }
+            }
+            "stream end" => {
+                let end = LoggedStreamEnd {
                     line,
-                    time_s: m.time_s,
-                    status: m.str("status").unwrap_or_default().to_owned(),
-                    f_hz: m.f32("f_hz"),
-                    f_sigma_hz: m.f32("f_sigma_hz"),
-                    e_kpa: m.f32("e_kpa"),
-                    e_sigma_kpa: m.f32("e_sigma_kpa"),
-                    e_repeat_kpa: m.f32("e_repeat_kpa"),
-                    q: m.f32("q"),
-                    probe_time_s: m.f32("probe_time_s"),
-                    points: m.uint("points").unwrap_or(0),
-                    method: m.str("method").unwrap_or_default().to_owned(),
-                    force_n: m.f32("force_n"),
-                    force_sigma_n: m.f32("force_sigma_n"),
-                    sweep,
-                });
+                    start_s: m.f32("start_s"),
+                    readings: m.uint("readings").unwrap_or(0),
+                    ok: m.uint("ok").unwrap_or(0),
+                    dropped: m.uint("dropped").unwrap_or(0),
+                    plan_work: m.uint("plan_work").unwrap_or(0),
+                };
+                match s.streams.last_mut() {
+                    Some(x) if x.end.is_none() => x.end = Some(end),
+                    _ => s.streams.push(LoggedStream {
+                        readings: Vec::new(),
+                        end: Some(end),
+                    }),
+                }
             }
             "boot" | "stalled" => {
                 if let Some(sw) = open.take() {

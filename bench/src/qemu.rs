@@ -71,6 +71,98 @@ pub fn run_script(script: &str) -> Result<String> {
     Ok(log)
 }
 
+/// `stream --qemu`: the image's `stream` command on the scene and its events (`sim` lines,
+/// which count from the scene's start, 10 ms before the stream's), its readings with `t_s`
+/// from the stream's start (as the host's stream, which starts at probe time 0).
+pub fn stream(
+    a: &crate::cmd::stream::StreamArgs,
+    target: &Target,
+    noise: NoiseScene,
+) -> Result<Vec<pzt_probe::stream::StreamReading>> {
+    use pzt_probe::stream::{StreamReading, TrackerConfig};
+    let d = TrackerConfig::DEFAULT;
+    if a.segment_s != d.segment.0 as f64
+        || a.dither != d.dither as f64
+        || a.q_prior != d.q_prior as f64
+    {
+        bail!("with --qemu the image streams with its default tracker (no --segment-s, --dither, --q-prior)");
+    }
+    if a.knocks_hz.is_some() {
+        bail!("with --qemu there are no knocks (the image's script has no knock line)");
+    }
+    if a.lift_off_ramp_s != 0.0 {
+        bail!("with --qemu the lift-off is a step (no --lift-off-ramp-s)");
+    }
+    if !(pzt_probe::command::STREAM_SECONDS.0 as f64..=pzt_probe::command::STREAM_SECONDS.1 as f64)
+        .contains(&a.seconds)
+    {
+        bail!("with --qemu --seconds must be in [0.1, 600]");
+    }
+    let mut lines = scene_lines(target, a.scene.preload_n, noise);
+    lines.push(format!("sim seed {}", a.seed));
+    if let (Some(p), Some(t)) = (&a.step_to, a.step_at_s) {
+        lines.push(format!("sim step {p} {t}"));
+    }
+    if let Some(t) = a.lift_off_at_s {
+        lines.push(format!("sim lift-off {t}"));
+    }
+    if let (Some(f), Some(t)) = (a.press_to, a.press_at_s) {
+        // The image's press is a step.
+        lines.push(format!("sim press {f} {t}"));
+    }
+    if let Some(t) = a.touch_at_s {
+        match target {
+            Target::Phantom(p) => lines.push(format!("sim step {} {t}", p.name)),
+            _ => bail!("with --qemu --touch-at-s needs a --phantom"),
+        }
+    }
+    lines.push(format!("stream {}", a.seconds));
+    let script = lines.join(";");
+    if !a.json {
+        println!(
+            "probe-bench stream --qemu: the firmware image on {}",
+            target.describe()
+        );
+        println!("  script: {script}");
+    }
+    let log = run_script(&script)?;
+    let session = defmt_log::parse_log(&log);
+    if let Some(e) = session.errors.first() {
+        bail!("the image's log does not parse: {e}");
+    }
+    let [x] = session.streams.as_slice() else {
+        bail!(
+            "the image logged {} streams, not one:\n{log}",
+            session.streams.len()
+        );
+    };
+    let end = x
+        .end
+        .as_ref()
+        .context("the image's stream has no end line")?;
+    let start = end.start_s.unwrap_or(0.0);
+    if !a.json {
+        println!(
+            "  the firmware: {} readings, {} ok, {} dropped (report channel full), most work from a window to the next plan {} instructions",
+            end.readings, end.ok, end.dropped, end.plan_work
+        );
+    }
+    x.readings
+        .iter()
+        .map(|r| {
+            Ok(StreamReading {
+                seq: r.seq,
+                t_s: pzt_probe::Seconds(r.t_s - start),
+                locked: r.locked,
+                reading: r
+                    .reading
+                    .to_reading()
+                    .with_context(|| format!("unknown status or method in {r:?}"))?,
+            })
+        })
+        .collect()
+}
+
 /// `measure --qemu`.
 pub fn measure(
     a: &MeasureArgs,

@@ -326,3 +326,99 @@ fn cli_table_stdin_plot_and_errors() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A captured QEMU log of two streams (`tests/data/log/qemu_stream.log`, command in its first
+/// line): phantom C for 1.5 s, then C lifted off 0.5 s into its scene. The streams, their
+/// numbering, ok rate and the firmware's own counts are reconstructed.
+#[test]
+fn qemu_stream_log_gives_streams_their_rate_and_no_missing_readings() {
+    let text = std::fs::read_to_string(root().join("tests/data/log/qemu_stream.log")).unwrap();
+    let s = defmt_log::parse_log(&text);
+    assert!(s.errors.is_empty(), "{:?}", s.errors);
+    assert!(s.readings.is_empty());
+    assert_eq!(s.streams.len(), 2);
+    let c = &s.streams[0];
+    let end = c.end.as_ref().expect("stream end");
+    assert_eq!(c.missing(), 0);
+    assert_eq!(end.dropped, 0);
+    assert_eq!(end.readings as usize, c.readings.len());
+    assert_eq!(end.ok as usize, c.ok());
+    assert!(c
+        .readings
+        .iter()
+        .enumerate()
+        .all(|(k, r)| r.seq as usize == k));
+    assert!(c.ok_per_s(0.5).unwrap() >= 20.0, "{:?}", c.ok_per_s(0.5));
+    for r in &c.readings {
+        let e = r.reading.e_kpa.unwrap() as f64;
+        assert!((e / 414.0 - 1.0).abs() < 0.03, "{r:?}");
+        assert!(r.locked && r.reading.method == "hold");
+        assert!(r.reading.to_reading().is_some());
+    }
+    // The lift-off 0.5 s into the scene (which starts before the stream): nothing ok after.
+    let l = &s.streams[1];
+    let lift = l.start_s().unwrap() + 0.5;
+    assert!(l.ok() > 0);
+    assert!(l
+        .readings
+        .iter()
+        .all(|r| r.reading.status != "ok" || r.t_s <= lift + 0.1));
+}
+
+/// Readings lost on the link (lines cut out of the log) are counted from the gaps in `seq`,
+/// also the last ones before the end line; without the end line a new stream starts where
+/// the numbering starts again.
+#[test]
+fn missing_stream_readings_are_counted_from_seq_gaps() {
+    let text = std::fs::read_to_string(root().join("tests/data/log/qemu_stream.log")).unwrap();
+    let cut: String = text
+        .lines()
+        .filter(|l| {
+            ![
+                "stream seq=3 ",
+                "stream seq=4 ",
+                "stream seq=10 ",
+                "stream seq=27 ",
+            ]
+            .iter()
+            .any(|p| l.contains(p))
+        })
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let s = defmt_log::parse_log(&cut);
+    assert_eq!(s.streams.len(), 2);
+    // Stream 1 loses 3, 4, 10 and its last reading (27 of 28); stream 2 loses 3, 4, 10.
+    assert_eq!(s.streams[0].missing(), 4);
+    assert_eq!(s.streams[1].missing(), 3);
+    // No end lines: the streams split where seq starts again from 0.
+    let no_end: String = text
+        .lines()
+        .filter(|l| !l.contains("stream end"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let s = defmt_log::parse_log(&no_end);
+    assert_eq!(s.streams.len(), 2);
+    assert!(s
+        .streams
+        .iter()
+        .all(|x| x.end.is_none() && x.missing() == 0));
+    // The CLI says so.
+    let dir = std::env::temp_dir().join(format!("probe-bench-stream-log-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let f = dir.join("cut.log");
+    std::fs::write(&f, &cut).unwrap();
+    let out = run_ok(bin().arg("log").arg(&f));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains("2 streams")
+            && stdout.contains("24 readings logged, 4 missing")
+            && stdout.contains("firmware: 28 readings, 0 dropped"),
+        "{stdout}"
+    );
+    let out = run_ok(bin().arg("log").arg(&f).arg("--json"));
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(j["streams"][0]["missing"], 4);
+    assert_eq!(j["streams"][0]["end"]["dropped"], 0);
+    assert_eq!(j["streams"][1]["readings"][0]["seq"], 0);
+    let _ = std::fs::remove_dir_all(&dir);
+}

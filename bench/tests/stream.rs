@@ -185,3 +185,127 @@ fn the_bench_log_and_the_plot() {
     run_fails_one_line(bin().args(["stream", "--phantom", "B", "--step-to", "D"]));
     run_fails_one_line(bin().args(["stream", "--phantom", "C", "--touch-at-s", "1"]));
 }
+
+/// `stream --qemu`: the firmware image's `stream` command in QEMU, the same JSON. Lifted off
+/// and put down again on phantom C: ok within 1 % before, none 0.1 s after the lift-off,
+/// within 3 % again 0.25 s after the new contact (the scene's events count from its start,
+/// 10 ms before the stream's). Host-only options the image does not take are refused.
+#[test]
+fn qemu_streams_the_same_json_and_follows_lift_off_and_new_contact() {
+    let v = stream(&[
+        "--phantom",
+        "C",
+        "--seconds",
+        "2.5",
+        "--lift-off-at-s",
+        "1.0",
+        "--touch-at-s",
+        "1.6",
+        "--qemu",
+    ]);
+    assert!(t(v.last().unwrap()) >= 2.5);
+    let before: Vec<&Value> = v.iter().filter(|r| t(r) > 0.3 && t(r) < 0.95).collect();
+    assert!(
+        before.len() >= 12 && before.iter().all(|r| ok(r)),
+        "{before:?}"
+    );
+    for r in &v {
+        let time = t(r);
+        if time > 1.1 && time < 1.6 {
+            assert!(!ok(r), "{r}");
+        }
+        if time >= 1.85 {
+            assert!(ok(r) && (modulus(r) / 414.0 - 1.0).abs() <= 0.03, "{r}");
+        }
+        if ok(r) && time < 0.95 {
+            assert!((modulus(r) / 414.0 - 1.0).abs() <= 0.01, "{r}");
+        }
+    }
+    run_fails_one_line(bin().args(["stream", "--phantom", "C", "--qemu", "--segment-s", "0.05"]));
+    run_fails_one_line(bin().args([
+        "stream",
+        "--phantom",
+        "C",
+        "--qemu",
+        "--lift-off-at-s",
+        "1",
+        "--lift-off-ramp-s",
+        "0.05",
+    ]));
+}
+
+/// The continuous-mode scenes of the stability catalogue (docs/methods.md): beside the step
+/// and the lift-off above, the tip slipping down an edge (the press falls from 30 to 9 mN in
+/// 30 ms: no ok reading from the slip on, `too_light` once it is over), a press that creeps
+/// from 30 to 45 mN over 0.5 s (`force_unstable` while it moves, every reading ok within 3 %
+/// at the new force after), and random knocks twice a second (no ok reading off by more than 3 %, RMS
+/// within 1 %, at least 20 ok readings per second still).
+#[test]
+fn continuous_mode_scenes_slip_press_and_knocks() {
+    for seed in ["0", "1", "2"] {
+        let base = ["--phantom", "C", "--seconds", "2", "--seed", seed];
+        // Slip off the edge at 1.0 s.
+        let v = stream(&[&base[..], &["--press-to", "0.3", "--press-at-s", "1.0"]].concat());
+        assert!(v.iter().filter(|r| t(r) > 0.5 && t(r) < 1.0).all(ok));
+        assert!(
+            v.iter().filter(|r| t(r) > 1.0).all(|r| !ok(r)),
+            "seed {seed}"
+        );
+        assert!(v
+            .iter()
+            .filter(|r| t(r) > 1.2)
+            .all(|r| r["status"] == "too_light"));
+        // A press creeping from 30 to 45 mN from 1.0 s over 0.5 s.
+        let v = stream(
+            &[
+                &base[..],
+                &[
+                    "--press-to",
+                    "1.5",
+                    "--press-at-s",
+                    "1.0",
+                    "--press-ramp-s",
+                    "0.5",
+                ],
+            ]
+            .concat(),
+        );
+        for r in &v {
+            let time = t(r);
+            if (1.15..1.45).contains(&time) {
+                assert!(!ok(r), "seed {seed}: {r}");
+            }
+            if time > 1.6 {
+                assert!(
+                    ok(r) && (modulus(r) / 414.0 - 1.0).abs() <= 0.03,
+                    "seed {seed}: {r}"
+                );
+            }
+        }
+        // Knocks twice a second for 3 s.
+        let v = stream(&[
+            "--phantom",
+            "C",
+            "--seconds",
+            "3",
+            "--seed",
+            seed,
+            "--knocks-hz",
+            "2",
+        ]);
+        let good: Vec<f64> = v
+            .iter()
+            .filter(|r| t(r) > 0.5 && ok(r))
+            .map(modulus)
+            .collect();
+        let rate = good.len() as f64 / (t(v.last().unwrap()) - 0.5);
+        let rms = (good.iter().map(|e| (e / 414.0 - 1.0).powi(2)).sum::<f64>() / good.len() as f64)
+            .sqrt();
+        eprintln!(
+            "knocks, seed {seed}: {rate:.1} ok/s, RMS {:.3} %",
+            100.0 * rms
+        );
+        assert!(rate >= 20.0 && rms <= 0.01, "seed {seed}: {rate} /s, {rms}");
+        assert!(good.iter().all(|e| (e / 414.0 - 1.0).abs() <= 0.03));
+    }
+}

@@ -20,7 +20,10 @@
 //! Data flow: `command` → requests → `measure` → plans (capacity 2: the double buffer of the
 //! interrupt's settings, validated before they reach it) → `sample` → points → `measure` →
 //! reports → `report`; the path of one reading is in `docs/architecture.md`, the log lines in
-//! [`pzt_probe::log`].
+//! [`pzt_probe::log`]. A stream's readings (`stream <seconds>`) go to the report channel with
+//! `try_send` ([`Io::try_emit`](pzt_probe::session::Io::try_emit)): a full channel drops the
+//! reading (a gap in its `seq`, counted in the `stream end` line) rather than hold up the
+//! measurement task's next plan; the sample interrupt never waits on anything.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(not(target_os = "none"))]
@@ -337,6 +340,10 @@ mod app {
         store: &'a mut Store<board::StoreFlash>,
         scale: FrontEndScale,
         forces: F,
+        /// When the last window arrived (`board::stamp`), until the next plan is loaded.
+        window_at: Option<u32>,
+        /// The most work from a window to the next plan's load ([`Io::take_plan_work`]).
+        plan_work: u32,
     }
 
     impl<F: rtic::Mutex<T = &'static mut ForceLog>> PointSource for FwIo<'_, F> {
@@ -351,6 +358,9 @@ mod app {
             now_sample()
         }
         async fn load(&mut self, plan: PointPlan) -> bool {
+            if let Some(t0) = self.window_at.take() {
+                self.plan_work = self.plan_work.max(board::elapsed(t0));
+            }
             self.plans.send(Some(plan)).await.is_ok()
         }
         async fn next(&mut self, plan: &PointPlan, budget: u64) -> Option<PointRaw> {
@@ -365,6 +375,7 @@ mod app {
                 }
             };
             promise(ALIVE_MS);
+            self.window_at = Some(board::stamp());
             got
         }
         async fn stop(&mut self) {
@@ -395,6 +406,11 @@ mod app {
                 let _ = self.reports.send(Report::Counters).await;
             }
         }
+        fn try_emit(&mut self, e: Event) -> bool {
+            // Never waits: a full channel drops the event (a stream's reading; its seq gap
+            // shows it).
+            self.reports.try_send(Report::Event(e)).is_ok()
+        }
         fn save(&mut self, p: &UnitProfile) -> Result<Saved, StoreError> {
             self.store.save(p)
         }
@@ -403,6 +419,10 @@ mod app {
         }
         fn boot_error(&self) -> Option<pzt_probe::boot::BootError> {
             board::boot_error()
+        }
+        fn take_plan_work(&mut self) -> Option<u32> {
+            self.window_at = None;
+            Some(core::mem::take(&mut self.plan_work))
         }
     }
 
@@ -451,6 +471,8 @@ mod app {
             store: cx.local.store,
             scale: *cx.local.scale,
             forces: cx.shared.forces,
+            window_at: None,
+            plan_work: 0,
         };
         // Power-on: the profile, then the self-test (every reading refused while it fails).
         let mut session = Session::boot(&mut io).await;

@@ -115,6 +115,7 @@ pub fn sim_state() -> super::sim_script::SimState {
         seed: 1,
         fault: None,
         boot_fault: None,
+        events: Default::default(),
     }
 }
 

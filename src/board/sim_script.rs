@@ -10,7 +10,17 @@
 //! sim seed 7                                           noise stream (a fresh probe)
 //! sim fault open|short|dac-stuck|adc-rail|none         an analog-chain fault (hal_sim::Fault)
 //! sim boot-fault <code>|none                           a failed bring-up step (BootError code)
+//! sim lift-off <t_s>                                   lifted off t_s after the scene starts
+//! sim step <phantom>|free-air <t_s>                    what is under the tip changes t_s after it starts
+//! sim press <fraction> <t_s>                           the preload steps to fraction of itself
 //! ```
+//!
+//! The events (`lift-off`, `step`, `press`: hal-sim's `LiftOff`, `Step`, `ForceChange`) count
+//! from the scene's start: the first batch after the next `sim` line puts the probe on its
+//! scene (the next command starts 10 ms later). `sim phantom`, `modulus` and `free-air` clear
+//! them. Each is a step, not a ramp: a ramp makes the simulated probe re-discretise its plant
+//! every millisecond inside the QEMU image's sample interrupt, which then runs late (overruns;
+//! the host's `probe-bench stream` has the ramps).
 //!
 //! A fault stays on whatever the probe is moved onto until `sim fault none`. A boot fault acts
 //! only among the script's leading `sim` lines, which the board applies before it comes up:
@@ -22,6 +32,7 @@
 
 use crate::command::{parse, Command, CommandError, MAX_LINE};
 use crate::hal::FrontEndScale;
+use hal_sim::events::{ForceChange, LiftOff, Step as TissueStep};
 use hal_sim::{phantoms, Fault, NoiseScene, Scene};
 
 /// What the simulated probe should become.
@@ -39,15 +50,43 @@ pub struct SimState {
     pub fault: Option<Fault>,
     /// A bring-up step the board is to report as failed (at boot only), or `None`.
     pub boot_fault: Option<crate::boot::BootError>,
+    /// Lift-off, step and force change during the scene.
+    pub events: SimEvents,
+}
+
+/// What happens during a scene (times from its start, s), kept small (the QEMU board copies
+/// its state on the boot stack): resolved into hal-sim's events by [`SimState::scene`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SimEvents {
+    /// The probe is lifted off at this time (a step).
+    pub lift_off_s: Option<f32>,
+    /// What is under the tip changes at this time: a phantom's name, or `None` for free air.
+    pub step: Option<(f32, Option<&'static str>)>,
+    /// The contact force steps to this fraction of the preload at this time: (time, fraction).
+    pub press: Option<(f32, f32)>,
 }
 
 impl SimState {
     /// The scene the probe is on.
     pub fn scene(&self) -> Scene {
-        let s = self
+        let mut s = self
             .base
             .with_noise(self.noise)
             .with_preload_n(self.preload_n);
+        let e = &self.events;
+        s.lift_off = e.lift_off_s.map(|at| LiftOff {
+            at_s: at as f64,
+            ramp_s: 0.0,
+        });
+        s.step = e.step.map(|(at, name)| TissueStep {
+            at_s: at as f64,
+            tissue: name.and_then(phantoms::by_name).map(|p| p.tissue()),
+        });
+        s.force_change = e.press.map(|(at, f)| ForceChange {
+            at_s: at as f64,
+            ramp_s: 0.0,
+            to_fraction: f as f64,
+        });
         match self.fault {
             Some(f) => f.apply(s),
             None => s,
@@ -71,7 +110,7 @@ impl SimError {
     pub fn message(self) -> &'static str {
         match self {
             SimError::Unknown => {
-                "sim: phantom, modulus, free-air, preload, noise, seed, fault or boot-fault"
+                "sim: phantom, modulus, free-air, preload, noise, seed, fault, boot-fault, lift-off, step or press"
             }
             SimError::BadArgument => "sim: argument missing or out of range",
             SimError::UnknownPhantom => "sim: unknown phantom",
@@ -98,10 +137,35 @@ pub fn apply(line: &str, state: &mut SimState) -> Result<bool, SimError> {
         return Ok(false);
     }
     let (what, arg) = (words.next(), words.next());
+    // The two-argument lines: `step <what> <t_s>`, `press <fraction> <t_s>`.
+    if matches!(what, Some("step" | "press")) {
+        let at_s = number(words.next(), 0.0, 600.0)?;
+        if words.next().is_some() {
+            return Err(SimError::BadArgument);
+        }
+        if what == Some("step") {
+            let name = match arg {
+                Some("free-air") => None,
+                a => Some(
+                    a.and_then(phantoms::by_name)
+                        .ok_or(SimError::UnknownPhantom)?
+                        .name,
+                ),
+            };
+            state.events.step = Some((at_s as f32, name));
+        } else {
+            state.events.press = Some((at_s as f32, number(arg, 0.01, 10.0)? as f32));
+        }
+        return Ok(true);
+    }
     if words.next().is_some() {
         return Err(SimError::BadArgument);
     }
+    if matches!(what, Some("phantom" | "modulus" | "free-air")) {
+        state.events = SimEvents::default();
+    }
     match what {
+        Some("lift-off") => state.events.lift_off_s = Some(number(arg, 0.0, 600.0)? as f32),
         Some("phantom") => {
             let p = arg
                 .and_then(phantoms::by_name)
@@ -187,7 +251,37 @@ mod tests {
             seed: 1,
             fault: None,
             boot_fault: None,
+            events: SimEvents::default(),
         }
+    }
+
+    #[test]
+    fn event_lines_set_the_scene_events_and_a_new_scene_clears_them() {
+        let mut s = start();
+        assert_eq!(apply("sim phantom C", &mut s), Ok(true));
+        assert_eq!(apply("sim lift-off 1.5", &mut s), Ok(true));
+        assert_eq!(apply("sim step D 0.5", &mut s), Ok(true));
+        assert_eq!(apply("sim press 0.5 0.7", &mut s), Ok(true));
+        let sc = s.scene();
+        assert_eq!(sc.lift_off.map(|l| l.at_s), Some(1.5));
+        assert_eq!(sc.step.map(|x| x.at_s), Some(0.5));
+        assert_eq!(sc.step.and_then(|x| x.tissue), Some(phantoms::D.tissue()));
+        assert_eq!(sc.force_change.map(|f| f.to_fraction), Some(0.5));
+        assert_eq!(apply("sim step free-air 2", &mut s), Ok(true));
+        assert_eq!(s.scene().step.map(|x| x.tissue), Some(None));
+        for bad in [
+            "sim lift-off",
+            "sim lift-off -1",
+            "sim step D",
+            "sim step D 1 2",
+            "sim press 0 1",
+            "sim press x 1",
+        ] {
+            assert_eq!(apply(bad, &mut s), Err(SimError::BadArgument), "{bad}");
+        }
+        assert_eq!(apply("sim step Z 1", &mut s), Err(SimError::UnknownPhantom));
+        assert_eq!(apply("sim phantom B", &mut s), Ok(true));
+        assert_eq!(s.events, SimEvents::default());
     }
 
     #[test]

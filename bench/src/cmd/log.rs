@@ -84,6 +84,74 @@ pub fn table(s: &Session) -> Vec<String> {
     out
 }
 
+/// The continuous streams, one line each: readings logged, missing (gaps in `seq`, with the
+/// firmware's own dropped count), ok and ok/s after the first 0.5 s, the ok moduli.
+pub fn stream_table(s: &Session) -> Vec<String> {
+    let mut out = Vec::new();
+    for (k, x) in s.streams.iter().enumerate() {
+        let first = x.readings.first().map_or(0, |r| r.reading.line);
+        let span = match (x.start_s(), x.readings.last()) {
+            (Some(a), Some(b)) => format!("{a:.3}–{:.3} s", b.t_s),
+            _ => "—".into(),
+        };
+        let e: Vec<f64> = x
+            .readings
+            .iter()
+            .filter(|r| r.reading.status == "ok")
+            .filter_map(|r| r.reading.e_kpa.map(f64::from))
+            .collect();
+        let modulus = if e.is_empty() {
+            "—".to_owned()
+        } else {
+            let mean = e.iter().sum::<f64>() / e.len() as f64;
+            let sd = (e.iter().map(|v| (v - mean).powi(2)).sum::<f64>()
+                / (e.len().max(2) - 1) as f64)
+                .sqrt();
+            format!("{mean:.1} ± {sd:.1} kPa")
+        };
+        let fw = x.end.as_ref().map_or("no end line".to_owned(), |e| {
+            format!("firmware: {} readings, {} dropped", e.readings, e.dropped)
+        });
+        out.push(format!(
+            "stream {} (line {first}, probe time {span}): {} readings logged, {} missing (gaps in seq; {fw}), {} ok, {} ok/s after 0.5 s, ok modulus {modulus}",
+            k + 1,
+            x.readings.len(),
+            x.missing(),
+            x.ok(),
+            x.ok_per_s(0.5).map_or("—".to_owned(), |v| format!("{v:.1}")),
+        ));
+    }
+    out
+}
+
+fn streams_json(s: &Session) -> Value {
+    Value::Array(
+        s.streams
+            .iter()
+            .map(|x| {
+                json!({
+                    "start_s": x.start_s(),
+                    "readings_logged": x.readings.len(),
+                    "missing": x.missing(),
+                    "ok": x.ok(),
+                    "ok_per_s_after_0_5_s": x.ok_per_s(0.5),
+                    "end": x.end.as_ref().map(|e| json!({
+                        "line": e.line, "readings": e.readings, "ok": e.ok,
+                        "dropped": e.dropped, "plan_work": e.plan_work,
+                    })),
+                    "readings": x.readings.iter().map(|r| json!({
+                        "seq": r.seq, "t_s": r.t_s, "locked": r.locked,
+                        "line": r.reading.line, "status": r.reading.status,
+                        "resonance_hz": r.reading.f_hz, "modulus_kpa": r.reading.e_kpa,
+                        "modulus_sigma_kpa": r.reading.e_sigma_kpa, "q_factor": r.reading.q,
+                        "force_n": r.reading.force_n,
+                    })).collect::<Vec<_>>(),
+                })
+            })
+            .collect(),
+    )
+}
+
 fn session_json(s: &Session) -> Value {
     let readings: Vec<Value> = s
         .readings
@@ -123,6 +191,7 @@ fn session_json(s: &Session) -> Value {
         "messages": s.messages,
         "readings": readings,
         "sweeps": sweeps,
+        "streams": streams_json(s),
         "events": events,
         "unparsed": s.errors.iter().map(|e| e.to_string()).collect::<Vec<_>>(),
     })
@@ -152,13 +221,19 @@ pub fn run(a: LogArgs) -> Result<()> {
         println!("{}", session_json(&s));
     } else {
         println!(
-            "probe-bench log: {name} — {} messages, {} readings, {} sweeps ({} other lines)",
+            "probe-bench log: {name} — {} messages, {} readings, {} sweeps, {} streams ({} other lines)",
             s.messages,
             s.readings.len(),
             s.sweeps.len(),
+            s.streams.len(),
             s.other_lines
         );
-        for l in table(&s) {
+        if !s.readings.is_empty() || s.streams.is_empty() {
+            for l in table(&s) {
+                println!("  {l}");
+            }
+        }
+        for l in stream_table(&s) {
             println!("  {l}");
         }
         if !s.events.is_empty() {

@@ -5,7 +5,7 @@ use crate::report;
 use crate::scene::{layer_names, noise_name, parse_noise, SceneArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use hal_sim::{phantoms, LiftOff, Step};
+use hal_sim::{phantoms, ForceChange, Knocks, LiftOff, Step};
 use plotters::prelude::*;
 use pzt_probe::board::sim as simboard;
 use pzt_probe::stream::{StreamReading, TrackerConfig, METHOD};
@@ -37,6 +37,20 @@ pub struct StreamArgs {
     /// Put the probe down again on the same tissue at this time, s (after `--lift-off-at-s`).
     #[arg(long)]
     pub touch_at_s: Option<f64>,
+    /// The hand presses harder or lighter (the tip slides down an edge): the preload moves to
+    /// this fraction of itself from `--press-at-s` over `--press-ramp-s` (hal-sim ForceChange).
+    #[arg(long)]
+    pub press_to: Option<f64>,
+    /// Time the press starts to change, s.
+    #[arg(long)]
+    pub press_at_s: Option<f64>,
+    /// Time the press takes to change, s.
+    #[arg(long, default_value_t = 0.03)]
+    pub press_ramp_s: f64,
+    /// Random knocks at this mean rate, per s (mechanical 15 mm/s, electrical 0.8 nC, as the
+    /// stability catalogue's `knocks` scene).
+    #[arg(long)]
+    pub knocks_hz: Option<f64>,
     /// Length of one tracking segment (one reading each), s.
     #[arg(long, default_value_t = TrackerConfig::DEFAULT.segment.0 as f64)]
     pub segment_s: f64,
@@ -60,6 +74,12 @@ pub struct StreamArgs {
     /// Write a plot of modulus and lock against time (SVG, or PNG by extension).
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Stream on the firmware image in QEMU instead (its `stream` command with the default
+    /// tracker and its factory profile, the scene and events as `sim` lines): the same
+    /// output, `t_s` counted from the stream's start. Needs qemu-system-arm, defmt-print and
+    /// the thumbv7em-none-eabihf target.
+    #[arg(long)]
+    pub qemu: bool,
 }
 
 /// What the scene's truth is at a time: the modulus under the probe, or none (lifted off): the
@@ -148,6 +168,31 @@ pub fn run(a: StreamArgs) -> Result<()> {
         truth.touch_s = Some(t);
         truth.push(t, target.modulus_kpa());
     }
+    match (a.press_to, a.press_at_s) {
+        (Some(f), Some(at)) => {
+            check_time(at, "--press-at-s")?;
+            if !(f > 0.0 && f <= 10.0 && (0.0..=1.0).contains(&a.press_ramp_s)) {
+                bail!("--press-to must be in (0, 10], --press-ramp-s in [0, 1]");
+            }
+            scene = scene.with_force_change(ForceChange {
+                at_s: at,
+                ramp_s: a.press_ramp_s,
+                to_fraction: f,
+            });
+        }
+        (None, None) => {}
+        _ => bail!("--press-to and --press-at-s go together"),
+    }
+    if let Some(rate) = a.knocks_hz {
+        if !(rate > 0.0 && rate <= 100.0) {
+            bail!("--knocks-hz must be in (0, 100]");
+        }
+        scene = scene.with_knocks(Knocks {
+            rate_hz: rate,
+            velocity_m_s: 15e-3,
+            charge_c: 8e-10,
+        });
+    }
     let config = TrackerConfig {
         segment: Seconds(a.segment_s as f32),
         dither: a.dither as f32,
@@ -166,19 +211,21 @@ pub fn run(a: StreamArgs) -> Result<()> {
             noise_name(noise),
             layer_names(&scene)
         );
-        println!(
+        if !a.qemu {
+            println!(
             "  tracker: segments of {:.0} ms, drive ±{} half-linewidths off the resonance; unit profile of the simulated unit ({} calibration)",
             a.segment_s * 1e3,
             a.dither,
             METHOD.name()
         );
+        }
     }
     let mut readings: Vec<StreamReading> = Vec::new();
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
     let mut last_progress = -1.0f64;
     let mut write_err = None;
-    simboard::stream(&scene, a.seed, &config, &unit, a.seconds, |r| {
+    let mut each = |r: &StreamReading| {
         if a.json {
             if let Err(e) = writeln!(out, "{}", stream_json(r)) {
                 write_err.get_or_insert(e);
@@ -197,8 +244,15 @@ pub fn run(a: StreamArgs) -> Result<()> {
             );
         }
         readings.push(*r);
-    })
-    .map_err(|e| anyhow::anyhow!("the stream failed: {e:?}"))?;
+    };
+    if a.qemu {
+        for r in crate::qemu::stream(&a, &target, noise)? {
+            each(&r);
+        }
+    } else {
+        simboard::stream(&scene, a.seed, &config, &unit, a.seconds, each)
+            .map_err(|e| anyhow::anyhow!("the stream failed: {e:?}"))?;
+    }
     if let Some(e) = write_err {
         return Err(e.into());
     }
