@@ -250,6 +250,13 @@ fn calibrate_agrees_with_the_implementation_before_the_fast_fit() {
         );
         for (k, (a, b)) in gw[1..].iter().zip(&lw[1..]).enumerate() {
             let (kind, want) = a.split_once(':').unwrap();
+            // The contact law's misfit is no longer the fit's in-sample RMS floored at the
+            // power law's (the golden's rule) but its held-out RMS over the interior moduli
+            // (the error budget, docs/accuracy.md, bench/tests/accuracy.rs): another quantity,
+            // not the fit's output.
+            if kind == "m" && k != 3 {
+                continue;
+            }
             // The power law's constants, misfit and covariance (values 0–2, 3, 6–14).
             let kind = match k {
                 0..=2 => "a",
