@@ -67,7 +67,8 @@ pub struct HoldSettings {
     pub seed: Hz,
     /// Seed burst length.
     pub seed_burst: Seconds,
-    /// Seed ring-down observation length (at least three two-cycle windows are taken).
+    /// Seed ring-down observation length (at least four two-cycle windows are taken; 0: exactly
+    /// three, the fewest the decay fit takes).
     pub seed_ring: Seconds,
     /// How long the drive is held on the resonance in all (0.05–10 s).
     pub hold: Seconds,
@@ -103,8 +104,16 @@ impl HoldSettings {
 
     /// The seed ring-down's settings, bursting at `seed`.
     fn seed_settings(&self, seed: Hz) -> RingdownSettings {
-        // The ring-down fit needs three windows of two cycles.
-        let min_ring = 6.0 / seed.0.max(1.0) + 0.001;
+        // The ring-down fit needs three windows of two cycles. A `seed_ring` of 0 asks for
+        // exactly those three (5.5 cycles round up to three windows: the shortest seed, auto's);
+        // otherwise at least six cycles and a millisecond, which round up to four windows — the
+        // fourth keeps a seed whose first window is lost in the noise (the paper's noise, a
+        // resonance far from the burst) from failing.
+        let min_ring = if self.seed_ring.0 == 0.0 {
+            5.5 / seed.0.max(1.0)
+        } else {
+            6.0 / seed.0.max(1.0) + 0.001
+        };
         RingdownSettings {
             band_start: self.band_start,
             band_stop: self.band_stop,
