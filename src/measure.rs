@@ -41,7 +41,7 @@ pub enum Method {
     Ringdown,
     /// Seed with a ring-down, then hold the drive on the resonance and fit its response.
     Hold,
-    /// The default strategy: hold (0.14 s), falling back to fit (0.7 s) and then to sweep-G
+    /// The default strategy: hold (0.37 s), falling back to fit (0.7 s) and then to sweep-G
     /// (6 s) while the resonance is not found or not resolved; the reading names the method
     /// that produced it.
     Auto,
@@ -529,20 +529,18 @@ enum Inner {
     },
 }
 
-/// Hold's settings as the first stage of [`Method::Auto`]: over auto's band, a 3 ms seed burst
-/// (its one-cycle screening window keeps the drive on 7–10 ms in all), the shortest ring-down
-/// (three windows) and one 100 ms hold on the seed: 134 ms of probe time at 500 kPa (9.8 τ),
-/// 1.4× the Cramér–Rao bound there. Every millisecond of the seed is lost to the hold's fit, so
-/// the seed is as short as still rings (docs/methods.md, hold: where the efficiency goes).
+/// Hold's settings as the first stage of [`Method::Auto`]: its defaults over auto's band.
+///
+/// A faster first stage is measured (the speed-accuracy chart's `3 ms seed, 100 ms` hold: a 3 ms
+/// seed burst, the three-window ring-down of `seed_ring` 0, one 100 ms hold; 126 ms at 500 kPa, 1.45× the Cramér–Rao bound) but is not the
+/// default: on the M4 its fit costs 2.3–2.6 % of the core over so short a reading (budget 2 %,
+/// `tests/qemu_cost.rs`) and it loses more readings under mains hum (docs/methods.md, hold:
+/// where the efficiency goes).
 fn auto_hold(s: &StagedSettings) -> HoldSettings {
     HoldSettings {
         band_start: s.band_start,
         band_stop: s.band_stop,
         seed: Hz(0.5 * (s.band_start.0 + s.band_stop.0)),
-        seed_burst: Seconds(0.003),
-        seed_ring: Seconds(0.0),
-        refine: Seconds(0.0),
-        hold: Seconds(0.1),
         ..HoldSettings::DEFAULT
     }
 }

@@ -123,7 +123,7 @@ pub fn configs() -> Vec<Config> {
     // hold subtracts the unit's static admittance: the profile's air reference supplies it.
     let air = HoldSettings::DEFAULT;
     for (burst, refine, hold) in [
-        // auto's first stage (`measure::auto_hold`): the default reading.
+        // the fast hold (not auto's default: its on-target cost, docs/methods.md).
         (3.0, 0.0, 100.0),
         (20.0, 50.0, 150.0),
         (20.0, 80.0, 300.0),

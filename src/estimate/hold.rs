@@ -199,6 +199,8 @@ pub(crate) fn add_sums(acc: &mut (ChannelSums, ReferenceSums), m: &ChannelSums, 
 const ON_SETTLE_S: f64 = 0.002;
 /// Shortest hold, s.
 const MIN_HOLD_S: f32 = 0.05;
+/// Fewest cycles in a window of a single hold (no refine segment).
+const MIN_SINGLE_CYCLES: f64 = 4.0;
 /// Relative standard uncertainty given to the seed ring-down's `Q` as the first hold's prior
 /// (a one-stage ring-down of two to four windows measures the decay to 5–20 %).
 const SEED_Q_SD: f64 = 0.25;
@@ -259,10 +261,19 @@ impl Hold {
                     return None;
                 }
                 self.pending = true;
-                // Windows of whole cycles, at least two, at most MAX_WINDOWS of them.
+                // Windows of whole cycles, at least two, at most MAX_WINDOWS of them; a single
+                // hold (no refine segment, auto's) takes windows of at least four cycles: five or
+                // six windows, each fitted window costs the same on the target whatever its
+                // length, and the window means lose almost nothing of the slow envelope (the
+                // per-reading work of a 134 ms reading stays within 2 % of the core).
                 let per_cycle = 1.0 / self.f_hold;
                 let hold = self.segment_length() - ON_SETTLE_S;
-                let cycles = libm::ceil(hold / per_cycle / MAX_WINDOWS as f64).max(2.0);
+                let fewest = if self.s.refine.0 > 0.0 {
+                    2.0
+                } else {
+                    MIN_SINGLE_CYCLES
+                };
+                let cycles = libm::ceil(hold / per_cycle / MAX_WINDOWS as f64).max(fewest);
                 let n = libm::floor(hold / (cycles * per_cycle)).clamp(2.0, MAX_WINDOWS as f64);
                 self.n_windows = n as u16;
                 Some(PointPlan {
