@@ -67,7 +67,8 @@ pub struct HoldSettings {
     pub seed: Hz,
     /// Seed burst length.
     pub seed_burst: Seconds,
-    /// Seed ring-down observation length (at least three two-cycle windows are taken).
+    /// Seed ring-down observation length (at least four two-cycle windows are taken; 0: exactly
+    /// three, the fewest the decay fit takes).
     pub seed_ring: Seconds,
     /// How long the drive is held on the resonance in all (0.05–10 s).
     pub hold: Seconds,
@@ -103,8 +104,16 @@ impl HoldSettings {
 
     /// The seed ring-down's settings, bursting at `seed`.
     fn seed_settings(&self, seed: Hz) -> RingdownSettings {
-        // The ring-down fit needs three windows of two cycles.
-        let min_ring = 6.0 / seed.0.max(1.0) + 0.001;
+        // The ring-down fit needs three windows of two cycles. A `seed_ring` of 0 asks for
+        // exactly those three (5.5 cycles round up to three windows: the shortest seed, auto's);
+        // otherwise at least six cycles and a millisecond, which round up to four windows — the
+        // fourth keeps a seed whose first window is lost in the noise (the paper's noise, a
+        // resonance far from the burst) from failing.
+        let min_ring = if self.seed_ring.0 == 0.0 {
+            5.5 / seed.0.max(1.0)
+        } else {
+            6.0 / seed.0.max(1.0) + 0.001
+        };
         RingdownSettings {
             band_start: self.band_start,
             band_stop: self.band_stop,
@@ -190,6 +199,8 @@ pub(crate) fn add_sums(acc: &mut (ChannelSums, ReferenceSums), m: &ChannelSums, 
 const ON_SETTLE_S: f64 = 0.002;
 /// Shortest hold, s.
 const MIN_HOLD_S: f32 = 0.05;
+/// Fewest cycles in a window of a single hold (no refine segment).
+const MIN_SINGLE_CYCLES: f64 = 4.0;
 /// Relative standard uncertainty given to the seed ring-down's `Q` as the first hold's prior
 /// (a one-stage ring-down of two to four windows measures the decay to 5–20 %).
 const SEED_Q_SD: f64 = 0.25;
@@ -250,10 +261,19 @@ impl Hold {
                     return None;
                 }
                 self.pending = true;
-                // Windows of whole cycles, at least two, at most MAX_WINDOWS of them.
+                // Windows of whole cycles, at least two, at most MAX_WINDOWS of them; a single
+                // hold (no refine segment, auto's) takes windows of at least four cycles: five or
+                // six windows, each fitted window costs the same on the target whatever its
+                // length, and the window means lose almost nothing of the slow envelope (the
+                // per-reading work of a 134 ms reading stays within 2 % of the core).
                 let per_cycle = 1.0 / self.f_hold;
                 let hold = self.segment_length() - ON_SETTLE_S;
-                let cycles = libm::ceil(hold / per_cycle / MAX_WINDOWS as f64).max(2.0);
+                let fewest = if self.s.refine.0 > 0.0 {
+                    2.0
+                } else {
+                    MIN_SINGLE_CYCLES
+                };
+                let cycles = libm::ceil(hold / per_cycle / MAX_WINDOWS as f64).max(fewest);
                 let n = libm::floor(hold / (cycles * per_cycle)).clamp(2.0, MAX_WINDOWS as f64);
                 self.n_windows = n as u16;
                 Some(PointPlan {

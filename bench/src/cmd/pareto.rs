@@ -27,6 +27,83 @@ pub struct ParetoArgs {
     /// Folder for speed-accuracy.{csv,md,svg,png} and speed-accuracy-paper.{svg,png}.
     #[arg(long, default_value = "docs")]
     pub out_dir: PathBuf,
+    /// Focused run instead of the study: hold with these knobs, `burst,ring,refine,hold` in ms
+    /// (repeatable), calibrated and read at `--moduli` (bench noise unless `--paper-noise`); prints
+    /// one line each.
+    #[arg(long)]
+    pub hold_knobs: Vec<String>,
+    /// Focused run: the default method (auto) at its default settings.
+    #[arg(long)]
+    pub auto: bool,
+    /// Moduli of a focused run, kPa.
+    #[arg(long, value_delimiter = ',', default_value = "500")]
+    pub moduli: Vec<f64>,
+    /// Focused run: in the paper's noise instead of the bench's.
+    #[arg(long)]
+    pub paper_noise: bool,
+    /// Focused run: first seed of the readings (each modulus adds 10 000 per place).
+    #[arg(long, default_value_t = 10_000)]
+    pub seed0: u64,
+}
+
+/// `--hold-knobs`, `--auto`: one line per (config, modulus).
+fn focused(a: &ParetoArgs) -> Result<()> {
+    use pzt_probe::estimate::hold::HoldSettings;
+    use pzt_probe::measure::{Method, Settings};
+    use pzt_probe::Seconds;
+    let mut cfgs = Vec::new();
+    if a.auto {
+        cfgs.push(Config::new(
+            Method::Auto,
+            "default".into(),
+            Method::Auto.default_settings(),
+        ));
+    }
+    for k in &a.hold_knobs {
+        let v: Vec<f32> = k
+            .split(',')
+            .map(|x| x.trim().parse::<f32>())
+            .collect::<Result<_, _>>()?;
+        let [burst, ring, refine, hold] = v[..] else {
+            return Err(anyhow!("--hold-knobs burst,ring,refine,hold (ms)"));
+        };
+        let s = HoldSettings {
+            seed_burst: Seconds(burst / 1e3),
+            seed_ring: Seconds(ring / 1e3),
+            refine: Seconds(refine / 1e3),
+            hold: Seconds(hold / 1e3),
+            ..HoldSettings::DEFAULT
+        };
+        cfgs.push(Config::new(Method::Hold, k.clone(), Settings::Hold(s)));
+    }
+    let noise = if a.paper_noise {
+        NoiseScene::Paper
+    } else {
+        NoiseScene::Bench
+    };
+    println!("config,modulus_kpa,ok,time_ms,time_tau,noise_rms_pct,rms_pct,sd_pct,repeat_pct,crb_pct,ratio");
+    for c in &cfgs {
+        let cal = calibrate(c, a.cal_repeats, noise).ok_or_else(|| anyhow!("calibration"))?;
+        for (k, e) in a.moduli.iter().enumerate() {
+            let cell = evaluate(c, &cal, *e, noise, a.seeds, a.seed0 * (k as u64 + 1));
+            let crb = crb_pct(&cal.calibration, *e, noise, 5.0, cell.time_ms * 1e-3);
+            println!(
+                "{},{e},{}/{},{:.1},{:.2},{:.4},{:.4},{:.4},{:.4},{:.4},{:.2}",
+                c.label,
+                cell.ok,
+                cell.n,
+                cell.time_ms,
+                cell.time_ms / tau_ms(*e),
+                cell.noise_rms_pct(),
+                cell.rms_pct(),
+                cell.sd_pct(),
+                cell.repeat_pct(),
+                crb,
+                cell.noise_rms_pct() / crb
+            );
+        }
+    }
+    Ok(())
 }
 
 struct Row {
@@ -47,6 +124,9 @@ fn noise_label(n: NoiseScene) -> &'static str {
 
 /// Run the subcommand.
 pub fn run(a: ParetoArgs) -> Result<()> {
+    if a.auto || !a.hold_knobs.is_empty() {
+        return focused(&a);
+    }
     let cfgs = configs();
     let noises = [NoiseScene::Bench, NoiseScene::Paper];
     let total = cfgs.len() * noises.len() * (1 + MODULI.len());

@@ -158,6 +158,21 @@ pub fn run(a: StabilityArgs) -> Result<()> {
     // The default strategy over more seeds: the statement.
     let unit = auto_unit.ok_or_else(|| anyhow!("auto was not calibrated"))?;
     let t = tally(&cases, Method::Auto, &unit, a.auto_seeds);
+    // Where auto loses readings (stderr: not part of the generated table).
+    for case in &cases {
+        let c = tally(
+            std::slice::from_ref(case),
+            Method::Auto,
+            &unit,
+            a.auto_seeds,
+        );
+        if c.wrong_failures > 0 {
+            eprintln!(
+                "auto lost {} of {} in {}",
+                c.wrong_failures, c.readings, case.name
+            );
+        }
+    }
     let _ = writeln!(
         md,
         "\nDefault strategy — {}",
