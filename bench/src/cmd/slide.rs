@@ -54,6 +54,16 @@ impl Slide {
     pub fn seconds(&self) -> f64 {
         ACQUIRE_S + (self.x_mm.1 - self.x_mm.0).abs() / self.speed_mm_s
     }
+    /// The closed form along the path: `n + 1` points `(x mm, E kPa)` evenly over it, in `x`.
+    pub fn truth_line(&self, n: usize) -> Vec<(f64, f64)> {
+        let (lo, hi) = (self.x_mm.0.min(self.x_mm.1), self.x_mm.0.max(self.x_mm.1));
+        (0..=n)
+            .map(|k| {
+                let x = lo + (hi - lo) * k as f64 / n as f64;
+                (x, self.truth_kpa(x))
+            })
+            .collect()
+    }
     /// The closed-form apparent modulus (kPa) at `x` mm on the line.
     pub fn truth_kpa(&self, x_mm: f64) -> f64 {
         self.phantom
@@ -163,13 +173,7 @@ pub fn slide(s: &Slide, config: &TrackerConfig, unit: &UnitProfile) -> Result<Sl
     if s.x_mm.1 < s.x_mm.0 {
         profile.reverse();
     }
-    let (lo, hi) = (s.x_mm.0.min(s.x_mm.1), s.x_mm.0.max(s.x_mm.1));
-    let truth_line: Vec<(f64, f64)> = (0..=2000)
-        .map(|k| {
-            let x = lo + (hi - lo) * k as f64 / 2000.0;
-            (x, s.truth_kpa(x))
-        })
-        .collect();
+    let truth_line = s.truth_line(2000);
     Ok(SlideResult {
         slide: *s,
         found: locate(&profile),
@@ -255,12 +259,7 @@ where
     root.fill(&WHITE).map_err(err)?;
     let s = &r.slide;
     let (lo, hi) = (s.x_mm.0.min(s.x_mm.1), s.x_mm.0.max(s.x_mm.1));
-    let truth: Vec<(f64, f64)> = (0..=400)
-        .map(|k| {
-            let x = lo + (hi - lo) * k as f64 / 400.0;
-            (x, s.truth_kpa(x))
-        })
-        .collect();
+    let truth = s.truth_line(400);
     let (elo, ehi) = padded_range(
         r.profile.iter().chain(truth.iter()).map(|p| p.1),
         0.1,
