@@ -106,8 +106,7 @@ pub fn conclude(
         r.status = Status::Failed(Failure::Uncalibrated);
         return r;
     }
-    let allowance = crate::profile::drift_allowance(probe_time);
-    let m = match unit.invert_with(est.resonance, est.sigma, force.as_ref(), allowance) {
+    let m = match unit.invert(est.resonance, est.sigma, force.as_ref(), probe_time) {
         Ok(m) => m,
         Err(f) => {
             r.status = Status::Failed(f);

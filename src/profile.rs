@@ -190,19 +190,20 @@ impl UnitProfile {
     ///
     /// Its combined σ is the curve's ([`crate::calibration::Modulus::propagated`]: the
     /// resonance's and the force's repeatability, the calibration's parameter covariance and
-    /// its held-out misfit) and the free resonance's allowance [`FREE_RESONANCE_ALLOWANCE`], in
-    /// quadrature.
+    /// its held-out misfit) and the free resonance's allowance over a reading of `probe_time`
+    /// ([`drift_allowance`]), in quadrature.
     pub fn invert(
         &self,
         f: crate::units::Hz,
         sigma: crate::units::Hz,
         force: Option<&ContactForce>,
+        probe_time: crate::units::Seconds,
     ) -> Result<Modulus, Failure> {
-        self.invert_with(f, sigma, force, FREE_RESONANCE_ALLOWANCE)
+        self.invert_with(f, sigma, force, drift_allowance(probe_time))
     }
 
     /// [`UnitProfile::invert`] with the free resonance's allowance `allowance` (the error
-    /// budget takes the σ apart with it; readings use [`FREE_RESONANCE_ALLOWANCE`]).
+    /// budget takes the σ apart with it; readings use [`drift_allowance`] of their probe time).
     pub fn invert_with(
         &self,
         f: crate::units::Hz,

@@ -388,7 +388,9 @@ pub fn measure(opts: &Options, mut tick: impl FnMut()) -> Result<Budget> {
             let at = |df: f32| {
                 let mut w2 = w;
                 w2.mean = Newtons(w.mean.0 + df);
-                unit.invert(f, fs, Some(&w2)).ok().map(|m| m.value.0 as f64)
+                unit.invert(f, fs, Some(&w2), a.probe_time)
+                    .ok()
+                    .map(|m| m.value.0 as f64)
             };
             let (Some(hi), Some(lo)) = (at(1e-3), at(-1e-3)) else {
                 continue;

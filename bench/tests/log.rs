@@ -200,7 +200,8 @@ fn qemu_log_reconstructs_the_firmwares_reading() {
     let unit = pzt_probe::board::sim_factory::profile().expect("factory record");
     let force = r.to_reading().and_then(|x| x.force);
     assert!(force.is_some(), "the reading logs its contact force");
-    let m = unit.invert(Hz(f), Hz(0.0), force.as_ref()).unwrap();
+    let t = pzt_probe::Seconds(r.probe_time_s.unwrap());
+    let m = unit.invert(Hz(f), Hz(0.0), force.as_ref(), t).unwrap();
     assert!(
         (m.value.0 / r.e_kpa.unwrap() - 1.0).abs() < 1e-4,
         "{} vs {:?}",
