@@ -45,6 +45,9 @@ pub struct PointRaw {
     pub end_sample: u64,
     /// Index of the window within the plan (0 for the first).
     pub window: u16,
+    /// Samples from the start of the batch in which the plan took effect (its frequency switch,
+    /// phase-continuous) to the end of this window (saturating).
+    pub since_load: u32,
 }
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -95,6 +98,8 @@ pub struct SampleEngine {
     sums: LockInSums,
     window: u16,
     samples: u64,
+    /// Sample count when the demodulated plan took effect.
+    load_sample: u64,
     overruns: u32,
 }
 
@@ -150,6 +155,7 @@ impl SampleEngine {
             },
             window: 0,
             samples: 0,
+            load_sample: 0,
             overruns: 0,
         }
     }
@@ -230,6 +236,7 @@ impl SampleEngine {
         if tag != self.demod_tag || info.load != self.demod_load {
             self.demod_tag = tag;
             self.demod_load = info.load;
+            self.load_sample = self.samples;
             self.sums = LockInSums::default();
             self.window = 0;
             self.stage = match info.plan {
@@ -276,6 +283,9 @@ impl SampleEngine {
                                 sums: self.sums,
                                 end_sample: self.samples,
                                 window: self.window,
+                                since_load: (self.samples.saturating_sub(self.load_sample))
+                                    .min(u32::MAX as u64)
+                                    as u32,
                             });
                             if self.window.saturating_add(1) < plan.windows {
                                 self.window += 1;

@@ -37,6 +37,7 @@
 use crate::dsp::dds::{frequency_hz, tuning_word};
 use crate::dsp::lockin::{solve, ChannelSums, ReferenceSums};
 use crate::engine::{PointPlan, PointRaw};
+use crate::estimate::conductance::GROSS_CHI2;
 use crate::estimate::hold::{self, Hold, HoldSettings, HoldWindow, MAX_WINDOWS};
 use crate::estimate::Estimate;
 use crate::hal::FrontEndScale;
@@ -476,6 +477,11 @@ impl Tracker {
         let y_s = C64::new(self.static_g, 2.0 * PI * self.f_h * self.static_c);
         let q_sd = self.cfg.q_prior as f64 * self.q_est;
         let h = hold::fit(&self.windows, self.f_h, y_s, self.f_est, (self.q_est, q_sd))?;
+        // A segment the resonator's model does not explain (a knock, a tone) is no reading,
+        // and the drive does not follow it: the next segment, 35 ms on, will be clean.
+        if h.reduced_chi2 > GROSS_CHI2 {
+            return Err(Failure::Interference);
+        }
         let e = h.estimate;
         let (f0, q) = (e.resonance.0 as f64, e.q.unwrap_or(0.0) as f64);
         let (lo, hi) = (self.cfg.band_start.0 as f64, self.cfg.band_stop.0 as f64);
@@ -640,6 +646,7 @@ mod tests {
                     sums,
                     end_sample: sample,
                     window: w,
+                    since_load: 0,
                 };
                 if let Some(r) = t.accept(&raw, &scale, &unit, |_, _| None) {
                     assert_eq!(r.seq, expect);

@@ -165,6 +165,7 @@ fn arbitrary_windows_after_lock() {
                 sums,
                 end_sample: sample,
                 window: w,
+                since_load: 0,
             };
             let acquiring = t.acquiring();
             if let Some(r) = t.accept(&raw, &scale, &unit, |_, _| None) {
