@@ -467,7 +467,8 @@ fn ringdown(args: &[&str], scale: &FrontEndScale) -> Result<RingdownSettings, Co
         window_cycles: count(window_cycles)?,
         drive: Volts(drive),
     };
-    s.validate(scale).map_err(CommandError::Settings)?;
+    s.validate::<{ crate::estimate::ringdown::MAX_WINDOWS }>(scale)
+        .map_err(CommandError::Settings)?;
     Ok(s)
 }
 

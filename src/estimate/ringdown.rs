@@ -95,7 +95,10 @@ enum Phase {
 
 /// A ring-down measurement in progress.
 #[derive(Clone, Debug)]
-pub struct Ringdown {
+///
+/// `W`: most windows it keeps (a seed ring-down of three or four windows needs far fewer than
+/// the method's own [`MAX_WINDOWS`]; `validate` refuses a ring that needs more).
+pub struct Ringdown<const W: usize = MAX_WINDOWS> {
     s: RingdownSettings,
     fs: f64,
     amplitude: u16,
@@ -104,7 +107,7 @@ pub struct Ringdown {
     pending: bool,
     f_ref: f64,
     ftw: u32,
-    windows: heapless::Vec<Window, MAX_WINDOWS>,
+    windows: heapless::Vec<Window, W>,
     n_windows: u16,
     tag: u16,
     last: Option<Result<Estimate, Failure>>,
@@ -112,7 +115,10 @@ pub struct Ringdown {
 
 impl RingdownSettings {
     /// Validate for a board.
-    pub fn validate(&self, scale: &FrontEndScale) -> Result<Ringdown, SettingsError> {
+    pub fn validate<const W: usize>(
+        &self,
+        scale: &FrontEndScale,
+    ) -> Result<Ringdown<W>, SettingsError> {
         check_frequency(self.band_start.0, scale)?;
         check_frequency(self.band_stop.0, scale)?;
         let ftw = check_frequency(self.seed.0, scale)?;
@@ -132,6 +138,10 @@ impl RingdownSettings {
             return Err(SettingsError::IntegrationShorterThanCycle);
         }
         let amplitude = amplitude_codes(self.drive, scale)?;
+        let f_ref = frequency_hz(ftw, fs);
+        if libm::ceil(self.ring.0 as f64 * f_ref / self.window_cycles as f64) > W as f64 {
+            return Err(SettingsError::KnobOutOfRange);
+        }
         Ok(Ringdown {
             s: *self,
             fs,
@@ -139,7 +149,7 @@ impl RingdownSettings {
             stage: 0,
             phase: Phase::Burst,
             pending: false,
-            f_ref: frequency_hz(ftw, fs),
+            f_ref,
             ftw,
             windows: heapless::Vec::new(),
             n_windows: 0,
@@ -149,7 +159,7 @@ impl RingdownSettings {
     }
 }
 
-impl Ringdown {
+impl<const W: usize> Ringdown<W> {
     /// The next plan, or `None` when done.
     pub fn next_plan(&mut self) -> Option<PointPlan> {
         if self.pending || self.phase == Phase::Done {
@@ -168,7 +178,7 @@ impl Ringdown {
             },
             _ => {
                 let per = self.s.window_cycles as f64 / self.f_ref;
-                let n = libm::ceil(self.s.ring.0 as f64 / per).clamp(1.0, MAX_WINDOWS as f64);
+                let n = libm::ceil(self.s.ring.0 as f64 / per).clamp(1.0, W as f64);
                 self.n_windows = n as u16;
                 self.windows.clear();
                 PointPlan {
