@@ -87,21 +87,25 @@ pub const MIN_RELATIVE_MISFIT: f64 = 3e-3;
 /// lies far below that of the next.
 pub fn transients(points: &[SweepPoint]) -> Result<(), Failure> {
     let r = |i: usize| points.get(i).map_or(f32::NAN, |p| p.residual_a);
-    let n = points.len();
-    // A run [i, j] (one or two points) with both outer neighbours present, from index 1 on.
-    for i in 2..n {
+    spike(points.len(), r, 2, false)
+}
+
+/// A burst in a sequence of `n` residual amplitudes `r(i)`: one or two adjacent values above
+/// [`SPIKE_RATIO`] times the larger of the values just outside them, judged from index `first`
+/// on (the values before it are neighbours only); `open_end`: a run at the end is judged against
+/// its one neighbour.
+fn spike(n: usize, r: impl Fn(usize) -> f32, first: usize, open_end: bool) -> Result<(), Failure> {
+    for i in first.max(1)..n {
         for j in [i, i + 1] {
-            if j + 1 >= n {
+            let after = if j + 1 < n {
+                r(j + 1)
+            } else if open_end && j < n {
+                0.0
+            } else {
                 continue;
-            }
-            let outside = {
-                let (a, b) = (r(i - 1), r(j + 1));
-                if a > b {
-                    a
-                } else {
-                    b
-                }
             };
+            let before = r(i - 1);
+            let outside = if before > after { before } else { after };
             let inside = if r(i) < r(j) { r(i) } else { r(j) };
             if inside > SPIKE_RATIO * outside {
                 return Err(Failure::Interference);
@@ -109,6 +113,18 @@ pub fn transients(points: &[SweepPoint]) -> Result<(), Failure> {
         }
     }
     Ok(())
+}
+
+/// Knocks in the consecutive windows of one drive frequency (a hold's segment, a stream's),
+/// from their residual variances `vars`: a burst of one or two windows as in [`transients`]
+/// ([`SPIKE_RATIO`] in amplitude over both neighbours, or over the one before for the last
+/// windows). The first window is judged only as a neighbour: after a switch it carries the
+/// probe's own transient, which decays over the next windows and so never qualifies; a knock
+/// raises one or two windows 250–450× in variance (stream segments on phantom C under the
+/// catalogue's knocks).
+pub fn window_spike(vars: &[f64]) -> Result<(), Failure> {
+    let r = |i: usize| vars.get(i).map_or(f32::NAN, |&v| libm::sqrt(v) as f32);
+    spike(vars.len(), r, 1, true)
 }
 
 /// How far the points scatter about a resonance, from [`bvd_misfit`].
@@ -241,6 +257,40 @@ mod tests {
             });
         }
         v
+    }
+
+    /// The windows of stream segments on phantom C under the catalogue's knocks (variances
+    /// relative to the first window's, measured): clean segments pass whatever their switch
+    /// transient, a knocked window anywhere is `interference`.
+    #[test]
+    fn a_knocked_window_is_interference() {
+        for clean in [
+            [1.0, 0.4, 0.2, 0.1],
+            [1.0, 0.3, 0.1, 0.0],
+            [1.0, 0.5, 0.2, 0.1],
+            [10.0, 0.4, 0.2, 0.1],
+        ] {
+            assert_eq!(window_spike(&clean), Ok(()), "{clean:?}");
+        }
+        for knocked in [
+            &[1.0, 0.3, 265.2, 0.1][..],
+            &[1.0, 0.3, 0.2, 40.0],
+            &[1.0, 0.3, 300.0, 250.0, 0.2, 0.1],
+        ] {
+            assert_eq!(
+                window_spike(knocked),
+                Err(Failure::Interference),
+                "{knocked:?}"
+            );
+        }
+        // A knock whose tail raises the next window 22× ([1, 0.4, 425.5, 22]: 4.7× in amplitude
+        // over the window before) is no burst of one or two: the stream's fit leaves a gross χ²
+        // for it instead (18).
+        // A transient that decays over the first windows is the probe's own.
+        assert_eq!(window_spike(&[400.0, 90.0, 8.0, 1.0, 1.0, 1.2]), Ok(()));
+        // NaN never qualifies; nothing panics.
+        assert_eq!(window_spike(&[f64::NAN, 1.0, 1.0, 1.0]), Ok(()));
+        assert_eq!(window_spike(&[0.0; 40]), Ok(()));
     }
 
     #[test]
