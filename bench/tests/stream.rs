@@ -309,3 +309,40 @@ fn continuous_mode_scenes_slip_press_and_knocks() {
         assert!(good.iter().all(|e| (e / 414.0 - 1.0).abs() <= 0.03));
     }
 }
+
+/// Issue 14 point 6, from the library (`pareto::evaluate_stream`, the study's function): at the
+/// default segment length the tracker gives ≥ 20 ok readings per second after the first 0.5 s
+/// within 1 % RMS of phantom C, and its error from noise sits above the steady-state Cramér–Rao
+/// bound for one reading's probe time — finite, never below it (a bound cannot be beaten), and
+/// no more than 8× (measured 5.9× on these seeds, 39.4 ms a reading; the single-shot hold is
+/// within 2×).
+#[test]
+fn the_trackers_speed_accuracy_point_on_phantom_c() {
+    use hal_sim::{phantoms, NoiseScene};
+    use probe_bench::pareto::{evaluate_stream, stream_unit};
+    use probe_bench::scene::Target;
+    use pzt_probe::stream::TrackerConfig;
+    let unit = stream_unit(NoiseScene::Bench).unwrap();
+    let c = Target::Phantom(phantoms::by_name("C").unwrap());
+    let seg = TrackerConfig::DEFAULT.segment.0 as f64;
+    let s = evaluate_stream(c, NoiseScene::Bench, seg, &unit, 5, 0).unwrap();
+    let x = &s.cell;
+    eprintln!(
+        "{:.0} ms: {:.1} ok/s ({} of {} ok), {:.1} ms a reading, RMS {:.3} % vs truth, {:.3} % from noise, CRB {:.4} %, ratio {:.2}",
+        seg * 1e3,
+        s.ok_per_s,
+        x.ok,
+        x.n,
+        x.time_ms,
+        x.rms_pct(),
+        x.noise_rms_pct(),
+        s.crb_pct,
+        s.ratio()
+    );
+    assert!(s.ok_per_s >= 20.0, "{} ok/s", s.ok_per_s);
+    assert!(x.ok >= 300, "{} ok readings", x.ok);
+    assert!(x.rms_pct() <= 1.0, "RMS {} %", x.rms_pct());
+    assert!(s.crb_pct.is_finite() && s.crb_pct > 0.0, "{}", s.crb_pct);
+    assert!(s.ratio().is_finite() && s.ratio() >= 1.0, "{}", s.ratio());
+    assert!(s.ratio() <= 8.0, "{}", s.ratio());
+}
