@@ -233,10 +233,10 @@ impl Must {
             }
             Must::NoOk { from_s, to_s } => format!("no `ok` in {from_s}–{to_s} s"),
             Must::Settle {
-                at_s,
+                at_s: 0.0,
                 within_s,
                 tol,
-            } if at_s == 0.0 => format!(
+            } => format!(
                 "every reading ok within {} % of the truth from {within_s} s until the first event",
                 100.0 * tol
             ),
