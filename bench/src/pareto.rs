@@ -328,6 +328,9 @@ pub struct StreamCell {
     pub ok_per_s: f64,
     /// The steady-state Cramér–Rao bound ([`steady_crb_pct`]) for one reading's probe time, %.
     pub crb_pct: f64,
+    /// Ok readings compared with the quiet stream's reading of the same `seq` (the others with
+    /// its mean).
+    pub matched: usize,
 }
 
 impl StreamCell {
@@ -392,7 +395,7 @@ pub fn evaluate_stream(
         .then(|| quiet_ok.iter().map(|q| q.2).sum::<f64>() / quiet_ok.len() as f64);
     let scene = StreamScene::on(target, noise);
     let mut cell = Cell::default();
-    let (mut t_ms, mut ok, mut span) = (0.0, 0.0, 0.0);
+    let (mut t_ms, mut ok, mut span, mut matched) = (0.0, 0.0, 0.0, 0);
     for k in 0..seeds {
         let s = run(
             &scene,
@@ -410,11 +413,12 @@ pub fn evaluate_stream(
         for r in s.readings.iter().filter(after) {
             cell.n += 1;
             t_ms += r.reading.probe_time.0 as f64 * 1e3;
-            let q = quiet_ok
+            let same = quiet_ok
                 .iter()
                 .find(|q| q.0 == r.seq && (q.1 - r.t_s.0 as f64).abs() < 1e-3)
-                .map(|q| q.2)
-                .or(quiet_mean);
+                .map(|q| q.2);
+            matched += (same.is_some() && r.reading.status.is_ok()) as usize;
+            let q = same.or(quiet_mean);
             cell.add(&r.reading, e, q);
         }
     }
@@ -433,6 +437,7 @@ pub fn evaluate_stream(
         cell,
         ok_per_s: ok / span.max(1e-9),
         crb_pct,
+        matched,
     })
 }
 

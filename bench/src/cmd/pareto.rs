@@ -805,7 +805,8 @@ fn stream_summary(streams: &[StreamRow], seeds: usize) -> String {
          readings are hold's motional resonance). One reading per segment: the probe time per \
          reading is a segment (the previous reading's end to its own), and readings/s counts the \
          ok ones. Error from noise: against the same stream in the quiet scene, reading for \
-         reading (same `seq`). CRB: the **steady-state** bound (`pareto::steady_crb_pct`) for \
+         reading (the same `seq` ending within 1 ms: the column \"matched\"; the others, whose \
+         segments have drifted apart, against the quiet stream's mean). CRB: the **steady-state** bound (`pareto::steady_crb_pct`) for \
          one reading's probe time — the drive never stops, so a segment starts on a resonator \
          already in steady state near its resonance, not from rest (the switch-on build-up of \
          the single-reading bound does not apply); on the resonance, `f0` and `g` unknown, `Q` \
@@ -826,11 +827,11 @@ fn stream_summary(streams: &[StreamRow], seeds: usize) -> String {
         let _ = writeln!(s, "\n#### {label}, {} noise\n", noise_label(noise));
         let _ = writeln!(
             s,
-            "| segment (ms) | probe time per reading (ms) | ok readings/s | ok | bias (%) | RMS error vs truth (%) | RMS error from noise (%) | sd (%) | reported repeatability σ (%) | CRB, steady state (%) | error from noise / CRB |"
+            "| segment (ms) | probe time per reading (ms) | ok readings/s | ok | matched | bias (%) | RMS error vs truth (%) | RMS error from noise (%) | sd (%) | reported repeatability σ (%) | CRB, steady state (%) | error from noise / CRB |"
         );
         let _ = writeln!(
             s,
-            "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+            "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
         );
         for r in streams
             .iter()
@@ -839,12 +840,13 @@ fn stream_summary(streams: &[StreamRow], seeds: usize) -> String {
             let (c, x) = (&r.cell, &r.cell.cell);
             let _ = writeln!(
                 s,
-                "| {:.0} | {:.1} | {:.1} | {}/{} | {:+.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.4} | {:.1} |",
+                "| {:.0} | {:.1} | {:.1} | {}/{} | {} | {:+.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.4} | {:.1} |",
                 c.segment_s * 1e3,
                 x.time_ms,
                 c.ok_per_s,
                 x.ok,
                 x.n,
+                c.matched,
                 x.bias_pct(),
                 x.rms_pct(),
                 x.noise_rms_pct(),
