@@ -310,9 +310,7 @@ pub const STREAM_SEGMENTS_S: [f64; 5] = [0.035, 0.045, 0.06, 0.09, 0.15];
 /// Probe time of each of the tracker's streams, s.
 pub const STREAM_SECONDS: f64 = 3.0;
 
-/// The tracker's figures count the readings that end after this probe time, s (the issue's
-/// "after the first 0.5 s": acquisition and the first segments left out).
-pub const STREAM_SETTLE_S: f64 = 0.5;
+pub use crate::stream::SETTLE_S as STREAM_SETTLE_S;
 
 /// The continuous tracker (`pzt_probe::stream`) at one segment length on one scene, streamed as
 /// `probe-bench stream` streams ([`crate::stream::run`]).

@@ -222,7 +222,7 @@ pub enum Must {
 
 /// The stream's figures count the readings that end after this probe time, s; before it (the
 /// acquisition) any failure code is a correct one.
-pub const STREAM_SETTLE_S: f64 = 0.5;
+pub use crate::stream::SETTLE_S as STREAM_SETTLE_S;
 
 impl Must {
     /// What it asks, for people.

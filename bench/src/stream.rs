@@ -172,6 +172,21 @@ impl StreamScene {
     }
 }
 
+/// A stream's figures count the readings that end after this probe time, s: the issue's "after
+/// the first 0.5 s" (the acquisition and the first segments left out).
+pub const SETTLE_S: f64 = 0.5;
+
+/// Probe time a stream may run for, s: (0, this].
+pub const MAX_SECONDS: f64 = 600.0;
+
+/// `seconds` as a stream's length: in (0, [`MAX_SECONDS`]].
+pub fn check_seconds(seconds: f64) -> Result<()> {
+    if !(seconds > 0.0 && seconds <= MAX_SECONDS) {
+        bail!("--seconds must be in (0, {MAX_SECONDS}]");
+    }
+    Ok(())
+}
+
 /// Time the press takes to change when `--press-ramp-s` is not given, s.
 pub const DEFAULT_PRESS_RAMP_S: f64 = 0.03;
 
@@ -238,9 +253,7 @@ pub fn run(
     seconds: f64,
     mut each: impl FnMut(&StreamReading),
 ) -> Result<Streamed> {
-    if !(seconds > 0.0 && seconds <= 600.0) {
-        bail!("--seconds must be in (0, 600]");
-    }
+    check_seconds(seconds)?;
     let (sim, truth) = scene.build()?;
     let mut readings = Vec::new();
     simboard::stream(&sim, seed, config, unit, seconds, |r| {

@@ -117,9 +117,7 @@ pub fn run(a: StreamArgs) -> Result<()> {
     };
     // The events and the seconds are checked before anything is printed or run.
     let (scene, truth) = stream_scene.build()?;
-    if !(a.seconds > 0.0 && a.seconds <= 600.0) {
-        bail!("--seconds must be in (0, 600]");
-    }
+    stream::check_seconds(a.seconds)?;
     let config = TrackerConfig {
         segment: Seconds(a.segment_s as f32),
         dither: a.dither as f32,
@@ -180,7 +178,7 @@ pub fn run(a: StreamArgs) -> Result<()> {
     if let Some(e) = write_err {
         return Err(e.into());
     }
-    let s = summarize(&readings, &truth, 0.5);
+    let s = summarize(&readings, &truth, stream::SETTLE_S);
     if !a.json {
         eprintln!();
         println!(
@@ -190,7 +188,8 @@ pub fn run(a: StreamArgs) -> Result<()> {
             s.dropped
         );
         println!(
-            "  after 0.5 s: {:.1} ok readings/s; {} of {} with a truth ok, RMS error {}",
+            "  after {} s: {:.1} ok readings/s; {} of {} with a truth ok, RMS error {}",
+            stream::SETTLE_S,
             s.ok_per_s,
             s.ok_with_truth,
             s.with_truth,
