@@ -1,6 +1,7 @@
 //! The stability study: every method through every scene of `hal_sim::catalogue`, each reading
 //! classified as a correct reading, a correct failure code, a wrong failure code, or a silent
-//! wrong number.
+//! wrong number; and the continuous mode's scenes ([`stream_catalogue`]), each stream's
+//! readings classed the same way and the stream checked against what it must do ([`Must`]).
 
 use crate::scene::Target;
 use crate::stream::{settled_after, summarize, StreamScene, Streamed};
