@@ -15,4 +15,5 @@ pub mod qemu;
 pub mod report;
 pub mod scene;
 pub mod stability;
+pub mod stream;
 pub mod unit;

@@ -254,39 +254,189 @@ pub fn evaluate(
             continue;
         };
         t += r.probe_time.0 as f64 * 1e3;
-        if let (true, Some(m), Some(s), Some(rep)) = (
+        cell.add(&r, e, quiet);
+    }
+    cell.time_ms = t / seeds.max(1) as f64;
+    cell.finish(quiet.is_some());
+    cell
+}
+
+impl Cell {
+    /// Count reading `r` of true modulus `e` (kPa) whose noise-free counterpart read `quiet`
+    /// (kPa; None: it did not read): its error, its stated σ, its deviation from `quiet`.
+    pub fn add(&mut self, r: &pzt_probe::Reading, e: f64, quiet: Option<f64>) {
+        let (true, Some(m), Some(s), Some(rep)) = (
             r.status.is_ok(),
             r.modulus,
             r.modulus_sigma,
             r.modulus_sigma_repeat,
-        ) {
-            let err = (m.0 as f64 - e) / e;
-            if let Some(q) = quiet {
-                let dev = (m.0 as f64 - q) / e;
-                cell.sum_dev2 += dev * dev;
-            }
-            cell.ok += 1;
-            cell.sum_err += err;
-            cell.sum_err2 += err * err;
-            let sr = s.0 as f64 / e;
-            cell.sum_sig2 += sr * sr;
-            let rr = rep.0 as f64 / e;
-            cell.sum_rep2 += rr * rr;
-            cell.within5 += (err.abs() <= 0.05) as usize;
-            cell.within10 += (err.abs() <= 0.10) as usize;
-            cell.within3sigma += (err.abs() <= 3.0 * sr) as usize;
+        ) else {
+            return;
+        };
+        let err = (m.0 as f64 - e) / e;
+        if let Some(q) = quiet {
+            let dev = (m.0 as f64 - q) / e;
+            self.sum_dev2 += dev * dev;
+        }
+        self.ok += 1;
+        self.sum_err += err;
+        self.sum_err2 += err * err;
+        let sr = s.0 as f64 / e;
+        self.sum_sig2 += sr * sr;
+        let rr = rep.0 as f64 / e;
+        self.sum_rep2 += rr * rr;
+        self.within5 += (err.abs() <= 0.05) as usize;
+        self.within10 += (err.abs() <= 0.10) as usize;
+        self.within3sigma += (err.abs() <= 3.0 * sr) as usize;
+    }
+
+    /// After the last [`Cell::add`]: without noise-free readings to compare with (`had_quiet`
+    /// false; a method may refuse perfectly clean data, e.g. a decay check whose χ² has no noise
+    /// to divide by) the deviation from the readings' own mean, i.e. the scatter, stands in —
+    /// never the error against the truth.
+    pub fn finish(&mut self, had_quiet: bool) {
+        if !had_quiet && self.ok > 1 {
+            let k = self.ok as f64;
+            let mean = self.sum_err / k;
+            self.sum_dev2 = (self.sum_err2 - k * mean * mean).max(0.0);
         }
     }
-    cell.time_ms = t / seeds.max(1) as f64;
-    if quiet.is_none() && cell.ok > 1 {
-        // No noise-free reading to compare with (a method may refuse perfectly clean data,
-        // e.g. a decay check whose χ² has no noise to divide by): the deviation from the
-        // readings' own mean, i.e. the scatter, stands in — never the error against the truth.
-        let k = cell.ok as f64;
-        let mean = cell.sum_err / k;
-        cell.sum_dev2 = (cell.sum_err2 - k * mean * mean).max(0.0);
+}
+
+/// Segment lengths of the continuous tracker's curve, s: the default (35 ms, four windows of two
+/// cycles — shorter settings get the same segment) and longer ones.
+pub const STREAM_SEGMENTS_S: [f64; 5] = [0.035, 0.045, 0.06, 0.09, 0.15];
+
+/// Probe time of each of the tracker's streams, s.
+pub const STREAM_SECONDS: f64 = 3.0;
+
+pub use crate::stream::SETTLE_S as STREAM_SETTLE_S;
+
+/// The continuous tracker (`pzt_probe::stream`) at one segment length on one scene, streamed as
+/// `probe-bench stream` streams ([`crate::stream::run`]).
+#[derive(Clone, Debug, Default)]
+pub struct StreamCell {
+    /// Length of a tracking segment (one reading each), s.
+    pub segment_s: f64,
+    /// The readings after [`STREAM_SETTLE_S`] as a single-reading cell: `n` readings, `ok` of
+    /// them ok, `time_ms` the mean probe time of one (a segment from the previous reading's end
+    /// to its own), errors against the truth and against the same stream in the quiet scene.
+    pub cell: Cell,
+    /// Ok readings per second of probe time after [`STREAM_SETTLE_S`], over all streams.
+    pub ok_per_s: f64,
+    /// The steady-state Cramér–Rao bound ([`steady_crb_pct`]) for one reading's probe time, %.
+    pub crb_pct: f64,
+    /// Ok readings compared with the quiet stream's reading of the same `seq` (the others with
+    /// its mean).
+    pub matched: usize,
+}
+
+impl StreamCell {
+    /// Probe time per ok reading, ms (1000 / ok readings per second).
+    pub fn ms_per_ok(&self) -> f64 {
+        1e3 / self.ok_per_s.max(1e-9)
     }
-    cell
+
+    /// RMS error caused by noise over the bound (how far the tracker sits above it).
+    pub fn ratio(&self) -> f64 {
+        self.cell.noise_rms_pct() / self.crb_pct
+    }
+}
+
+/// The unit the tracker reads with under `noise`: calibrated with the stream's method at its
+/// default settings on A–E × 20 (noise seeds from 1000) — at bench noise the unit
+/// `probe-bench stream` reads with (`crate::unit::default_for`).
+pub fn stream_unit(noise: NoiseScene) -> Option<UnitProfile> {
+    let m = pzt_probe::stream::METHOD;
+    crate::unit::simulated(m, &m.default_settings(), noise, 20, 1000).ok()
+}
+
+/// Stream `target` under `noise` with the default tracker but segments of `segment_s` seconds,
+/// `seeds` streams of [`STREAM_SECONDS`] (noise seeds from `seed0`) with the unit `unit`, and
+/// once in the quiet scene: each reading after [`STREAM_SETTLE_S`] counted against the truth
+/// and against the quiet stream's reading of the same `seq` (ending within a millisecond of
+/// it; else the quiet stream's mean). None when the stream fails to run or the target has no
+/// modulus.
+pub fn evaluate_stream(
+    target: crate::scene::Target,
+    noise: NoiseScene,
+    segment_s: f64,
+    unit: &UnitProfile,
+    seeds: usize,
+    seed0: u64,
+) -> Option<StreamCell> {
+    use crate::stream::{run, summarize, StreamScene};
+    use pzt_probe::stream::TrackerConfig;
+    let e = target.modulus_kpa()?;
+    let config = TrackerConfig {
+        segment: Seconds(segment_s as f32),
+        ..TrackerConfig::DEFAULT
+    };
+    let after = |r: &&pzt_probe::stream::StreamReading| r.t_s.0 as f64 > STREAM_SETTLE_S;
+    let quiet = run(
+        &StreamScene::on(target, NoiseScene::Quiet),
+        &config,
+        unit,
+        seed0,
+        STREAM_SECONDS,
+        |_| {},
+    )
+    .ok()?
+    .readings;
+    let quiet_ok: Vec<(u32, f64, f64)> = quiet
+        .iter()
+        .filter(after)
+        .filter(|r| r.reading.status.is_ok())
+        .filter_map(|r| Some((r.seq, r.t_s.0 as f64, r.reading.modulus?.0 as f64)))
+        .collect();
+    let quiet_mean = (!quiet_ok.is_empty())
+        .then(|| quiet_ok.iter().map(|q| q.2).sum::<f64>() / quiet_ok.len() as f64);
+    let scene = StreamScene::on(target, noise);
+    let mut cell = Cell::default();
+    let (mut t_ms, mut ok, mut span, mut matched) = (0.0, 0.0, 0.0, 0);
+    for k in 0..seeds {
+        let s = run(
+            &scene,
+            &config,
+            unit,
+            seed0 + k as u64,
+            STREAM_SECONDS,
+            |_| {},
+        )
+        .ok()?;
+        let sum = summarize(&s.readings, &s.truth, STREAM_SETTLE_S);
+        let end = s.readings.last().map_or(0.0, |r| r.t_s.0 as f64);
+        ok += sum.ok_per_s * (end - STREAM_SETTLE_S);
+        span += end - STREAM_SETTLE_S;
+        for r in s.readings.iter().filter(after) {
+            cell.n += 1;
+            t_ms += r.reading.probe_time.0 as f64 * 1e3;
+            let same = quiet_ok
+                .iter()
+                .find(|q| q.0 == r.seq && (q.1 - r.t_s.0 as f64).abs() < 1e-3)
+                .map(|q| q.2);
+            matched += (same.is_some() && r.reading.status.is_ok()) as usize;
+            let q = same.or(quiet_mean);
+            cell.add(&r.reading, e, q);
+        }
+    }
+    cell.time_ms = t_ms / cell.n.max(1) as f64;
+    cell.finish(quiet_mean.is_some());
+    let (sim, _) = scene.build().ok()?;
+    let crb_pct = steady_crb_pct(
+        &unit.calibration,
+        &sim,
+        e,
+        config.drive.0 as f64,
+        cell.time_ms * 1e-3,
+    );
+    Some(StreamCell {
+        segment_s,
+        cell,
+        ok_per_s: ok / span.max(1e-9),
+        crb_pct,
+        matched,
+    })
 }
 
 /// The Cramér–Rao bound on the resonance frequency (Hz) of the scene's resonator driven at its
@@ -315,6 +465,23 @@ pub fn crb_hz(scene: &Scene, drive_v: f64, t_s: f64) -> f64 {
     let (c, n0, tau) = carrier_noise_tau(scene, drive_v);
     let t_eff = tau * build_up(t_s / tau);
     1.0 / (2.0 * PI * tau * (2.0 * (c / n0) * t_eff.max(1e-30)).sqrt())
+}
+
+/// The Cramér–Rao bound on the resonance frequency (Hz) of the scene's resonator observed for
+/// `t_s` seconds while it is driven at its resonance **in steady state** (driven long before the
+/// observation starts, as the continuous tracker's segments are: the drive never stops, a
+/// segment begins where the previous one left the resonator), `f0` and `g` unknown, `Q` known to
+/// the tracker's prior, the static branch known: `σ_f = 1 / (2π τ sqrt(2 (C/N0) T))` —
+/// [`crb_hz`] without the switch-on's build-up (`T_eff = T`). In steady state on the resonance
+/// the current carries almost no information on `Q` (`∂Y/∂Q = 0` at `f_h = f0`): without a prior
+/// the little that is left correlates with `f0` over a short window and the numerical bound
+/// with `Q` free is 11.5 % higher at 2.5 τ; the tracker fits with a prior on `Q` (±50 %, a
+/// thousand times the data's information) and so does this bound. [`fisher_crb_hz_after`]
+/// with a long warm-up and that prior computes it numerically (test
+/// `the_steady_state_bound_matches_the_numerical_fisher_information`).
+pub fn steady_crb_hz(scene: &Scene, drive_v: f64, t_s: f64) -> f64 {
+    let (c, n0, tau) = carrier_noise_tau(scene, drive_v);
+    1.0 / (2.0 * PI * tau * (2.0 * (c / n0) * t_s.max(1e-30)).sqrt())
 }
 
 /// `T_eff / τ` of [`crb_hz`] at `x = T/τ`.
@@ -347,13 +514,36 @@ fn carrier_noise_tau(scene: &Scene, drive_v: f64) -> (f64, f64, f64) {
 /// closed form. The samples themselves are observed here; the firmware's whole-cycle windows of
 /// a sine fit lose essentially nothing of an envelope that changes little within a window.
 pub fn fisher_crb_hz(scene: &Scene, drive_v: f64, t_s: f64, detune_hz: f64) -> f64 {
-    fisher_crb_schedule_hz(scene, drive_v, &[(t_s, detune_hz)])
+    fisher_crb_schedule_hz(scene, drive_v, &[(t_s, detune_hz)], 0.0, f64::INFINITY)
 }
 
-/// [`fisher_crb_hz`] for a drive that moves phase-continuously through `schedule`: (duration
-/// s, detune from `f0` Hz) in turn, every sample observed — the bound of a reading that holds
-/// first at a seed and then on the resonance.
-pub fn fisher_crb_schedule_hz(scene: &Scene, drive_v: f64, schedule: &[(f64, f64)]) -> f64 {
+/// [`fisher_crb_hz`] with the resonator driven from rest for `warmup_s` seconds before the
+/// `t_s` seconds observed (a long warm-up: the steady-state bound, [`steady_crb_hz`]) and a
+/// prior on `Q` of relative standard uncertainty `q_prior_rel` (infinite: none).
+pub fn fisher_crb_hz_after(
+    scene: &Scene,
+    drive_v: f64,
+    warmup_s: f64,
+    t_s: f64,
+    detune_hz: f64,
+    q_prior_rel: f64,
+) -> f64 {
+    let schedule = [(warmup_s + t_s, detune_hz)];
+    fisher_crb_schedule_hz(scene, drive_v, &schedule, warmup_s, q_prior_rel)
+}
+
+/// The numerical bound of [`fisher_crb_hz`] for a drive that moves phase-continuously through
+/// `schedule` — (duration s, detune from `f0` Hz) in turn, from rest — observed from
+/// `observe_from_s` on, with a prior on `Q` of relative standard uncertainty `q_prior_rel`
+/// (infinite: none): the bound of a reading that holds first at a seed and then on the
+/// resonance, or of a stream's segment long after the drive came on.
+pub fn fisher_crb_schedule_hz(
+    scene: &Scene,
+    drive_v: f64,
+    schedule: &[(f64, f64)],
+    observe_from_s: f64,
+    q_prior_rel: f64,
+) -> f64 {
     let k = scene.kelvin();
     let (f0, q, g) = (
         k.natural_frequency_hz(),
@@ -364,6 +554,7 @@ pub fn fisher_crb_schedule_hz(scene: &Scene, drive_v: f64, schedule: &[(f64, f64
     let fs = scene.front_end.sample_rate_hz;
     let t_s: f64 = schedule.iter().map(|s| s.0).sum();
     let n = (t_s * fs).round() as usize;
+    let skip = (observe_from_s * fs).round() as usize;
     // The drive's frequency at time t, and its phase (continuous across the switches).
     let f_at = |t: f64| {
         let mut end = 0.0;
@@ -398,7 +589,7 @@ pub fn fisher_crb_schedule_hz(scene: &Scene, drive_v: f64, schedule: &[(f64, f64
             ]
         };
         let mut x = [0.0f64; 2];
-        let mut out = Vec::with_capacity(n);
+        let mut out = Vec::with_capacity(n.saturating_sub(skip));
         for i in 0..n {
             for j in 0..sub {
                 let k = 2 * (i * sub + j);
@@ -409,7 +600,9 @@ pub fn fisher_crb_schedule_hz(scene: &Scene, drive_v: f64, schedule: &[(f64, f64
                 x[0] += h / 6.0 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]);
                 x[1] += h / 6.0 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]);
             }
-            out.push(x[1]);
+            if i >= skip {
+                out.push(x[1]);
+            }
         }
         out
     };
@@ -440,6 +633,8 @@ pub fn fisher_crb_schedule_hz(scene: &Scene, drive_v: f64, schedule: &[(f64, f64
         }
     }
     // f0 element of the inverse: 1 / (F00 − F0r Frr⁻¹ Fr0) over the nuisance block r = (Q, g).
+    // A prior on Q: its information adds to the Q element.
+    fi[1][1] += 1.0 / (q_prior_rel * q).powi(2);
     let det = fi[1][1] * fi[2][2] - fi[1][2] * fi[2][1];
     let inv = [
         [fi[2][2] / det, -fi[1][2] / det],
@@ -458,7 +653,23 @@ pub fn fisher_crb_schedule_hz(scene: &Scene, drive_v: f64, schedule: &[(f64, f64
 /// ([`force_floor_hz`]).
 pub fn crb_pct(cal: &PowerLaw, e: f64, noise: NoiseScene, drive_v: f64, t_s: f64) -> f64 {
     let scene = Scene::on_modulus_kpa(e).with_noise(noise);
-    let f = crb_hz(&scene, drive_v, t_s).hypot(force_floor_hz(&scene, t_s));
+    bound_pct(cal, &scene, e, crb_hz(&scene, drive_v, t_s), t_s)
+}
+
+/// The steady-state bound of [`steady_crb_hz`] for `t_s` seconds on `scene` (true modulus `e`,
+/// kPa) as a relative modulus error (%) through `cal`'s slope, with the load cell's limit for
+/// the force a stream reading inverts at (averaged over at least
+/// `pzt_probe::stream::FORCE_WINDOW_S`) added in quadrature.
+pub fn steady_crb_pct(cal: &PowerLaw, scene: &Scene, e: f64, drive_v: f64, t_s: f64) -> f64 {
+    let force_s = t_s.max(pzt_probe::stream::FORCE_WINDOW_S);
+    bound_pct(cal, scene, e, steady_crb_hz(scene, drive_v, t_s), force_s)
+}
+
+/// A resonance bound `f_hz` (Hz) on `scene` as a relative modulus error (%) at true modulus
+/// `e` (kPa), the load cell's floor for a force averaged over `force_s` seconds added in
+/// quadrature.
+fn bound_pct(cal: &PowerLaw, scene: &Scene, e: f64, f_hz: f64, force_s: f64) -> f64 {
+    let f = f_hz.hypot(force_floor_hz(scene, force_s));
     100.0 * f / cal.slope(e) / e
 }
 
@@ -478,7 +689,11 @@ pub fn force_floor_hz(scene: &Scene, t_s: f64) -> f64 {
 
 /// Time constant τ = Q/(π f0) of the scene at modulus `e`, ms.
 pub fn tau_ms(e: f64) -> f64 {
-    let s = Scene::on_modulus_kpa(e);
+    scene_tau_ms(&Scene::on_modulus_kpa(e))
+}
+
+/// Time constant τ = Q/(π f0) of `scene`, ms.
+pub fn scene_tau_ms(s: &Scene) -> f64 {
     1e3 * s.q() / (PI * s.resonance_hz())
 }
 
@@ -511,6 +726,28 @@ mod tests {
         }
     }
 
+    /// The steady-state bound (the tracker's: the drive never stops) against the numerical
+    /// Fisher information of the resonator driven from rest for 15 τ before the observation, with
+    /// the tracker's prior on `Q`, at 2.5 τ (the default 35 ms segment) and 10 τ; and below the from-rest bound by the
+    /// switch-on's build-up (`T` against `T − 2.75 τ`).
+    #[test]
+    fn the_steady_state_bound_matches_the_numerical_fisher_information() {
+        let scene = Scene::on_modulus_kpa(500.0).with_noise(NoiseScene::Bench);
+        let tau = 1e-3 * tau_ms(500.0);
+        for x in [2.5, 10.0] {
+            let closed = steady_crb_hz(&scene, 5.0, x * tau);
+            let q_prior = pzt_probe::stream::TrackerConfig::DEFAULT.q_prior as f64;
+            let numeric = fisher_crb_hz_after(&scene, 5.0, 15.0 * tau, x * tau, 0.0, q_prior);
+            let from_rest = crb_hz(&scene, 5.0, x * tau);
+            println!(
+                "{x} tau: steady closed {closed:.3e} Hz, numeric {numeric:.3e} Hz, from rest {from_rest:.3e} Hz"
+            );
+            assert!((closed / numeric - 1.0).abs() < 0.02, "{x} tau");
+            let expect = (x / build_up(x)).sqrt();
+            assert!((from_rest / closed / expect - 1.0).abs() < 1e-9, "{x} tau");
+        }
+    }
+
     /// On resonance is where the bound is lowest: with `Q` and `g` unknown, a tenth of a
     /// half-width off raises it by 10–20 % at 10 τ (docs/methods.md, hold).
     /// The schedule's bound: two pieces on resonance are one hold (the drive's phase is
@@ -523,9 +760,21 @@ mod tests {
         let half_width = scene.resonance_hz() / (2.0 * scene.q());
         let t = 0.125;
         let on = fisher_crb_hz(&scene, 5.0, t, 0.0);
-        let split = fisher_crb_schedule_hz(&scene, 5.0, &[(0.03, 0.0), (t - 0.03, 0.0)]);
+        let split = fisher_crb_schedule_hz(
+            &scene,
+            5.0,
+            &[(0.03, 0.0), (t - 0.03, 0.0)],
+            0.0,
+            f64::INFINITY,
+        );
         assert!((split / on - 1.0).abs() < 1e-6, "{split} vs {on}");
-        let seeded = fisher_crb_schedule_hz(&scene, 5.0, &[(0.03, -half_width), (t - 0.03, 0.0)]);
+        let seeded = fisher_crb_schedule_hz(
+            &scene,
+            5.0,
+            &[(0.03, -half_width), (t - 0.03, 0.0)],
+            0.0,
+            f64::INFINITY,
+        );
         println!("30 ms a half-width off: {:.3}x", seeded / on);
         assert!((1.15..1.27).contains(&(seeded / on)), "{}", seeded / on);
     }

@@ -1,14 +1,19 @@
-//! `probe-bench stream` as a user runs it (issue 14's "done when"): phantom C streams at least
-//! 20 ok readings per second after the first 0.5 s within 1 % RMS of its modulus, numbered
-//! without gaps; after a step from B to D every reading from 0.25 s on is within 3 % of D;
-//! after a lift-off no ok reading later than 0.1 s; on a new contact the stream finds the
-//! tissue again without a command. Probe time is the simulator's (deterministic); the
-//! tolerances are the issue's, the measured worst cases over the seeds are in
-//! docs/methods.md.
+//! `probe-bench stream` as a user runs it (issue 14's "done when") and the continuous-mode scenes
+//! of the stability map (`probe_bench::stability::stream_catalogue`, the definitions the map
+//! uses): phantom C streams at least 20 ok readings per second after the first 0.5 s within 1 %
+//! RMS of its modulus, numbered without gaps; after a step from B to D every reading from
+//! 0.25 s on is within 3 % of D; after a lift-off no ok reading later than 0.1 s; on a new
+//! contact the stream finds the tissue again without a command; the tip slipping off an edge, a
+//! creeping press and knocks as docs/stability.md states. Probe time is the simulator's
+//! (deterministic); the tolerances are the issue's, the measured figures in docs/stability.md.
 
 mod common;
 
 use common::{bin, run_fails_one_line, run_ok};
+use hal_sim::NoiseScene;
+use probe_bench::stability::{calibrated, stream_catalogue, Must, Outcome, StreamCase, FIRST_SEED};
+use probe_bench::unit::default_for;
+use pzt_probe::stream::METHOD;
 use serde_json::Value;
 
 fn stream(args: &[&str]) -> Vec<Value> {
@@ -50,106 +55,141 @@ fn modulus(r: &Value) -> f64 {
     r["modulus_kpa"].as_f64().unwrap()
 }
 
+/// The command line streams each catalogue scene as the library does: `probe-bench stream` with
+/// the scene's own options (`StreamCase::args`) gives the same readings — seq, time, status,
+/// modulus — as `StreamCase::run` with the command's unit, numbered without gaps; on phantom C
+/// every reading after the first 0.5 s is locked.
 #[test]
-fn phantom_c_streams_20_readings_per_second_within_1_percent() {
-    for seed in ["0", "1", "2"] {
-        let v = stream(&["--phantom", "C", "--seconds", "3", "--seed", seed]);
-        let end = t(v.last().unwrap());
-        assert!(end >= 3.0, "{end}");
-        let after: Vec<&Value> = v.iter().filter(|r| t(r) > 0.5).collect();
-        let good: Vec<f64> = after.iter().filter(|r| ok(r)).map(|r| modulus(r)).collect();
-        let rate = good.len() as f64 / (end - 0.5);
-        let rms = (good.iter().map(|e| (e / 414.0 - 1.0).powi(2)).sum::<f64>() / good.len() as f64)
-            .sqrt();
-        eprintln!(
-            "seed {seed}: {rate:.1} ok readings/s, RMS {:.3} %",
-            100.0 * rms
-        );
-        assert!(rate >= 20.0, "seed {seed}: {rate} ok readings/s");
-        assert!(rms <= 0.01, "seed {seed}: RMS {rms}");
-        assert!(after.iter().all(|r| r["locked"] == true), "seed {seed}");
+fn the_command_streams_the_catalogue_scenes_as_the_library_does() {
+    let unit = default_for(METHOD).unwrap();
+    for case in stream_catalogue(NoiseScene::Bench) {
+        let seed = 1u64;
+        let mut args = case.args();
+        args.extend(["--seed".to_owned(), seed.to_string()]);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let cli = stream(&args);
+        let lib = case.run(&unit, seed).unwrap().readings;
+        assert_eq!(cli.len(), lib.len(), "{}", case.name);
+        for (c, l) in cli.iter().zip(&lib) {
+            assert_eq!(c["seq"].as_u64(), Some(l.seq as u64), "{}", case.name);
+            assert!((t(c) - l.t_s.0 as f64).abs() < 1e-6, "{}: {c}", case.name);
+            assert_eq!(c["status"], l.reading.status.code(), "{}: {c}", case.name);
+            assert_eq!(
+                c["modulus_kpa"].as_f64().map(|x| x as f32),
+                l.reading.modulus.map(|m| m.0),
+                "{}: {c}",
+                case.name
+            );
+        }
+        if case.name == "steady" {
+            assert!(t(cli.last().unwrap()) >= 3.0);
+            assert!(cli
+                .iter()
+                .filter(|r| t(r) > 0.5)
+                .all(|r| r["locked"] == true));
+        }
     }
 }
 
+/// Every continuous scene does what it must (`stability::Must`) in every stream, and no reading
+/// is a silent wrong number: seeds 0–2 with the command's unit, and the stability map's seeds
+/// with the map's unit (hold's column) — where the knocks scene is the exception the map shows:
+/// seed 5002 gives one ok reading 10 % (3.8 σ) off after a knock at 0.55 s (the segment's fit
+/// has too few windows to see it), so there at most one silent wrong number and one stream
+/// short of the scene's figures are allowed.
 #[test]
-fn a_step_from_b_to_d_is_followed_within_a_quarter_second() {
-    for seed in ["0", "1", "2"] {
-        let v = stream(&[
-            "--phantom",
-            "B",
-            "--step-to",
-            "D",
-            "--step-at-s",
-            "1.5",
-            "--seconds",
-            "3",
-            "--seed",
-            seed,
-        ]);
-        for r in &v {
-            let (time, e) = (t(r), r["modulus_kpa"].as_f64());
-            if time < 1.5 && time > 0.5 {
-                assert!(ok(r) && (e.unwrap() / 279.0 - 1.0).abs() <= 0.03, "{r}");
-            }
-            if time >= 1.75 {
-                assert!(ok(r), "seed {seed}: {r}");
-                assert!(
-                    (e.unwrap() / 1146.0 - 1.0).abs() <= 0.03,
-                    "seed {seed}: {r}"
+fn the_continuous_scenes_do_what_they_must() {
+    let command_unit = default_for(METHOD).unwrap();
+    let map_unit = calibrated(METHOD, 10).unwrap().profile;
+    let cases = stream_catalogue(NoiseScene::Bench);
+    assert_eq!(cases.len(), 8);
+    for (unit, seeds, knocks_exception) in [
+        (&command_unit, 0..3, false),
+        (&map_unit, FIRST_SEED..FIRST_SEED + 5, true),
+    ] {
+        for case in &cases {
+            let (mut silent, mut missed) = (0, 0);
+            for seed in seeds.clone() {
+                let s = case.run(unit, seed).unwrap();
+                let v = case.judge(&s);
+                eprintln!("{} seed {seed}: {v:?}", case.name);
+                silent += v.counts[Outcome::SilentWrong as usize];
+                missed += (!v.met()) as usize;
+                assert_eq!(
+                    v.counts.iter().sum::<usize>(),
+                    s.readings.len(),
+                    "{}",
+                    case.name
                 );
             }
+            if knocks_exception && case.name == "knocks" {
+                assert!(
+                    silent <= 1 && missed <= 1,
+                    "{}: {silent}, {missed}",
+                    case.name
+                );
+            } else {
+                assert_eq!((silent, missed), (0, 0), "{}", case.name);
+            }
         }
-        assert!(v.iter().filter(|r| t(r) >= 1.75).count() >= 25);
     }
 }
 
+/// After a lift-off the free probe is told apart by the pipeline's contact check: no modulus, and
+/// all but two readings `no_contact` (the catalogue's `lift-off` scene, seeds 0–2).
 #[test]
-fn no_ok_reading_after_a_lift_off_and_the_next_contact_is_found() {
-    for seed in ["0", "1", "2"] {
-        let v = stream(&[
-            "--phantom",
-            "C",
-            "--lift-off-at-s",
-            "1.5",
-            "--seconds",
-            "2.5",
-            "--seed",
-            seed,
-        ]);
-        let after: Vec<&Value> = v.iter().filter(|r| t(r) > 1.6).collect();
+fn after_a_lift_off_the_stream_says_no_contact() {
+    let unit = default_for(METHOD).unwrap();
+    let case = stream_catalogue(NoiseScene::Bench)
+        .into_iter()
+        .find(|c| c.name == "lift-off")
+        .unwrap();
+    for seed in 0..3 {
+        let s = case.run(&unit, seed).unwrap();
+        let after: Vec<_> = s.readings.iter().filter(|r| r.t_s.0 > 1.6).collect();
         assert!(after.len() >= 15);
+        assert!(after.iter().all(|r| r.reading.modulus.is_none()), "{seed}");
+        let free = after
+            .iter()
+            .filter(|r| r.reading.status.code() == "no_contact")
+            .count();
         assert!(
-            after.iter().all(|r| !ok(r) && r["modulus_kpa"].is_null()),
-            "seed {seed}"
+            free + 2 >= after.len(),
+            "seed {seed}: {free} of {}",
+            after.len()
         );
-        // The free probe is told apart by the pipeline's contact check.
-        assert!(after.iter().filter(|r| r["status"] == "no_contact").count() >= after.len() - 2);
-        // Lifted off at 1.0 s, put down on the same tissue at 2.0 s: read again within 0.25 s.
-        let v = stream(&[
-            "--phantom",
-            "C",
-            "--lift-off-at-s",
-            "1.0",
-            "--touch-at-s",
-            "2.0",
-            "--seconds",
-            "3",
-            "--seed",
-            seed,
-        ]);
-        for r in &v {
-            let time = t(r);
-            if time > 1.1 && time < 2.0 {
-                assert!(!ok(r), "{r}");
-            }
-            if time >= 2.25 {
-                assert!(
-                    ok(r) && (modulus(r) / 414.0 - 1.0).abs() <= 0.03,
-                    "seed {seed}: {r}"
-                );
-            }
-        }
     }
+}
+
+/// A criterion that is not met is reported: the step scene judged against a tolerance of 0.1 %
+/// (the tracker's scatter is 0.2–0.5 %) never settles, and a lift-off scene whose stream is
+/// judged as if the probe stayed on the tissue has silent wrong numbers.
+#[test]
+fn the_judge_can_say_no() {
+    let unit = default_for(METHOD).unwrap();
+    let cases = stream_catalogue(NoiseScene::Bench);
+    let step = cases.iter().find(|c| c.name == "step-b-d").unwrap();
+    let strict = StreamCase {
+        must: vec![Must::Settle {
+            at_s: 1.5,
+            within_s: 0.25,
+            tol: 0.001,
+        }],
+        ..step.clone()
+    };
+    let s = strict.run(&unit, 0).unwrap();
+    let v = strict.judge(&s);
+    assert!(!v.met() && v.checks[0].1 > 0.25, "{v:?}");
+    let steady = cases.iter().find(|c| c.name == "steady").unwrap();
+    let lift = cases.iter().find(|c| c.name == "lift-off").unwrap();
+    // The steady scene's stream judged against the lift-off's truth: ok readings with no tissue.
+    let mut s = steady.run(&unit, 0).unwrap();
+    s.truth = lift.scene.build().unwrap().1;
+    let v = lift.judge(&s);
+    assert!(
+        !v.met() && v.counts[Outcome::SilentWrong as usize] >= 10,
+        "{v:?}"
+    );
 }
 
 #[test]
@@ -234,78 +274,39 @@ fn qemu_streams_the_same_json_and_follows_lift_off_and_new_contact() {
     ]));
 }
 
-/// The continuous-mode scenes of the stability catalogue (docs/methods.md): beside the step
-/// and the lift-off above, the tip slipping down an edge (the press falls from 30 to 9 mN in
-/// 30 ms: no ok reading from the slip on, `too_light` once it is over), a press that creeps
-/// from 30 to 45 mN over 0.5 s (`force_unstable` while it moves, every reading ok within 3 %
-/// at the new force after), and random knocks twice a second (no ok reading off by more than 3 %, RMS
-/// within 1 %, at least 20 ok readings per second still).
+/// Issue 14 point 6, from the library (`pareto::evaluate_stream`, the study's function): at the
+/// default segment length the tracker gives ≥ 20 ok readings per second after the first 0.5 s
+/// within 1 % RMS of phantom C, and its error from noise sits above the steady-state Cramér–Rao
+/// bound for one reading's probe time — finite, never below it (a bound cannot be beaten), and
+/// no more than 8× (measured 5.9× on these seeds, 39.4 ms a reading; the single-shot hold is
+/// within 2×).
 #[test]
-fn continuous_mode_scenes_slip_press_and_knocks() {
-    for seed in ["0", "1", "2"] {
-        let base = ["--phantom", "C", "--seconds", "2", "--seed", seed];
-        // Slip off the edge at 1.0 s.
-        let v = stream(&[&base[..], &["--press-to", "0.3", "--press-at-s", "1.0"]].concat());
-        assert!(v.iter().filter(|r| t(r) > 0.5 && t(r) < 1.0).all(ok));
-        assert!(
-            v.iter().filter(|r| t(r) > 1.0).all(|r| !ok(r)),
-            "seed {seed}"
-        );
-        assert!(v
-            .iter()
-            .filter(|r| t(r) > 1.2)
-            .all(|r| r["status"] == "too_light"));
-        // A press creeping from 30 to 45 mN from 1.0 s over 0.5 s.
-        let v = stream(
-            &[
-                &base[..],
-                &[
-                    "--press-to",
-                    "1.5",
-                    "--press-at-s",
-                    "1.0",
-                    "--press-ramp-s",
-                    "0.5",
-                ],
-            ]
-            .concat(),
-        );
-        for r in &v {
-            let time = t(r);
-            if (1.15..1.45).contains(&time) {
-                assert!(!ok(r), "seed {seed}: {r}");
-            }
-            if time > 1.6 {
-                assert!(
-                    ok(r) && (modulus(r) / 414.0 - 1.0).abs() <= 0.03,
-                    "seed {seed}: {r}"
-                );
-            }
-        }
-        // Knocks twice a second for 3 s.
-        let v = stream(&[
-            "--phantom",
-            "C",
-            "--seconds",
-            "3",
-            "--seed",
-            seed,
-            "--knocks-hz",
-            "2",
-        ]);
-        let good: Vec<f64> = v
-            .iter()
-            .filter(|r| t(r) > 0.5 && ok(r))
-            .map(modulus)
-            .collect();
-        let rate = good.len() as f64 / (t(v.last().unwrap()) - 0.5);
-        let rms = (good.iter().map(|e| (e / 414.0 - 1.0).powi(2)).sum::<f64>() / good.len() as f64)
-            .sqrt();
-        eprintln!(
-            "knocks, seed {seed}: {rate:.1} ok/s, RMS {:.3} %",
-            100.0 * rms
-        );
-        assert!(rate >= 20.0 && rms <= 0.01, "seed {seed}: {rate} /s, {rms}");
-        assert!(good.iter().all(|e| (e / 414.0 - 1.0).abs() <= 0.03));
-    }
+fn the_trackers_speed_accuracy_point_on_phantom_c() {
+    use hal_sim::{phantoms, NoiseScene};
+    use probe_bench::pareto::{evaluate_stream, stream_unit};
+    use probe_bench::scene::Target;
+    use pzt_probe::stream::TrackerConfig;
+    let unit = stream_unit(NoiseScene::Bench).unwrap();
+    let c = Target::Phantom(phantoms::by_name("C").unwrap());
+    let seg = TrackerConfig::DEFAULT.segment.0 as f64;
+    let s = evaluate_stream(c, NoiseScene::Bench, seg, &unit, 5, 0).unwrap();
+    let x = &s.cell;
+    eprintln!(
+        "{:.0} ms: {:.1} ok/s ({} of {} ok), {:.1} ms a reading, RMS {:.3} % vs truth, {:.3} % from noise, CRB {:.4} %, ratio {:.2}",
+        seg * 1e3,
+        s.ok_per_s,
+        x.ok,
+        x.n,
+        x.time_ms,
+        x.rms_pct(),
+        x.noise_rms_pct(),
+        s.crb_pct,
+        s.ratio()
+    );
+    assert!(s.ok_per_s >= 20.0, "{} ok/s", s.ok_per_s);
+    assert!(x.ok >= 300, "{} ok readings", x.ok);
+    assert!(x.rms_pct() <= 1.0, "RMS {} %", x.rms_pct());
+    assert!(s.crb_pct.is_finite() && s.crb_pct > 0.0, "{}", s.crb_pct);
+    assert!(s.ratio().is_finite() && s.ratio() >= 1.0, "{}", s.ratio());
+    assert!(s.ratio() <= 8.0, "{}", s.ratio());
 }

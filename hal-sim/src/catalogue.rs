@@ -72,6 +72,16 @@ pub const SCENES: usize = 27;
 /// of the paper method, 10.9 s).
 pub const DRIFT_HZ_S: f64 = 0.3;
 
+/// The knocks of the `knocks` scene, twice a second: a mechanical knock steps the mode's velocity
+/// by about 15 mm/s (twice what the drive gives it at resonance on 300 kPa), an electrical one
+/// puts 0.8 nC into the sense input (a 1.8 uA-peak pulse through the anti-alias filter). Both
+/// stay below the converter's rails on top of the driven current.
+pub const KNOCKS: Knocks = Knocks {
+    rate_hz: 2.0,
+    velocity_m_s: 15e-3,
+    charge_c: 8e-10,
+};
+
 /// The catalogue under `noise`.
 pub fn catalogue(noise: NoiseScene) -> [Case; SCENES] {
     let nominal = at(NOMINAL_KPA, noise);
@@ -101,15 +111,6 @@ pub fn catalogue(noise: NoiseScene) -> [Case; SCENES] {
     let s = phantoms::silicones();
     // Lift-off: the preload falls to nothing in 50 ms (a hand lifting the probe).
     let lift = |at_s: f64| LiftOff { at_s, ramp_s: 0.05 };
-    // Knocks twice a second: a mechanical knock steps the mode's velocity by about 15 mm/s
-    // (twice what the drive gives it at resonance on 300 kPa), an electrical one puts 0.8 nC
-    // into the sense input (a 1.8 uA-peak pulse through the anti-alias filter). Both stay
-    // below the converter's rails on top of the driven current.
-    let knocks = Knocks {
-        rate_hz: 2.0,
-        velocity_m_s: 15e-3,
-        charge_c: 8e-10,
-    };
     // The paper's second mode (326 Hz) pulled down to 295 Hz, Q 40 (the tissue does not load
     // it), its peak motional conductance half of the first mode's on 300 kPa.
     let mode2 = SecondMode::with_peak_conductance(295.0, 40.0, 0.5 * g_peak);
@@ -320,7 +321,7 @@ pub fn catalogue(noise: NoiseScene) -> [Case; SCENES] {
         Case {
             name: "knocks",
             what: "300 kPa, random knocks twice a second (mechanical 15 mm/s, electrical 0.8 nC)",
-            scene: nominal.with_knocks(knocks),
+            scene: nominal.with_knocks(KNOCKS),
             truth_kpa: Some(NOMINAL_KPA),
             accept: &["interference", "low_snr"],
         },

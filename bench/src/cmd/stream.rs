@@ -3,11 +3,11 @@
 
 use crate::report;
 use crate::scene::{layer_names, noise_name, parse_noise, SceneArgs};
+use crate::stream::{self, settled_after, summarize, StreamScene, Truth};
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use hal_sim::{phantoms, ForceChange, Knocks, LiftOff, Step};
+use hal_sim::{phantoms, ForceChange, LiftOff};
 use plotters::prelude::*;
-use pzt_probe::board::sim as simboard;
 use pzt_probe::stream::{StreamReading, TrackerConfig, METHOD};
 use pzt_probe::{Seconds, Status};
 use serde_json::json;
@@ -45,7 +45,7 @@ pub struct StreamArgs {
     #[arg(long)]
     pub press_at_s: Option<f64>,
     /// Time the press takes to change, s.
-    #[arg(long, default_value_t = 0.03)]
+    #[arg(long, default_value_t = stream::DEFAULT_PRESS_RAMP_S)]
     pub press_ramp_s: f64,
     /// Random knocks at this mean rate, per s (mechanical 15 mm/s, electrical 0.8 nC, as the
     /// stability catalogue's `knocks` scene).
@@ -82,117 +82,42 @@ pub struct StreamArgs {
     pub qemu: bool,
 }
 
-/// What the scene's truth is at a time: the modulus under the probe, or none (lifted off): the
-/// starting tissue's, then each event's from its time on.
-#[derive(Clone, Debug, Default)]
-pub struct Truth {
-    start_kpa: Option<f64>,
-    /// (time, modulus from then on), in time order.
-    events: Vec<(f64, Option<f64>)>,
-    /// When the tip leaves the tissue.
-    pub lift_s: Option<f64>,
-    /// When the probe is put down again.
-    pub touch_s: Option<f64>,
-    /// When the stiffness steps.
-    pub step_s: Option<f64>,
-}
-
-impl Truth {
-    /// The modulus under the probe at `t_s` (None: no tissue, or none known).
-    pub fn at(&self, t_s: f64) -> Option<f64> {
-        self.events
-            .iter()
-            .rev()
-            .find(|(t, _)| t_s >= *t)
-            .map_or(self.start_kpa, |(_, e)| *e)
-    }
-
-    fn push(&mut self, t: f64, e: Option<f64>) {
-        self.events.push((t, e));
-        self.events.sort_by(|a, b| a.0.total_cmp(&b.0));
-    }
-}
-
 /// Run the subcommand.
 pub fn run(a: StreamArgs) -> Result<()> {
     let noise = parse_noise(&a.noise)?;
-    let (target, mut scene) = a.scene.scene(noise, false)?;
-    if !(a.seconds > 0.0 && a.seconds <= 600.0) {
-        bail!("--seconds must be in (0, 600]");
-    }
-    let mut truth = Truth {
-        start_kpa: target.modulus_kpa(),
-        ..Truth::default()
-    };
-    match (&a.step_to, a.step_at_s) {
-        (Some(p), Some(at)) => {
-            let ph = phantoms::by_name(p).with_context(|| format!("unknown phantom `{p}`"))?;
-            check_time(at, "--step-at-s")?;
-            scene = scene.with_step(Step {
-                at_s: at,
-                tissue: Some(ph.tissue()),
-            });
-            truth.push(at, Some(ph.modulus_kpa));
-            truth.step_s = Some(at);
-        }
-        (None, None) => {}
+    let (target, _) = a.scene.scene(noise, false)?;
+    let step = match (&a.step_to, a.step_at_s) {
+        (Some(p), Some(at)) => Some((
+            phantoms::by_name(p).with_context(|| format!("unknown phantom `{p}`"))?,
+            at,
+        )),
+        (None, None) => None,
         _ => bail!("--step-to and --step-at-s go together"),
-    }
-    if let Some(l) = a.lift_off_at_s {
-        check_time(l, "--lift-off-at-s")?;
-        if !(a.lift_off_ramp_s >= 0.0 && a.lift_off_ramp_s <= 1.0) {
-            bail!("--lift-off-ramp-s must be in [0, 1]");
-        }
-        scene = scene.with_lift_off(LiftOff {
-            at_s: l,
-            ramp_s: a.lift_off_ramp_s,
-        });
-        // The tip leaves the tissue at the end of the ramp.
-        if truth.step_s.is_some_and(|s| s >= l) {
-            bail!(
-                "--step-at-s after --lift-off-at-s: use --touch-at-s to put the probe down again"
-            );
-        }
-        truth.lift_s = Some(l + a.lift_off_ramp_s);
-        truth.push(l + a.lift_off_ramp_s, None);
-    }
-    if let Some(t) = a.touch_at_s {
-        check_time(t, "--touch-at-s")?;
-        if a.step_to.is_some() || !a.lift_off_at_s.is_some_and(|l| t > l + a.lift_off_ramp_s) {
-            bail!("--touch-at-s needs an earlier --lift-off-at-s (and no --step-to)");
-        }
-        scene = scene.with_step(Step {
-            at_s: t,
-            tissue: scene.tissue,
-        });
-        truth.touch_s = Some(t);
-        truth.push(t, target.modulus_kpa());
-    }
-    match (a.press_to, a.press_at_s) {
-        (Some(f), Some(at)) => {
-            check_time(at, "--press-at-s")?;
-            if !(f > 0.0 && f <= 10.0 && (0.0..=1.0).contains(&a.press_ramp_s)) {
-                bail!("--press-to must be in (0, 10], --press-ramp-s in [0, 1]");
-            }
-            scene = scene.with_force_change(ForceChange {
-                at_s: at,
-                ramp_s: a.press_ramp_s,
-                to_fraction: f,
-            });
-        }
-        (None, None) => {}
+    };
+    let press = match (a.press_to, a.press_at_s) {
+        (Some(f), Some(at)) => Some(ForceChange {
+            at_s: at,
+            ramp_s: a.press_ramp_s,
+            to_fraction: f,
+        }),
+        (None, None) => None,
         _ => bail!("--press-to and --press-at-s go together"),
-    }
-    if let Some(rate) = a.knocks_hz {
-        if !(rate > 0.0 && rate <= 100.0) {
-            bail!("--knocks-hz must be in (0, 100]");
-        }
-        scene = scene.with_knocks(Knocks {
-            rate_hz: rate,
-            velocity_m_s: 15e-3,
-            charge_c: 8e-10,
-        });
-    }
+    };
+    let stream_scene = StreamScene {
+        preload_n: a.scene.preload_n,
+        step,
+        lift_off: a.lift_off_at_s.map(|at_s| LiftOff {
+            at_s,
+            ramp_s: a.lift_off_ramp_s,
+        }),
+        touch_at_s: a.touch_at_s,
+        press,
+        knocks_hz: a.knocks_hz,
+        ..StreamScene::on(target, noise)
+    };
+    // The events and the seconds are checked before anything is printed or run.
+    let (scene, truth) = stream_scene.build()?;
+    stream::check_seconds(a.seconds)?;
     let config = TrackerConfig {
         segment: Seconds(a.segment_s as f32),
         dither: a.dither as f32,
@@ -220,7 +145,6 @@ pub fn run(a: StreamArgs) -> Result<()> {
         );
         }
     }
-    let mut readings: Vec<StreamReading> = Vec::new();
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
     let mut last_progress = -1.0f64;
@@ -243,20 +167,18 @@ pub fn run(a: StreamArgs) -> Result<()> {
                 if r.locked { "locked" } else { "unlocked" }
             );
         }
-        readings.push(*r);
     };
-    if a.qemu {
-        for r in crate::qemu::stream(&a, &target, noise)? {
-            each(&r);
-        }
+    let readings = if a.qemu {
+        let v = crate::qemu::stream(&a, &target, noise)?;
+        v.iter().for_each(&mut each);
+        v
     } else {
-        simboard::stream(&scene, a.seed, &config, &unit, a.seconds, each)
-            .map_err(|e| anyhow::anyhow!("the stream failed: {e:?}"))?;
-    }
+        stream::run(&stream_scene, &config, &unit, a.seed, a.seconds, each)?.readings
+    };
     if let Some(e) = write_err {
         return Err(e.into());
     }
-    let s = summarize(&readings, &truth, 0.5);
+    let s = summarize(&readings, &truth, stream::SETTLE_S);
     if !a.json {
         eprintln!();
         println!(
@@ -266,7 +188,8 @@ pub fn run(a: StreamArgs) -> Result<()> {
             s.dropped
         );
         println!(
-            "  after 0.5 s: {:.1} ok readings/s; {} of {} with a truth ok, RMS error {}",
+            "  after {} s: {:.1} ok readings/s; {} of {} with a truth ok, RMS error {}",
+            stream::SETTLE_S,
             s.ok_per_s,
             s.ok_with_truth,
             s.with_truth,
@@ -301,13 +224,6 @@ pub fn run(a: StreamArgs) -> Result<()> {
     Ok(())
 }
 
-fn check_time(t: f64, what: &str) -> Result<()> {
-    if !(0.0..=600.0).contains(&t) {
-        bail!("{what} must be in [0, 600] s");
-    }
-    Ok(())
-}
-
 /// The JSON object of one stream reading: the reading's own fields and seq, t_s, locked.
 pub fn stream_json(r: &StreamReading) -> serde_json::Value {
     let mut v = report::reading_json(&r.reading);
@@ -317,91 +233,6 @@ pub fn stream_json(r: &StreamReading) -> serde_json::Value {
         o.insert("locked".into(), json!(r.locked));
     }
     v
-}
-
-/// A stream's figures against the scene's truth.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Summary {
-    /// Readings missing from the sequence numbers.
-    pub dropped: u64,
-    /// Ok readings per second of probe time after `settle_s`.
-    pub ok_per_s: f64,
-    /// Readings after `settle_s` with a truth (the probe on tissue).
-    pub with_truth: usize,
-    /// Of them, ok.
-    pub ok_with_truth: usize,
-    /// RMS relative error of the ok readings against the truth.
-    pub rms_rel: Option<f64>,
-    /// Time of the last ok reading after the lift-off.
-    pub last_ok_after_lift: Option<f64>,
-}
-
-/// The figures of `readings` against `truth`, counting from `settle_s`.
-pub fn summarize(readings: &[StreamReading], truth: &Truth, settle_s: f64) -> Summary {
-    let mut s = Summary::default();
-    let mut expect = 0u64;
-    for r in readings {
-        s.dropped += (r.seq as u64).saturating_sub(expect);
-        expect = r.seq as u64 + 1;
-    }
-    let end = readings.last().map_or(0.0, |r| r.t_s.0 as f64);
-    let (mut n_ok, mut sq) = (0usize, 0.0);
-    for r in readings.iter().filter(|r| r.t_s.0 as f64 > settle_s) {
-        let ok = r.reading.status == Status::Ok;
-        if ok {
-            n_ok += 1;
-        }
-        if let Some(t) = truth.at(r.t_s.0 as f64) {
-            s.with_truth += 1;
-            if let (true, Some(e)) = (ok, r.reading.modulus) {
-                s.ok_with_truth += 1;
-                sq += (e.0 as f64 / t - 1.0).powi(2);
-            }
-        }
-    }
-    if end > settle_s {
-        s.ok_per_s = n_ok as f64 / (end - settle_s);
-    }
-    if s.ok_with_truth > 0 {
-        s.rms_rel = Some((sq / s.ok_with_truth as f64).sqrt());
-    }
-    if let Some(l) = truth.lift_s {
-        s.last_ok_after_lift = readings
-            .iter()
-            .filter(|r| r.reading.status == Status::Ok && r.t_s.0 as f64 >= l)
-            .filter(|r| truth.touch_s.is_none_or(|t| (r.t_s.0 as f64) < t))
-            .map(|r| r.t_s.0 as f64)
-            .next_back();
-    }
-    s
-}
-
-/// The time after `at` from which every reading until the next event is ok and within `tol`
-/// of the truth (None: never).
-pub fn settled_after(readings: &[StreamReading], truth: &Truth, at: f64, tol: f64) -> Option<f64> {
-    let next = truth
-        .events
-        .iter()
-        .map(|e| e.0)
-        .find(|t| *t > at)
-        .unwrap_or(f64::INFINITY);
-    let mut from = None;
-    for r in readings
-        .iter()
-        .filter(|r| (at..next).contains(&(r.t_s.0 as f64)))
-    {
-        let t = r.t_s.0 as f64;
-        let good = match (truth.at(t), r.reading.modulus, r.reading.status) {
-            (Some(x), Some(e), Status::Ok) => (e.0 as f64 / x - 1.0).abs() <= tol,
-            _ => false,
-        };
-        match (good, from) {
-            (true, None) => from = Some(t),
-            (false, _) => from = None,
-            _ => {}
-        }
-    }
-    from
 }
 
 /// Modulus (ok readings, with their σ, and the truth) and lock against time.
