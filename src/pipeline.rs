@@ -14,7 +14,7 @@
 //! reference, no Q model, no Q) is a failure with its own code, never a skipped check.
 
 use crate::estimate::Estimate;
-use crate::loadcell::{RawForce, MAX_FORCE_CHANGE, NO_CONTACT_FORCE};
+use crate::loadcell::{ContactForce, RawForce, MAX_FORCE_CHANGE, NO_CONTACT_FORCE};
 use crate::measure::{Method, Reading};
 use crate::profile::UnitProfile;
 use crate::status::{Failure, Status};
@@ -26,6 +26,33 @@ use crate::units::Seconds;
 /// cannot place tissue on that scale, whatever its mean. The default methods read 0.01–0.3 %
 /// in the bench noise and below 1 % in the paper's (`docs/speed-accuracy.md`).
 pub const MAX_RELATIVE_REPEATABILITY: f32 = 0.10;
+
+/// What the load cell says against a reading (with a load cell): no force measured, contact lost
+/// during the reading, no contact, too light, too hard, or a force that changed during the
+/// reading; `None` when the press is fine.
+fn press_failure(unit: &UnitProfile, force: Option<&ContactForce>) -> Option<Failure> {
+    let Some(w) = force else {
+        return Some(Failure::NoForce);
+    };
+    // The force at the window's end, on the fitted line through it.
+    let end = w.mean.0 + 0.5 * w.change.0;
+    if !(w.mean.0.is_finite() && w.change.0.is_finite()) {
+        Some(Failure::NoForce)
+    } else if w.mean.0 >= NO_CONTACT_FORCE.0 && end < NO_CONTACT_FORCE.0 {
+        // Pressed at first, off the tissue by the end: the probe was lifted during the reading.
+        Some(Failure::ContactLost)
+    } else if w.mean.0 < NO_CONTACT_FORCE.0 {
+        Some(Failure::NoContact)
+    } else if w.mean.0 < unit.force_window.min.0 {
+        Some(Failure::TooLight)
+    } else if w.mean.0 > unit.force_window.max.0 {
+        Some(Failure::TooHard)
+    } else if libm::fabsf(w.change.0) > MAX_FORCE_CHANGE.0 {
+        Some(Failure::ForceUnstable)
+    } else {
+        None
+    }
+}
 
 /// Conclude a reading by `method` from its estimate with the unit's profile and the load
 /// cell's counts over the reading's window (`raw_force`; ignored by a unit without a load
@@ -46,9 +73,14 @@ pub fn conclude(
         force,
         ..Reading::failed(method, f, probe_time, points)
     };
+    // The contact force, with a load cell: there, pressing, inside the window, steady.
+    let press = unit.load_cell.and(press_failure(unit, force.as_ref()));
     let est = match est {
         Ok(e) => e,
-        Err(f) => return fail(f),
+        // A press that moved, slipped or lifted during the reading explains whatever the
+        // estimator then made of it (a moving resonance reads as interference, lost lock, ...):
+        // the load cell's verdict is the one to report. A fault of the instrument stays.
+        Err(f) => return fail(press.filter(|_| !f.is_fault()).unwrap_or(f)),
     };
     let mut r = Reading {
         status: Status::Ok,
@@ -72,29 +104,9 @@ pub fn conclude(
         r.status = Status::Failed(Failure::LowSnr);
         return r;
     };
-    // The contact force, with a load cell: there, pressing, inside the window, steady.
-    if unit.load_cell.is_some() {
-        let Some(w) = force else {
-            r.status = Status::Failed(Failure::NoForce);
-            return r;
-        };
-        let fail = if !(w.mean.0.is_finite() && w.change.0.is_finite()) {
-            Some(Failure::NoForce)
-        } else if w.mean.0 < NO_CONTACT_FORCE.0 {
-            Some(Failure::NoContact)
-        } else if w.mean.0 < unit.force_window.min.0 {
-            Some(Failure::TooLight)
-        } else if w.mean.0 > unit.force_window.max.0 {
-            Some(Failure::TooHard)
-        } else if libm::fabsf(w.change.0) > MAX_FORCE_CHANGE.0 {
-            Some(Failure::ForceUnstable)
-        } else {
-            None
-        };
-        if let Some(f) = fail {
-            r.status = Status::Failed(f);
-            return r;
-        }
+    if let Some(f) = press {
+        r.status = Status::Failed(f);
+        return r;
     }
     if air.looks_free(est.resonance, q) {
         r.status = Status::Failed(Failure::NoContact);

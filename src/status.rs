@@ -137,6 +137,21 @@ impl Failure {
         }
     }
 
+    /// A fault of the instrument or of its setup (the converters, the drive, the PZT and its
+    /// wiring, the settings, the unit's data), which no press explains.
+    pub const fn is_fault(self) -> bool {
+        matches!(
+            self,
+            Failure::Clipped
+                | Failure::OpenCircuit
+                | Failure::ShortCircuit
+                | Failure::DriveFault
+                | Failure::BadSettings
+                | Failure::NoAirReference
+                | Failure::Uncalibrated
+        )
+    }
+
     /// True for a failure of the press itself, which the load cell tells before the resonance
     /// is read: no contact, no force, too light, too hard, a force that changed.
     pub const fn is_press(self) -> bool {

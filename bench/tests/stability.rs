@@ -24,10 +24,11 @@ fn the_default_strategy_is_within_three_sigma_in_99_percent_of_its_readings() {
     assert!(t.ok >= 100, "{t:?}");
     assert!(t.within_fraction() >= 0.99, "{t:?}");
     assert_eq!(t.ok_without_truth, 0, "{t:?}");
-    // The lost readings: mains hum pulls hold's Q off the Q(E) curve (bad_contact) or towards
-    // the free Q (no_contact) by less than a gross misfit: measured 15 of the 80 mains readings
-    // (12 when auto began with fit, which names the hum `interference` but reads 0.9 s).
-    assert!(t.wrong_failures <= 15, "{t:?}");
+    // No lost reading: mains hum, which pulled hold's Q off the Q(E) curve (bad_contact) or
+    // towards the free Q (no_contact) in 15 of the 80 mains readings, is now seen turning in the
+    // hold fit's residuals (`interference::hum`), and a press that moved during the reading is
+    // reported as such (`force_unstable`) whatever the estimator made of it.
+    assert_eq!(t.wrong_failures, 0, "{t:?}");
 }
 
 #[test]

@@ -43,6 +43,7 @@
 //! non-finite values): the estimators' own checks see those.
 
 use super::model::Motional;
+use crate::estimate::hold::Segment;
 use crate::linalg::LineFit;
 use crate::status::Failure;
 use crate::sweep::SweepPoint;
@@ -123,8 +124,87 @@ fn spike(n: usize, r: impl Fn(usize) -> f32, first: usize, open_end: bool) -> Re
 /// raises one or two windows 250–450× in variance (stream segments on phantom C under the
 /// catalogue's knocks).
 pub fn window_spike(vars: &[f64]) -> Result<(), Failure> {
-    let r = |i: usize| vars.get(i).map_or(f32::NAN, |&v| libm::sqrt(v) as f32);
+    let r = |i: usize| vars.get(i).map_or(f32::NAN, |&v| libm::sqrtf(v as f32));
     spike(vars.len(), r, 1, true)
+}
+
+/// Mains frequencies whose harmonics [`hum`] looks for, Hz.
+pub const MAINS_HZ: [f64; 2] = [50.0, 60.0];
+/// Harmonics of each mains frequency looked for.
+pub const MAINS_HARMONICS: u32 = 8;
+/// Fewest turns a mains harmonic's offset from the drive must make over a segment for [`hum`]
+/// to judge it.
+pub const HUM_TURNS: f64 = 1.5;
+/// [`hum`]'s detection threshold on `|S|² / (2 Σ var)`, exponentially distributed with mean 1
+/// for white residuals: a false alarm once in `e^25` ≈ 7e10 tests.
+pub const HUM_THRESHOLD: f64 = 25.0;
+
+/// Mains hum in the residuals of a hold's windows (the fit's `y − model`, in the windows' order
+/// over `segments`): a mains harmonic `f_m` within a window's main lobe of the drive `f_h`
+/// (`|f_m − f_h| < 1/L`, `L` the window length) and [`HUM_TURNS`] turns or more over the segment
+/// leaks into every window's phasor as a phasor
+/// turning at `f_m − f_h`, coherently from window to window, while it raises each window's own
+/// residual only a little. The residuals' projection on that turn, `S = Σ r_k e^{−j2π(f_m −
+/// f_h) t_k}` (`t_k` the window centres), against its variance for white residuals `2 Σ var_k`,
+/// is exponential with mean 1 without hum; above [`HUM_THRESHOLD`] it is `interference`. Each
+/// segment is judged on its own (its own drive frequency).
+pub fn hum(segments: &[Segment], residuals: &[num_complex::Complex32]) -> Result<(), Failure> {
+    use num_complex::Complex32 as C32;
+    let mut at = 0usize;
+    for seg in segments {
+        let w = seg.windows;
+        let r = residuals.get(at..at + w.len()).unwrap_or(&[]);
+        at += w.len();
+        let (Some(first), true) = (w.first(), r.len() == w.len() && w.len() >= 3) else {
+            continue;
+        };
+        let var: f64 = w.iter().map(|x| x.var).sum();
+        if !(var > 0.0) || !var.is_finite() {
+            continue;
+        }
+        let last = w[w.len() - 1];
+        let span = (last.t0 + 0.5 * last.len) - (first.t0 + 0.5 * first.len);
+        // The steps between consecutive window centres, s (f32: once per segment, not per
+        // harmonic; the windows are gap-free, so two lengths a sample apart give one step).
+        let mut steps = [0.0f32; 32];
+        for (o, p) in steps.iter_mut().zip(w.windows(2)) {
+            *o = ((p[1].t0 + 0.5 * p[1].len) - (p[0].t0 + 0.5 * p[0].len)) as f32;
+        }
+        for fm in MAINS_HZ {
+            for k in 1..=MAINS_HARMONICS {
+                let d = fm * k as f64 - seg.f_h;
+                // Within a window's main lobe, and turning at least HUM_TURNS times over the
+                // segment: a slower turn is a slow change of the residual that a drifting
+                // resonance or the model's own misfit also leaves (measured: 3–5 Hz off, 84–91).
+                if libm::fabs(d) * first.len >= 1.0 || libm::fabs(d) * span < HUM_TURNS {
+                    continue;
+                }
+                // The turn e^{−j2πd t_k} carried from window to window (in f32: sixteen
+                // products lose 1e-6 rad), a sine and cosine only where the step between window
+                // centres changes (whole-cycle windows: two lengths a sample apart).
+                let w_d = -2.0 * core::f32::consts::PI * d as f32;
+                let mut turn = C32::new(1.0, 0.0);
+                let (mut step, mut rot) = (f32::NAN, C32::new(1.0, 0.0));
+                let mut sum = C32::new(0.0, 0.0);
+                for (k, rk) in r.iter().enumerate() {
+                    if let Some(&dt) = steps.get(k.wrapping_sub(1)) {
+                        if dt != step {
+                            step = dt;
+                            let ph = w_d * dt;
+                            rot = C32::new(libm::cosf(ph), libm::sinf(ph));
+                        }
+                        turn *= rot;
+                    }
+                    sum += *rk * turn;
+                }
+                let (sr, si) = (sum.re as f64, sum.im as f64);
+                if (sr * sr + si * si) / (2.0 * var) > HUM_THRESHOLD {
+                    return Err(Failure::Interference);
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// How far the points scatter about a resonance, from [`bvd_misfit`].
@@ -257,6 +337,53 @@ mod tests {
             });
         }
         v
+    }
+
+    /// Hum: residuals of a hold's windows (two cycles at 225 Hz, noise of unit variance per
+    /// component from a fixed generator) with a 250 Hz mains harmonic added at 2.5 noise
+    /// standard deviations (statistic ≈ 44 against 25) are `interference`; without it they are
+    /// not.
+    #[test]
+    fn hum_turning_in_the_residuals_is_interference() {
+        use crate::estimate::hold::{HoldWindow, Segment};
+        use num_complex::Complex32 as C32;
+        let f_h = 225.0;
+        let len = 2.0 / f_h;
+        let mut state = 12345u64;
+        let mut gauss = || {
+            // Sum of 12 uniforms − 6: a unit normal to within what this test needs.
+            (0..12)
+                .map(|_| {
+                    state = state
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
+                    (state >> 11) as f64 / (1u64 << 53) as f64
+                })
+                .sum::<f64>()
+                - 6.0
+        };
+        let windows: [HoldWindow; 14] = core::array::from_fn(|k| HoldWindow {
+            t0: 0.1 + k as f64 * len,
+            len,
+            y: Complex64::new(0.0, 0.0),
+            var: 1.0,
+        });
+        let noise: [C32; 14] = core::array::from_fn(|_| C32::new(gauss() as f32, gauss() as f32));
+        let seg = Segment {
+            windows: &windows,
+            f_h,
+            y_s: Complex64::new(0.0, 0.0),
+        };
+        assert_eq!(hum(&[seg], &noise), Ok(()));
+        let d = 250.0 - f_h;
+        let humming: [C32; 14] = core::array::from_fn(|k| {
+            let t = (k as f64 + 0.5) * len;
+            let ph = 2.0 * core::f64::consts::PI * d * t;
+            noise[k] + C32::new((2.5 * ph.cos()) as f32, (2.5 * ph.sin()) as f32)
+        });
+        assert_eq!(hum(&[seg], &humming), Err(Failure::Interference));
+        // Residuals shorter than the windows, or no windows: nothing to judge, no panic.
+        assert_eq!(hum(&[seg], &humming[..3]), Ok(()));
     }
 
     /// The windows of stream segments on phantom C under the catalogue's knocks (variances
