@@ -295,7 +295,7 @@ fn cli_table_stdin_plot_and_errors() {
     let out = run_ok(bin().arg("log").arg(&log).arg("--plot").arg(&svg));
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
-        stdout.contains("227.966 ± 0.044")
+        stdout.contains("227.960 ± 0.041")
             && stdout.contains("280.2 ± 6.0")
             && stdout.contains("29.96 ± 0.01"),
         "{stdout}"
