@@ -118,6 +118,17 @@ pub fn check_frequency(f: f32, scale: &FrontEndScale) -> Result<u32, SettingsErr
     Ok(tuning_word(f as f64, scale.sample_rate.0 as f64))
 }
 
+/// Validate a band: both edges drive frequencies ([`check_frequency`]), the stop above the
+/// start (used by every method with a band).
+pub fn check_band(start: Hz, stop: Hz, scale: &FrontEndScale) -> Result<(), SettingsError> {
+    check_frequency(start.0, scale)?;
+    check_frequency(stop.0, scale)?;
+    if !(stop.0 > start.0) {
+        return Err(SettingsError::EmptyBand);
+    }
+    Ok(())
+}
+
 /// Validate a settling and an integration time against the lowest frequency they apply to.
 pub fn check_durations(
     settle: Seconds,
@@ -156,11 +167,7 @@ impl SweepSettings {
         if !a.is_finite() || !b.is_finite() || !s.is_finite() {
             return Err(SettingsError::NotFinite);
         }
-        check_frequency(a, scale)?;
-        check_frequency(b, scale)?;
-        if !(b > a) {
-            return Err(SettingsError::EmptyBand);
-        }
+        check_band(self.start, self.stop, scale)?;
         if !(s > 0.0) {
             return Err(SettingsError::StepNotPositive);
         }

@@ -47,7 +47,9 @@ use crate::engine::{PointPlan, PointRaw};
 use crate::hal::FrontEndScale;
 use crate::linalg::{damped_solve, spd_inverse};
 use crate::status::Failure;
-use crate::sweep::{amplitude_codes, check_durations, check_frequency, Drive, SettingsError};
+use crate::sweep::{
+    amplitude_codes, check_band, check_durations, check_frequency, Drive, SettingsError,
+};
 use crate::units::{Farads, Hz, Seconds, Siemens, Volts};
 use core::f64::consts::PI;
 use num_complex::Complex64 as C64;
@@ -133,11 +135,7 @@ impl HoldSettings {
         let seedless = self.seed_burst.0 == 0.0;
         let seed = if seedless {
             check_frequency(self.seed.0, scale)?;
-            check_frequency(self.band_start.0, scale)?;
-            check_frequency(self.band_stop.0, scale)?;
-            if !(self.band_stop.0 > self.band_start.0) {
-                return Err(SettingsError::EmptyBand);
-            }
+            check_band(self.band_start, self.band_stop, scale)?;
             None
         } else {
             Some(self.seed_settings(self.seed).validate(scale)?)

@@ -24,7 +24,8 @@ use crate::hal::FrontEndScale;
 use crate::linalg::Line;
 use crate::status::Failure;
 use crate::sweep::{
-    amplitude_codes, check_durations, check_frequency, point_from_raw, PointError, SettingsError,
+    amplitude_codes, check_band, check_durations, check_frequency, point_from_raw, PointError,
+    SettingsError,
 };
 use crate::units::{Hz, Seconds, Volts};
 use core::f64::consts::PI;
@@ -119,12 +120,8 @@ impl RingdownSettings {
         &self,
         scale: &FrontEndScale,
     ) -> Result<Ringdown<W>, SettingsError> {
-        check_frequency(self.band_start.0, scale)?;
-        check_frequency(self.band_stop.0, scale)?;
+        check_band(self.band_start, self.band_stop, scale)?;
         let ftw = check_frequency(self.seed.0, scale)?;
-        if !(self.band_stop.0 > self.band_start.0) {
-            return Err(SettingsError::EmptyBand);
-        }
         check_durations(self.burst, self.ring, self.band_start.0)?;
         if !(self.burst.0 > 0.0) {
             return Err(SettingsError::IntegrationShorterThanCycle);

@@ -22,7 +22,7 @@ use crate::engine::{PointPlan, PointRaw};
 use crate::hal::FrontEndScale;
 use crate::status::Failure;
 use crate::sweep::{
-    amplitude_codes, check_durations, check_frequency, point_from_raw, PointError, SettingsError,
+    amplitude_codes, check_band, check_durations, point_from_raw, PointError, SettingsError,
     SweepPoint,
 };
 use crate::units::{Hz, Seconds, Volts};
@@ -111,11 +111,7 @@ impl StagedSettings {
 
     /// Validate for a board.
     pub fn validate(&self, r: Refine, scale: &FrontEndScale) -> Result<Staged, SettingsError> {
-        check_frequency(self.band_start.0, scale)?;
-        check_frequency(self.band_stop.0, scale)?;
-        if !(self.band_stop.0 > self.band_start.0) {
-            return Err(SettingsError::EmptyBand);
-        }
+        check_band(self.band_start, self.band_stop, scale)?;
         check_durations(self.coarse_settle, self.integrate, self.band_start.0)?;
         let min_coarse = if r == Refine::Conductance { 3 } else { 4 };
         let knobs_ok = (min_coarse..=MAX_STAGE_POINTS as u8).contains(&self.coarse_points)
