@@ -531,11 +531,10 @@ enum Inner {
 
 /// Hold's settings as the first stage of [`Method::Auto`]: its defaults over auto's band.
 ///
-/// A faster first stage is measured (the speed-accuracy chart's `3 ms seed, 100 ms` hold: a 3 ms
-/// seed burst, the three-window ring-down of `seed_ring` 0, one 100 ms hold; 126 ms at 500 kPa, 1.45× the Cramér–Rao bound) but is not the
-/// default: on the M4 its fit costs 2.3–2.6 % of the core over so short a reading (budget 2 %,
-/// `tests/qemu_cost.rs`) and it loses more readings under mains hum (docs/methods.md, hold:
-/// where the efficiency goes).
+/// The fast hold ([`HoldSettings::FAST`]: no seed, three two-cycle windows at the band's centre,
+/// then on their estimate, one joint fit; 130 ms, 9.5 τ at 500 kPa, within 1.3× of the
+/// Cramér–Rao bound) is measured but is not the default: on the M4 its fits cost about 8 % of
+/// the 170 MHz core over so short a reading (budget 2 %, `tests/qemu_cost.rs`; docs/methods.md).
 fn auto_hold(s: &StagedSettings) -> HoldSettings {
     HoldSettings {
         band_start: s.band_start,

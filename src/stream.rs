@@ -476,7 +476,13 @@ impl Tracker {
         }
         let y_s = C64::new(self.static_g, 2.0 * PI * self.f_h * self.static_c);
         let q_sd = self.cfg.q_prior as f64 * self.q_est;
-        let h = hold::fit(&self.windows, self.f_h, y_s, self.f_est, (self.q_est, q_sd))?;
+        let seg = hold::Segment {
+            windows: &self.windows,
+            f_h: self.f_h,
+            y_s,
+            mirror: hold::mirror(drive.v),
+        };
+        let h = hold::fit(seg, self.f_est, (self.q_est, q_sd))?;
         // A segment the resonator's model does not explain (a knock, a tone) is no reading,
         // and the drive does not follow it: the next segment, 35 ms on, will be clean.
         if h.reduced_chi2 > GROSS_CHI2 {

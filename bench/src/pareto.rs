@@ -122,9 +122,18 @@ pub fn configs() -> Vec<Config> {
     }
     // hold subtracts the unit's static admittance: the profile's air reference supplies it.
     let air = HoldSettings::DEFAULT;
+    // The fast hold (not auto's default: its on-target cost, docs/methods.md).
+    let fast = HoldSettings::FAST;
+    v.push(Config {
+        method: Method::Hold,
+        label: format!(
+            "no seed, {:.0}+{:.0} ms",
+            1e3 * fast.refine.0,
+            1e3 * (fast.hold.0 - fast.refine.0)
+        ),
+        settings: Settings::Hold(fast),
+    });
     for (burst, refine, hold) in [
-        // the fast hold (not auto's default: its on-target cost, docs/methods.md).
-        (3.0, 0.0, 100.0),
         (20.0, 50.0, 150.0),
         (20.0, 80.0, 300.0),
         (20.0, 100.0, 500.0),
@@ -440,12 +449,15 @@ pub fn evaluate_stream(
 }
 
 /// The Cramér–Rao bound on the resonance frequency (Hz) of the scene's resonator driven at its
-/// resonance from rest for `t_s` seconds at drive amplitude `drive_v`, its current observed in
-/// white noise, `f0`, `Q` and the motional conductance `g` unknown, the static branch known.
+/// resonance from rest for `t_s` seconds at drive amplitude `drive_v` (asked of the DAC), its
+/// current observed in white noise, `f0`, `Q` and the motional conductance `g` unknown, the
+/// static branch known.
 ///
 /// Steady state (Rife–Boorstyn phase bound turned into frequency through the resonance's phase
-/// slope `dφ/df = 2πτ`): `σ_f = 1 / (2π τ sqrt(2 (C/N0) T))`, with carrier power
-/// `C = (G_peak V)² / 2`, noise density `N0` (A²/Hz, one-sided), `τ = Q / (π f0)`.
+/// slope `dφ/df = 2πτ`): `σ_f = 1 / (2π τ sqrt(2 (C/N0) T))`, with carrier power at the ADC
+/// `C = (G_peak V k)² / 2` (`k` the front end's filters, [`front_end_gain`]: until 2026-11-24 the
+/// bound left them out and was 12 % too low at 500 kPa), noise density `N0` (A²/Hz, one-sided),
+/// `τ = Q / (π f0)`.
 ///
 /// Switched on from rest the motional admittance in the drive's rotating frame is
 /// `Y(t) = Y_m (1 − e^{λt})`, `Y_m = g/(1 + jQu)`, `λ = −1/τ + j2π(f_d − f_h)`. At `f_h = f0`
@@ -493,11 +505,23 @@ fn build_up(x: f64) -> f64 {
     x - 2.75 + 2.0 * (2.0 + x) * e1 - (1.25 + 1.5 * x + 0.5 * x * x) * e2
 }
 
-/// Carrier power `C` (A²), noise density `N0` (A²/Hz, one-sided, with the ADC's quantisation)
-/// and `τ` (s) of `scene` driven at `drive_v` on resonance.
+/// Magnitude of the front end's two filters at `f_hz`: the reconstruction filter between the
+/// DAC and the PZT (the drive the PZT sees is `drive_v` times its gain) and the anti-alias
+/// filter between the sense current and the ADC, whose noise enters after it — each two real
+/// poles, `1/(1 + (f/f_c)²)`. At 242 Hz with both corners at 1 kHz it is 0.892: the carrier at
+/// the ADC is 11 % below `g drive_v` and the bound 12 % above what an ideal front end's would be.
+pub fn front_end_gain(scene: &Scene, f_hz: f64) -> f64 {
+    let fe = &scene.front_end;
+    let pole2 = |fc: f64| 1.0 / (1.0 + (f_hz / fc).powi(2));
+    pole2(fe.reconstruction_hz) * pole2(fe.antialias_hz)
+}
+
+/// Carrier power `C` (A², at the ADC, through [`front_end_gain`]), noise density `N0` (A²/Hz,
+/// one-sided, with the ADC's quantisation) and `τ` (s) of `scene` driven at `drive_v` (asked of
+/// the DAC) on resonance.
 fn carrier_noise_tau(scene: &Scene, drive_v: f64) -> (f64, f64, f64) {
     let k = scene.kelvin();
-    let g = scene.pzt.motional_peak_s(&k);
+    let g = scene.pzt.motional_peak_s(&k) * front_end_gain(scene, k.natural_frequency_hz());
     let c = 0.5 * (g * drive_v) * (g * drive_v);
     let n0 = scene.front_end.current_noise_a_rthz.powi(2)
         + scene.front_end.amps_per_code().powi(2) / 12.0 / (scene.front_end.sample_rate_hz / 2.0);
@@ -506,9 +530,10 @@ fn carrier_noise_tau(scene: &Scene, drive_v: f64) -> (f64, f64, f64) {
 }
 
 /// The Cramér–Rao bound (Hz) on `f0` computed numerically: the motional branch (series `RLC`
-/// with `R = 1/g`, `L = Q R / ω0`, `C = 1/(ω0² L)`) driven from rest by `drive_v sin(2π f_h t)`,
-/// `f_h = f0 + detune_hz`, integrated (RK4, 16 steps a sample) and sampled at the front end's
-/// rate for `t_s`; the current's derivatives with respect to `f0`, `Q`, `g` by central
+/// with `R = 1/g`, `L = Q R / ω0`, `C = 1/(ω0² L)`) driven from rest by `drive_v sin(2π f_h t)`
+/// through the reconstruction filter, its current through the anti-alias filter (each two real
+/// poles at the scene's corners), `f_h = f0 + detune_hz`, integrated (RK4, 16 steps a sample)
+/// and sampled at the front end's rate for `t_s`; the current's derivatives with respect to `f0`, `Q`, `g` by central
 /// differences; white noise of the scene's density per sample; the `f0` element of the inverse
 /// 3 × 3 Fisher matrix (the unknown `Q` and `g` accounted for). Independent of [`crb_hz`]'s
 /// closed form. The samples themselves are observed here; the firmware's whole-cycle windows of
@@ -574,6 +599,10 @@ pub fn fisher_crb_schedule_hz(
         phases.push(ph);
         ph += 2.0 * PI * f_at(i as f64 * 0.5 * h0) * 0.5 * h0;
     }
+    // The front end's filters (two real poles each): the drive through the reconstruction
+    // filter to the PZT, the motional current through the anti-alias filter to the ADC.
+    let wr = 2.0 * PI * scene.front_end.reconstruction_hz;
+    let wa = 2.0 * PI * scene.front_end.antialias_hz;
     let current = |f0: f64, q: f64, g: f64| -> Vec<f64> {
         let w0 = 2.0 * PI * f0;
         let r = 1.0 / g;
@@ -581,27 +610,36 @@ pub fn fisher_crb_schedule_hz(
         let cap = 1.0 / (w0 * w0 * l);
         let sub = substeps;
         let h = h0;
-        // The drive at half-step k (phases tabulated at every half step).
-        let deriv = |k: usize, x: [f64; 2]| -> [f64; 2] {
+        // State: reconstruction filter (2), charge and current of the motional branch (2),
+        // anti-alias filter (2); the drive at half-step k (phases tabulated at every half step).
+        let deriv = |k: usize, x: &[f64; 6]| -> [f64; 6] {
             [
-                x[1],
-                (drive_v * phases[k].sin() - r * x[1] - x[0] / cap) / l,
+                wr * (drive_v * phases[k].sin() - x[0]),
+                wr * (x[0] - x[1]),
+                x[3],
+                (x[1] - r * x[3] - x[2] / cap) / l,
+                wa * (x[3] - x[4]),
+                wa * (x[4] - x[5]),
             ]
         };
-        let mut x = [0.0f64; 2];
+        let add = |x: &[f64; 6], d: &[f64; 6], s: f64| -> [f64; 6] {
+            core::array::from_fn(|i| x[i] + s * d[i])
+        };
+        let mut x = [0.0f64; 6];
         let mut out = Vec::with_capacity(n.saturating_sub(skip));
         for i in 0..n {
             for j in 0..sub {
                 let k = 2 * (i * sub + j);
-                let k1 = deriv(k, x);
-                let k2 = deriv(k + 1, [x[0] + 0.5 * h * k1[0], x[1] + 0.5 * h * k1[1]]);
-                let k3 = deriv(k + 1, [x[0] + 0.5 * h * k2[0], x[1] + 0.5 * h * k2[1]]);
-                let k4 = deriv(k + 2, [x[0] + h * k3[0], x[1] + h * k3[1]]);
-                x[0] += h / 6.0 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]);
-                x[1] += h / 6.0 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]);
+                let k1 = deriv(k, &x);
+                let k2 = deriv(k + 1, &add(&x, &k1, 0.5 * h));
+                let k3 = deriv(k + 1, &add(&x, &k2, 0.5 * h));
+                let k4 = deriv(k + 2, &add(&x, &k3, h));
+                for (m, v) in x.iter_mut().enumerate() {
+                    *v += h / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m]);
+                }
             }
             if i >= skip {
-                out.push(x[1]);
+                out.push(x[5]);
             }
         }
         out

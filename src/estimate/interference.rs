@@ -373,6 +373,7 @@ mod tests {
             windows: &windows,
             f_h,
             y_s: Complex64::new(0.0, 0.0),
+            mirror: Complex64::new(1.0, 0.0),
         };
         assert_eq!(hum(&[seg], &noise), Ok(()));
         let d = 250.0 - f_h;
