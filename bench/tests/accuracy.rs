@@ -102,3 +102,44 @@ fn measured_terms_agree_with_their_predictions() {
         assert!(p.mean_err_pct.abs() < 0.5, "{p:?}");
     }
 }
+
+/// The drift allowance's epoch (`profile::DRIFT_EPOCH`): a steady drift of the free resonance
+/// (`hal_sim::Drift`, both signs, twice the specified rate) moves the default reading by
+/// `DRIFT_EPOCH × rate × probe time` times the contact resonance's own sensitivity to the free
+/// resonance (measured here from a reading with the free resonance moved by 0.1 Hz), at 300,
+/// 1000 and 2500 kPa in the bench noise (the same noise stream in every reading, so it cancels
+/// in the differences; the quiet front end's noise-free windows read a drift as interference):
+/// within 0.05 of 0.62. The reference is the simulator's drift, not the allowance's formula.
+#[test]
+fn a_steady_drift_moves_the_reading_by_its_epoch() {
+    use hal_sim::{NoiseScene, Scene};
+    use pzt_probe::measure::Method;
+    use pzt_probe::profile::{DRIFT_EPOCH, FREE_RESONANCE_DRIFT_HZ_S};
+    let unit = probe_bench::unit::default_for(Method::Auto).expect("the unit");
+    let read = |s: &Scene| {
+        let settings = Method::Auto.default_settings();
+        let r = pzt_probe::board::sim::read(s, 1, Method::Auto, &settings, &unit, |_| {})
+            .expect("a reading");
+        (
+            r.resonance.expect("a resonance").0 as f64,
+            r.probe_time.0 as f64,
+        )
+    };
+    for e in [300.0, 1000.0, 2500.0] {
+        let base = Scene::on_modulus_kpa(e).with_noise(NoiseScene::Bench);
+        let (f0, _) = read(&base);
+        let mut moved = base;
+        moved.mech.free_resonance_hz += 0.1;
+        let per_hz = (read(&moved).0 - f0) / 0.1;
+        for rate in [2.0, -2.0] {
+            let rate = rate * FREE_RESONANCE_DRIFT_HZ_S as f64;
+            let (f, t) = read(&base.with_drift(hal_sim::Drift { rate_hz_s: rate }));
+            let k = (f - f0) / (per_hz * rate * t);
+            println!("{e} kPa, {rate} Hz/s over {t:.3} s: epoch {k:.3}");
+            assert!(
+                (k - DRIFT_EPOCH as f64).abs() < 0.05,
+                "{e} kPa, {rate} Hz/s: {k}"
+            );
+        }
+    }
+}

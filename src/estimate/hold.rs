@@ -19,7 +19,10 @@
 //!
 //!    `E_k` = the mean of `exp(λ t)` over window `k`, `λ = −π f0/Q + j 2π (f_d − f_h)`,
 //!    `f_d = f0 sqrt(1 − 1/(4Q²))` — the ring-up from the state `z` that the ring-down left
-//!    towards the steady state `Y_m`, in the drive's rotating frame.
+//!    towards the steady state `Y_m`, in the drive's rotating frame — plus the transient's
+//!    **mirror image** that a window of whole cycles lets through (its counter-rotating part,
+//!    [`mirror`]; about `|λ|/(4·2πf_h)` of the transient, 2 % at `Q` 10, which biased a detuned
+//!    segment's `f0` by about 4 % of the detuning until it was modelled).
 //!
 //! The static admittance `Y_s = G0 + j 2π f_h C0` is **not** fitted: it comes from the air
 //! reference (the settings' `static_capacitance`, `static_conductance`). With it known, the
@@ -172,7 +175,8 @@ impl HoldSettings {
         // With no seed the first segment only places the second, and counts in the joint fit:
         // three two-cycle windows suffice (`min_first`); the second is a hold of its own.
         let refine_ok = if seedless {
-            self.refine.0 >= Self::min_first(self.seed).0 && self.hold.0 - self.refine.0 >= MIN_HOLD_S
+            self.refine.0 >= Self::min_first(self.seed).0
+                && self.hold.0 - self.refine.0 >= MIN_HOLD_S
         } else {
             self.refine.0 == 0.0
                 || (self.refine.0 >= MIN_HOLD_S && self.hold.0 - self.refine.0 >= MIN_HOLD_S)
@@ -833,7 +837,13 @@ fn seg_models(
     };
     let m0 = DriveModel::new(p, f_first);
     let z0 = c32(p.z);
-    let _ = out.push(SegModel::new(g, &m0, z0, [zero, zero, zero, one, j], mirror0));
+    let _ = out.push(SegModel::new(
+        g,
+        &m0,
+        z0,
+        [zero, zero, zero, one, j],
+        mirror0,
+    ));
     if let (Some(&(f_second, t_second, mirror1)), Some(c)) = (segs.get(1), carry) {
         let m1 = DriveModel::new(p, f_second);
         let rho = c32(c.rho);
@@ -1015,13 +1025,7 @@ impl Problem<'_> {
 /// `Q = q_prior.0 ± q_prior.1` (a hold at one frequency measures the phase well and `Q` poorly;
 /// the prior — the seed's `Q` — keeps a noisy hold from trading one for the other).
 pub fn fit(seg: Segment, f_start: f64, q_prior: (f64, f64)) -> Result<HoldFit, Failure> {
-    fit_segments(
-        &[seg],
-        None,
-        (f_start, q_prior.0),
-        q_prior,
-        None,
-    )
+    fit_segments(&[seg], None, (f_start, q_prior.0), q_prior, None)
 }
 
 /// The joint fit of two consecutive segments: one `f0`, `Q`, `g`, and the first segment's
@@ -1053,13 +1057,7 @@ pub fn fit_searched(
     band: (f64, f64),
     q_prior: (f64, f64),
 ) -> Result<HoldFit, Failure> {
-    fit_segments(
-        &[seg],
-        None,
-        (seg.f_h, q_prior.0),
-        q_prior,
-        Some(band),
-    )
+    fit_segments(&[seg], None, (seg.f_h, q_prior.0), q_prior, Some(band))
 }
 
 /// The fit over the segments from `start` (`f0`, `Q`); `search`: the band to search for a start
@@ -1115,7 +1113,13 @@ fn fit_segments(
         gs,
         segs: segs
             .iter()
-            .map(|s| (s.f_h, s.windows.first().map_or(0.0, |x| x.t0), c32(s.mirror)))
+            .map(|s| {
+                (
+                    s.f_h,
+                    s.windows.first().map_or(0.0, |x| x.t0),
+                    c32(s.mirror),
+                )
+            })
             .collect(),
         carry,
         wt: 1.0 / var,
