@@ -296,7 +296,7 @@ fn cli_table_stdin_plot_and_errors() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
         stdout.contains("227.960 ± 0.041")
-            && stdout.contains("280.2 ± 6.0")
+            && stdout.contains("280.2 ± 3.8")
             && stdout.contains("29.96 ± 0.01"),
         "{stdout}"
     );
