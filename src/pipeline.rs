@@ -79,8 +79,13 @@ pub fn conclude(
         Ok(e) => e,
         // A press that moved, slipped or lifted during the reading explains whatever the
         // estimator then made of it (a moving resonance reads as interference, lost lock, ...):
-        // the load cell's verdict is the one to report. A fault of the instrument stays.
-        Err(f) => return fail(press.filter(|_| !f.is_fault()).unwrap_or(f)),
+        // the load cell's verdict is the one to report. A fault of the instrument stays, and so
+        // does the estimator's own failure when the load cell has no verdict on the press (no
+        // force: a reading that failed before the cell's first conversion is not a cable fault).
+        Err(f) => {
+            let verdict = press.filter(|p| *p != Failure::NoForce && !f.is_fault());
+            return fail(verdict.unwrap_or(f));
+        }
     };
     let mut r = Reading {
         status: Status::Ok,
@@ -142,4 +147,43 @@ pub fn conclude(
     r.modulus_sigma = Some(m.sigma);
     r.modulus_sigma_repeat = Some(m.sigma_repeat);
     r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::loadcell::RawForce;
+
+    /// A failed estimate with the load cell silent over the reading's window (a reading that
+    /// failed before the cell's first conversion) reports the estimator's failure, not
+    /// `no_force`; a press the cell judges (too light) still explains the failure; an
+    /// estimate that succeeded without a force is `no_force`.
+    #[test]
+    fn a_silent_load_cell_does_not_hide_the_estimators_failure() {
+        let unit = crate::board::sim_factory::profile().expect("the factory profile");
+        assert!(unit.load_cell.is_some());
+        let t = Seconds(0.01);
+        let r = conclude(Method::Hold, Err(Failure::NoResonance), &unit, t, 2, None);
+        assert_eq!(r.status, Status::Failed(Failure::NoResonance));
+        let cal = unit.load_cell.expect("a load cell");
+        // 5 mN: below the window.
+        let light: RawForce = cal.stated(crate::units::Newtons(0.005));
+        let r = conclude(
+            Method::Hold,
+            Err(Failure::NoResonance),
+            &unit,
+            t,
+            2,
+            Some(light),
+        );
+        assert_eq!(r.status, Status::Failed(Failure::TooLight));
+        let est = Estimate {
+            resonance: crate::units::Hz(230.0),
+            sigma: crate::units::Hz(0.01),
+            q: Some(10.0),
+            points_used: 8,
+        };
+        let r = conclude(Method::Hold, Ok(est), &unit, t, 8, None);
+        assert_eq!(r.status, Status::Failed(Failure::NoForce));
+    }
 }
