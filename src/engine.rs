@@ -28,7 +28,9 @@ pub struct PointPlan {
     pub cycles: u32,
     /// Consecutive integration windows (0 and 1 both mean one). Window `k + 1` starts at the
     /// cycle boundary where window `k` ends, with no gap: a ring-down is demodulated this way.
-    /// Each window must be longer than one batch so that at most one completes per batch.
+    /// Each window must be at least half a batch long ([`MIN_WINDOW_SAMPLES`]) so that at most
+    /// [`MAX_POINTS_PER_BATCH`] complete per batch; a further one is dropped and counted as an
+    /// overrun.
     pub windows: u16,
     /// Caller's tag, echoed in the result (must differ from the previous plan's).
     pub tag: u16,
@@ -69,6 +71,16 @@ enum Stage {
 }
 
 const RING: usize = 4;
+
+/// Most windows that close in one batch: a window of at least [`MIN_WINDOW_SAMPLES`].
+pub const MAX_POINTS_PER_BATCH: usize = 2;
+
+/// Shortest window a plan may ask for, samples: half a batch, so that at most
+/// [`MAX_POINTS_PER_BATCH`] close in one (one cycle at up to 400 Hz at 10 kHz).
+pub const MIN_WINDOW_SAMPLES: u32 = (crate::reading::BATCH / 2) as u32;
+
+/// The windows that closed in one batch, in order.
+pub type Points = heapless::Vec<PointRaw, MAX_POINTS_PER_BATCH>;
 
 /// Engine errors (reported, never silent).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -223,8 +235,10 @@ impl SampleEngine {
     }
 
     /// Demodulate the ADC batch captured while the oldest not yet demodulated DAC batch played.
-    /// Returns a point when its integration window closed in this batch.
-    pub fn demodulate(&mut self, adc: &[AdcFrame]) -> Option<PointRaw> {
+    /// Returns the points whose integration windows closed in this batch (at most
+    /// [`MAX_POINTS_PER_BATCH`]; a window shorter than [`MIN_WINDOW_SAMPLES`] could close a
+    /// third, which is dropped and counted in [`overruns`](Self::overruns)).
+    pub fn demodulate(&mut self, adc: &[AdcFrame]) -> Points {
         let info = if self.demodulated != self.generated {
             let i = self.ring[self.demodulated as usize % RING];
             self.demodulated = self.demodulated.wrapping_add(1);
@@ -246,7 +260,7 @@ impl SampleEngine {
         }
         let mut phase = info.start_phase;
         let ftw = info.ftw;
-        let mut out = None;
+        let mut out = Points::new();
         for f in adc {
             if let Stage::Settling(n) = self.stage {
                 self.stage = if n == 0 {
@@ -278,7 +292,7 @@ impl SampleEngine {
                     Stage::Integrating(k) if k <= 1 => {
                         self.stage = Stage::Done;
                         if let Some(plan) = info.plan {
-                            out = Some(PointRaw {
+                            let point = PointRaw {
                                 plan,
                                 sums: self.sums,
                                 end_sample: self.samples,
@@ -286,7 +300,10 @@ impl SampleEngine {
                                 since_load: (self.samples.saturating_sub(self.load_sample))
                                     .min(u32::MAX as u64)
                                     as u32,
-                            });
+                            };
+                            if out.push(point).is_err() {
+                                self.overruns = self.overruns.saturating_add(1);
+                            }
                             if self.window.saturating_add(1) < plan.windows {
                                 self.window += 1;
                                 self.sums = LockInSums::default();
@@ -332,7 +349,7 @@ mod tests {
     }
 
     /// One batch of 50 samples with the DAC looped straight back into both ADC channels.
-    fn loopback_batch(e: &mut SampleEngine) -> Option<PointRaw> {
+    fn loopback_batch(e: &mut SampleEngine) -> Points {
         let mut dac = [DacCode::MID; 50];
         let mut adc = [AdcFrame::default(); 50];
         e.generate(&mut dac);
@@ -353,8 +370,8 @@ mod tests {
         let mut e = loaded(237.0, 1000, 123, 10, 1, 1);
         let mut got = None;
         for _ in 0..100 {
-            if let Some(p) = loopback_batch(&mut e) {
-                got = Some(p);
+            if let Some(p) = loopback_batch(&mut e).first() {
+                got = Some(*p);
                 break;
             }
         }
@@ -380,9 +397,7 @@ mod tests {
         let mut e = loaded(241.0, 800, 10, 2, 6, 3);
         let mut got = std::vec::Vec::new();
         for _ in 0..40 {
-            if let Some(p) = loopback_batch(&mut e) {
-                got.push(p);
-            }
+            got.extend(loopback_batch(&mut e));
         }
         assert_eq!(got.len(), 6);
         for (k, w) in got.windows(2).enumerate() {
@@ -394,5 +409,32 @@ mod tests {
             );
         }
         assert!(!e.busy());
+    }
+
+    /// Windows of one cycle (4.1 ms at 241 Hz, shorter than a 5 ms batch): two may
+    /// close in one batch, and every one is handed on, in order, gap-free; none is an overrun.
+    #[test]
+    fn windows_shorter_than_a_batch_are_all_handed_on() {
+        let mut e = loaded(241.0, 800, 10, 1, 12, 5);
+        let mut got = std::vec::Vec::new();
+        let mut two = 0;
+        for _ in 0..40 {
+            let batch = loopback_batch(&mut e);
+            two += (batch.len() == 2) as usize;
+            got.extend(batch);
+        }
+        assert_eq!(got.len(), 12);
+        assert!(two > 0, "no batch closed two windows");
+        for (k, w) in got.windows(2).enumerate() {
+            assert_eq!(w[0].window as usize, k);
+            assert_eq!(
+                w[1].end_sample - w[0].end_sample,
+                w[1].sums.reference.n as u64
+            );
+        }
+        assert_eq!(e.overruns(), 0);
+        assert!(!e.busy());
+        // 400 Hz is the fastest one-cycle window of half a batch.
+        assert!(10_000.0 / 400.0 >= MIN_WINDOW_SAMPLES as f64);
     }
 }

@@ -185,6 +185,8 @@ pub struct SyncSource<'a, S> {
     pub engine: &'a mut SampleEngine,
     /// The first error the stream reported.
     pub error: Option<StreamError>,
+    /// A second window that closed in the batch of the one [`PointSource::next`] returned.
+    held: Option<PointRaw>,
 }
 
 impl<'a, S: SampleStream> SyncSource<'a, S> {
@@ -194,6 +196,7 @@ impl<'a, S: SampleStream> SyncSource<'a, S> {
             stream,
             engine,
             error: None,
+            held: None,
         }
     }
 }
@@ -213,6 +216,9 @@ impl<S: SampleStream + ForceSource> PointSource for SyncSource<'_, S> {
         self.error.is_none()
     }
     async fn next(&mut self, plan: &PointPlan, budget: u64) -> Option<PointRaw> {
+        if let Some(raw) = self.held.take().filter(|r| r.plan == *plan) {
+            return Some(raw);
+        }
         let mut dac = [DacCode::MID; BATCH];
         let mut adc = [AdcFrame::default(); BATCH];
         let mut used = 0u64;
@@ -223,10 +229,10 @@ impl<S: SampleStream + ForceSource> PointSource for SyncSource<'_, S> {
                 return None;
             }
             used += BATCH as u64;
-            if let Some(raw) = self.engine.demodulate(&adc) {
-                if raw.plan == *plan {
-                    return Some(raw);
-                }
+            let mut points = self.engine.demodulate(&adc).into_iter();
+            if let Some(raw) = points.by_ref().find(|r| r.plan == *plan) {
+                self.held = points.find(|r| r.plan == *plan);
+                return Some(raw);
             }
         }
         None
@@ -247,6 +253,7 @@ impl<S: SampleStream + ForceSource> PointSource for SyncSource<'_, S> {
             }
             let _ = self.engine.demodulate(&adc);
             done += BATCH as u64;
+            self.held = None;
         }
     }
     fn contact_force(&mut self, from: u64, to: u64) -> Option<RawForce> {

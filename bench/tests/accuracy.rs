@@ -118,7 +118,7 @@ fn a_steady_drift_moves_the_reading_by_its_epoch() {
     let unit = probe_bench::unit::default_for(Method::Auto).expect("the unit");
     let read = |s: &Scene| {
         let settings = Method::Auto.default_settings();
-        let r = pzt_probe::board::sim::read(s, 1, Method::Auto, &settings, &unit, |_| {})
+        let r = pzt_probe::board::sim::read(s, 1, Method::Auto, settings, &unit, |_| {})
             .expect("a reading");
         (
             r.resonance.expect("a resonance").0 as f64,

@@ -232,6 +232,8 @@ mod harness {
         /// reads it (not counted: it is not the reading's work).
         load_cell: Option<board::LoadCell>,
         forces: ForceLog,
+        /// A second window that closed in the batch of the one `next` returned.
+        held: Option<PointRaw>,
     }
 
     impl PointSource for CostSource<'_> {
@@ -250,6 +252,9 @@ mod harness {
             true
         }
         async fn next(&mut self, plan: &PointPlan, budget: u64) -> Option<PointRaw> {
+            if let Some(raw) = self.held.take().filter(|r| r.plan == *plan) {
+                return Some(raw);
+            }
             let mut used = 0u64;
             while used <= budget {
                 // The plant plays the DAC batch and fills the ADC batch: not counted.
@@ -269,7 +274,9 @@ mod harness {
                 self.cost.borrow_mut().batch(board::elapsed(t0));
                 compiler_fence(Ordering::SeqCst);
                 used += BATCH as u64;
-                if let Some(raw) = point.filter(|r| r.plan == *plan) {
+                let mut points = point.into_iter();
+                if let Some(raw) = points.by_ref().find(|r| r.plan == *plan) {
+                    self.held = points.find(|r| r.plan == *plan);
                     return Some(raw);
                 }
             }
@@ -287,6 +294,7 @@ mod harness {
                 self.engine.generate(dac);
                 done += BATCH as u64;
             }
+            self.held = None;
         }
         fn contact_force(&mut self, from: u64, to: u64) -> Option<RawForce> {
             self.forces.over(from, to, self.scale().sample_rate.0)
@@ -329,6 +337,7 @@ mod harness {
             stream: board::Stream::new(SimProbe::new(scene, SEED)),
             engine: SampleEngine::new(),
             intake: None,
+            held: None,
             cost,
             load_cell: board::load_cell(),
             forces: ForceLog::new(),

@@ -284,9 +284,9 @@ mod app {
                 None => engine.stop(),
             }
         }
-        let point = engine.demodulate(adc);
+        let points = engine.demodulate(adc);
         engine.generate(dac);
-        if let Some(p) = point {
+        for p in points {
             if cx.local.point_tx.try_send(p).is_err() {
                 DROPPED.fetch_add(1, Ordering::Relaxed);
             }

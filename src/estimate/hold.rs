@@ -109,22 +109,25 @@ impl HoldSettings {
         static_conductance: Siemens(0.0),
     };
 
-    /// The fast hold: no seed ring-down; a first segment at `seed` (the band centre) of the
-    /// filters' settle and three two-cycle windows, whose searched fit places the second;
-    /// 95 ms on that estimate; both segments in one fit. 125 ms of segments, 9.5 τ at 500 kPa
+    /// The fast hold: no seed ring-down; a 20 ms first segment at `seed` (the band centre): the
+    /// filters' settle and four one-cycle windows, whose searched fit places the second; 105 ms
+    /// on that estimate; both segments in one fit. 125 ms of segments, about 9 τ at 500 kPa
     /// (`docs/speed-accuracy.md`). Not auto's first stage: see `measure::auto_hold`.
     pub const FAST: Self = Self {
         seed_burst: Seconds(0.0),
         seed_ring: Seconds(0.0),
-        refine: Seconds(0.03),
+        refine: Seconds(0.02),
         hold: Seconds(0.125),
         ..Self::DEFAULT
     };
 
-    /// The shortest first segment of a hold with no seed driven at `seed`: the filters' settle
-    /// and three windows of two cycles (the fewest its searched fit takes), s.
-    pub fn min_first(seed: Hz) -> Seconds {
-        Seconds(ON_SETTLE_S as f32 + (FIRST_WINDOWS * 2) as f32 / seed.0.max(1.0))
+    /// The shortest first segment of a hold with no seed driven at `seed` on a front end
+    /// sampling at `fs`: the filters' settle and three of the first segment's windows (the
+    /// fewest its searched fit takes, [`first_cycles`] each), s.
+    pub fn min_first(seed: Hz, fs: Hz) -> Seconds {
+        let f = seed.0.max(1.0);
+        let cycles = first_cycles(f as f64, fs.0 as f64) as f32;
+        Seconds(ON_SETTLE_S as f32 + FIRST_WINDOWS as f32 * cycles / f)
     }
 
     /// The seed ring-down's settings, bursting at `seed`.
@@ -175,7 +178,7 @@ impl HoldSettings {
         // With no seed the first segment only places the second, and counts in the joint fit:
         // three two-cycle windows suffice (`min_first`); the second is a hold of its own.
         let refine_ok = if seedless {
-            self.refine.0 >= Self::min_first(self.seed).0
+            self.refine.0 >= Self::min_first(self.seed, scale.sample_rate).0
                 && self.hold.0 - self.refine.0 >= MIN_HOLD_S
         } else {
             self.refine.0 == 0.0
@@ -256,9 +259,16 @@ const MIN_HOLD_S: f32 = 0.05;
 /// Most windows of the seed ring-down (it uses three or four of two cycles; eight cover a
 /// `seed_ring` of 55 ms at the band's top).
 const SEED_WINDOWS: usize = 8;
-/// Windows of a hold's first segment with no seed (two cycles each): the fewest its searched
-/// fit takes ([`HoldSettings::min_first`]).
+/// Windows of a hold's first segment with no seed: the fewest its searched fit takes
+/// ([`HoldSettings::min_first`]).
 const FIRST_WINDOWS: usize = 3;
+
+/// Whole cycles of a first segment's window at `f` Hz sampled at `fs`: the fewest that span
+/// half a batch (`engine::MIN_WINDOW_SAMPLES`; one cycle up to 400 Hz at 10 kHz).
+fn first_cycles(f: f64, fs: f64) -> f64 {
+    let per_cycle = fs / f.max(1.0);
+    libm::ceil(crate::engine::MIN_WINDOW_SAMPLES as f64 / per_cycle).max(1.0)
+}
 /// The `Q` a hold with no seed starts from, and its prior's relative standard uncertainty (weak:
 /// tissue gives 5–20).
 const NOMINAL_Q: f64 = 10.0;
@@ -349,10 +359,13 @@ impl Hold {
                 let settle = if self.segment == 0 { ON_SETTLE_S } else { 0.0 };
                 let per_cycle = 1.0 / self.f_hold;
                 let hold = self.segment_length() - settle;
-                let fewest = if self.s.refine.0 > 0.0 {
-                    2.0
-                } else {
-                    MIN_SINGLE_CYCLES
+                // A first segment (it only places the second, and it is short) takes windows as
+                // short as the engine passes on (half a batch: one cycle up to 400 Hz), the
+                // second two cycles, a single hold four.
+                let fewest = match (self.s.refine.0 > 0.0, self.segment) {
+                    (true, 0) => first_cycles(self.f_hold, self.fs),
+                    (true, _) => 2.0,
+                    (false, _) => MIN_SINGLE_CYCLES,
                 };
                 let room = match (self.s.refine.0 > 0.0, self.segment) {
                     (true, 0) => MAX_WINDOWS / 2,
