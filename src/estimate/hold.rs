@@ -38,7 +38,6 @@
 //! longer matches the air reference (a different cable or a drifted `C0` biases `f0` by
 //! `f0 ΔB / (2 Q g)`: this is the method's systematic, documented in `docs/methods.md`).
 
-use super::model::Motional;
 use super::ringdown::{Ringdown, RingdownSettings};
 use super::Estimate;
 use crate::dsp::dds::{frequency_hz, tuning_word};
@@ -172,7 +171,8 @@ impl HoldSettings {
         // With no seed the first segment only places the second, and counts in the joint fit:
         // three two-cycle windows suffice (`min_first`); the second is a hold of its own.
         let refine_ok = if seedless {
-            self.refine.0 >= Self::min_first(self.seed).0 && self.hold.0 - self.refine.0 >= MIN_HOLD_S
+            self.refine.0 >= Self::min_first(self.seed).0
+                && self.hold.0 - self.refine.0 >= MIN_HOLD_S
         } else {
             self.refine.0 == 0.0
                 || (self.refine.0 >= MIN_HOLD_S && self.hold.0 - self.refine.0 >= MIN_HOLD_S)
@@ -748,23 +748,41 @@ fn c32(x: C64) -> C32 {
 }
 
 impl DriveModel {
+    /// The model at `p`'s `f0`, `Q` for a drive at `f_h`: [`super::model::Motional`]'s `h`
+    /// and derivatives and the transient's `λ`, formed in `f32` from the detuning `f0 − f_h`
+    /// (taken in `f64`, the one difference of near-equal numbers): `u = −(f0 − f_h)(f_h + f0)/(f0 f_h)` and
+    /// `f_d − f_h = (f0 − f_h) − f0 (1 − sqrt(1 − 1/(4Q²)))` lose nothing to cancellation, so
+    /// every value keeps `f32`'s relative precision (1e-7) — what the `f64` model rounded to
+    /// `f32` gave, at a sixth of the work on the Cortex-M4F (whose FPU is single precision).
     fn new(p: &Params, f_h: f64) -> Self {
-        let (f0, q) = (p.f0, p.q);
-        let m = Motional::at(f0, q, f_h);
-        let (dh_df0, dh_dq) = m.derivatives(f0, q, f_h);
-        let root = libm::sqrt((1.0 - 0.25 / (q * q)).max(1e-12));
-        let lam = C64::new(-PI * f0 / q, 2.0 * PI * (f0 * root - f_h));
+        use core::f32::consts::PI as PI32;
+        let d = (p.f0 - f_h) as f32;
+        let (f0, q, fh) = (p.f0 as f32, p.q as f32, f_h as f32);
+        let u = -d * (fh + f0) / (f0 * fh);
+        let x = q * u;
+        let den = 1.0 + x * x;
+        let h = C32::new(1.0 / den, -x / den);
+        // ∂h/∂f0 = −j Q h² ∂u/∂f0, ∂h/∂Q = −j u h² ([`super::model::Motional::derivatives`]).
+        let h2 = h * h;
+        let du_df0 = -fh / (f0 * f0) - 1.0 / fh;
+        let minus_j = |x: f32| C32::new(x * h2.im, -x * h2.re);
+        let quarter = 0.25 / (q * q);
+        let root = libm::sqrtf((1.0 - quarter).max(1e-12));
+        // 1 − root, without the cancellation.
+        let one_less = if quarter < 1.0 {
+            quarter / (1.0 + root)
+        } else {
+            1.0 - root
+        };
+        let lam = C32::new(-PI32 * f0 / q, 2.0 * PI32 * (d - f0 * one_less));
         Self {
-            h: c32(m.h),
-            dh: [c32(dh_df0), c32(dh_dq)],
-            lam: c32(lam),
-            mu: c32(lam.conj() - C64::new(0.0, 4.0 * PI * f_h)),
+            h,
+            dh: [minus_j(q * du_df0), minus_j(u)],
+            lam,
+            mu: C32::new(lam.re, -lam.im - 4.0 * PI32 * fh),
             dlam: [
-                c32(C64::new(-PI / q, 2.0 * PI * root)),
-                c32(C64::new(
-                    PI * f0 / (q * q),
-                    2.0 * PI * f0 * 0.25 / (q * q * q * root),
-                )),
+                C32::new(-PI32 / q, 2.0 * PI32 * root),
+                C32::new(PI32 * f0 / (q * q), 2.0 * PI32 * f0 * quarter / (q * root)),
             ],
         }
     }
@@ -833,7 +851,13 @@ fn seg_models(
     };
     let m0 = DriveModel::new(p, f_first);
     let z0 = c32(p.z);
-    let _ = out.push(SegModel::new(g, &m0, z0, [zero, zero, zero, one, j], mirror0));
+    let _ = out.push(SegModel::new(
+        g,
+        &m0,
+        z0,
+        [zero, zero, zero, one, j],
+        mirror0,
+    ));
     if let (Some(&(f_second, t_second, mirror1)), Some(c)) = (segs.get(1), carry) {
         let m1 = DriveModel::new(p, f_second);
         let rho = c32(c.rho);
@@ -910,7 +934,8 @@ fn evaluate(
         }
         let (a, len) = (x.a, x.len);
         if x.gap {
-            ea = cexp(m.lam * a);
+            // A segment's first window starts at its origin: exp(0) = 1 exactly.
+            ea = if a == 0.0 { one } else { cexp(m.lam * a) };
         }
         let decay = if cache[0].0 == len {
             cache[0].1
@@ -996,17 +1021,87 @@ impl Problem<'_> {
         evaluate(self, p, jac, None)
     }
 
+    /// A candidate of the start search of a one-segment problem: the linear parameters
+    /// `(g, z)` at `f0`, `q` solved by least squares (the model is linear in them:
+    /// `y_k = g a_k + Re z b_k + Im z c_k`, the three columns formed once, in `f32`, a 3×3
+    /// Cholesky solve), and the χ² there (from the residuals, not the normal equations, so no
+    /// cancellation). A third of the work of [`Self::linear_start`], which forms all five
+    /// columns and evaluates twice. `None` for two segments or a singular system.
+    fn linear_candidate(&self, f0: f64, q: f64) -> Option<(Params, f64)> {
+        let [(f_h, _, mirror)] = self.segs[..] else {
+            return None;
+        };
+        let one = C32::new(1.0, 0.0);
+        let j = C32::new(0.0, 1.0);
+        let at = Params {
+            f0,
+            q,
+            g: 0.0,
+            z: C64::new(0.0, 0.0),
+        };
+        let m = DriveModel::new(&at, f_h);
+        let (inv_lam, inv_mu) = (one / m.lam, one / m.mu);
+        let mut cols = [[C32::new(0.0, 0.0); 3]; MAX_WINDOWS];
+        let mut a = [[0.0f32; 3]; 3];
+        let mut b = [0.0f32; 3];
+        let mut ea = one;
+        let mut cache: [(f32, C32); 2] = [(-1.0, one); 2];
+        for (x, c) in self.w.iter().zip(cols.iter_mut()) {
+            if x.gap {
+                ea = if x.a == 0.0 { one } else { cexp(m.lam * x.a) };
+            }
+            let decay = if cache[0].0 == x.len {
+                cache[0].1
+            } else if cache[1].0 == x.len {
+                cache[1].1
+            } else {
+                cache[1] = cache[0];
+                cache[0] = (x.len, cexp(m.lam * x.len));
+                cache[0].1
+            };
+            let eb = ea * decay;
+            let e = (eb - ea) * inv_lam / x.len;
+            // The mirror image's factor on conj(transient at the window's start).
+            let mp = mirror * (decay.conj() - one) * inv_mu / x.len;
+            let image = mp * ea.conj();
+            *c = [
+                m.h * (one - e) - mp * (m.h * ea).conj(),
+                e + image,
+                j * (e - image),
+            ];
+            for i in 0..3 {
+                let ci = c[i] * x.wl;
+                b[i] += ci.re * x.y.re + ci.im * x.y.im;
+                for k in 0..=i {
+                    a[i][k] += ci.re * c[k].re + ci.im * c[k].im;
+                }
+            }
+            ea = eb;
+        }
+        let sol = cholesky3(&a, &b)?;
+        let mut chi2 = 0.0f32;
+        for (x, c) in self.w.iter().zip(cols.iter()) {
+            let r = x.y - c[0] * sol[0] - c[1] * sol[1] - c[2] * sol[2];
+            chi2 += x.wl * r.norm_sqr();
+        }
+        let p = Params {
+            g: sol[0] as f64,
+            z: C64::new(sol[1] as f64, sol[2] as f64),
+            ..at
+        };
+        let c = chi2 as f64 * self.wt;
+        c.is_finite().then_some((p, c))
+    }
+
     /// The linear parameters (g, z) at `p`'s `f0`, `Q`: one Gauss–Newton step on them alone
-    /// (the model is linear in them), and the χ² there.
-    fn linear_start(&self, p: &Params) -> Option<(Params, f64)> {
+    /// (the model is linear in them).
+    fn linear_start(&self, p: &Params) -> Option<Params> {
         let (_, jtj, jtr) = self.eval(p, true);
         let m3: [[f64; 3]; 3] =
             core::array::from_fn(|i| core::array::from_fn(|j| jtj[i + 2][j + 2]));
         let r3: [f64; 3] = core::array::from_fn(|i| jtr[i + 2]);
         let step = damped_solve(&m3, &r3, 0.0)?;
-        let t = p.stepped(&[0.0, 0.0, step[0], step[1], step[2]]);
-        let c = self.eval(&t, false).0;
-        c.is_finite().then_some((t, c))
+        Some(p.stepped(&[0.0, 0.0, step[0], step[1], step[2]]))
     }
 }
 
@@ -1015,13 +1110,7 @@ impl Problem<'_> {
 /// `Q = q_prior.0 ± q_prior.1` (a hold at one frequency measures the phase well and `Q` poorly;
 /// the prior — the seed's `Q` — keeps a noisy hold from trading one for the other).
 pub fn fit(seg: Segment, f_start: f64, q_prior: (f64, f64)) -> Result<HoldFit, Failure> {
-    fit_segments(
-        &[seg],
-        None,
-        (f_start, q_prior.0),
-        q_prior,
-        None,
-    )
+    fit_segments(&[seg], None, (f_start, q_prior.0), q_prior, None)
 }
 
 /// The joint fit of two consecutive segments: one `f0`, `Q`, `g`, and the first segment's
@@ -1053,13 +1142,7 @@ pub fn fit_searched(
     band: (f64, f64),
     q_prior: (f64, f64),
 ) -> Result<HoldFit, Failure> {
-    fit_segments(
-        &[seg],
-        None,
-        (seg.f_h, q_prior.0),
-        q_prior,
-        Some(band),
-    )
+    fit_segments(&[seg], None, (seg.f_h, q_prior.0), q_prior, Some(band))
 }
 
 /// The fit over the segments from `start` (`f0`, `Q`); `search`: the band to search for a start
@@ -1115,7 +1198,13 @@ fn fit_segments(
         gs,
         segs: segs
             .iter()
-            .map(|s| (s.f_h, s.windows.first().map_or(0.0, |x| x.t0), c32(s.mirror)))
+            .map(|s| {
+                (
+                    s.f_h,
+                    s.windows.first().map_or(0.0, |x| x.t0),
+                    c32(s.mirror),
+                )
+            })
             .collect(),
         carry,
         wt: 1.0 / var,
@@ -1130,7 +1219,7 @@ fn fit_segments(
     };
     // Start: the seed's f0 and Q (or the search's best), the linear parameters from one
     // Gauss–Newton step on them alone.
-    let (mut p, mut c) = match search {
+    let mut p = match search {
         None => pb.linear_start(&at(f_start)).ok_or(Failure::NoResonance)?,
         Some((lo, hi)) => {
             if !(lo > 0.0) || !(hi > lo) || !hi.is_finite() {
@@ -1141,29 +1230,32 @@ fn fit_segments(
             let mut best: Option<(Params, f64)> = None;
             for k in 0..=n {
                 let f = lo + (hi - lo) * k as f64 / n as f64;
-                if let Some((t, tc)) = pb.linear_start(&at(f)) {
+                if let Some((t, tc)) = pb.linear_candidate(f, q0) {
                     // Only a positive motional conductance is a resonance.
                     if t.g > 0.0 && best.is_none_or(|(_, bc)| tc < bc) {
                         best = Some((t, tc));
                     }
                 }
             }
-            best.ok_or(Failure::NoResonance)?
+            best.ok_or(Failure::NoResonance)?.0
         }
     };
-    c += prior(p.q);
     let mut lambda = 1e-3;
     // The normal equations at the current point, with the prior on Q; recomputed only when a
     // step is taken (a rejected step costs one χ² evaluation).
     // The residuals come with them (the last call's are the fit's, for the hum check).
     let mut res = [C32::new(0.0, 0.0); MAX_WINDOWS];
+    // The start's χ² comes with them (the same sum a χ²-only evaluation makes).
     let normal = |p: &Params, res: &mut [C32]| {
-        let (_, mut jtj, mut jtr) = evaluate(&pb, p, true, Some(res));
+        let (chi2, mut jtj, mut jtr) = evaluate(&pb, p, true, Some(res));
         jtj[1][1] += q_w;
         jtr[1] += (q_start - p.q) * q_w;
-        (jtj, jtr)
+        (chi2 + prior(p.q), jtj, jtr)
     };
-    let (mut jtj, mut jtr) = normal(&p, &mut res);
+    let (mut c, mut jtj, mut jtr) = normal(&p, &mut res);
+    if !c.is_finite() {
+        return Err(Failure::NoResonance);
+    }
     for _ in 0..30 {
         let Some(step) = damped_solve(&jtj, &jtr, lambda) else {
             lambda *= 10.0;
@@ -1194,7 +1286,7 @@ fn fit_segments(
             let done = c - tc <= 1e-2;
             (p, c) = (t, tc);
             lambda = (lambda * 0.3).max(1e-12);
-            (jtj, jtr) = normal(&p, &mut res);
+            (_, jtj, jtr) = normal(&p, &mut res);
             if done {
                 break;
             }
@@ -1230,13 +1322,57 @@ fn fit_segments(
     })
 }
 
+/// `x` with `a x = b` for a symmetric positive-definite 3×3 `a` (its lower triangle), in
+/// `f32`, by Cholesky factorisation; `None` when `a` is not positive definite.
+#[allow(clippy::needless_range_loop)] // triangular index arithmetic reads best as indices
+fn cholesky3(a: &[[f32; 3]; 3], b: &[f32; 3]) -> Option<[f32; 3]> {
+    let mut l = [[0.0f32; 3]; 3];
+    let mut rd = [0.0f32; 3];
+    for i in 0..3 {
+        for k in 0..=i {
+            let mut s = a[i][k];
+            for m in 0..k {
+                s -= l[i][m] * l[k][m];
+            }
+            if i == k {
+                if !(s > 0.0) || !s.is_finite() {
+                    return None;
+                }
+                l[i][i] = libm::sqrtf(s);
+                rd[i] = 1.0 / l[i][i];
+            } else {
+                l[i][k] = s * rd[k];
+            }
+        }
+    }
+    let mut y = [0.0f32; 3];
+    for i in 0..3 {
+        let mut s = b[i];
+        for m in 0..i {
+            s -= l[i][m] * y[m];
+        }
+        y[i] = s * rd[i];
+    }
+    let mut x = [0.0f32; 3];
+    for i in (0..3).rev() {
+        let mut s = y[i];
+        for m in i + 1..3 {
+            s -= l[m][i] * x[m];
+        }
+        x[i] = s * rd[i];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
 /// `exp(z)` by the `libm` crate's `expf`, `cosf`, `sinf`: the same bits on the host and the
 /// target, whatever `num-traits` features another crate of the build enables (with `std` its
 /// `Float::exp` is the platform's, which differs in the last bits and made the host's readings
 /// depend on which binary took them).
 fn cexp(z: num_complex::Complex32) -> num_complex::Complex32 {
     let m = libm::expf(z.re);
-    num_complex::Complex32::new(m * libm::cosf(z.im), m * libm::sinf(z.im))
+    // One argument reduction for both (the same bits as `sinf`, `cosf`).
+    let (sin, cos) = libm::sincosf(z.im);
+    num_complex::Complex32::new(m * cos, m * sin)
 }
 
 #[cfg(test)]
