@@ -44,7 +44,7 @@ use crate::dsp::dds::{frequency_hz, tuning_word};
 use crate::dsp::lockin::{solve, ChannelSums, ReferenceSums};
 use crate::engine::{PointPlan, PointRaw};
 use crate::hal::FrontEndScale;
-use crate::linalg::{damped_solve, spd_inverse};
+use crate::linalg::spd_inverse;
 use crate::status::Failure;
 use crate::sweep::{
     amplitude_codes, check_band, check_durations, check_frequency, Drive, SettingsError,
@@ -892,22 +892,15 @@ fn seg_models(
 /// (`docs/firmware.md` has the measured totals). `f32` carries the model values with a relative
 /// error of about 1e-7 of `g`, far below the noise of any window (1e-3 of `g` at the bench noise
 /// and the longest hold).
-fn evaluate(
-    pb: &Problem,
-    p: &Params,
-    jac: bool,
-    mut res: Option<&mut [C32]>,
-) -> (f64, [[f64; 5]; 5], [f64; 5]) {
+fn evaluate(pb: &Problem, p: &Params, jac: bool, mut res: Option<&mut [C32]>) -> (f64, Normal) {
     let (w, gs, wt) = (&pb.w[..], pb.gs, pb.wt);
     let (segs, carry) = (&pb.segs[..], pb.carry);
     let one = C32::new(1.0, 0.0);
     let (f0, q) = (p.f0, p.q);
-    let mut jtj = [[0.0f64; 5]; 5];
-    let mut jtr = [0.0f64; 5];
     let models = seg_models(p, segs, carry);
     // The normal equations' sums (at most 16 products each) in f32, each column scaled to about
-    // unit size first; f32's relative precision (1e-7) is far finer than what the steps and the
-    // covariance need.
+    // unit size first ([`Normal`]); f32's relative precision (1e-7) is far finer than what the
+    // steps and the covariance need.
     let scale: [f32; 5] = [
         1.0 / (gs * (q / f0) as f32),
         1.0 / (gs / q as f32),
@@ -926,7 +919,7 @@ fn evaluate(
     let mut chi2 = 0.0f32;
     for (i, x) in w.iter().enumerate() {
         let Some(m) = models.get(x.seg as usize) else {
-            return (f64::INFINITY, jtj, jtr);
+            return (f64::INFINITY, Normal::default());
         };
         if x.seg != seg {
             seg = x.seg;
@@ -991,20 +984,45 @@ fn evaluate(
         }
         ea = eb;
     }
-    if jac {
-        // Unscaled: five divisions, then two products an entry (the lower triangle, mirrored).
-        let inv: [f64; 5] = core::array::from_fn(|i| 1.0 / scale[i] as f64);
+    let normal = Normal {
+        jtj: jtj32,
+        jtr: jtr32,
+        scale,
+    };
+    (chi2 as f64 * wt, normal)
+}
+
+/// The normal equations of the fit over (f0, Q, g, Re z, Im z) in `f32`, each column of the
+/// Jacobian multiplied by `scale` (to about unit size) and the weight `1/var` left out:
+/// `JᵀWJ = wt S⁻¹ jtj S⁻¹`, `JᵀW r = wt S⁻¹ jtr` (`S = diag(scale)`). The steps are solved
+/// in these units ([`spd_solve32`]: on the Cortex-M4F's single-precision FPU, where the `f64`
+/// solve was emulated, a tenth of the work); only the covariance is formed in `f64`.
+#[derive(Clone, Copy, Debug, Default)]
+struct Normal {
+    /// `JᵀJ` (scaled), lower triangle.
+    jtj: [[f32; 5]; 5],
+    /// `Jᵀ r` (scaled).
+    jtr: [f32; 5],
+    /// The columns' scale.
+    scale: [f32; 5],
+}
+
+impl Normal {
+    /// `JᵀWJ` and `JᵀW r` in `f64`, unscaled, for weight `wt`.
+    fn unscaled(&self, wt: f64) -> ([[f64; 5]; 5], [f64; 5]) {
+        let (mut jtj, mut jtr) = ([[0.0f64; 5]; 5], [0.0f64; 5]);
+        let inv: [f64; 5] = core::array::from_fn(|i| 1.0 / self.scale[i] as f64);
         for i in 0..5 {
             let wi = wt * inv[i];
-            jtr[i] = wi * jtr32[i] as f64;
+            jtr[i] = wi * self.jtr[i] as f64;
             for j in 0..=i {
-                let v = wi * inv[j] * jtj32[i][j] as f64;
+                let v = wi * inv[j] * self.jtj[i][j] as f64;
                 jtj[i][j] = v;
                 jtj[j][i] = v;
             }
         }
+        (jtj, jtr)
     }
-    (chi2 as f64 * wt, jtj, jtr)
 }
 
 /// The problem a fit solves: the windows, their segments' drives and start times, the carry.
@@ -1017,7 +1035,7 @@ struct Problem<'a> {
 }
 
 impl Problem<'_> {
-    fn eval(&self, p: &Params, jac: bool) -> (f64, [[f64; 5]; 5], [f64; 5]) {
+    fn eval(&self, p: &Params, jac: bool) -> (f64, Normal) {
         evaluate(self, p, jac, None)
     }
 
@@ -1078,7 +1096,7 @@ impl Problem<'_> {
             }
             ea = eb;
         }
-        let sol = cholesky3(&a, &b)?;
+        let sol = spd_solve32(&a, &b)?;
         let mut chi2 = 0.0f32;
         for (x, c) in self.w.iter().zip(cols.iter()) {
             let r = x.y - c[0] * sol[0] - c[1] * sol[1] - c[2] * sol[2];
@@ -1096,12 +1114,13 @@ impl Problem<'_> {
     /// The linear parameters (g, z) at `p`'s `f0`, `Q`: one Gauss–Newton step on them alone
     /// (the model is linear in them).
     fn linear_start(&self, p: &Params) -> Option<Params> {
-        let (_, jtj, jtr) = self.eval(p, true);
-        let m3: [[f64; 3]; 3] =
-            core::array::from_fn(|i| core::array::from_fn(|j| jtj[i + 2][j + 2]));
-        let r3: [f64; 3] = core::array::from_fn(|i| jtr[i + 2]);
-        let step = damped_solve(&m3, &r3, 0.0)?;
-        Some(p.stepped(&[0.0, 0.0, step[0], step[1], step[2]]))
+        // The linear parameters' columns are not scaled (their scale is 1).
+        let (_, n) = self.eval(p, true);
+        let m3: [[f32; 3]; 3] =
+            core::array::from_fn(|i| core::array::from_fn(|j| n.jtj[i + 2][j + 2]));
+        let r3: [f32; 3] = core::array::from_fn(|i| n.jtr[i + 2]);
+        let step = spd_solve32(&m3, &r3)?;
+        Some(p.stepped(&[0.0, 0.0, step[0] as f64, step[1] as f64, step[2] as f64]))
     }
 }
 
@@ -1246,18 +1265,20 @@ fn fit_segments(
     // The residuals come with them (the last call's are the fit's, for the hum check).
     let mut res = [C32::new(0.0, 0.0); MAX_WINDOWS];
     // The start's χ² comes with them (the same sum a χ²-only evaluation makes).
+    // The prior in the normal equations' units ([`Normal`]).
     let normal = |p: &Params, res: &mut [C32]| {
-        let (chi2, mut jtj, mut jtr) = evaluate(&pb, p, true, Some(res));
-        jtj[1][1] += q_w;
-        jtr[1] += (q_start - p.q) * q_w;
-        (chi2 + prior(p.q), jtj, jtr)
+        let (chi2, mut n) = evaluate(&pb, p, true, Some(res));
+        let s1 = n.scale[1] as f64;
+        n.jtj[1][1] += (q_w * s1 * s1 / pb.wt) as f32;
+        n.jtr[1] += ((q_start - p.q) * q_w * s1 / pb.wt) as f32;
+        (chi2 + prior(p.q), n)
     };
-    let (mut c, mut jtj, mut jtr) = normal(&p, &mut res);
+    let (mut c, mut n) = normal(&p, &mut res);
     if !c.is_finite() {
         return Err(Failure::NoResonance);
     }
     for _ in 0..30 {
-        let Some(step) = damped_solve(&jtj, &jtr, lambda) else {
+        let Some(step) = damped_solve32(&n, lambda) else {
             lambda *= 10.0;
             if lambda > 1e6 {
                 break;
@@ -1268,13 +1289,13 @@ fn fit_segments(
         // hundredth of a unit (and the step is near Gauss–Newton's), the fit has converged — a
         // step the `f32` χ² would then reject is round-off, and each rejection costs an
         // evaluation.
-        let pred = (0..5)
-            .map(|i| step[i] * (2.0 * jtr[i] - (0..5).map(|j| jtj[i][j] * step[j]).sum::<f64>()))
-            .sum::<f64>();
+        let pred = predicted_decrease(&n, &step) as f64 * pb.wt;
         if pred <= 1e-2 && lambda <= 1.0 {
             break;
         }
-        let t = p.stepped(&step);
+        let t = p.stepped(&core::array::from_fn(|i| {
+            step[i] as f64 * n.scale[i] as f64
+        }));
         let tc = if t.f0 > 0.0 && t.q > 0.5 {
             pb.eval(&t, false).0 + prior(t.q)
         } else {
@@ -1286,7 +1307,7 @@ fn fit_segments(
             let done = c - tc <= 1e-2;
             (p, c) = (t, tc);
             lambda = (lambda * 0.3).max(1e-12);
-            (_, jtj, jtr) = normal(&p, &mut res);
+            (_, n) = normal(&p, &mut res);
             if done {
                 break;
             }
@@ -1299,7 +1320,7 @@ fn fit_segments(
     }
     // Mains hum near the drive turns in the residuals at its offset: no reading.
     super::interference::hum(segs, &res)?;
-    let cov = spd_inverse(&jtj).ok_or(Failure::NoResonance)?;
+    let cov = spd_inverse(&n.unscaled(pb.wt).0).ok_or(Failure::NoResonance)?;
     let dof = (2 * pb.w.len() + 1).saturating_sub(5).max(1) as f64;
     let red = c / dof;
     let scale = super::gross_scale(red);
@@ -1322,13 +1343,39 @@ fn fit_segments(
     })
 }
 
-/// `x` with `a x = b` for a symmetric positive-definite 3×3 `a` (its lower triangle), in
-/// `f32`, by Cholesky factorisation; `None` when `a` is not positive definite.
+/// The Levenberg–Marquardt step of the scaled normal equations `n` with damping `lambda`
+/// (`(JᵀJ + λ diag JᵀJ) x = Jᵀ r`, as [`crate::linalg::damped_solve`], in `f32`): the step in
+/// the scaled parameters (multiply by `n.scale` for the parameters' own units).
+fn damped_solve32(n: &Normal, lambda: f64) -> Option<[f32; 5]> {
+    let mut m = n.jtj;
+    for (i, row) in m.iter_mut().enumerate() {
+        row[i] *= 1.0 + lambda as f32;
+    }
+    spd_solve32(&m, &n.jtr)
+}
+
+/// The decrease of χ²/wt the quadratic model of `n` predicts for the scaled step `x`:
+/// `x · (2 Jᵀr − JᵀJ x)`.
+fn predicted_decrease(n: &Normal, x: &[f32; 5]) -> f32 {
+    let mut sum = 0.0f32;
+    for i in 0..5 {
+        let mut jx = 0.0f32;
+        for (j, xj) in x.iter().enumerate() {
+            // The lower triangle holds JᵀJ[i][j] at [max][min].
+            jx += if j <= i { n.jtj[i][j] } else { n.jtj[j][i] } * xj;
+        }
+        sum += x[i] * (2.0 * n.jtr[i] - jx);
+    }
+    sum
+}
+
+/// `x` with `a x = b` for a symmetric positive-definite `a` (its lower triangle), in `f32`,
+/// by Cholesky factorisation; `None` when `a` is not positive definite.
 #[allow(clippy::needless_range_loop)] // triangular index arithmetic reads best as indices
-fn cholesky3(a: &[[f32; 3]; 3], b: &[f32; 3]) -> Option<[f32; 3]> {
-    let mut l = [[0.0f32; 3]; 3];
-    let mut rd = [0.0f32; 3];
-    for i in 0..3 {
+fn spd_solve32<const N: usize>(a: &[[f32; N]; N], b: &[f32; N]) -> Option<[f32; N]> {
+    let mut l = [[0.0f32; N]; N];
+    let mut rd = [0.0f32; N];
+    for i in 0..N {
         for k in 0..=i {
             let mut s = a[i][k];
             for m in 0..k {
@@ -1345,18 +1392,18 @@ fn cholesky3(a: &[[f32; 3]; 3], b: &[f32; 3]) -> Option<[f32; 3]> {
             }
         }
     }
-    let mut y = [0.0f32; 3];
-    for i in 0..3 {
+    let mut y = [0.0f32; N];
+    for i in 0..N {
         let mut s = b[i];
         for m in 0..i {
             s -= l[i][m] * y[m];
         }
         y[i] = s * rd[i];
     }
-    let mut x = [0.0f32; 3];
-    for i in (0..3).rev() {
+    let mut x = [0.0f32; N];
+    for i in (0..N).rev() {
         let mut s = y[i];
-        for m in i + 1..3 {
+        for m in i + 1..N {
             s -= l[m][i] * x[m];
         }
         x[i] = s * rd[i];
@@ -1364,14 +1411,14 @@ fn cholesky3(a: &[[f32; 3]; 3], b: &[f32; 3]) -> Option<[f32; 3]> {
     x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
-/// `exp(z)` by the `libm` crate's `expf`, `cosf`, `sinf`: the same bits on the host and the
-/// target, whatever `num-traits` features another crate of the build enables (with `std` its
-/// `Float::exp` is the platform's, which differs in the last bits and made the host's readings
-/// depend on which binary took them).
+/// `exp(z)` by the `libm` crate's `expf` and [`crate::dsp::trig::sincos`] (`f32` arithmetic
+/// alone: `libm`'s `sincosf` computes in `f64`, 2 400 instructions a call on the Cortex-M4F):
+/// the same bits on the host and the target, whatever `num-traits` features another crate of
+/// the build enables (with `std` its `Float::exp` is the platform's, which differs in the last
+/// bits and made the host's readings depend on which binary took them).
 fn cexp(z: num_complex::Complex32) -> num_complex::Complex32 {
     let m = libm::expf(z.re);
-    // One argument reduction for both (the same bits as `sinf`, `cosf`).
-    let (sin, cos) = libm::sincosf(z.im);
+    let (sin, cos) = crate::dsp::trig::sincos(z.im);
     num_complex::Complex32::new(m * cos, m * sin)
 }
 
@@ -1741,7 +1788,7 @@ mod gradcheck {
                 carry: None,
                 wt: 1e14,
             };
-            let (_, _, jtr) = evaluate(&pb, &p, true, None);
+            let (_, jtr) = evaluate(&pb, &p, true, None).1.unscaled(pb.wt);
             for (i, g) in jtr.iter().enumerate() {
                 let mut step = [0.0; 5];
                 step[i] = [1e-2, 1e-2, 1e-10, 1e-10, 1e-10][i];

@@ -191,7 +191,8 @@ pub fn hum(segments: &[Segment], residuals: &[num_complex::Complex32]) -> Result
                         if dt != step {
                             step = dt;
                             let ph = w_d * dt;
-                            rot = C32::new(libm::cosf(ph), libm::sinf(ph));
+                            let (sin, cos) = crate::dsp::trig::sincos(ph);
+                            rot = C32::new(cos, sin);
                         }
                         turn *= rot;
                     }
