@@ -104,6 +104,25 @@ pub struct Phasor {
 /// Solve the sine fit of one channel. `None` if the window is too short (fewer than 4 samples)
 /// or the reference does not span a sine (degenerate normal matrix).
 pub fn solve(ch: &ChannelSums, r: &ReferenceSums) -> Option<Phasor> {
+    let (value, variance, beta, sigma2) = fit(ch, r)?;
+    Some(Phasor {
+        value,
+        variance,
+        offset: beta[2],
+        residual_rms: libm::sqrt(sigma2),
+    })
+}
+
+/// [`solve`]'s complex amplitude and its variance alone (the same bits), without the
+/// residual's square root, which the Cortex-M4F emulates in software in `f64` (the hold takes
+/// one a window).
+pub fn solve_value(ch: &ChannelSums, r: &ReferenceSums) -> Option<(Complex64, f64)> {
+    fit(ch, r).map(|(value, variance, _, _)| (value, variance))
+}
+
+/// The sine fit: the amplitude, its variance, the coefficients `(a, b, d)` and the residual
+/// variance.
+fn fit(ch: &ChannelSums, r: &ReferenceSums) -> Option<(Complex64, f64, [f64; 3], f64)> {
     if r.n < 4 {
         return None;
     }
@@ -124,12 +143,12 @@ pub fn solve(ch: &ChannelSums, r: &ReferenceSums) -> Option<Phasor> {
     let sigma2 = rss / dof;
     let var_a = Q15 * Q15 * sigma2 * inv[0][0];
     let var_b = Q15 * Q15 * sigma2 * inv[1][1];
-    Some(Phasor {
-        value: Complex64::new(beta[0] * Q15, -beta[1] * Q15),
-        variance: 0.5 * (var_a + var_b).max(0.0),
-        offset: beta[2],
-        residual_rms: libm::sqrt(sigma2),
-    })
+    Some((
+        Complex64::new(beta[0] * Q15, -beta[1] * Q15),
+        0.5 * (var_a + var_b).max(0.0),
+        beta,
+        sigma2,
+    ))
 }
 
 #[cfg(test)]

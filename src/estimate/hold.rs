@@ -41,10 +41,9 @@
 use super::ringdown::{Ringdown, RingdownSettings};
 use super::Estimate;
 use crate::dsp::dds::{frequency_hz, tuning_word};
-use crate::dsp::lockin::{solve, ChannelSums, ReferenceSums};
+use crate::dsp::lockin::{solve, solve_value, ChannelSums, ReferenceSums};
 use crate::engine::{PointPlan, PointRaw};
 use crate::hal::FrontEndScale;
-use crate::linalg::spd_inverse;
 use crate::status::Failure;
 use crate::sweep::{
     amplitude_codes, check_band, check_durations, check_frequency, Drive, SettingsError,
@@ -396,16 +395,16 @@ impl Hold {
                 }
                 self.clipped |= s.current_rail_hits > 0;
                 add_sums(&mut self.monitor, &s.monitor, &s.reference);
-                match solve(&s.current, &s.reference) {
-                    Some(p) => {
+                match solve_value(&s.current, &s.reference) {
+                    Some((value, variance)) => {
                         let ai = scale.amps_per_code as f64;
                         let len = s.reference.n as f64 / self.fs;
                         let end = raw.end_sample as f64 / self.fs;
                         let _ = self.windows.push(HoldWindow {
                             t0: end - len,
                             len,
-                            y: p.value * ai,
-                            var: p.variance * ai * ai,
+                            y: value * ai,
+                            var: variance * ai * ai,
                         });
                     }
                     None => self.finish(Err(Failure::BadSettings)),
@@ -454,10 +453,14 @@ impl Hold {
             // with it alone, or the voltage's share alone, the fast holds scatter 5–15 % more).
             self.carry.rho = self.v_first / drive.v;
         }
+        // The segment's drive (its variance that of the whole segment) for every window: `Y =
+        // I / V` and `var = (var_I + |Y|² var_V) / |V|²` ([`Drive::admittance`]) with `1/V` and
+        // `1/|V|²` formed once (a complex division a window is dear in emulated `f64`).
+        let inv_v = C64::new(1.0, 0.0) / drive.v;
+        let inv_n = inv_v.norm_sqr();
         for x in self.windows.iter_mut().skip(self.first_len as usize) {
-            // The segment's drive (its variance that of the whole segment) for every window.
-            let y = drive.admittance(x.y, x.var);
-            (x.y, x.var) = (y.y, y.var);
+            let y = x.y * inv_v;
+            (x.y, x.var) = (y, (x.var + y.norm_sqr() * drive.var_v) * inv_n);
         }
         Ok(())
     }
@@ -1008,7 +1011,60 @@ struct Normal {
 }
 
 impl Normal {
+    /// The variances of `f0` and `Q` (the first two diagonal entries of `(JᵀWJ)⁻¹`) for
+    /// weight `wt`, in `f64`: the scaled matrix factored as `L D Lᵀ` (no square roots), `L y =
+    /// e_i` solved for the two unit vectors, `Σ y_k² / d_k` unscaled by `scale_i² / wt`. `None`
+    /// when the matrix is not positive definite.
+    #[allow(clippy::needless_range_loop)] // triangular index arithmetic reads best as indices
+    fn variances(&self, wt: f64) -> Option<[f64; 2]> {
+        const N: usize = 5;
+        let m: [[f64; N]; N] =
+            core::array::from_fn(|i| core::array::from_fn(|j| self.jtj[i.max(j)][i.min(j)] as f64));
+        let mut l = [[0.0f64; N]; N];
+        let mut d = [0.0f64; N];
+        let mut inv_d = [0.0f64; N];
+        for i in 0..N {
+            // L[i][k] d[k] for the row, then the diagonal.
+            let mut ld = [0.0f64; N];
+            for j in 0..i {
+                let mut s = m[i][j];
+                for k in 0..j {
+                    s -= ld[k] * l[j][k];
+                }
+                ld[j] = s;
+                l[i][j] = s * inv_d[j];
+            }
+            let mut s = m[i][i];
+            for k in 0..i {
+                s -= ld[k] * l[i][k];
+            }
+            if !(s > 0.0) || !s.is_finite() {
+                return None;
+            }
+            d[i] = s;
+            inv_d[i] = 1.0 / s;
+        }
+        let mut out = [0.0f64; 2];
+        for (c, o) in out.iter_mut().enumerate() {
+            let mut y = [0.0f64; N];
+            y[c] = 1.0;
+            let mut v = inv_d[c];
+            for i in c + 1..N {
+                let mut s = 0.0;
+                for k in c..i {
+                    s -= l[i][k] * y[k];
+                }
+                y[i] = s;
+                v += s * s * inv_d[i];
+            }
+            let sc = self.scale[c] as f64;
+            *o = v * sc * sc / wt;
+        }
+        out.iter().all(|v| v.is_finite()).then_some(out)
+    }
+
     /// `JᵀWJ` and `JᵀW r` in `f64`, unscaled, for weight `wt`.
+    #[cfg(test)]
     fn unscaled(&self, wt: f64) -> ([[f64; 5]; 5], [f64; 5]) {
         let (mut jtj, mut jtr) = ([[0.0f64; 5]; 5], [0.0f64; 5]);
         let inv: [f64; 5] = core::array::from_fn(|i| 1.0 / self.scale[i] as f64);
@@ -1320,12 +1376,12 @@ fn fit_segments(
     }
     // Mains hum near the drive turns in the residuals at its offset: no reading.
     super::interference::hum(segs, &res)?;
-    let cov = spd_inverse(&n.unscaled(pb.wt).0).ok_or(Failure::NoResonance)?;
+    let cov = n.variances(pb.wt).ok_or(Failure::NoResonance)?;
     let dof = (2 * pb.w.len() + 1).saturating_sub(5).max(1) as f64;
     let red = c / dof;
     let scale = super::gross_scale(red);
-    let sigma = libm::sqrt((cov[0][0] * scale).max(0.0));
-    let sigma_q = libm::sqrt((cov[1][1] * scale).max(0.0));
+    let sigma = libm::sqrt((cov[0] * scale).max(0.0));
+    let sigma_q = libm::sqrt((cov[1] * scale).max(0.0));
     let (f0, q) = (p.f0, p.q);
     if !(p.g > 0.0) || !f0.is_finite() || !q.is_finite() || !sigma.is_finite() {
         return Err(Failure::NoResonance);
@@ -1788,7 +1844,20 @@ mod gradcheck {
                 carry: None,
                 wt: 1e14,
             };
-            let (_, jtr) = evaluate(&pb, &p, true, None).1.unscaled(pb.wt);
+            let n = evaluate(&pb, &p, true, None).1;
+            let (jtj, jtr) = n.unscaled(pb.wt);
+            // The variances of f0 and Q by LDLᵀ of the scaled matrix, against the f64 inverse
+            // of the unscaled one.
+            let inv = crate::linalg::spd_inverse(&jtj).unwrap();
+            let v = n.variances(pb.wt).unwrap();
+            for i in 0..2 {
+                assert!(
+                    (v[i] / inv[i][i] - 1.0).abs() < 1e-9,
+                    "{i}: {} vs {}",
+                    v[i],
+                    inv[i][i]
+                );
+            }
             for (i, g) in jtr.iter().enumerate() {
                 let mut step = [0.0; 5];
                 step[i] = [1e-2, 1e-2, 1e-10, 1e-10, 1e-10][i];

@@ -170,19 +170,24 @@ pub fn hum(segments: &[Segment], residuals: &[num_complex::Complex32]) -> Result
         for (o, p) in steps.iter_mut().zip(w.windows(2)) {
             *o = ((p[1].t0 + 0.5 * p[1].len) - (p[0].t0 + 0.5 * p[0].len)) as f32;
         }
+        // The harmonics' offsets and the tests on them in f32 (sixteen of them a segment; f64
+        // is emulated on the Cortex-M4F).
+        let (f_h, len, span) = (seg.f_h as f32, first.len as f32, span as f32);
+        // `|S|² / (2 Σ var) > HUM_THRESHOLD`, the division taken once.
+        let limit = HUM_THRESHOLD * 2.0 * var;
         for fm in MAINS_HZ {
             for k in 1..=MAINS_HARMONICS {
-                let d = fm * k as f64 - seg.f_h;
+                let d = fm as f32 * k as f32 - f_h;
                 // Within a window's main lobe, and turning at least HUM_TURNS times over the
                 // segment: a slower turn is a slow change of the residual that a drifting
                 // resonance or the model's own misfit also leaves (measured: 3–5 Hz off, 84–91).
-                if libm::fabs(d) * first.len >= 1.0 || libm::fabs(d) * span < HUM_TURNS {
+                if libm::fabsf(d) * len >= 1.0 || libm::fabsf(d) * span < HUM_TURNS as f32 {
                     continue;
                 }
                 // The turn e^{−j2πd t_k} carried from window to window (in f32: sixteen
                 // products lose 1e-6 rad), a sine and cosine only where the step between window
                 // centres changes (whole-cycle windows: two lengths a sample apart).
-                let w_d = -2.0 * core::f32::consts::PI * d as f32;
+                let w_d = -2.0 * core::f32::consts::PI * d;
                 let mut turn = C32::new(1.0, 0.0);
                 let (mut step, mut rot) = (f32::NAN, C32::new(1.0, 0.0));
                 let mut sum = C32::new(0.0, 0.0);
@@ -198,8 +203,7 @@ pub fn hum(segments: &[Segment], residuals: &[num_complex::Complex32]) -> Result
                     }
                     sum += *rk * turn;
                 }
-                let (sr, si) = (sum.re as f64, sum.im as f64);
-                if (sr * sr + si * si) / (2.0 * var) > HUM_THRESHOLD {
+                if sum.norm_sqr() as f64 > limit {
                     return Err(Failure::Interference);
                 }
             }
