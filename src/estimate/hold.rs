@@ -205,6 +205,7 @@ impl HoldSettings {
             first_len: 0,
             f_first: 0.0,
             q_first: 0.0,
+            linear_first: (0.0, C64::new(0.0, 0.0)),
             v_first: C64::new(0.0, 0.0),
             v_hold: C64::new(0.0, 0.0),
             carry: Carry {
@@ -306,6 +307,8 @@ pub struct Hold {
     /// The first segment's drive frequency, and its fit's `Q`.
     f_first: f64,
     q_first: f64,
+    /// The first segment's fitted `g` and `z` ([`HoldFit::linear`]).
+    linear_first: (f64, C64),
     /// The first segment's drive phasor, V.
     v_first: C64,
     /// The latest segment's drive phasor, V.
@@ -425,6 +428,7 @@ impl Hold {
                             self.first_len = self.windows.len() as u8;
                             self.f_first = self.f_hold;
                             self.q_first = e.q.map_or(self.q_seed, |q| q as f64);
+                            self.linear_first = h.linear;
                             self.f_seed = e.resonance.0 as f64;
                             self.ftw = tuning_word(self.f_seed, self.fs);
                             self.f_hold = frequency_hz(self.ftw, self.fs);
@@ -564,7 +568,14 @@ impl Hold {
                 y_s: self.static_admittance(self.f_first),
                 mirror: mirror(self.v_first),
             };
-            fit_two(first, this, &self.carry, (self.f_seed, self.q_first), prior)?
+            fit_two_from(
+                first,
+                this,
+                &self.carry,
+                (self.f_seed, self.q_first),
+                self.linear_first,
+                prior,
+            )?
         } else if self.seed.is_none() {
             let band = (self.s.band_start.0 as f64, self.s.band_stop.0 as f64);
             fit_searched(this, band, prior)?
@@ -608,6 +619,9 @@ pub struct HoldFit {
     /// χ² per degree of freedom at the fit (above [`super::conductance::GROSS_CHI2`] the model
     /// does not explain the windows and `sigma` has been scaled by it).
     pub reduced_chi2: f64,
+    /// The fitted motional peak conductance `g` (S) and state `z` at the start of the first
+    /// window (S): a joint fit that takes these windows goes on from them ([`fit_two_from`]).
+    pub linear: (f64, C64),
 }
 
 /// One segment of a hold: consecutive windows driven at one frequency `f_h`, with the static
@@ -676,7 +690,7 @@ struct Win32 {
 /// admittances and the mean window length (s).
 fn prepare(segs: &[Segment]) -> (heapless::Vec<Win32, MAX_WINDOWS>, f32, f64) {
     let mut out = heapless::Vec::new();
-    let mut big = 0.0f64;
+    let mut big = 0.0f32;
     let all = || segs.iter().flat_map(|s| s.windows.iter());
     let n = all().count();
     let total: f64 = all().map(|x| x.len).sum();
@@ -685,25 +699,29 @@ fn prepare(segs: &[Segment]) -> (heapless::Vec<Win32, MAX_WINDOWS>, f32, f64) {
     } else {
         1.0
     };
+    // The differences in f64 (times from the reading's start, the admittance less its static
+    // part), the rest in f32 (f64 is emulated on the Cortex-M4F).
+    let mean32 = mean_len as f32;
     for (s, seg) in segs.iter().enumerate() {
         let t0 = seg.windows.first().map_or(0.0, |x| x.t0);
         let mut next = 0.0f64;
         for (k, x) in seg.windows.iter().enumerate() {
             let a = x.t0 - t0;
-            let y = x.y - seg.y_s;
+            let y = c32(x.y - seg.y_s);
             big = big.max(y.norm_sqr());
+            let len = x.len as f32;
             let _ = out.push(Win32 {
                 a: a as f32,
-                len: x.len as f32,
-                y: num_complex::Complex32::new(y.re as f32, y.im as f32),
+                len,
+                y,
                 gap: k == 0 || libm::fabs(a - next) > 1e-6,
                 seg: s as u8,
-                wl: (x.len / mean_len) as f32,
+                wl: len / mean32,
             });
             next = a + x.len;
         }
     }
-    (out, (libm::sqrt(big) as f32).max(1e-30), mean_len)
+    (out, libm::sqrtf(big).max(1e-30), mean_len)
 }
 
 /// The model's parameters: resonance, quality factor, motional peak conductance, and the state
@@ -1185,7 +1203,7 @@ impl Problem<'_> {
 /// `Q = q_prior.0 ± q_prior.1` (a hold at one frequency measures the phase well and `Q` poorly;
 /// the prior — the seed's `Q` — keeps a noisy hold from trading one for the other).
 pub fn fit(seg: Segment, f_start: f64, q_prior: (f64, f64)) -> Result<HoldFit, Failure> {
-    fit_segments(&[seg], None, (f_start, q_prior.0), q_prior, None)
+    fit_segments(&[seg], None, (f_start, q_prior.0), q_prior, Start::Linear)
 }
 
 /// The joint fit of two consecutive segments: one `f0`, `Q`, `g`, and the first segment's
@@ -1202,11 +1220,43 @@ pub fn fit_two(
     start: (f64, f64),
     q_prior: (f64, f64),
 ) -> Result<HoldFit, Failure> {
-    fit_segments(&[first, second], Some(carry), start, q_prior, None)
+    fit_segments(&[first, second], Some(carry), start, q_prior, Start::Linear)
+}
+
+/// [`fit_two`] going on from the first segment's fitted linear parameters (`g`, `z`:
+/// [`HoldFit::linear`]) instead of solving them anew at `start` (one evaluation of the joint
+/// problem fewer; the Levenberg–Marquardt steps move them with `f0` and `Q`).
+pub fn fit_two_from(
+    first: Segment,
+    second: Segment,
+    carry: &Carry,
+    start: (f64, f64),
+    linear: (f64, C64),
+    q_prior: (f64, f64),
+) -> Result<HoldFit, Failure> {
+    let (g, z) = linear;
+    fit_segments(
+        &[first, second],
+        Some(carry),
+        start,
+        q_prior,
+        Start::Given(g, z),
+    )
+}
+
+/// Where a fit's linear parameters start.
+#[derive(Clone, Copy, Debug)]
+enum Start {
+    /// Solved at the given `f0`, `Q` ([`Problem::linear_start`]).
+    Linear,
+    /// The best of a search of the band `(lo, hi)` for `f0` (each candidate's solved).
+    Search(f64, f64),
+    /// The given `g`, `z`.
+    Given(f64, C64),
 }
 
 /// Steps of the start search over the band, in half-widths `f0/(2Q)` of the prior `Q`.
-const SEARCH_STEP_HALF_WIDTHS: f64 = 0.5;
+const SEARCH_STEP_HALF_WIDTHS: f64 = 1.0;
 /// Most candidates of the start search.
 const SEARCH_MAX: usize = 64;
 
@@ -1217,7 +1267,13 @@ pub fn fit_searched(
     band: (f64, f64),
     q_prior: (f64, f64),
 ) -> Result<HoldFit, Failure> {
-    fit_segments(&[seg], None, (seg.f_h, q_prior.0), q_prior, Some(band))
+    fit_segments(
+        &[seg],
+        None,
+        (seg.f_h, q_prior.0),
+        q_prior,
+        Start::Search(band.0, band.1),
+    )
 }
 
 /// The fit over the segments from `start` (`f0`, `Q`); `search`: the band to search for a start
@@ -1229,8 +1285,12 @@ fn fit_segments(
     carry: Option<&Carry>,
     (f_start, q_begin): (f64, f64),
     q_prior: (f64, f64),
-    search: Option<(f64, f64)>,
+    start: Start,
 ) -> Result<HoldFit, Failure> {
+    let search = match start {
+        Start::Search(lo, hi) => Some((lo, hi)),
+        _ => None,
+    };
     let (q_start, q_sd) = q_prior;
     if !(q_start > 0.0) || !(q_sd > 0.0) || !q_sd.is_finite() || segs.len() > MAX_SEGMENTS {
         return Err(Failure::NoResonance);
@@ -1295,7 +1355,14 @@ fn fit_segments(
     // Start: the seed's f0 and Q (or the search's best), the linear parameters from one
     // Gauss–Newton step on them alone.
     let mut p = match search {
-        None => pb.linear_start(&at(f_start)).ok_or(Failure::NoResonance)?,
+        None => match start {
+            Start::Given(g, z) if g.is_finite() && z.is_finite() => Params {
+                g,
+                z,
+                ..at(f_start)
+            },
+            _ => pb.linear_start(&at(f_start)).ok_or(Failure::NoResonance)?,
+        },
         Some((lo, hi)) => {
             if !(lo > 0.0) || !(hi > lo) || !hi.is_finite() {
                 return Err(Failure::NoResonance);
@@ -1396,6 +1463,7 @@ fn fit_segments(
         },
         sigma_q,
         reduced_chi2: red,
+        linear: (p.g, p.z),
     })
 }
 

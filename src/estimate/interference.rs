@@ -124,8 +124,27 @@ fn spike(n: usize, r: impl Fn(usize) -> f32, first: usize, open_end: bool) -> Re
 /// raises one or two windows 250–450× in variance (stream segments on phantom C under the
 /// catalogue's knocks).
 pub fn window_spike(vars: &[f64]) -> Result<(), Failure> {
-    let r = |i: usize| vars.get(i).map_or(f32::NAN, |&v| libm::sqrtf(v as f32));
-    spike(vars.len(), r, 1, true)
+    let amp = |v: f64| libm::sqrtf(v as f32);
+    // The amplitudes once each (a conversion from the emulated f64 and a square root), not at
+    // every look; the same values.
+    let mut once = [f32::NAN; 32];
+    if vars.len() <= once.len() {
+        for (o, &v) in once.iter_mut().zip(vars) {
+            *o = amp(v);
+        }
+        return spike(
+            vars.len(),
+            |i| once.get(i).copied().unwrap_or(f32::NAN),
+            1,
+            true,
+        );
+    }
+    spike(
+        vars.len(),
+        |i| vars.get(i).map_or(f32::NAN, |&v| amp(v)),
+        1,
+        true,
+    )
 }
 
 /// Mains frequencies whose harmonics [`hum`] looks for, Hz.
