@@ -41,7 +41,7 @@
 use super::ringdown::{Ringdown, RingdownSettings};
 use super::Estimate;
 use crate::dsp::dds::{frequency_hz, tuning_word};
-use crate::dsp::lockin::{solve, solve_value, ChannelSums, ReferenceSums};
+use crate::dsp::lockin::{solve_value, ChannelSums, ReferenceSums};
 use crate::engine::{PointPlan, PointRaw};
 use crate::hal::FrontEndScale;
 use crate::status::Failure;
@@ -446,8 +446,8 @@ impl Hold {
     /// Turn the windows' currents into admittances with the segment's drive phasor.
     fn currents_to_admittances(&mut self, scale: &FrontEndScale) -> Result<(), Failure> {
         let (m, r) = &self.monitor;
-        let pv = solve(m, r).ok_or(Failure::BadSettings)?;
-        let drive = Drive::from_monitor(&pv, scale).ok_or(Failure::DriveFault)?;
+        let (value, variance) = solve_value(m, r).ok_or(Failure::BadSettings)?;
+        let drive = Drive::from_value(value, variance, scale).ok_or(Failure::DriveFault)?;
         self.v_hold = drive.v;
         if self.segment == 0 {
             self.v_first = drive.v;
