@@ -1419,21 +1419,28 @@ fn fit_segments(
         let t = p.stepped(&core::array::from_fn(|i| {
             step[i] as f64 * n.scale[i] as f64
         }));
+        let mut trial_res = [C32::new(0.0, 0.0); MAX_WINDOWS];
         let tc = if t.f0 > 0.0 && t.q > 0.5 {
-            pb.eval(&t, false).0 + prior(t.q)
+            evaluate(&pb, &t, false, Some(&mut trial_res)).0 + prior(t.q)
         } else {
             f64::INFINITY
         };
         if tc < c {
-            // Converged when χ² no longer falls by a hundredth of one unit: the parameters then
-            // move by less than a tenth of their standard uncertainty.
-            let done = c - tc <= 1e-2;
+            // Converged when χ² no longer falls by a hundredth of one unit (the parameters then
+            // move by less than a tenth of their standard uncertainty), or by one unit at a
+            // Gauss–Newton step (lightly damped): a step of at most 1 σ, after which the next
+            // would move them by about (1 σ)² over the scale of the model's curvature in σ —
+            // the linewidth, hundreds of σ. The normal equations of the last point serve for the
+            // covariance (not formed again: the Jacobian is the evaluation's dearest part); the
+            // residuals are the trial's own.
+            let done = c - tc <= 1e-2 || (c - tc <= 1.0 && lambda <= 1e-3);
             (p, c) = (t, tc);
-            lambda = (lambda * 0.3).max(1e-12);
-            (_, n) = normal(&p, &mut res);
             if done {
+                res = trial_res;
                 break;
             }
+            lambda = (lambda * 0.3).max(1e-12);
+            (_, n) = normal(&p, &mut res);
         } else {
             lambda *= 10.0;
             if lambda > 1e6 {
