@@ -1,4 +1,5 @@
-//! `sin` and `cos` of an `f32` argument in `f32` arithmetic alone.
+//! `sin` and `cos` of an `f32` argument in `f32` arithmetic alone, and the square root on the
+//! FPU.
 //!
 //! The `libm` crate's `sinf`, `cosf`, `sincosf` (musl's) reduce the argument and evaluate their
 //! polynomials in `f64`, which the Cortex-M4F emulates in software: about 2 400 instructions a
@@ -36,6 +37,38 @@ pub fn sincos(x: f32) -> (f32, f32) {
     }
 }
 
+/// `√x`, correctly rounded: the FPU's `VSQRT.F32` on a hard-float Arm target (one instruction
+/// where `libm::sqrtf`'s portable loop takes about 90), `libm::sqrtf` elsewhere — both are
+/// IEEE-exact, so the same bits on the host and the target.
+#[inline]
+pub fn sqrtf(x: f32) -> f32 {
+    #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+    {
+        let r: u32;
+        // SAFETY: VSQRT.F32 through s15, which the sequence saves in a core register first and
+        // restores last (the `sreg` operand class needs the double-precision `vfp2` feature the
+        // Cortex-M4F lacks); no memory, no flags.
+        unsafe {
+            core::arch::asm!(
+                "vmov {save}, s15",
+                "vmov s15, {x}",
+                "vsqrt.f32 s15, s15",
+                "vmov {r}, s15",
+                "vmov s15, {save}",
+                x = in(reg) x.to_bits(),
+                r = lateout(reg) r,
+                save = out(reg) _,
+                options(pure, nomem, nostack)
+            );
+        }
+        f32::from_bits(r)
+    }
+    #[cfg(not(all(target_arch = "arm", target_abi = "eabihf")))]
+    {
+        libm::sqrtf(x)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -55,5 +88,13 @@ mod tests {
         assert_eq!(sincos(1e5), libm::sincosf(1e5));
         assert!(sincos(f32::NAN).0.is_nan());
         assert_eq!(sincos(0.0), (0.0, 1.0));
+    }
+
+    #[test]
+    fn square_root_is_libm_s() {
+        for x in [0.0f32, 1e-30, 0.25, 2.0, 3.7e9, f32::INFINITY] {
+            assert_eq!(sqrtf(x), libm::sqrtf(x));
+        }
+        assert!(sqrtf(-1.0).is_nan());
     }
 }

@@ -721,7 +721,7 @@ fn prepare(segs: &[Segment]) -> (heapless::Vec<Win32, MAX_WINDOWS>, f32, f64) {
             next = a + x.len;
         }
     }
-    (out, libm::sqrtf(big).max(1e-30), mean_len)
+    (out, crate::dsp::trig::sqrtf(big).max(1e-30), mean_len)
 }
 
 /// The model's parameters: resonance, quality factor, motional peak conductance, and the state
@@ -788,7 +788,7 @@ impl DriveModel {
         let du_df0 = -fh / (f0 * f0) - 1.0 / fh;
         let minus_j = |x: f32| C32::new(x * h2.im, -x * h2.re);
         let quarter = 0.25 / (q * q);
-        let root = libm::sqrtf((1.0 - quarter).max(1e-12));
+        let root = crate::dsp::trig::sqrtf((1.0 - quarter).max(1e-12));
         // 1 − root, without the cancellation.
         let one_less = if quarter < 1.0 {
             quarter / (1.0 + root)
@@ -1516,7 +1516,7 @@ fn spd_solve32<const N: usize>(a: &[[f32; N]; N], b: &[f32; N]) -> Option<[f32; 
                 if !(s > 0.0) || !s.is_finite() {
                     return None;
                 }
-                l[i][i] = libm::sqrtf(s);
+                l[i][i] = crate::dsp::trig::sqrtf(s);
                 rd[i] = 1.0 / l[i][i];
             } else {
                 l[i][k] = s * rd[k];

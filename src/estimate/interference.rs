@@ -124,7 +124,7 @@ fn spike(n: usize, r: impl Fn(usize) -> f32, first: usize, open_end: bool) -> Re
 /// raises one or two windows 250–450× in variance (stream segments on phantom C under the
 /// catalogue's knocks).
 pub fn window_spike(vars: &[f64]) -> Result<(), Failure> {
-    let amp = |v: f64| libm::sqrtf(v as f32);
+    let amp = |v: f64| crate::dsp::trig::sqrtf(v as f32);
     // The amplitudes once each (a conversion from the emulated f64 and a square root), not at
     // every look; the same values.
     let mut once = [f32::NAN; 32];
