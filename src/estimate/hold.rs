@@ -459,12 +459,15 @@ impl Hold {
         }
         // The segment's drive (its variance that of the whole segment) for every window: `Y =
         // I / V` and `var = (var_I + |Y|² var_V) / |V|²` ([`Drive::admittance`]) with `1/V` and
-        // `1/|V|²` formed once (a complex division a window is dear in emulated `f64`).
+        // `1/|V|²` formed once, each window's in f32 (emulated f64 is dear on the Cortex-M4F;
+        // f32's 1e-7 is far below any window's noise, 1e-3 of |Y| and more).
         let inv_v = C64::new(1.0, 0.0) / drive.v;
-        let inv_n = inv_v.norm_sqr();
+        let (inv_v32, inv_n) = (c32(inv_v), inv_v.norm_sqr() as f32);
+        let var_v = drive.var_v as f32;
         for x in self.windows.iter_mut().skip(self.first_len as usize) {
-            let y = x.y * inv_v;
-            (x.y, x.var) = (y, (x.var + y.norm_sqr() * drive.var_v) * inv_n);
+            let y = c32(x.y) * inv_v32;
+            let var = (x.var as f32 + y.norm_sqr() * var_v) * inv_n;
+            (x.y, x.var) = (C64::new(y.re as f64, y.im as f64), var as f64);
         }
         Ok(())
     }
