@@ -981,21 +981,23 @@ fn evaluate(pb: &Problem, p: &Params, jac: bool, mut res: Option<&mut [C32]>) ->
             let k = (m.z - m.gh) * de;
             // The image: d(tr)/dp and d(P)/dp = (e^{λ̄ len} − P)/μ · conj(dλ/dp) (real p).
             let dp = (decay.conj() - pm) * m.inv_mu;
-            let zero = C32::new(0.0, 0.0);
-            let dgh = [m.g_dh[0], m.g_dh[1], m.h, zero, zero];
-            let dl = [m.dl[0], m.dl[1], zero, zero, zero];
-            let image = |i: usize| {
-                let dtr = (m.dz[i] - dgh[i]) * ea + tr * dl[i] * a;
-                m.mirror * (dp * dl[i].conj() * tr.conj() + pm * dtr.conj())
+            // The image's derivative `mirror (dP conj(dλ) conj(tr) + P conj(d tr))`, `d tr =
+            // (dz − d(gh)) e^{λa} + tr a dλ`, with its common factors taken once and the terms
+            // that vanish (g and z do not move λ; z does not move gh) left out.
+            let (ia, ib, ta) = (m.mirror * dp * tr.conj(), m.mirror * pm, tr * a);
+            let moving = |i: usize| {
+                let dtr = (m.dz[i] - m.g_dh[i]) * ea + ta * m.dl[i];
+                ia * m.dl[i].conj() + ib * dtr.conj()
             };
+            let one_e = one - e;
             let cols = [
-                m.g_dh[0] * (one - e) + k * m.dl[0] + e * m.dz[0] + image(0),
-                m.g_dh[1] * (one - e) + k * m.dl[1] + e * m.dz[1] + image(1),
-                m.h * (one - e) + e * m.dz[2] + image(2),
-                e * m.dz[3] + image(3),
-                e * m.dz[4] + image(4),
+                (m.g_dh[0] * one_e + k * m.dl[0] + e * m.dz[0] + moving(0)) * scale[0],
+                (m.g_dh[1] * one_e + k * m.dl[1] + e * m.dz[1] + moving(1)) * scale[1],
+                // The linear parameters' columns are not scaled.
+                m.h * one_e + e * m.dz[2] + ib * ((m.dz[2] - m.h) * ea).conj(),
+                e * m.dz[3] + ib * (m.dz[3] * ea).conj(),
+                e * m.dz[4] + ib * (m.dz[4] * ea).conj(),
             ];
-            let cols: [C32; 5] = core::array::from_fn(|i| cols[i] * scale[i]);
             let rw = r * x.wl;
             for i in 0..5 {
                 let ci = cols[i];
