@@ -187,7 +187,8 @@ pub fn hum(segments: &[Segment], residuals: &[num_complex::Complex32]) -> Result
         // harmonic; the windows are gap-free, so two lengths a sample apart give one step).
         let mut steps = [0.0f32; 32];
         for (o, p) in steps.iter_mut().zip(w.windows(2)) {
-            *o = ((p[1].t0 + 0.5 * p[1].len) - (p[0].t0 + 0.5 * p[0].len)) as f32;
+            // The starts' difference in f64 (times from the reading's start), the lengths' in f32.
+            *o = (p[1].t0 - p[0].t0) as f32 + 0.5 * (p[1].len as f32 - p[0].len as f32);
         }
         // The harmonics' offsets and the tests on them in f32 (sixteen of them a segment; f64
         // is emulated on the Cortex-M4F).
