@@ -1121,10 +1121,11 @@ impl Problem<'_> {
     /// A candidate of the start search of a one-segment problem: the linear parameters
     /// `(g, z)` at `f0`, `q` solved by least squares (the model is linear in them:
     /// `y_k = g a_k + Re z b_k + Im z c_k`, the three columns formed once, in `f32`, a 3×3
-    /// Cholesky solve), and the χ² there (from the residuals, not the normal equations, so no
-    /// cancellation). A third of the work of [`Self::linear_start`], which forms all five
-    /// columns and evaluates twice. `None` for two segments or a singular system.
-    fn linear_candidate(&self, f0: f64, q: f64) -> Option<(Params, f64)> {
+    /// Cholesky solve), and the χ² there in units of the weight `1/var` (from the residuals,
+    /// not the normal equations, so no cancellation; `f32`, compared between candidates
+    /// alone). A third of the work of [`Self::linear_start`], which forms all five columns and
+    /// evaluates twice. `None` for two segments, a singular system or a non-finite χ².
+    fn linear_candidate(&self, f0: f64, q: f64) -> Option<([f32; 3], f32)> {
         let [(f_h, _, mirror)] = self.segs[..] else {
             return None;
         };
@@ -1181,13 +1182,7 @@ impl Problem<'_> {
             let r = x.y - c[0] * sol[0] - c[1] * sol[1] - c[2] * sol[2];
             chi2 += x.wl * r.norm_sqr();
         }
-        let p = Params {
-            g: sol[0] as f64,
-            z: C64::new(sol[1] as f64, sol[2] as f64),
-            ..at
-        };
-        let c = chi2 as f64 * self.wt;
-        c.is_finite().then_some((p, c))
+        chi2.is_finite().then_some((sol, chi2))
     }
 
     /// The linear parameters (g, z) at `p`'s `f0`, `Q`: one Gauss–Newton step on them alone
@@ -1374,17 +1369,23 @@ fn fit_segments(
             }
             let step = SEARCH_STEP_HALF_WIDTHS * 0.5 * (lo + hi) / (2.0 * q0);
             let n = (libm::ceil((hi - lo) / step) as usize).clamp(1, SEARCH_MAX - 1);
-            let mut best: Option<(Params, f64)> = None;
+            let mut best: Option<(f64, [f32; 3], f32)> = None;
+            let df = (hi - lo) / n as f64;
             for k in 0..=n {
-                let f = lo + (hi - lo) * k as f64 / n as f64;
-                if let Some((t, tc)) = pb.linear_candidate(f, q0) {
+                let f = lo + df * k as f64;
+                if let Some((sol, tc)) = pb.linear_candidate(f, q0) {
                     // Only a positive motional conductance is a resonance.
-                    if t.g > 0.0 && best.is_none_or(|(_, bc)| tc < bc) {
-                        best = Some((t, tc));
+                    if sol[0] > 0.0 && best.is_none_or(|(_, _, bc)| tc < bc) {
+                        best = Some((f, sol, tc));
                     }
                 }
             }
-            best.ok_or(Failure::NoResonance)?.0
+            let (f, sol, _) = best.ok_or(Failure::NoResonance)?;
+            Params {
+                g: sol[0] as f64,
+                z: C64::new(sol[1] as f64, sol[2] as f64),
+                ..at(f)
+            }
         }
     };
     let mut lambda = 1e-3;
@@ -1394,11 +1395,12 @@ fn fit_segments(
     let mut res = [C32::new(0.0, 0.0); MAX_WINDOWS];
     // The start's χ² comes with them (the same sum a χ²-only evaluation makes).
     // The prior in the normal equations' units ([`Normal`]).
+    let q_w_scaled = q_w / pb.wt;
     let normal = |p: &Params, res: &mut [C32]| {
         let (chi2, mut n) = evaluate(&pb, p, true, Some(res));
         let s1 = n.scale[1] as f64;
-        n.jtj[1][1] += (q_w * s1 * s1 / pb.wt) as f32;
-        n.jtr[1] += ((q_start - p.q) * q_w * s1 / pb.wt) as f32;
+        n.jtj[1][1] += (q_w_scaled * s1 * s1) as f32;
+        n.jtr[1] += ((q_start - p.q) * q_w_scaled * s1) as f32;
         (chi2 + prior(p.q), n)
     };
     let (mut c, mut n) = normal(&p, &mut res);
