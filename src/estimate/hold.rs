@@ -1256,7 +1256,7 @@ enum Start {
 }
 
 /// Steps of the start search over the band, in half-widths `f0/(2Q)` of the prior `Q`.
-const SEARCH_STEP_HALF_WIDTHS: f64 = 1.0;
+const SEARCH_STEP_HALF_WIDTHS: f64 = 1.5;
 /// Most candidates of the start search.
 const SEARCH_MAX: usize = 64;
 
