@@ -309,7 +309,11 @@ fn frequency_of(free_hz: f64, p: &[f64; 3], e_kpa: f64, ratio: f64) -> f64 {
 pub const VALUES: usize = 17;
 
 /// Lowest and highest modulus an inversion searches, kPa.
+#[cfg_attr(not(test), allow(dead_code))] // the search takes their cube roots
 const SEARCH_KPA: (f64, f64) = (1.0, 1.0e6);
+/// Their cube roots (`tests` check them against `libm::cbrt`): two software `cbrt` an inversion
+/// fewer.
+const SEARCH_CUBE_ROOT: (f64, f64) = (1.0, 100.0);
 
 impl ContactLaw {
     /// The law as the numbers the store's record and the bench's profile file keep, in this
@@ -389,6 +393,50 @@ impl ContactLaw {
     /// the same cases). The force's uncertainty counts as the resonance's (`∂f/∂F σ_F` added
     /// in quadrature): a force read anew each reading scatters with it.
     pub fn invert(&self, f: Hz, sigma: Hz, force: Option<(f64, f64)>) -> Result<Modulus, Failure> {
+        let (input, k) = self.inversion(f, sigma, force)?;
+        self.solve(&k, input, None).map(|(m, _)| m)
+    }
+
+    /// [`ContactLaw::invert`], and the same with the free resonance moved by `moved_hz` (the
+    /// unit's drift allowance, [`crate::profile::UnitProfile::invert`]): the second shares the
+    /// first's constants (the free resonance enters only `K1`) and starts its Newton steps at
+    /// the first's root (two or three evaluations instead of eight). The same roots to the
+    /// same tolerance as two calls of `invert`.
+    pub fn invert_moved(
+        &self,
+        f: Hz,
+        sigma: Hz,
+        force: Option<(f64, f64)>,
+        moved_hz: f64,
+    ) -> (Result<Modulus, Failure>, Result<Modulus, Failure>) {
+        let moved = ContactLaw {
+            free_hz: self.free_hz + moved_hz,
+            ..*self
+        };
+        let (input, k) = match self.inversion(f, sigma, force) {
+            Ok(x) => x,
+            Err(e) => return (Err(e), moved.invert(f, sigma, force)),
+        };
+        let (m, y) = match self.solve(&k, input, None) {
+            Ok((m, y)) => (Ok(m), Some(y)),
+            Err(e) => (Err(e), None),
+        };
+        let two_pi_free = 2.0 * PI * moved.free_hz;
+        let k_moved = Constants {
+            k1: two_pi_free * two_pi_free,
+            ..k
+        };
+        (m, moved.solve(&k_moved, input, y).map(|(m, _)| m))
+    }
+
+    /// The checked resonance, its uncertainty and the force's relative one, and the law's
+    /// constants at the force.
+    fn inversion(
+        &self,
+        f: Hz,
+        sigma: Hz,
+        force: Option<(f64, f64)>,
+    ) -> Result<((f64, f64, f64), Constants), Failure> {
         let (f, sf) = inversion_input(self.is_valid(), f, sigma)?;
         let (ratio, sigma_ln_f) = match force {
             Some((fm, sfm)) if self.force_n > 0.0 && fm > 0.0 => {
@@ -396,19 +444,36 @@ impl ContactLaw {
             }
             _ => (1.0, 0.0),
         };
-        let k = Constants::of(self.free_hz, &self.p, ratio);
+        Ok((
+            (f, sf, sigma_ln_f),
+            Constants::of(self.free_hz, &self.p, ratio),
+        ))
+    }
+
+    /// The inversion proper with constants `k` from [`Self::inversion`]'s input, Newton steps
+    /// started at `near` (a cube root of a modulus) when it lies inside the searched range:
+    /// the modulus and its cube root.
+    fn solve(
+        &self,
+        k: &Constants,
+        (f, sf, sigma_ln_f): (f64, f64, f64),
+        near: Option<f64>,
+    ) -> Result<(Modulus, f64), Failure> {
         // In y = E^(1/3) the law needs no transcendental but a square root (km = A y²,
         // B/E = B/y³): Newton steps on y, kept inside a bracket that shrinks with every
         // evaluation (a bisection step where Newton would leave it). Cost: ~8 evaluations
         // where a bisection of the range took 64 (docs/firmware.md).
-        let (mut lo, mut hi) = (libm::cbrt(SEARCH_KPA.0), libm::cbrt(SEARCH_KPA.1));
+        let (mut lo, mut hi) = SEARCH_CUBE_ROOT;
         if f >= k.at_cube_root(hi).f {
             return Err(Failure::AboveRange);
         }
         if f <= k.at_cube_root(lo).f {
             return Err(Failure::BelowRange);
         }
-        let mut y = libm::cbrt(libm::sqrt(self.min_kpa * self.max_kpa));
+        let mut y = match near {
+            Some(y) if y > lo && y < hi => y,
+            _ => libm::cbrt(libm::sqrt(self.min_kpa * self.max_kpa)),
+        };
         let mut at = k.at_cube_root(y);
         for _ in 0..60 {
             if at.f < f {
@@ -446,7 +511,7 @@ impl ContactLaw {
         let df_dlnf = FORCE_EXPONENT_A * at.df_dp[1] + FORCE_EXPONENT_B * at.df_dp[2];
         let sf = libm::sqrt(sf * sf + (df_dlnf * sigma_ln_f) * (df_dlnf * sigma_ln_f));
         let (misfit, cov) = (self.model_sigma_hz, &self.cov);
-        Ok(Modulus::propagated(e, de_df, sf, misfit, &g, cov))
+        Ok((Modulus::propagated(e, de_df, sf, misfit, &g, cov), y))
     }
 
     /// Weighted least-squares fit of `(ln Ks, ln A, ln B)` at the reference force `force_n` (N;
@@ -786,7 +851,27 @@ mod tests {
             let slope = (law.frequency(e * 1.0001) - law.frequency(e * 0.9999)) / (2e-4 * e);
             let tol = 2.0 * 7.6e-6 / slope;
             assert!((m.value.0 as f64 - e).abs() <= tol + 1e-6 * e, "{e}: {m:?}");
+            // With a force and the free resonance moved: the pair as two inversions.
+            let force = Some((0.03, 0.001));
+            let law = ContactLaw {
+                force_n: 0.025,
+                ..law
+            };
+            let (a, b) = law.invert_moved(Hz(f), Hz(0.1), force, 0.4);
+            let moved = ContactLaw {
+                free_hz: law.free_hz + 0.4,
+                ..law
+            };
+            for (x, y) in [
+                (a.unwrap(), law.invert(Hz(f), Hz(0.1), force).unwrap()),
+                (b.unwrap(), moved.invert(Hz(f), Hz(0.1), force).unwrap()),
+            ] {
+                assert!((x.value.0 / y.value.0 - 1.0).abs() < 1e-6, "{x:?} {y:?}");
+                assert!((x.sigma.0 / y.sigma.0 - 1.0).abs() < 1e-5, "{x:?} {y:?}");
+            }
         }
+        assert_eq!(libm::cbrt(SEARCH_KPA.0), SEARCH_CUBE_ROOT.0);
+        assert_eq!(libm::cbrt(SEARCH_KPA.1), SEARCH_CUBE_ROOT.1);
         assert_eq!(
             law.invert(Hz(rigid as f32 + 0.1), Hz(0.1), None),
             Err(Failure::AboveRange)

@@ -229,14 +229,10 @@ impl UnitProfile {
         // allowance since the air reference: the contact law with its free resonance moved, the
         // power law (which has none) with the resonance moved by as much.
         let (m, moved) = match &self.contact {
-            Some(c) => (
-                c.invert(f, sigma, force)?,
-                ContactLaw {
-                    free_hz: c.free_hz + u,
-                    ..*c
-                }
-                .invert(f, sigma, force),
-            ),
+            Some(c) => {
+                let (m, moved) = c.invert_moved(f, sigma, force, u);
+                (m?, moved)
+            }
             None => (
                 self.calibration.invert(f, sigma)?,
                 self.calibration.invert(Hz(f.0 - u as f32), sigma),

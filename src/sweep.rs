@@ -291,14 +291,21 @@ impl Drive {
     /// The drive from the monitor channel's phasor (codes); `None` below 2 monitor codes (no
     /// drive: DAC or amplifier fault).
     pub fn from_monitor(pv: &Phasor, scale: &FrontEndScale) -> Option<Self> {
+        Self::from_value(pv.value, pv.variance, scale)
+    }
+
+    /// [`Drive::from_monitor`] from the monitor's amplitude `value` (codes) and its variance
+    /// alone ([`crate::dsp::lockin::solve_value`]).
+    pub fn from_value(value: Complex64, variance: f64, scale: &FrontEndScale) -> Option<Self> {
         let av = scale.monitor_volts_per_code as f64;
-        let v = pv.value * av;
-        if !(pv.value.norm() > 2.0) || !(v.norm_sqr() > 0.0) {
+        let v = value * av;
+        // |value| > 2 codes (squared: no square root).
+        if !(value.norm_sqr() > 4.0) || !(v.norm_sqr() > 0.0) {
             return None;
         }
         Some(Self {
             v,
-            var_v: pv.variance * av * av,
+            var_v: variance * av * av,
         })
     }
 

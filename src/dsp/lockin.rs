@@ -104,6 +104,59 @@ pub struct Phasor {
 /// Solve the sine fit of one channel. `None` if the window is too short (fewer than 4 samples)
 /// or the reference does not span a sine (degenerate normal matrix).
 pub fn solve(ch: &ChannelSums, r: &ReferenceSums) -> Option<Phasor> {
+    let (value, variance, beta, sigma2) = fit(ch, r)?;
+    Some(Phasor {
+        value,
+        variance,
+        offset: beta[2],
+        residual_rms: libm::sqrt(sigma2),
+    })
+}
+
+/// [`solve`]'s complex amplitude and its variance alone (to rounding), at about half the work
+/// on the Cortex-M4F, which emulates `f64`: the normal matrix, ordered (offset, cosine, sine),
+/// factored as `L D Lᵀ` (no square root, no full inverse: the two variances come from `D` and
+/// one entry of `L`), the residual's square root not taken. The hold solves one a window.
+/// `None` where [`solve`] is.
+pub fn solve_value(ch: &ChannelSums, r: &ReferenceSums) -> Option<(Complex64, f64)> {
+    if r.n < 4 {
+        return None;
+    }
+    let (n, c, s) = (r.n as f64, r.c as f64, r.s as f64);
+    let (cc, cs, ss) = (r.cc as f64, r.cs as f64, r.ss as f64);
+    // L D Lᵀ of [[n, c, s], [c, cc, cs], [s, cs, ss]].
+    let inv0 = 1.0 / n;
+    let (l10, l20) = (c * inv0, s * inv0);
+    let d1 = cc - c * l10;
+    let t = cs - s * l10;
+    if !(d1 > 0.0) {
+        return None;
+    }
+    let inv1 = 1.0 / d1;
+    let l21 = t * inv1;
+    let d2 = ss - s * l20 - l21 * t;
+    // Singular to working precision as `inverse3` judges it (det / (n cc ss) = d1 d2 / (cc ss)).
+    if !(d2 > 0.0) || !(d1 * d2 > 1e-13 * libm::fabs(cc * ss)) || !d2.is_finite() {
+        return None;
+    }
+    let inv2 = 1.0 / d2;
+    // L y = (Σx, Σxc, Σxs); the coefficients of cosine and sine by D⁻¹ y and Lᵀ back.
+    let (x, xc, xs) = (ch.x as f64, ch.xc as f64, ch.xs as f64);
+    let y1 = xc - l10 * x;
+    let y2 = xs - l20 * x - l21 * y1;
+    let b = y2 * inv2;
+    let a = y1 * inv1 - l21 * b;
+    let explained = x * x * inv0 + y1 * y1 * inv1 + y2 * y2 * inv2;
+    let rss = (ch.xx as f64 - explained).max(0.0);
+    let sigma2 = rss / (r.n - 3) as f64;
+    // (M⁻¹)_bb = 1/d2, (M⁻¹)_aa = 1/d1 + l21²/d2.
+    let var_sum = Q15 * Q15 * sigma2 * (inv1 + (l21 * l21 + 1.0) * inv2);
+    Some((Complex64::new(a * Q15, -b * Q15), 0.5 * var_sum.max(0.0)))
+}
+
+/// The sine fit: the amplitude, its variance, the coefficients `(a, b, d)` and the residual
+/// variance.
+fn fit(ch: &ChannelSums, r: &ReferenceSums) -> Option<(Complex64, f64, [f64; 3], f64)> {
     if r.n < 4 {
         return None;
     }
@@ -124,12 +177,12 @@ pub fn solve(ch: &ChannelSums, r: &ReferenceSums) -> Option<Phasor> {
     let sigma2 = rss / dof;
     let var_a = Q15 * Q15 * sigma2 * inv[0][0];
     let var_b = Q15 * Q15 * sigma2 * inv[1][1];
-    Some(Phasor {
-        value: Complex64::new(beta[0] * Q15, -beta[1] * Q15),
-        variance: 0.5 * (var_a + var_b).max(0.0),
-        offset: beta[2],
-        residual_rms: libm::sqrt(sigma2),
-    })
+    Some((
+        Complex64::new(beta[0] * Q15, -beta[1] * Q15),
+        0.5 * (var_a + var_b).max(0.0),
+        beta,
+        sigma2,
+    ))
 }
 
 #[cfg(test)]
@@ -159,16 +212,30 @@ mod tests {
         assert!((p.offset - off).abs() < 0.05);
         // Residual is the rounding of the codes: uniform, rms 1/sqrt(12) = 0.289.
         assert!((p.residual_rms - 0.289).abs() < 0.03, "{}", p.residual_rms);
+        // The value-only solve agrees to rounding.
+        let (v, var) = solve_value(&sums.current, &sums.reference).unwrap();
+        assert!(
+            (v - p.value).norm() <= 1e-12 * p.value.norm(),
+            "{v} {}",
+            p.value
+        );
+        assert!(
+            (var / p.variance - 1.0).abs() < 1e-9,
+            "{var} {}",
+            p.variance
+        );
     }
 
     #[test]
     fn degenerate_windows_are_rejected() {
         let s = LockInSums::default();
         assert!(solve(&s.current, &s.reference).is_none());
+        assert!(solve_value(&s.current, &s.reference).is_none());
         let mut s = LockInSums::default();
         for _ in 0..100 {
             s.accumulate(32767, 0, 5, 5); // zero frequency: no sine to fit
         }
         assert!(solve(&s.current, &s.reference).is_none());
+        assert!(solve_value(&s.current, &s.reference).is_none());
     }
 }

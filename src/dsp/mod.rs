@@ -5,3 +5,4 @@
 
 pub mod dds;
 pub mod lockin;
+pub mod trig;

@@ -41,14 +41,12 @@
 //! longer matches the air reference (a different cable or a drifted `C0` biases `f0` by
 //! `f0 ΔB / (2 Q g)`: this is the method's systematic, documented in `docs/methods.md`).
 
-use super::model::Motional;
 use super::ringdown::{Ringdown, RingdownSettings};
 use super::Estimate;
 use crate::dsp::dds::{frequency_hz, tuning_word};
-use crate::dsp::lockin::{solve, ChannelSums, ReferenceSums};
+use crate::dsp::lockin::{solve_value, ChannelSums, ReferenceSums};
 use crate::engine::{PointPlan, PointRaw};
 use crate::hal::FrontEndScale;
-use crate::linalg::{damped_solve, spd_inverse};
 use crate::status::Failure;
 use crate::sweep::{
     amplitude_codes, check_band, check_durations, check_frequency, Drive, SettingsError,
@@ -213,6 +211,7 @@ impl HoldSettings {
             first_len: 0,
             f_first: 0.0,
             q_first: 0.0,
+            linear_first: (0.0, C64::new(0.0, 0.0)),
             v_first: C64::new(0.0, 0.0),
             v_hold: C64::new(0.0, 0.0),
             carry: Carry {
@@ -321,6 +320,8 @@ pub struct Hold {
     /// The first segment's drive frequency, and its fit's `Q`.
     f_first: f64,
     q_first: f64,
+    /// The first segment's fitted `g` and `z` ([`HoldFit::linear`]).
+    linear_first: (f64, C64),
     /// The first segment's drive phasor, V.
     v_first: C64,
     /// The latest segment's drive phasor, V.
@@ -413,16 +414,16 @@ impl Hold {
                 }
                 self.clipped |= s.current_rail_hits > 0;
                 add_sums(&mut self.monitor, &s.monitor, &s.reference);
-                match solve(&s.current, &s.reference) {
-                    Some(p) => {
+                match solve_value(&s.current, &s.reference) {
+                    Some((value, variance)) => {
                         let ai = scale.amps_per_code as f64;
                         let len = s.reference.n as f64 / self.fs;
                         let end = raw.end_sample as f64 / self.fs;
                         let _ = self.windows.push(HoldWindow {
                             t0: end - len,
                             len,
-                            y: p.value * ai,
-                            var: p.variance * ai * ai,
+                            y: value * ai,
+                            var: variance * ai * ai,
                         });
                     }
                     None => self.finish(Err(Failure::BadSettings)),
@@ -443,6 +444,7 @@ impl Hold {
                             self.first_len = self.windows.len() as u8;
                             self.f_first = self.f_hold;
                             self.q_first = e.q.map_or(self.q_seed, |q| q as f64);
+                            self.linear_first = h.linear;
                             self.f_seed = e.resonance.0 as f64;
                             self.ftw = tuning_word(self.f_seed, self.fs);
                             self.f_hold = frequency_hz(self.ftw, self.fs);
@@ -460,8 +462,8 @@ impl Hold {
     /// Turn the windows' currents into admittances with the segment's drive phasor.
     fn currents_to_admittances(&mut self, scale: &FrontEndScale) -> Result<(), Failure> {
         let (m, r) = &self.monitor;
-        let pv = solve(m, r).ok_or(Failure::BadSettings)?;
-        let drive = Drive::from_monitor(&pv, scale).ok_or(Failure::DriveFault)?;
+        let (value, variance) = solve_value(m, r).ok_or(Failure::BadSettings)?;
+        let drive = Drive::from_value(value, variance, scale).ok_or(Failure::DriveFault)?;
         self.v_hold = drive.v;
         if self.segment == 0 {
             self.v_first = drive.v;
@@ -471,10 +473,17 @@ impl Hold {
             // with it alone, or the voltage's share alone, the fast holds scatter 5–15 % more).
             self.carry.rho = self.v_first / drive.v;
         }
+        // The segment's drive (its variance that of the whole segment) for every window: `Y =
+        // I / V` and `var = (var_I + |Y|² var_V) / |V|²` ([`Drive::admittance`]) with `1/V` and
+        // `1/|V|²` formed once, each window's in f32 (emulated f64 is dear on the Cortex-M4F;
+        // f32's 1e-7 is far below any window's noise, 1e-3 of |Y| and more).
+        let inv_v = C64::new(1.0, 0.0) / drive.v;
+        let (inv_v32, inv_n) = (c32(inv_v), inv_v.norm_sqr() as f32);
+        let var_v = drive.var_v as f32;
         for x in self.windows.iter_mut().skip(self.first_len as usize) {
-            // The segment's drive (its variance that of the whole segment) for every window.
-            let y = drive.admittance(x.y, x.var);
-            (x.y, x.var) = (y.y, y.var);
+            let y = c32(x.y) * inv_v32;
+            let var = (x.var as f32 + y.norm_sqr() * var_v) * inv_n;
+            (x.y, x.var) = (C64::new(y.re as f64, y.im as f64), var as f64);
         }
         Ok(())
     }
@@ -578,7 +587,14 @@ impl Hold {
                 y_s: self.static_admittance(self.f_first),
                 mirror: mirror(self.v_first),
             };
-            fit_two(first, this, &self.carry, (self.f_seed, self.q_first), prior)?
+            fit_two_from(
+                first,
+                this,
+                &self.carry,
+                (self.f_seed, self.q_first),
+                self.linear_first,
+                prior,
+            )?
         } else if self.seed.is_none() {
             let band = (self.s.band_start.0 as f64, self.s.band_stop.0 as f64);
             fit_searched(this, band, prior)?
@@ -622,6 +638,9 @@ pub struct HoldFit {
     /// χ² per degree of freedom at the fit (above [`super::conductance::GROSS_CHI2`] the model
     /// does not explain the windows and `sigma` has been scaled by it).
     pub reduced_chi2: f64,
+    /// The fitted motional peak conductance `g` (S) and state `z` at the start of the first
+    /// window (S): a joint fit that takes these windows goes on from them ([`fit_two_from`]).
+    pub linear: (f64, C64),
 }
 
 /// One segment of a hold: consecutive windows driven at one frequency `f_h`, with the static
@@ -690,7 +709,7 @@ struct Win32 {
 /// admittances and the mean window length (s).
 fn prepare(segs: &[Segment]) -> (heapless::Vec<Win32, MAX_WINDOWS>, f32, f64) {
     let mut out = heapless::Vec::new();
-    let mut big = 0.0f64;
+    let mut big = 0.0f32;
     let all = || segs.iter().flat_map(|s| s.windows.iter());
     let n = all().count();
     let total: f64 = all().map(|x| x.len).sum();
@@ -699,25 +718,29 @@ fn prepare(segs: &[Segment]) -> (heapless::Vec<Win32, MAX_WINDOWS>, f32, f64) {
     } else {
         1.0
     };
+    // The differences in f64 (times from the reading's start, the admittance less its static
+    // part), the rest in f32 (f64 is emulated on the Cortex-M4F).
+    let mean32 = mean_len as f32;
     for (s, seg) in segs.iter().enumerate() {
         let t0 = seg.windows.first().map_or(0.0, |x| x.t0);
         let mut next = 0.0f64;
         for (k, x) in seg.windows.iter().enumerate() {
             let a = x.t0 - t0;
-            let y = x.y - seg.y_s;
+            let y = c32(x.y - seg.y_s);
             big = big.max(y.norm_sqr());
+            let len = x.len as f32;
             let _ = out.push(Win32 {
                 a: a as f32,
-                len: x.len as f32,
-                y: num_complex::Complex32::new(y.re as f32, y.im as f32),
+                len,
+                y,
                 gap: k == 0 || libm::fabs(a - next) > 1e-6,
                 seg: s as u8,
-                wl: (x.len / mean_len) as f32,
+                wl: len / mean32,
             });
             next = a + x.len;
         }
     }
-    (out, (libm::sqrt(big) as f32).max(1e-30), mean_len)
+    (out, crate::dsp::trig::sqrtf(big).max(1e-30), mean_len)
 }
 
 /// The model's parameters: resonance, quality factor, motional peak conductance, and the state
@@ -765,23 +788,41 @@ fn c32(x: C64) -> C32 {
 }
 
 impl DriveModel {
+    /// The model at `p`'s `f0`, `Q` for a drive at `f_h`: [`super::model::Motional`]'s `h`
+    /// and derivatives and the transient's `λ`, formed in `f32` from the detuning `f0 − f_h`
+    /// (taken in `f64`, the one difference of near-equal numbers): `u = −(f0 − f_h)(f_h + f0)/(f0 f_h)` and
+    /// `f_d − f_h = (f0 − f_h) − f0 (1 − sqrt(1 − 1/(4Q²)))` lose nothing to cancellation, so
+    /// every value keeps `f32`'s relative precision (1e-7) — what the `f64` model rounded to
+    /// `f32` gave, at a sixth of the work on the Cortex-M4F (whose FPU is single precision).
     fn new(p: &Params, f_h: f64) -> Self {
-        let (f0, q) = (p.f0, p.q);
-        let m = Motional::at(f0, q, f_h);
-        let (dh_df0, dh_dq) = m.derivatives(f0, q, f_h);
-        let root = libm::sqrt((1.0 - 0.25 / (q * q)).max(1e-12));
-        let lam = C64::new(-PI * f0 / q, 2.0 * PI * (f0 * root - f_h));
+        use core::f32::consts::PI as PI32;
+        let d = (p.f0 - f_h) as f32;
+        let (f0, q, fh) = (p.f0 as f32, p.q as f32, f_h as f32);
+        let u = -d * (fh + f0) / (f0 * fh);
+        let x = q * u;
+        let den = 1.0 + x * x;
+        let h = C32::new(1.0 / den, -x / den);
+        // ∂h/∂f0 = −j Q h² ∂u/∂f0, ∂h/∂Q = −j u h² ([`super::model::Motional::derivatives`]).
+        let h2 = h * h;
+        let du_df0 = -fh / (f0 * f0) - 1.0 / fh;
+        let minus_j = |x: f32| C32::new(x * h2.im, -x * h2.re);
+        let quarter = 0.25 / (q * q);
+        let root = crate::dsp::trig::sqrtf((1.0 - quarter).max(1e-12));
+        // 1 − root, without the cancellation.
+        let one_less = if quarter < 1.0 {
+            quarter / (1.0 + root)
+        } else {
+            1.0 - root
+        };
+        let lam = C32::new(-PI32 * f0 / q, 2.0 * PI32 * (d - f0 * one_less));
         Self {
-            h: c32(m.h),
-            dh: [c32(dh_df0), c32(dh_dq)],
-            lam: c32(lam),
-            mu: c32(lam.conj() - C64::new(0.0, 4.0 * PI * f_h)),
+            h,
+            dh: [minus_j(q * du_df0), minus_j(u)],
+            lam,
+            mu: C32::new(lam.re, -lam.im - 4.0 * PI32 * fh),
             dlam: [
-                c32(C64::new(-PI / q, 2.0 * PI * root)),
-                c32(C64::new(
-                    PI * f0 / (q * q),
-                    2.0 * PI * f0 * 0.25 / (q * q * q * root),
-                )),
+                C32::new(-PI32 / q, 2.0 * PI32 * root),
+                C32::new(PI32 * f0 / (q * q), 2.0 * PI32 * f0 * quarter / (q * root)),
             ],
         }
     }
@@ -891,22 +932,15 @@ fn seg_models(
 /// (`docs/firmware.md` has the measured totals). `f32` carries the model values with a relative
 /// error of about 1e-7 of `g`, far below the noise of any window (1e-3 of `g` at the bench noise
 /// and the longest hold).
-fn evaluate(
-    pb: &Problem,
-    p: &Params,
-    jac: bool,
-    mut res: Option<&mut [C32]>,
-) -> (f64, [[f64; 5]; 5], [f64; 5]) {
+fn evaluate(pb: &Problem, p: &Params, jac: bool, mut res: Option<&mut [C32]>) -> (f64, Normal) {
     let (w, gs, wt) = (&pb.w[..], pb.gs, pb.wt);
     let (segs, carry) = (&pb.segs[..], pb.carry);
     let one = C32::new(1.0, 0.0);
     let (f0, q) = (p.f0, p.q);
-    let mut jtj = [[0.0f64; 5]; 5];
-    let mut jtr = [0.0f64; 5];
     let models = seg_models(p, segs, carry);
     // The normal equations' sums (at most 16 products each) in f32, each column scaled to about
-    // unit size first; f32's relative precision (1e-7) is far finer than what the steps and the
-    // covariance need.
+    // unit size first ([`Normal`]); f32's relative precision (1e-7) is far finer than what the
+    // steps and the covariance need.
     let scale: [f32; 5] = [
         1.0 / (gs * (q / f0) as f32),
         1.0 / (gs / q as f32),
@@ -925,7 +959,7 @@ fn evaluate(
     let mut chi2 = 0.0f32;
     for (i, x) in w.iter().enumerate() {
         let Some(m) = models.get(x.seg as usize) else {
-            return (f64::INFINITY, jtj, jtr);
+            return (f64::INFINITY, Normal::default());
         };
         if x.seg != seg {
             seg = x.seg;
@@ -933,7 +967,8 @@ fn evaluate(
         }
         let (a, len) = (x.a, x.len);
         if x.gap {
-            ea = cexp(m.lam * a);
+            // A segment's first window starts at its origin: exp(0) = 1 exactly.
+            ea = if a == 0.0 { one } else { cexp(m.lam * a) };
         }
         let decay = if cache[0].0 == len {
             cache[0].1
@@ -962,21 +997,23 @@ fn evaluate(
             let k = (m.z - m.gh) * de;
             // The image: d(tr)/dp and d(P)/dp = (e^{λ̄ len} − P)/μ · conj(dλ/dp) (real p).
             let dp = (decay.conj() - pm) * m.inv_mu;
-            let zero = C32::new(0.0, 0.0);
-            let dgh = [m.g_dh[0], m.g_dh[1], m.h, zero, zero];
-            let dl = [m.dl[0], m.dl[1], zero, zero, zero];
-            let image = |i: usize| {
-                let dtr = (m.dz[i] - dgh[i]) * ea + tr * dl[i] * a;
-                m.mirror * (dp * dl[i].conj() * tr.conj() + pm * dtr.conj())
+            // The image's derivative `mirror (dP conj(dλ) conj(tr) + P conj(d tr))`, `d tr =
+            // (dz − d(gh)) e^{λa} + tr a dλ`, with its common factors taken once and the terms
+            // that vanish (g and z do not move λ; z does not move gh) left out.
+            let (ia, ib, ta) = (m.mirror * dp * tr.conj(), m.mirror * pm, tr * a);
+            let moving = |i: usize| {
+                let dtr = (m.dz[i] - m.g_dh[i]) * ea + ta * m.dl[i];
+                ia * m.dl[i].conj() + ib * dtr.conj()
             };
+            let one_e = one - e;
             let cols = [
-                m.g_dh[0] * (one - e) + k * m.dl[0] + e * m.dz[0] + image(0),
-                m.g_dh[1] * (one - e) + k * m.dl[1] + e * m.dz[1] + image(1),
-                m.h * (one - e) + e * m.dz[2] + image(2),
-                e * m.dz[3] + image(3),
-                e * m.dz[4] + image(4),
+                (m.g_dh[0] * one_e + k * m.dl[0] + e * m.dz[0] + moving(0)) * scale[0],
+                (m.g_dh[1] * one_e + k * m.dl[1] + e * m.dz[1] + moving(1)) * scale[1],
+                // The linear parameters' columns are not scaled.
+                m.h * one_e + e * m.dz[2] + ib * ((m.dz[2] - m.h) * ea).conj(),
+                e * m.dz[3] + ib * (m.dz[3] * ea).conj(),
+                e * m.dz[4] + ib * (m.dz[4] * ea).conj(),
             ];
-            let cols: [C32; 5] = core::array::from_fn(|i| cols[i] * scale[i]);
             let rw = r * x.wl;
             for i in 0..5 {
                 let ci = cols[i];
@@ -989,20 +1026,98 @@ fn evaluate(
         }
         ea = eb;
     }
-    if jac {
-        // Unscaled: five divisions, then two products an entry (the lower triangle, mirrored).
-        let inv: [f64; 5] = core::array::from_fn(|i| 1.0 / scale[i] as f64);
+    let normal = Normal {
+        jtj: jtj32,
+        jtr: jtr32,
+        scale,
+    };
+    (chi2 as f64 * wt, normal)
+}
+
+/// The normal equations of the fit over (f0, Q, g, Re z, Im z) in `f32`, each column of the
+/// Jacobian multiplied by `scale` (to about unit size) and the weight `1/var` left out:
+/// `JᵀWJ = wt S⁻¹ jtj S⁻¹`, `JᵀW r = wt S⁻¹ jtr` (`S = diag(scale)`). The steps are solved
+/// in these units ([`spd_solve32`]: on the Cortex-M4F's single-precision FPU, where the `f64`
+/// solve was emulated, a tenth of the work); only the covariance is formed in `f64`.
+#[derive(Clone, Copy, Debug, Default)]
+struct Normal {
+    /// `JᵀJ` (scaled), lower triangle.
+    jtj: [[f32; 5]; 5],
+    /// `Jᵀ r` (scaled).
+    jtr: [f32; 5],
+    /// The columns' scale.
+    scale: [f32; 5],
+}
+
+impl Normal {
+    /// The variances of `f0` and `Q` (the first two diagonal entries of `(JᵀWJ)⁻¹`) for
+    /// weight `wt`, in `f64`: the scaled matrix factored as `L D Lᵀ` (no square roots), `L y =
+    /// e_i` solved for the two unit vectors, `Σ y_k² / d_k` unscaled by `scale_i² / wt`. `None`
+    /// when the matrix is not positive definite.
+    #[allow(clippy::needless_range_loop)] // triangular index arithmetic reads best as indices
+    fn variances(&self, wt: f64) -> Option<[f64; 2]> {
+        const N: usize = 5;
+        let m: [[f64; N]; N] =
+            core::array::from_fn(|i| core::array::from_fn(|j| self.jtj[i.max(j)][i.min(j)] as f64));
+        let mut l = [[0.0f64; N]; N];
+        let mut d = [0.0f64; N];
+        let mut inv_d = [0.0f64; N];
+        for i in 0..N {
+            // L[i][k] d[k] for the row, then the diagonal.
+            let mut ld = [0.0f64; N];
+            for j in 0..i {
+                let mut s = m[i][j];
+                for k in 0..j {
+                    s -= ld[k] * l[j][k];
+                }
+                ld[j] = s;
+                l[i][j] = s * inv_d[j];
+            }
+            let mut s = m[i][i];
+            for k in 0..i {
+                s -= ld[k] * l[i][k];
+            }
+            if !(s > 0.0) || !s.is_finite() {
+                return None;
+            }
+            d[i] = s;
+            inv_d[i] = 1.0 / s;
+        }
+        let mut out = [0.0f64; 2];
+        for (c, o) in out.iter_mut().enumerate() {
+            let mut y = [0.0f64; N];
+            y[c] = 1.0;
+            let mut v = inv_d[c];
+            for i in c + 1..N {
+                let mut s = 0.0;
+                for k in c..i {
+                    s -= l[i][k] * y[k];
+                }
+                y[i] = s;
+                v += s * s * inv_d[i];
+            }
+            let sc = self.scale[c] as f64;
+            *o = v * sc * sc / wt;
+        }
+        out.iter().all(|v| v.is_finite()).then_some(out)
+    }
+
+    /// `JᵀWJ` and `JᵀW r` in `f64`, unscaled, for weight `wt`.
+    #[cfg(test)]
+    fn unscaled(&self, wt: f64) -> ([[f64; 5]; 5], [f64; 5]) {
+        let (mut jtj, mut jtr) = ([[0.0f64; 5]; 5], [0.0f64; 5]);
+        let inv: [f64; 5] = core::array::from_fn(|i| 1.0 / self.scale[i] as f64);
         for i in 0..5 {
             let wi = wt * inv[i];
-            jtr[i] = wi * jtr32[i] as f64;
+            jtr[i] = wi * self.jtr[i] as f64;
             for j in 0..=i {
-                let v = wi * inv[j] * jtj32[i][j] as f64;
+                let v = wi * inv[j] * self.jtj[i][j] as f64;
                 jtj[i][j] = v;
                 jtj[j][i] = v;
             }
         }
+        (jtj, jtr)
     }
-    (chi2 as f64 * wt, jtj, jtr)
 }
 
 /// The problem a fit solves: the windows, their segments' drives and start times, the carry.
@@ -1015,21 +1130,87 @@ struct Problem<'a> {
 }
 
 impl Problem<'_> {
-    fn eval(&self, p: &Params, jac: bool) -> (f64, [[f64; 5]; 5], [f64; 5]) {
+    fn eval(&self, p: &Params, jac: bool) -> (f64, Normal) {
         evaluate(self, p, jac, None)
     }
 
+    /// A candidate of the start search of a one-segment problem: the linear parameters
+    /// `(g, z)` at `f0`, `q` solved by least squares (the model is linear in them:
+    /// `y_k = g a_k + Re z b_k + Im z c_k`, the three columns formed once, in `f32`, a 3×3
+    /// Cholesky solve), and the χ² there in units of the weight `1/var` (from the residuals,
+    /// not the normal equations, so no cancellation; `f32`, compared between candidates
+    /// alone). A third of the work of [`Self::linear_start`], which forms all five columns and
+    /// evaluates twice. `None` for two segments, a singular system or a non-finite χ².
+    fn linear_candidate(&self, f0: f64, q: f64) -> Option<([f32; 3], f32)> {
+        let [(f_h, _, mirror)] = self.segs[..] else {
+            return None;
+        };
+        let one = C32::new(1.0, 0.0);
+        let j = C32::new(0.0, 1.0);
+        let at = Params {
+            f0,
+            q,
+            g: 0.0,
+            z: C64::new(0.0, 0.0),
+        };
+        let m = DriveModel::new(&at, f_h);
+        let (inv_lam, inv_mu) = (one / m.lam, one / m.mu);
+        let mut cols = [[C32::new(0.0, 0.0); 3]; MAX_WINDOWS];
+        let mut a = [[0.0f32; 3]; 3];
+        let mut b = [0.0f32; 3];
+        let mut ea = one;
+        let mut cache: [(f32, C32); 2] = [(-1.0, one); 2];
+        for (x, c) in self.w.iter().zip(cols.iter_mut()) {
+            if x.gap {
+                ea = if x.a == 0.0 { one } else { cexp(m.lam * x.a) };
+            }
+            let decay = if cache[0].0 == x.len {
+                cache[0].1
+            } else if cache[1].0 == x.len {
+                cache[1].1
+            } else {
+                cache[1] = cache[0];
+                cache[0] = (x.len, cexp(m.lam * x.len));
+                cache[0].1
+            };
+            let eb = ea * decay;
+            let e = (eb - ea) * inv_lam / x.len;
+            // The mirror image's factor on conj(transient at the window's start).
+            let mp = mirror * (decay.conj() - one) * inv_mu / x.len;
+            let image = mp * ea.conj();
+            *c = [
+                m.h * (one - e) - mp * (m.h * ea).conj(),
+                e + image,
+                j * (e - image),
+            ];
+            for i in 0..3 {
+                let ci = c[i] * x.wl;
+                b[i] += ci.re * x.y.re + ci.im * x.y.im;
+                for k in 0..=i {
+                    a[i][k] += ci.re * c[k].re + ci.im * c[k].im;
+                }
+            }
+            ea = eb;
+        }
+        let sol = spd_solve32(&a, &b)?;
+        let mut chi2 = 0.0f32;
+        for (x, c) in self.w.iter().zip(cols.iter()) {
+            let r = x.y - c[0] * sol[0] - c[1] * sol[1] - c[2] * sol[2];
+            chi2 += x.wl * r.norm_sqr();
+        }
+        chi2.is_finite().then_some((sol, chi2))
+    }
+
     /// The linear parameters (g, z) at `p`'s `f0`, `Q`: one Gauss–Newton step on them alone
-    /// (the model is linear in them), and the χ² there.
-    fn linear_start(&self, p: &Params) -> Option<(Params, f64)> {
-        let (_, jtj, jtr) = self.eval(p, true);
-        let m3: [[f64; 3]; 3] =
-            core::array::from_fn(|i| core::array::from_fn(|j| jtj[i + 2][j + 2]));
-        let r3: [f64; 3] = core::array::from_fn(|i| jtr[i + 2]);
-        let step = damped_solve(&m3, &r3, 0.0)?;
-        let t = p.stepped(&[0.0, 0.0, step[0], step[1], step[2]]);
-        let c = self.eval(&t, false).0;
-        c.is_finite().then_some((t, c))
+    /// (the model is linear in them).
+    fn linear_start(&self, p: &Params) -> Option<Params> {
+        // The linear parameters' columns are not scaled (their scale is 1).
+        let (_, n) = self.eval(p, true);
+        let m3: [[f32; 3]; 3] =
+            core::array::from_fn(|i| core::array::from_fn(|j| n.jtj[i + 2][j + 2]));
+        let r3: [f32; 3] = core::array::from_fn(|i| n.jtr[i + 2]);
+        let step = spd_solve32(&m3, &r3)?;
+        Some(p.stepped(&[0.0, 0.0, step[0] as f64, step[1] as f64, step[2] as f64]))
     }
 }
 
@@ -1038,7 +1219,7 @@ impl Problem<'_> {
 /// `Q = q_prior.0 ± q_prior.1` (a hold at one frequency measures the phase well and `Q` poorly;
 /// the prior — the seed's `Q` — keeps a noisy hold from trading one for the other).
 pub fn fit(seg: Segment, f_start: f64, q_prior: (f64, f64)) -> Result<HoldFit, Failure> {
-    fit_segments(&[seg], None, (f_start, q_prior.0), q_prior, None)
+    fit_segments(&[seg], None, (f_start, q_prior.0), q_prior, Start::Linear)
 }
 
 /// The joint fit of two consecutive segments: one `f0`, `Q`, `g`, and the first segment's
@@ -1055,11 +1236,43 @@ pub fn fit_two(
     start: (f64, f64),
     q_prior: (f64, f64),
 ) -> Result<HoldFit, Failure> {
-    fit_segments(&[first, second], Some(carry), start, q_prior, None)
+    fit_segments(&[first, second], Some(carry), start, q_prior, Start::Linear)
+}
+
+/// [`fit_two`] going on from the first segment's fitted linear parameters (`g`, `z`:
+/// [`HoldFit::linear`]) instead of solving them anew at `start` (one evaluation of the joint
+/// problem fewer; the Levenberg–Marquardt steps move them with `f0` and `Q`).
+pub fn fit_two_from(
+    first: Segment,
+    second: Segment,
+    carry: &Carry,
+    start: (f64, f64),
+    linear: (f64, C64),
+    q_prior: (f64, f64),
+) -> Result<HoldFit, Failure> {
+    let (g, z) = linear;
+    fit_segments(
+        &[first, second],
+        Some(carry),
+        start,
+        q_prior,
+        Start::Given(g, z),
+    )
+}
+
+/// Where a fit's linear parameters start.
+#[derive(Clone, Copy, Debug)]
+enum Start {
+    /// Solved at the given `f0`, `Q` ([`Problem::linear_start`]).
+    Linear,
+    /// The best of a search of the band `(lo, hi)` for `f0` (each candidate's solved).
+    Search(f64, f64),
+    /// The given `g`, `z`.
+    Given(f64, C64),
 }
 
 /// Steps of the start search over the band, in half-widths `f0/(2Q)` of the prior `Q`.
-const SEARCH_STEP_HALF_WIDTHS: f64 = 0.5;
+const SEARCH_STEP_HALF_WIDTHS: f64 = 1.5;
 /// Most candidates of the start search.
 const SEARCH_MAX: usize = 64;
 
@@ -1070,7 +1283,13 @@ pub fn fit_searched(
     band: (f64, f64),
     q_prior: (f64, f64),
 ) -> Result<HoldFit, Failure> {
-    fit_segments(&[seg], None, (seg.f_h, q_prior.0), q_prior, Some(band))
+    fit_segments(
+        &[seg],
+        None,
+        (seg.f_h, q_prior.0),
+        q_prior,
+        Start::Search(band.0, band.1),
+    )
 }
 
 /// The fit over the segments from `start` (`f0`, `Q`); `search`: the band to search for a start
@@ -1082,8 +1301,12 @@ fn fit_segments(
     carry: Option<&Carry>,
     (f_start, q_begin): (f64, f64),
     q_prior: (f64, f64),
-    search: Option<(f64, f64)>,
+    start: Start,
 ) -> Result<HoldFit, Failure> {
+    let search = match start {
+        Start::Search(lo, hi) => Some((lo, hi)),
+        _ => None,
+    };
     let (q_start, q_sd) = q_prior;
     if !(q_start > 0.0) || !(q_sd > 0.0) || !q_sd.is_finite() || segs.len() > MAX_SEGMENTS {
         return Err(Failure::NoResonance);
@@ -1147,42 +1370,61 @@ fn fit_segments(
     };
     // Start: the seed's f0 and Q (or the search's best), the linear parameters from one
     // Gauss–Newton step on them alone.
-    let (mut p, mut c) = match search {
-        None => pb.linear_start(&at(f_start)).ok_or(Failure::NoResonance)?,
+    let mut p = match search {
+        None => match start {
+            Start::Given(g, z) if g.is_finite() && z.is_finite() => Params {
+                g,
+                z,
+                ..at(f_start)
+            },
+            _ => pb.linear_start(&at(f_start)).ok_or(Failure::NoResonance)?,
+        },
         Some((lo, hi)) => {
             if !(lo > 0.0) || !(hi > lo) || !hi.is_finite() {
                 return Err(Failure::NoResonance);
             }
             let step = SEARCH_STEP_HALF_WIDTHS * 0.5 * (lo + hi) / (2.0 * q0);
             let n = (libm::ceil((hi - lo) / step) as usize).clamp(1, SEARCH_MAX - 1);
-            let mut best: Option<(Params, f64)> = None;
+            let mut best: Option<(f64, [f32; 3], f32)> = None;
+            let df = (hi - lo) / n as f64;
             for k in 0..=n {
-                let f = lo + (hi - lo) * k as f64 / n as f64;
-                if let Some((t, tc)) = pb.linear_start(&at(f)) {
+                let f = lo + df * k as f64;
+                if let Some((sol, tc)) = pb.linear_candidate(f, q0) {
                     // Only a positive motional conductance is a resonance.
-                    if t.g > 0.0 && best.is_none_or(|(_, bc)| tc < bc) {
-                        best = Some((t, tc));
+                    if sol[0] > 0.0 && best.is_none_or(|(_, _, bc)| tc < bc) {
+                        best = Some((f, sol, tc));
                     }
                 }
             }
-            best.ok_or(Failure::NoResonance)?
+            let (f, sol, _) = best.ok_or(Failure::NoResonance)?;
+            Params {
+                g: sol[0] as f64,
+                z: C64::new(sol[1] as f64, sol[2] as f64),
+                ..at(f)
+            }
         }
     };
-    c += prior(p.q);
     let mut lambda = 1e-3;
     // The normal equations at the current point, with the prior on Q; recomputed only when a
     // step is taken (a rejected step costs one χ² evaluation).
     // The residuals come with them (the last call's are the fit's, for the hum check).
     let mut res = [C32::new(0.0, 0.0); MAX_WINDOWS];
+    // The start's χ² comes with them (the same sum a χ²-only evaluation makes).
+    // The prior in the normal equations' units ([`Normal`]).
+    let q_w_scaled = q_w / pb.wt;
     let normal = |p: &Params, res: &mut [C32]| {
-        let (_, mut jtj, mut jtr) = evaluate(&pb, p, true, Some(res));
-        jtj[1][1] += q_w;
-        jtr[1] += (q_start - p.q) * q_w;
-        (jtj, jtr)
+        let (chi2, mut n) = evaluate(&pb, p, true, Some(res));
+        let s1 = n.scale[1] as f64;
+        n.jtj[1][1] += (q_w_scaled * s1 * s1) as f32;
+        n.jtr[1] += ((q_start - p.q) * q_w_scaled * s1) as f32;
+        (chi2 + prior(p.q), n)
     };
-    let (mut jtj, mut jtr) = normal(&p, &mut res);
+    let (mut c, mut n) = normal(&p, &mut res);
+    if !c.is_finite() {
+        return Err(Failure::NoResonance);
+    }
     for _ in 0..30 {
-        let Some(step) = damped_solve(&jtj, &jtr, lambda) else {
+        let Some(step) = damped_solve32(&n, lambda) else {
             lambda *= 10.0;
             if lambda > 1e6 {
                 break;
@@ -1193,28 +1435,35 @@ fn fit_segments(
         // hundredth of a unit (and the step is near Gauss–Newton's), the fit has converged — a
         // step the `f32` χ² would then reject is round-off, and each rejection costs an
         // evaluation.
-        let pred = (0..5)
-            .map(|i| step[i] * (2.0 * jtr[i] - (0..5).map(|j| jtj[i][j] * step[j]).sum::<f64>()))
-            .sum::<f64>();
+        let pred = predicted_decrease(&n, &step) as f64 * pb.wt;
         if pred <= 1e-2 && lambda <= 1.0 {
             break;
         }
-        let t = p.stepped(&step);
+        let t = p.stepped(&core::array::from_fn(|i| {
+            step[i] as f64 * n.scale[i] as f64
+        }));
+        let mut trial_res = [C32::new(0.0, 0.0); MAX_WINDOWS];
         let tc = if t.f0 > 0.0 && t.q > 0.5 {
-            pb.eval(&t, false).0 + prior(t.q)
+            evaluate(&pb, &t, false, Some(&mut trial_res)).0 + prior(t.q)
         } else {
             f64::INFINITY
         };
         if tc < c {
-            // Converged when χ² no longer falls by a hundredth of one unit: the parameters then
-            // move by less than a tenth of their standard uncertainty.
-            let done = c - tc <= 1e-2;
+            // Converged when χ² no longer falls by a hundredth of one unit (the parameters then
+            // move by less than a tenth of their standard uncertainty), or by one unit at a
+            // Gauss–Newton step (lightly damped): a step of at most 1 σ, after which the next
+            // would move them by about (1 σ)² over the scale of the model's curvature in σ —
+            // the linewidth, hundreds of σ. The normal equations of the last point serve for the
+            // covariance (not formed again: the Jacobian is the evaluation's dearest part); the
+            // residuals are the trial's own.
+            let done = c - tc <= 1e-2 || (c - tc <= 1.0 && lambda <= 1e-3);
             (p, c) = (t, tc);
-            lambda = (lambda * 0.3).max(1e-12);
-            (jtj, jtr) = normal(&p, &mut res);
             if done {
+                res = trial_res;
                 break;
             }
+            lambda = (lambda * 0.3).max(1e-12);
+            (_, n) = normal(&p, &mut res);
         } else {
             lambda *= 10.0;
             if lambda > 1e6 {
@@ -1224,12 +1473,12 @@ fn fit_segments(
     }
     // Mains hum near the drive turns in the residuals at its offset: no reading.
     super::interference::hum(segs, &res)?;
-    let cov = spd_inverse(&jtj).ok_or(Failure::NoResonance)?;
+    let cov = n.variances(pb.wt).ok_or(Failure::NoResonance)?;
     let dof = (2 * pb.w.len() + 1).saturating_sub(5).max(1) as f64;
     let red = c / dof;
     let scale = super::gross_scale(red);
-    let sigma = libm::sqrt((cov[0][0] * scale).max(0.0));
-    let sigma_q = libm::sqrt((cov[1][1] * scale).max(0.0));
+    let sigma = libm::sqrt((cov[0] * scale).max(0.0));
+    let sigma_q = libm::sqrt((cov[1] * scale).max(0.0));
     let (f0, q) = (p.f0, p.q);
     if !(p.g > 0.0) || !f0.is_finite() || !q.is_finite() || !sigma.is_finite() {
         return Err(Failure::NoResonance);
@@ -1244,16 +1493,87 @@ fn fit_segments(
         },
         sigma_q,
         reduced_chi2: red,
+        linear: (p.g, p.z),
     })
 }
 
-/// `exp(z)` by the `libm` crate's `expf`, `cosf`, `sinf`: the same bits on the host and the
-/// target, whatever `num-traits` features another crate of the build enables (with `std` its
-/// `Float::exp` is the platform's, which differs in the last bits and made the host's readings
-/// depend on which binary took them).
+/// The Levenberg–Marquardt step of the scaled normal equations `n` with damping `lambda`
+/// (`(JᵀJ + λ diag JᵀJ) x = Jᵀ r`, as [`crate::linalg::damped_solve`], in `f32`): the step in
+/// the scaled parameters (multiply by `n.scale` for the parameters' own units).
+fn damped_solve32(n: &Normal, lambda: f64) -> Option<[f32; 5]> {
+    let mut m = n.jtj;
+    for (i, row) in m.iter_mut().enumerate() {
+        row[i] *= 1.0 + lambda as f32;
+    }
+    spd_solve32(&m, &n.jtr)
+}
+
+/// The decrease of χ²/wt the quadratic model of `n` predicts for the scaled step `x`:
+/// `x · (2 Jᵀr − JᵀJ x)`.
+fn predicted_decrease(n: &Normal, x: &[f32; 5]) -> f32 {
+    let mut sum = 0.0f32;
+    for i in 0..5 {
+        let mut jx = 0.0f32;
+        for (j, xj) in x.iter().enumerate() {
+            // The lower triangle holds JᵀJ[i][j] at [max][min].
+            jx += if j <= i { n.jtj[i][j] } else { n.jtj[j][i] } * xj;
+        }
+        sum += x[i] * (2.0 * n.jtr[i] - jx);
+    }
+    sum
+}
+
+/// `x` with `a x = b` for a symmetric positive-definite `a` (its lower triangle), in `f32`,
+/// by Cholesky factorisation; `None` when `a` is not positive definite.
+#[allow(clippy::needless_range_loop)] // triangular index arithmetic reads best as indices
+fn spd_solve32<const N: usize>(a: &[[f32; N]; N], b: &[f32; N]) -> Option<[f32; N]> {
+    let mut l = [[0.0f32; N]; N];
+    let mut rd = [0.0f32; N];
+    for i in 0..N {
+        for k in 0..=i {
+            let mut s = a[i][k];
+            for m in 0..k {
+                s -= l[i][m] * l[k][m];
+            }
+            if i == k {
+                if !(s > 0.0) || !s.is_finite() {
+                    return None;
+                }
+                l[i][i] = crate::dsp::trig::sqrtf(s);
+                rd[i] = 1.0 / l[i][i];
+            } else {
+                l[i][k] = s * rd[k];
+            }
+        }
+    }
+    let mut y = [0.0f32; N];
+    for i in 0..N {
+        let mut s = b[i];
+        for m in 0..i {
+            s -= l[i][m] * y[m];
+        }
+        y[i] = s * rd[i];
+    }
+    let mut x = [0.0f32; N];
+    for i in (0..N).rev() {
+        let mut s = y[i];
+        for m in i + 1..N {
+            s -= l[m][i] * x[m];
+        }
+        x[i] = s * rd[i];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
+/// `exp(z)` by the `libm` crate's `expf` and [`crate::dsp::trig::sincos`] (`f32` arithmetic
+/// alone: `libm`'s `sincosf` computes in `f64`, 2 400 instructions a call on the Cortex-M4F):
+/// the same bits on the host and the target, whatever `num-traits` features another crate of
+/// the build enables (with `std` its `Float::exp` is the platform's, which differs in the last
+/// bits and made the host's readings depend on which binary took them).
 fn cexp(z: num_complex::Complex32) -> num_complex::Complex32 {
     let m = libm::expf(z.re);
-    num_complex::Complex32::new(m * libm::cosf(z.im), m * libm::sinf(z.im))
+    let (sin, cos) = crate::dsp::trig::sincos(z.im);
+    num_complex::Complex32::new(m * cos, m * sin)
 }
 
 #[cfg(test)]
@@ -1622,7 +1942,20 @@ mod gradcheck {
                 carry: None,
                 wt: 1e14,
             };
-            let (_, _, jtr) = evaluate(&pb, &p, true, None);
+            let n = evaluate(&pb, &p, true, None).1;
+            let (jtj, jtr) = n.unscaled(pb.wt);
+            // The variances of f0 and Q by LDLᵀ of the scaled matrix, against the f64 inverse
+            // of the unscaled one.
+            let inv = crate::linalg::spd_inverse(&jtj).unwrap();
+            let v = n.variances(pb.wt).unwrap();
+            for i in 0..2 {
+                assert!(
+                    (v[i] / inv[i][i] - 1.0).abs() < 1e-9,
+                    "{i}: {} vs {}",
+                    v[i],
+                    inv[i][i]
+                );
+            }
             for (i, g) in jtr.iter().enumerate() {
                 let mut step = [0.0; 5];
                 step[i] = [1e-2, 1e-2, 1e-10, 1e-10, 1e-10][i];

@@ -124,8 +124,27 @@ fn spike(n: usize, r: impl Fn(usize) -> f32, first: usize, open_end: bool) -> Re
 /// raises one or two windows 250–450× in variance (stream segments on phantom C under the
 /// catalogue's knocks).
 pub fn window_spike(vars: &[f64]) -> Result<(), Failure> {
-    let r = |i: usize| vars.get(i).map_or(f32::NAN, |&v| libm::sqrtf(v as f32));
-    spike(vars.len(), r, 1, true)
+    let amp = |v: f64| crate::dsp::trig::sqrtf(v as f32);
+    // The amplitudes once each (a conversion from the emulated f64 and a square root), not at
+    // every look; the same values.
+    let mut once = [f32::NAN; 32];
+    if vars.len() <= once.len() {
+        for (o, &v) in once.iter_mut().zip(vars) {
+            *o = amp(v);
+        }
+        return spike(
+            vars.len(),
+            |i| once.get(i).copied().unwrap_or(f32::NAN),
+            1,
+            true,
+        );
+    }
+    spike(
+        vars.len(),
+        |i| vars.get(i).map_or(f32::NAN, |&v| amp(v)),
+        1,
+        true,
+    )
 }
 
 /// Mains frequencies whose harmonics [`hum`] looks for, Hz.
@@ -168,21 +187,27 @@ pub fn hum(segments: &[Segment], residuals: &[num_complex::Complex32]) -> Result
         // harmonic; the windows are gap-free, so two lengths a sample apart give one step).
         let mut steps = [0.0f32; 32];
         for (o, p) in steps.iter_mut().zip(w.windows(2)) {
-            *o = ((p[1].t0 + 0.5 * p[1].len) - (p[0].t0 + 0.5 * p[0].len)) as f32;
+            // The starts' difference in f64 (times from the reading's start), the lengths' in f32.
+            *o = (p[1].t0 - p[0].t0) as f32 + 0.5 * (p[1].len as f32 - p[0].len as f32);
         }
+        // The harmonics' offsets and the tests on them in f32 (sixteen of them a segment; f64
+        // is emulated on the Cortex-M4F).
+        let (f_h, len, span) = (seg.f_h as f32, first.len as f32, span as f32);
+        // `|S|² / (2 Σ var) > HUM_THRESHOLD`, the division taken once.
+        let limit = HUM_THRESHOLD * 2.0 * var;
         for fm in MAINS_HZ {
             for k in 1..=MAINS_HARMONICS {
-                let d = fm * k as f64 - seg.f_h;
+                let d = fm as f32 * k as f32 - f_h;
                 // Within a window's main lobe, and turning at least HUM_TURNS times over the
                 // segment: a slower turn is a slow change of the residual that a drifting
                 // resonance or the model's own misfit also leaves (measured: 3–5 Hz off, 84–91).
-                if libm::fabs(d) * first.len >= 1.0 || libm::fabs(d) * span < HUM_TURNS {
+                if libm::fabsf(d) * len >= 1.0 || libm::fabsf(d) * span < HUM_TURNS as f32 {
                     continue;
                 }
                 // The turn e^{−j2πd t_k} carried from window to window (in f32: sixteen
                 // products lose 1e-6 rad), a sine and cosine only where the step between window
                 // centres changes (whole-cycle windows: two lengths a sample apart).
-                let w_d = -2.0 * core::f32::consts::PI * d as f32;
+                let w_d = -2.0 * core::f32::consts::PI * d;
                 let mut turn = C32::new(1.0, 0.0);
                 let (mut step, mut rot) = (f32::NAN, C32::new(1.0, 0.0));
                 let mut sum = C32::new(0.0, 0.0);
@@ -191,14 +216,14 @@ pub fn hum(segments: &[Segment], residuals: &[num_complex::Complex32]) -> Result
                         if dt != step {
                             step = dt;
                             let ph = w_d * dt;
-                            rot = C32::new(libm::cosf(ph), libm::sinf(ph));
+                            let (sin, cos) = crate::dsp::trig::sincos(ph);
+                            rot = C32::new(cos, sin);
                         }
                         turn *= rot;
                     }
                     sum += *rk * turn;
                 }
-                let (sr, si) = (sum.re as f64, sum.im as f64);
-                if (sr * sr + si * si) / (2.0 * var) > HUM_THRESHOLD {
+                if sum.norm_sqr() as f64 > limit {
                     return Err(Failure::Interference);
                 }
             }
