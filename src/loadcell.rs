@@ -232,6 +232,15 @@ pub const NO_CONTACT_FORCE: Newtons = Newtons(0.003);
 /// docs/physics.md) and is `force_unstable`, not a number. 2 mN.
 pub const MAX_FORCE_CHANGE: Newtons = Newtons(0.002);
 
+/// Smallest change of the contact force across a window that explains a reading the estimator
+/// refused (a press that moved shifts the resonance during the reading, and the estimator sees
+/// a resonance that will not sit still): 0.5 mN, the force resolution the force compensation
+/// needs (docs/physics.md: 1.2–1.9 % of modulus per mN on the soft phantoms, a 2 % reading
+/// wants the force to ±0.5 mN). A change must also stand out of the cell's noise
+/// ([`ContactForce::moved`]). Below [`MAX_FORCE_CHANGE`] such a press still gives a reading
+/// when the estimator accepts it: the calibration applies at the window's mean force.
+pub const MOVING_FORCE_CHANGE: Newtons = Newtons(0.0005);
+
 /// Where a reading gets its contact force: the load cell's counts over samples `from..=to` of
 /// the sample engine (`None`: no load cell on this board, or it gave fewer than three
 /// conversions in the window). The board's load-cell task fills a [`ForceLog`]; a board
@@ -285,6 +294,23 @@ pub struct ContactForce {
     pub change: Newtons,
     /// Samples averaged.
     pub samples: u16,
+}
+
+impl ContactForce {
+    /// Standard uncertainty of [`Self::change`]: the slope of a line through `n` evenly spaced
+    /// samples over a window `T` has the uncertainty `s / sqrt(n T² / 12)`, so its change over
+    /// `T` has `sqrt(12) s / sqrt(n) = sqrt(12) σ_mean`.
+    pub fn change_sigma(&self) -> Newtons {
+        Newtons(libm::sqrtf(12.0) * self.sigma.0)
+    }
+
+    /// True when the press moved during the window: a change of at least
+    /// [`MOVING_FORCE_CHANGE`] that is also three of its standard uncertainties (a change the
+    /// cell's noise makes one window in 370).
+    pub fn moved(&self) -> bool {
+        let c = libm::fabsf(self.change.0);
+        c.is_finite() && c >= MOVING_FORCE_CHANGE.0 && c > 3.0 * self.change_sigma().0
+    }
 }
 
 /// The load cell's recent conversions, each at a sample count of the engine: the last

@@ -82,8 +82,16 @@ pub fn conclude(
         // the load cell's verdict is the one to report. A fault of the instrument stays, and so
         // does the estimator's own failure when the load cell has no verdict on the press (no
         // force: a reading that failed before the cell's first conversion is not a cable fault).
+        // A press that moved by less than the window allows is still the likely cause when the
+        // estimator refused the reading: the resonance moved with it.
         Err(f) => {
-            let verdict = press.filter(|p| *p != Failure::NoForce && !f.is_fault());
+            let moved = force
+                .filter(|w| unit.load_cell.is_some() && w.moved())
+                .map(|_| Failure::ForceUnstable);
+            let verdict = press
+                .filter(|p| *p != Failure::NoForce)
+                .or(moved)
+                .filter(|_| !f.is_fault());
             return fail(verdict.unwrap_or(f));
         }
     };
@@ -185,5 +193,61 @@ mod tests {
         };
         let r = conclude(Method::Hold, Ok(est), &unit, t, 8, None);
         assert_eq!(r.status, Status::Failed(Failure::NoForce));
+    }
+
+    /// A refused estimate during a press that moved by less than the force window allows, but
+    /// clearly (1.5 mN over a reading, 0.1 mN noise per conversion over ten conversions), is
+    /// `force_unstable`: the press explains it. The same change in a cell too noisy to resolve
+    /// it, or a resolved change below 0.5 mN, leaves the estimator's own failure; a fault of the
+    /// instrument stays a fault; an accepted estimate on such a press is a reading.
+    #[test]
+    fn a_press_that_moved_explains_a_refused_estimate() {
+        let unit = crate::board::sim_factory::profile().expect("the factory profile");
+        let cal = unit.load_cell.expect("a load cell");
+        let t = Seconds(0.125);
+        // Counts for a force window: 30 mN, the given change, the mean's σ from 0.1 mN per
+        // conversion over `n` conversions.
+        let window = |change_n: f64, noise_n: f64, n: u16| {
+            let k = cal.newtons_per_count as f64;
+            RawForce {
+                change: change_n / k,
+                sigma: noise_n / libm::sqrt(n as f64) / k,
+                samples: n,
+                ..cal.stated(crate::units::Newtons(0.030))
+            }
+        };
+        let refused =
+            |w: RawForce, f: Failure| conclude(Method::Auto, Err(f), &unit, t, 8, Some(w)).status;
+        let moving = window(0.0015, 1e-4, 10);
+        assert_eq!(
+            refused(moving, Failure::Interference),
+            Status::Failed(Failure::ForceUnstable)
+        );
+        // σ_change = sqrt(12) × 2 mN / sqrt(10) = 2.2 mN: not resolved.
+        let noisy = window(0.0015, 2e-3, 10);
+        assert_eq!(
+            refused(noisy, Failure::Interference),
+            Status::Failed(Failure::Interference)
+        );
+        let small = window(0.0004, 1e-5, 10);
+        assert_eq!(
+            refused(small, Failure::Interference),
+            Status::Failed(Failure::Interference)
+        );
+        assert_eq!(
+            refused(moving, Failure::DriveFault),
+            Status::Failed(Failure::DriveFault)
+        );
+        // An accepted estimate over the same press is concluded as any other (here on the
+        // factory curve: a resonance inside the calibrated span gives a modulus).
+        let air = unit.air.expect("an air reference");
+        let est = Estimate {
+            resonance: crate::units::Hz(air.free_resonance.0 - 4.0),
+            sigma: crate::units::Hz(0.01),
+            q: Some(10.0),
+            points_used: 8,
+        };
+        let r = conclude(Method::Auto, Ok(est), &unit, t, 8, Some(moving));
+        assert_ne!(r.status, Status::Failed(Failure::ForceUnstable));
     }
 }

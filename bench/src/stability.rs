@@ -89,7 +89,7 @@ pub fn run_case(case: &Case, method: Method, unit: &Unit, seed: u64) -> Option<R
 }
 
 /// What one method did over the catalogue: its readings counted by outcome.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Tally {
     /// Readings made.
     pub readings: usize,
@@ -103,6 +103,8 @@ pub struct Tally {
     pub correct_failures: usize,
     /// Failure codes it does not accept (lost readings).
     pub wrong_failures: usize,
+    /// The lost readings, by scene and code: how many of each.
+    pub lost: Vec<(&'static str, &'static str, usize)>,
 }
 
 impl Tally {
@@ -125,6 +127,15 @@ impl Tally {
                     self.correct_failures += 1;
                 } else {
                     self.wrong_failures += 1;
+                    let code = r.status.code();
+                    match self
+                        .lost
+                        .iter_mut()
+                        .find(|(s, c, _)| *s == case.name && *c == code)
+                    {
+                        Some(l) => l.2 += 1,
+                        None => self.lost.push((case.name, code, 1)),
+                    }
                 }
             }
         }
@@ -163,10 +174,20 @@ pub fn tally(cases: &[Case], method: Method, unit: &Unit, seeds: u64) -> Tally {
 /// scenes × `seeds` seeds, how many of those lie within 3 of their stated standard
 /// uncertainties, and how many are numbers where none is due.
 pub fn statement(method: Method, t: &Tally, scenes: usize, seeds: u64) -> String {
+    let lost: Vec<String> = t
+        .lost
+        .iter()
+        .map(|(s, c, n)| format!("{s} {c} ×{n}"))
+        .collect();
+    let lost = if lost.is_empty() {
+        String::new()
+    } else {
+        format!(": {}", lost.join(", "))
+    };
     format!(
         "{}: {} readings ({} scenes × seeds {}–{}); {} reported a modulus, {} of them ({:.1} %) \
          within 3 combined standard uncertainties of the truth, {} a number where none is due; \
-         {} correct failure codes, {} wrong failure codes (lost readings)",
+         {} correct failure codes, {} wrong failure codes (lost readings{})",
         method.name(),
         t.readings,
         scenes,
@@ -178,6 +199,7 @@ pub fn statement(method: Method, t: &Tally, scenes: usize, seeds: u64) -> String
         t.ok_without_truth,
         t.correct_failures,
         t.wrong_failures,
+        lost,
     )
 }
 
