@@ -187,6 +187,11 @@ impl SampleEngine {
         self.samples
     }
 
+    /// DAC batches generated and not yet demodulated: those in the board's pipeline.
+    pub fn in_flight(&self) -> u32 {
+        self.generated.wrapping_sub(self.demodulated)
+    }
+
     /// Ring overruns seen since start.
     pub fn overruns(&self) -> u32 {
         self.overruns

@@ -30,8 +30,10 @@ pub enum StreamError {
 /// A synchronous DAC/ADC sample stream.
 pub trait SampleStream {
     /// Queue `dac` as the next batch to play and fill `adc` with the frames captured during the
-    /// batch queued [`latency_batches`](Self::latency_batches) calls earlier.
-    fn exchange(&mut self, dac: &[DacCode], adc: &mut [AdcFrame]) -> Result<(), StreamError>;
+    /// batch queued [`latency_batches`](Self::latency_batches) calls earlier: `Ok(true)`, or
+    /// `Ok(false)` while the first batches fill the pipeline (nothing has played yet; `adc` is
+    /// untouched).
+    fn exchange(&mut self, dac: &[DacCode], adc: &mut [AdcFrame]) -> Result<bool, StreamError>;
     /// Calls between queueing a DAC batch and receiving the ADC frames captured while it played.
     fn latency_batches(&self) -> usize;
     /// Scale of the converters and amplifiers.

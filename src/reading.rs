@@ -17,6 +17,13 @@ use crate::units::{DacCode, Seconds};
 /// Samples per batch (one DMA half-buffer on the STM32: 5 ms at 10 kHz).
 pub const BATCH: usize = 50;
 
+/// Batches between the sample engine's generating a DAC batch and the ADC batch captured while
+/// it played, on every board: the DAC's DMA runs over two half-buffers, both filled before it
+/// starts, and the sample interrupt refills the half that just played, which plays again two
+/// periods later (the STM32's circular DMA, the QEMU board's emulation of it, and the host's
+/// simulated board, so that a plan takes effect as late on the host as on the target).
+pub const PIPELINE_BATCHES: usize = 2;
+
 /// The stall rule: samples a window of `plan` may take before it counts as lost — its
 /// settling, its cycles and two more (to find the window's boundary), and the stream's
 /// pipeline of `latency_batches` plus two batches of margin.
@@ -185,17 +192,35 @@ pub struct SyncSource<'a, S> {
     pub engine: &'a mut SampleEngine,
     /// The first error the stream reported.
     pub error: Option<StreamError>,
-    /// A second window that closed in the batch of the one [`PointSource::next`] returned.
-    held: Option<PointRaw>,
+    /// A second window that closed in the batch of the one [`PointSource::next`] returned (a
+    /// caller that makes a new source per call carries it over).
+    pub held: Option<PointRaw>,
 }
 
 impl<'a, S: SampleStream> SyncSource<'a, S> {
-    /// Wrap `stream` and `engine`.
+    /// Wrap `stream` and `engine`, the stream's pipeline filled from the engine first if it is
+    /// not yet (as a board fills its DAC buffers before starting the DMA): a plan then takes
+    /// effect [`SampleStream::latency_batches`] batches after it is loaded, as on the target.
     pub fn new(stream: &'a mut S, engine: &'a mut SampleEngine) -> Self {
+        let mut error = None;
+        let mut dac = [DacCode::MID; BATCH];
+        let mut adc = [AdcFrame::default(); BATCH];
+        while (engine.in_flight() as usize) < stream.latency_batches() && error.is_none() {
+            engine.generate(&mut dac);
+            match stream.exchange(&dac, &mut adc) {
+                Ok(false) => {}
+                // A stream that plays at once has no pipeline to fill.
+                Ok(true) => {
+                    let _ = engine.demodulate(&adc);
+                    break;
+                }
+                Err(e) => error = Some(e),
+            }
+        }
         Self {
             stream,
             engine,
-            error: None,
+            error,
             held: None,
         }
     }
@@ -224,9 +249,14 @@ impl<S: SampleStream + ForceSource> PointSource for SyncSource<'_, S> {
         let mut used = 0u64;
         while used <= budget {
             self.engine.generate(&mut dac);
-            if let Err(e) = self.stream.exchange(&dac, &mut adc) {
-                self.error = Some(e);
-                return None;
+            match self.stream.exchange(&dac, &mut adc) {
+                Ok(true) => {}
+                // The pipeline is still filling: nothing played yet.
+                Ok(false) => continue,
+                Err(e) => {
+                    self.error = Some(e);
+                    return None;
+                }
             }
             used += BATCH as u64;
             let mut points = self.engine.demodulate(&adc).into_iter();
@@ -247,9 +277,13 @@ impl<S: SampleStream + ForceSource> PointSource for SyncSource<'_, S> {
         let mut done = 0u64;
         while done < samples {
             self.engine.generate(&mut dac);
-            if let Err(e) = self.stream.exchange(&dac, &mut adc) {
-                self.error = Some(e);
-                return;
+            match self.stream.exchange(&dac, &mut adc) {
+                Ok(true) => {}
+                Ok(false) => continue,
+                Err(e) => {
+                    self.error = Some(e);
+                    return;
+                }
             }
             let _ = self.engine.demodulate(&adc);
             done += BATCH as u64;

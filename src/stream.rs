@@ -68,8 +68,8 @@ pub struct TrackerConfig {
     /// The acquisition's hold in all (first half on the seed, second on its estimate).
     pub acquire_hold: Seconds,
     /// Length of one tracking segment: one reading each (25–1000 ms). A segment is at least
-    /// four windows of two cycles (hold's fit needs four windows; an engine window must
-    /// outlast a 5 ms batch), 34 ms at 238 Hz: shorter settings get that.
+    /// four windows of one cycle (hold's fit needs four windows; an engine window must span
+    /// half a 5 ms batch), 17 ms at 238 Hz.
     pub segment: Seconds,
     /// Offset of the drive from the estimate, alternately above and below, in half-linewidths
     /// `f0/(2Q)` (0–2).
@@ -84,15 +84,16 @@ pub struct TrackerConfig {
 
 impl TrackerConfig {
     /// Band 170–290 Hz seeded at 230 Hz, acquisition 20 + 20 ms seed and 100 ms hold, segments
-    /// of 35 ms (four windows of two cycles: 25 readings/s at 240 Hz) with the drive a quarter
-    /// half-linewidth off the resonance alternately, Q prior ±50 %, re-acquire after three
-    /// unlocked segments in a row, 5 V.
+    /// of 25 ms (five or six one-cycle windows at 240 Hz; with the two batches every plan waits
+    /// in the DAC's pipeline and the wait for a cycle boundary, a reading every 38 ms: 26
+    /// readings/s, docs/methods.md) with the drive a quarter half-linewidth off the resonance
+    /// alternately, Q prior ±50 %, re-acquire after three unlocked segments in a row, 5 V.
     pub const DEFAULT: Self = Self {
         band_start: Hz(170.0),
         band_stop: Hz(290.0),
         seed: Hz(230.0),
         acquire_hold: Seconds(0.1),
-        segment: Seconds(0.035),
+        segment: Seconds(0.03),
         dither: 0.25,
         q_prior: 0.5,
         lost_after: 3,
@@ -291,10 +292,12 @@ impl Tracker {
                 self.side = -self.side;
                 let ftw = tuning_word(f, self.fs);
                 self.f_h = frequency_hz(ftw, self.fs);
-                // Windows of whole cycles, at least two, at most MAX_WINDOWS of them.
+                // Windows of whole cycles, the shortest the engine passes on (one cycle in the
+                // band), at most MAX_WINDOWS of them.
                 let per_cycle = 1.0 / self.f_h.max(1.0);
                 let seg = self.cfg.segment.0 as f64;
-                let cycles = libm::ceil(seg / per_cycle / MAX_WINDOWS as f64).max(2.0);
+                let cycles = libm::ceil(seg / per_cycle / MAX_WINDOWS as f64)
+                    .max(hold::first_cycles(self.f_h, self.fs));
                 let n = libm::floor(seg / (cycles * per_cycle)).clamp(4.0, MAX_WINDOWS as f64);
                 self.tag = self.tag.wrapping_add(1);
                 let plan = PointPlan {

@@ -30,6 +30,8 @@ struct SimIo {
     boot: Option<BootError>,
     /// Room for events offered without waiting (`None`: always room): a slow host.
     room: Option<usize>,
+    /// A second window that closed in the batch of the last one a source returned.
+    held: Option<PointRaw>,
 }
 
 impl SimIo {
@@ -42,6 +44,7 @@ impl SimIo {
             events: Vec::new(),
             boot: None,
             room: None,
+            held: None,
         }
     }
     fn put_on(&mut self, scene: Scene) {
@@ -59,7 +62,7 @@ impl PointSource for SimIo {
         self.board.scale()
     }
     fn latency_batches(&self) -> usize {
-        0
+        self.board.latency_batches()
     }
     fn now_sample(&self) -> u64 {
         self.engine.samples()
@@ -68,7 +71,14 @@ impl PointSource for SimIo {
         self.source().load(plan).await
     }
     async fn next(&mut self, plan: &PointPlan, budget: u64) -> Option<PointRaw> {
-        self.source().next(plan, budget).await
+        // The second window of a batch, kept from the last call's source.
+        let held = self.held.take();
+        let mut src = self.source();
+        src.held = held;
+        let got = src.next(plan, budget).await;
+        let held = src.held.take();
+        self.held = held;
+        got
     }
     async fn stop(&mut self) {
         self.source().stop().await

@@ -312,9 +312,9 @@ impl Cell {
     }
 }
 
-/// Segment lengths of the continuous tracker's curve, s: the default (35 ms, four windows of two
-/// cycles — shorter settings get the same segment) and longer ones.
-pub const STREAM_SEGMENTS_S: [f64; 5] = [0.035, 0.045, 0.06, 0.09, 0.15];
+/// Segment lengths of the continuous tracker's curve, s: the default (25 ms, the shortest the
+/// tracker takes) and longer ones.
+pub const STREAM_SEGMENTS_S: [f64; 6] = [0.025, 0.035, 0.045, 0.06, 0.09, 0.15];
 
 /// Probe time of each of the tracker's streams, s.
 pub const STREAM_SECONDS: f64 = 3.0;
@@ -766,7 +766,7 @@ mod tests {
 
     /// The steady-state bound (the tracker's: the drive never stops) against the numerical
     /// Fisher information of the resonator driven from rest for 15 τ before the observation, with
-    /// the tracker's prior on `Q`, at 2.5 τ (the default 35 ms segment) and 10 τ; and below the from-rest bound by the
+    /// the tracker's prior on `Q`, at 2.5 τ (a 35 ms segment) and 10 τ; and below the from-rest bound by the
     /// switch-on's build-up (`T` against `T − 2.75 τ`).
     #[test]
     fn the_steady_state_bound_matches_the_numerical_fisher_information() {

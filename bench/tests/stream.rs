@@ -268,8 +268,9 @@ fn qemu_streams_the_same_json_and_follows_lift_off_and_new_contact() {
 /// default segment length the tracker gives ≥ 20 ok readings per second after the first 0.5 s
 /// within 1 % RMS of phantom C, and its error from noise sits above the steady-state Cramér–Rao
 /// bound for one reading's probe time — finite, never below it (a bound cannot be beaten), and
-/// no more than 8× (measured 5.9× on these seeds, 39.4 ms a reading; the single-shot hold is
-/// within 2×).
+/// no more than 8× (measured 4.3× on these seeds, 23.0 ok/s, 44.1 ms a reading with the DAC's
+/// two-batch pipeline; the single-shot hold is within 2×). Five 3 s streams at 20/s after 0.5 s
+/// make at least 250 readings.
 #[test]
 fn the_trackers_speed_accuracy_point_on_phantom_c() {
     use hal_sim::{phantoms, NoiseScene};
@@ -294,7 +295,7 @@ fn the_trackers_speed_accuracy_point_on_phantom_c() {
         s.ratio()
     );
     assert!(s.ok_per_s >= 20.0, "{} ok/s", s.ok_per_s);
-    assert!(x.ok >= 300, "{} ok readings", x.ok);
+    assert!(x.ok >= 250, "{} ok readings", x.ok);
     assert!(x.rms_pct() <= 1.0, "RMS {} %", x.rms_pct());
     assert!(s.crb_pct.is_finite() && s.crb_pct > 0.0, "{}", s.crb_pct);
     assert!(s.ratio().is_finite() && s.ratio() >= 1.0, "{}", s.ratio());

@@ -242,7 +242,7 @@ mod harness {
         }
         /// As the firmware's interrupt: a plan applies from the next batch.
         fn latency_batches(&self) -> usize {
-            2
+            pzt_probe::reading::PIPELINE_BATCHES
         }
         fn now_sample(&self) -> u64 {
             self.engine.samples()

@@ -355,7 +355,7 @@ mod app {
         }
         /// The interrupt's double buffer: a plan applies from the batch after the one playing.
         fn latency_batches(&self) -> usize {
-            2
+            pzt_probe::reading::PIPELINE_BATCHES
         }
         fn now_sample(&self) -> u64 {
             now_sample()

@@ -290,6 +290,10 @@ pub fn elapsed_long(start: u32) -> u64 {
 /// Unit of [`elapsed`].
 pub const ELAPSED_UNIT: &str = "instructions";
 
+// Two DAC halves: the pipeline of `reading::PIPELINE_BATCHES` that the host's simulated board
+// models too.
+const _: () = assert!(crate::reading::PIPELINE_BATCHES == 2);
+
 /// The simulated sample stream: a double-buffered DAC/ADC exchange with the simulated probe.
 pub struct Stream {
     probe: SimProbe,

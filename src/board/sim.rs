@@ -2,6 +2,7 @@
 
 use crate::hal::{AdcFrame, FrontEndScale, SampleStream, StreamError};
 use crate::loadcell::{ForceLog, ForceSource, Hx711, LoadCellError, RawForce};
+use crate::reading::PIPELINE_BATCHES;
 use crate::units::{AdcCode, DacCode, Hz};
 use core::cell::RefCell;
 use hal_sim::loadcell::{Delay, Dout, Hx711Sim, Sck};
@@ -10,8 +11,10 @@ use hal_sim::{AdcPair, SimProbe};
 /// Largest batch the adapter takes in one call.
 pub const MAX_BATCH: usize = 256;
 
-/// A [`SampleStream`] backed by a [`SimProbe`]: the DAC batch plays and is captured in the same
-/// call (latency 0). Its load cell (when the scene has one) is read after every batch by the
+/// A [`SampleStream`] backed by a [`SimProbe`], with the firmware's DMA pipeline: a DAC batch
+/// plays [`PIPELINE_BATCHES`] calls after it is queued (the first calls only fill the
+/// pipeline), so that a plan takes effect on the host exactly as late as on the target. Its
+/// load cell (when the scene has one) is read after every batch by the
 /// firmware's own driver ([`Hx711`]) through the simulated chip's pins into a [`ForceLog`],
 /// stamped with the probe's sample count: the board's load-cell task, polled at the batch
 /// rate (200 Hz, above the chip's 80 conversions a second).
@@ -25,6 +28,8 @@ pub struct SimBoard {
     pub forces: ForceLog,
     /// The first error the load-cell driver reported.
     pub load_cell_error: Option<LoadCellError>,
+    /// The DAC batches queued and not yet played (codes and length).
+    queued: heapless::Deque<([u16; MAX_BATCH], usize), { PIPELINE_BATCHES + 1 }>,
 }
 
 impl SimBoard {
@@ -35,6 +40,7 @@ impl SimBoard {
             probe,
             forces: ForceLog::new(),
             load_cell_error: None,
+            queued: heapless::Deque::new(),
         }
     }
 
@@ -74,16 +80,28 @@ pub fn scale_of(fe: &hal_sim::FrontEnd) -> FrontEndScale {
 }
 
 impl SampleStream for SimBoard {
-    fn exchange(&mut self, dac: &[DacCode], adc: &mut [AdcFrame]) -> Result<(), StreamError> {
+    fn exchange(&mut self, dac: &[DacCode], adc: &mut [AdcFrame]) -> Result<bool, StreamError> {
         if dac.len() != adc.len() || dac.len() > MAX_BATCH {
             return Err(StreamError::BatchSize);
         }
         let mut codes = [0u16; MAX_BATCH];
-        let mut pairs = [AdcPair::default(); MAX_BATCH];
-        let n = dac.len();
         for (c, d) in codes.iter_mut().zip(dac) {
             *c = d.0;
         }
+        if self.queued.push_back((codes, dac.len())).is_err() {
+            return Err(StreamError::Overrun);
+        }
+        if self.queued.len() <= PIPELINE_BATCHES {
+            return Ok(false);
+        }
+        let Some((codes, n)) = self.queued.pop_front() else {
+            return Ok(false);
+        };
+        // Batches of one length only: the frames returned are those of the batch that played.
+        if n != adc.len() {
+            return Err(StreamError::BatchSize);
+        }
+        let mut pairs = [AdcPair::default(); MAX_BATCH];
         self.probe.exchange(&codes[..n], &mut pairs[..n]);
         for (a, p) in adc.iter_mut().zip(&pairs[..n]) {
             *a = AdcFrame {
@@ -92,11 +110,11 @@ impl SampleStream for SimBoard {
             };
         }
         self.poll_load_cell();
-        Ok(())
+        Ok(true)
     }
 
     fn latency_batches(&self) -> usize {
-        0
+        PIPELINE_BATCHES
     }
 
     fn scale(&self) -> FrontEndScale {
@@ -418,8 +436,9 @@ pub fn weigh(hardware: &Scene, weight_n: f64, seed: u64) -> Option<RawForce> {
     let dac = [DacCode::MID; crate::reading::BATCH];
     let mut adc = [AdcFrame::default(); crate::reading::BATCH];
     let n = (0.5 * scene.front_end.sample_rate_hz) as usize / crate::reading::BATCH;
-    for _ in 0..n {
-        board.exchange(&dac, &mut adc).ok()?;
+    let mut played = 0;
+    while played < n {
+        played += board.exchange(&dac, &mut adc).ok()? as usize;
     }
     board.contact_force(0, board.probe.samples())
 }

@@ -445,6 +445,10 @@ fn prio(logical: u8) -> Priority {
 
 // ---- the sample stream -----------------------------------------------------------------
 
+// Two DMA half-buffers: the pipeline of `reading::PIPELINE_BATCHES` that the host's simulated
+// board models too.
+const _: () = assert!(crate::reading::PIPELINE_BATCHES == 2);
+
 /// DMA buffers: the DMA owns them once started; the interrupt touches only the DAC half the DMA
 /// has just left, and reads the ADC rings through embassy.
 static mut DAC_BUF: [DacCode; 2 * BATCH] = [DacCode::MID; 2 * BATCH];

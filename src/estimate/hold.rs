@@ -108,14 +108,15 @@ impl HoldSettings {
     };
 
     /// The fast hold: no seed ring-down; a 20 ms first segment at `seed` (the band centre): the
-    /// filters' settle and four one-cycle windows, whose searched fit places the second; 105 ms
-    /// on that estimate; both segments in one fit. 125 ms of segments, about 9 τ at 500 kPa
+    /// filters' settle and four one-cycle windows, whose searched fit places the second; 90 ms
+    /// on that estimate; both segments in one fit. 110 ms of segments, and each of the two
+    /// plans two batches through the DAC's pipeline: 132 ms, 9.6 τ at 500 kPa
     /// (`docs/speed-accuracy.md`). Not auto's first stage: see `measure::auto_hold`.
     pub const FAST: Self = Self {
         seed_burst: Seconds(0.0),
         seed_ring: Seconds(0.0),
         refine: Seconds(0.02),
-        hold: Seconds(0.125),
+        hold: Seconds(0.11),
         ..Self::DEFAULT
     };
 
@@ -262,9 +263,10 @@ const SEED_WINDOWS: usize = 8;
 /// ([`HoldSettings::min_first`]).
 const FIRST_WINDOWS: usize = 3;
 
-/// Whole cycles of a first segment's window at `f` Hz sampled at `fs`: the fewest that span
-/// half a batch (`engine::MIN_WINDOW_SAMPLES`; one cycle up to 400 Hz at 10 kHz).
-fn first_cycles(f: f64, fs: f64) -> f64 {
+/// Whole cycles of the shortest window the engine passes on at `f` Hz sampled at `fs` (a
+/// hold's first segment's, a tracker segment's): the fewest that span half a batch
+/// (`engine::MIN_WINDOW_SAMPLES`; one cycle up to 400 Hz at 10 kHz).
+pub fn first_cycles(f: f64, fs: f64) -> f64 {
     let per_cycle = fs / f.max(1.0);
     libm::ceil(crate::engine::MIN_WINDOW_SAMPLES as f64 / per_cycle).max(1.0)
 }
