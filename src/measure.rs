@@ -531,10 +531,11 @@ enum Inner {
 
 /// Hold's settings as the first stage of [`Method::Auto`]: its defaults over auto's band.
 ///
-/// The fast hold ([`HoldSettings::FAST`]: no seed, three two-cycle windows at the band's centre,
-/// then on their estimate, one joint fit; 130 ms, 9.5 τ at 500 kPa, within 1.3× of the
-/// Cramér–Rao bound) is measured but is not the default: on the M4 its fits cost about 8 % of
-/// the 170 MHz core over so short a reading (budget 2 %, `tests/qemu_cost.rs`; docs/methods.md).
+/// The fast hold ([`HoldSettings::FAST`]: no seed, four one-cycle windows at the band's centre,
+/// then on their estimate, one joint fit; 132 ms, 9.6 τ at 500 kPa with the DAC's pipeline) is
+/// measured but is not the default: its error from noise is 1.1–1.5× the Cramér–Rao bound where
+/// the default's is 1.0–1.3×, and on the M4 its fits take about 2.2 % of the 170 MHz core over
+/// so short a reading (budget 2 %, `tests/qemu_cost.rs`; docs/methods.md, session 8).
 fn auto_hold(s: &StagedSettings) -> HoldSettings {
     HoldSettings {
         band_start: s.band_start,

@@ -312,9 +312,9 @@ impl Cell {
     }
 }
 
-/// Segment lengths of the continuous tracker's curve, s: the default (25 ms, the shortest the
-/// tracker takes) and longer ones.
-pub const STREAM_SEGMENTS_S: [f64; 6] = [0.025, 0.035, 0.045, 0.06, 0.09, 0.15];
+/// Segment lengths of the continuous tracker's curve, s: the shortest the tracker takes (25
+/// ms), the default (30 ms) and longer ones.
+pub const STREAM_SEGMENTS_S: [f64; 7] = [0.025, 0.03, 0.035, 0.045, 0.06, 0.09, 0.15];
 
 /// Probe time of each of the tracker's streams, s.
 pub const STREAM_SECONDS: f64 = 3.0;
