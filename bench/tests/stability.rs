@@ -98,8 +98,8 @@ fn fit_names_interference_and_lost_contact() {
             assert_eq!(classify(case("knocks"), &r), Outcome::Correct, "{r:?}");
         }
     }
-    // mains-60 puts 240 Hz within a linewidth of the resonance: most readings see it (31 of 40;
-    // the rest: `fit_under_mains_hum_is_a_bounded_known_limitation`).
+    // mains-60 puts 240 Hz within a linewidth of the resonance: most readings see it (9 of these
+    // 10; the rest: `fit_under_mains_hum_is_a_bounded_known_limitation`).
     let interference = (FIRST_SEED..FIRST_SEED + 10)
         .filter(|&seed| {
             let r = run_case(case("mains-60"), Method::Fit, &unit, seed).unwrap();
@@ -107,7 +107,7 @@ fn fit_names_interference_and_lost_contact() {
         })
         .count();
     println!("fit on mains-60: {interference} of 10 interference");
-    assert!(interference >= 5, "{interference}");
+    assert!(interference >= 7, "{interference}");
     for seed in FIRST_SEED..FIRST_SEED + 5 {
         let r = run_case(case("lift-off-0.4s"), Method::Fit, &unit, seed).unwrap();
         assert_eq!(r.status, Status::Failed(Failure::ContactLost), "{r:?}");
@@ -115,12 +115,13 @@ fn fit_names_interference_and_lost_contact() {
 }
 
 /// fit under mains hum, a known limitation: a harmonic within a linewidth of the resonance
-/// biases some of its readings by 3–5 of their stated σ while its misfit test passes them.
-/// Measured over 40 seeds: mains-50 1 and mains-60 4 silent wrong numbers (on the firmware's
-/// timing; 1 and 1 before the host's board took the DAC's two-batch pipeline, which moves
-/// every point's drive phase against the hum), the rest `interference` or correct. Bounded
-/// here at 5 a scene so that it cannot grow unseen; the default strategy does not take fit
-/// on `interference` and reads both scenes without one (`the_default_strategy_…`).
+/// biases some of its readings by 3–5 of their stated σ. Since session 8 its misfit test asks
+/// the χ² that white residuals exceed once in ten thousand (`interference::chi2_limit_per_dof`)
+/// instead of the fixed 16: over 40 seeds mains-50 0 and mains-60 1 silent wrong numbers (with
+/// 16: 1 and 4). The one left scatters at 2.9 its stated σ² per degree of freedom (limit 4.3)
+/// but 0.9 % of the admittance: the hum also inflates each point's own σ. Bounded here at 2 a
+/// scene so that it cannot grow unseen; the default strategy reads both scenes without one
+/// (`the_default_strategy_…`).
 #[test]
 fn fit_under_mains_hum_is_a_bounded_known_limitation() {
     let unit = calibrated(Method::Fit, 10).expect("calibration");
@@ -134,7 +135,7 @@ fn fit_under_mains_hum_is_a_bounded_known_limitation() {
             })
             .count();
         println!("fit on {name}: {silent} silent wrong numbers of 40");
-        assert!(silent <= 5, "fit on {name}: {silent} of 40");
+        assert!(silent <= 2, "fit on {name}: {silent} of 40");
     }
 }
 
