@@ -589,12 +589,12 @@ impl Hold {
                 y_s: self.static_admittance(self.f_first),
                 mirror: mirror(self.v_first),
             };
-            fit_two_from(
+            fit_two(
                 first,
                 this,
                 &self.carry,
                 (self.f_seed, self.q_first),
-                self.linear_first,
+                Some(self.linear_first),
                 prior,
             )?
         } else if self.seed.is_none() {
@@ -641,7 +641,7 @@ pub struct HoldFit {
     /// does not explain the windows and `sigma` has been scaled by it).
     pub reduced_chi2: f64,
     /// The fitted motional peak conductance `g` (S) and state `z` at the start of the first
-    /// window (S): a joint fit that takes these windows goes on from them ([`fit_two_from`]).
+    /// window (S): a joint fit that takes these windows goes on from them ([`fit_two`]).
     pub linear: (f64, C64),
 }
 
@@ -1229,37 +1229,24 @@ pub fn fit(seg: Segment, f_start: f64, q_prior: (f64, f64)) -> Result<HoldFit, F
 /// resonator's; nothing is re-estimated at the switch), so the first segment's windows count
 /// towards the reading instead of being thrown away when the drive moves.
 ///
-/// `start`: `f0`, `Q` to start from (the first segment's own fit); `q_prior`: the prior on `Q`
-/// (the seed's, not the first segment's, whose windows are in this fit).
+/// `start`: `f0`, `Q` to start from (the first segment's own fit); `linear`: its fitted linear
+/// parameters (`g`, `z`: [`HoldFit::linear`]) to go on from — one evaluation of the joint
+/// problem fewer, the Levenberg–Marquardt steps move them with `f0` and `Q` — or `None` to solve
+/// them anew at `start`; `q_prior`: the prior on `Q` (the seed's, not the first segment's,
+/// whose windows are in this fit).
 pub fn fit_two(
     first: Segment,
     second: Segment,
     carry: &Carry,
     start: (f64, f64),
+    linear: Option<(f64, C64)>,
     q_prior: (f64, f64),
 ) -> Result<HoldFit, Failure> {
-    fit_segments(&[first, second], Some(carry), start, q_prior, Start::Linear)
-}
-
-/// [`fit_two`] going on from the first segment's fitted linear parameters (`g`, `z`:
-/// [`HoldFit::linear`]) instead of solving them anew at `start` (one evaluation of the joint
-/// problem fewer; the Levenberg–Marquardt steps move them with `f0` and `Q`).
-pub fn fit_two_from(
-    first: Segment,
-    second: Segment,
-    carry: &Carry,
-    start: (f64, f64),
-    linear: (f64, C64),
-    q_prior: (f64, f64),
-) -> Result<HoldFit, Failure> {
-    let (g, z) = linear;
-    fit_segments(
-        &[first, second],
-        Some(carry),
-        start,
-        q_prior,
-        Start::Given(g, z),
-    )
+    let start_linear = match linear {
+        Some((g, z)) => Start::Given(g, z),
+        None => Start::Linear,
+    };
+    fit_segments(&[first, second], Some(carry), start, q_prior, start_linear)
 }
 
 /// Where a fit's linear parameters start.
@@ -1789,7 +1776,7 @@ mod tests {
                 mirror: mirror(C64::new(1.0, 0.0) / rho),
             };
             let carry = Carry { t_switch, rho };
-            let e = fit_two(first, second, &carry, (f2, 10.0), (10.0, 10.0))
+            let e = fit_two(first, second, &carry, (f2, 10.0), None, (10.0, 10.0))
                 .unwrap()
                 .estimate;
             assert!(
@@ -1805,7 +1792,7 @@ mod tests {
             };
             if rho != C64::new(1.0, 0.0) {
                 // Biased, or refused for the misfit it leaves.
-                if let Ok(b) = fit_two(first, second, &wrong, (f2, 10.0), (10.0, 10.0)) {
+                if let Ok(b) = fit_two(first, second, &wrong, (f2, 10.0), None, (10.0, 10.0)) {
                     let b = b.estimate.resonance.0 as f64;
                     assert!((b - f0).abs() > 5e-3, "{b}");
                 }
