@@ -280,12 +280,56 @@ pub fn damped_solve<const N: usize>(
     spd_solve(&m, jtr)
 }
 
-/// The lower Cholesky factor `L` (`m = L Lᵀ`) of a symmetric positive-definite matrix, and the
-/// reciprocals of its diagonal; `None` if `m` is not positive definite.
+/// The float arithmetic of the Cholesky factorisation and solve: `f64` (software on the
+/// Cortex-M4F: the covariances, the calibration) and `f32` (its FPU: hold's Levenberg–Marquardt
+/// steps), with each type's square root.
+pub trait Real:
+    Copy
+    + PartialOrd
+    + core::ops::Sub<Output = Self>
+    + core::ops::Mul<Output = Self>
+    + core::ops::Div<Output = Self>
+    + core::ops::SubAssign
+{
+    /// Zero.
+    const ZERO: Self;
+    /// One.
+    const ONE: Self;
+    /// The square root.
+    fn sqrt(self) -> Self;
+    /// True when neither infinite nor NaN.
+    fn finite(self) -> bool;
+}
+
+impl Real for f64 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    fn sqrt(self) -> Self {
+        libm::sqrt(self)
+    }
+    fn finite(self) -> bool {
+        self.is_finite()
+    }
+}
+
+impl Real for f32 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    fn sqrt(self) -> Self {
+        crate::dsp::trig::sqrtf(self)
+    }
+    fn finite(self) -> bool {
+        self.is_finite()
+    }
+}
+
+/// The lower Cholesky factor `L` (`m = L Lᵀ`) of a symmetric positive-definite matrix (its lower
+/// triangle is read), and the reciprocals of its diagonal; `None` if `m` is not positive
+/// definite.
 #[allow(clippy::needless_range_loop)] // triangular index arithmetic reads best as indices
-fn cholesky<const N: usize>(m: &[[f64; N]; N]) -> Option<([[f64; N]; N], [f64; N])> {
-    let mut l = [[0.0; N]; N];
-    let mut rd = [0.0; N];
+fn cholesky<T: Real, const N: usize>(m: &[[T; N]; N]) -> Option<([[T; N]; N], [T; N])> {
+    let mut l = [[T::ZERO; N]; N];
+    let mut rd = [T::ZERO; N];
     for i in 0..N {
         for j in 0..=i {
             let mut s = m[i][j];
@@ -293,11 +337,11 @@ fn cholesky<const N: usize>(m: &[[f64; N]; N]) -> Option<([[f64; N]; N], [f64; N
                 s -= l[i][k] * l[j][k];
             }
             if i == j {
-                if !(s > 0.0) || !s.is_finite() {
+                if !(s > T::ZERO) || !s.finite() {
                     return None;
                 }
-                l[i][i] = libm::sqrt(s);
-                rd[i] = 1.0 / l[i][i];
+                l[i][i] = s.sqrt();
+                rd[i] = T::ONE / l[i][i];
             } else {
                 l[i][j] = s * rd[j];
             }
@@ -306,14 +350,15 @@ fn cholesky<const N: usize>(m: &[[f64; N]; N]) -> Option<([[f64; N]; N], [f64; N
     Some((l, rd))
 }
 
-/// `x` with `m x = b` for a symmetric positive-definite `m`, by Cholesky factorisation and two
-/// triangular substitutions (a third of the work of [`spd_inverse`] and a product: on the
-/// Cortex-M4F every `f64` operation is software); `None` if `m` is not positive definite.
+/// `x` with `m x = b` for a symmetric positive-definite `m` (its lower triangle is read), by
+/// Cholesky factorisation and two triangular substitutions (a third of the work of
+/// [`spd_inverse`] and a product: on the Cortex-M4F every `f64` operation is software); `None`
+/// if `m` is not positive definite.
 #[allow(clippy::needless_range_loop)] // triangular index arithmetic reads best as indices
-pub fn spd_solve<const N: usize>(m: &[[f64; N]; N], b: &[f64; N]) -> Option<[f64; N]> {
+pub fn spd_solve<T: Real, const N: usize>(m: &[[T; N]; N], b: &[T; N]) -> Option<[T; N]> {
     let (l, rd) = cholesky(m)?;
     // L y = b, then Lᵀ x = y.
-    let mut y = [0.0; N];
+    let mut y = [T::ZERO; N];
     for i in 0..N {
         let mut s = b[i];
         for k in 0..i {
@@ -321,7 +366,7 @@ pub fn spd_solve<const N: usize>(m: &[[f64; N]; N], b: &[f64; N]) -> Option<[f64
         }
         y[i] = s * rd[i];
     }
-    let mut x = [0.0; N];
+    let mut x = [T::ZERO; N];
     for i in (0..N).rev() {
         let mut s = y[i];
         for k in i + 1..N {
@@ -329,7 +374,7 @@ pub fn spd_solve<const N: usize>(m: &[[f64; N]; N], b: &[f64; N]) -> Option<[f64
         }
         x[i] = s * rd[i];
     }
-    x.iter().all(|v| v.is_finite()).then_some(x)
+    x.iter().all(|v| v.finite()).then_some(x)
 }
 
 /// Inverse of a symmetric positive-definite matrix by Cholesky factorisation; `None` if `m` is

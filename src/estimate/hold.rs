@@ -1039,7 +1039,7 @@ fn evaluate(pb: &Problem, p: &Params, jac: bool, mut res: Option<&mut [C32]>) ->
 /// The normal equations of the fit over (f0, Q, g, Re z, Im z) in `f32`, each column of the
 /// Jacobian multiplied by `scale` (to about unit size) and the weight `1/var` left out:
 /// `JᵀWJ = wt S⁻¹ jtj S⁻¹`, `JᵀW r = wt S⁻¹ jtr` (`S = diag(scale)`). The steps are solved
-/// in these units ([`spd_solve32`]: on the Cortex-M4F's single-precision FPU, where the `f64`
+/// in these units ([`crate::linalg::spd_solve`] in `f32`: on the Cortex-M4F's single-precision FPU, where the `f64`
 /// solve was emulated, a tenth of the work); only the covariance is formed in `f64`.
 #[derive(Clone, Copy, Debug, Default)]
 struct Normal {
@@ -1194,7 +1194,7 @@ impl Problem<'_> {
             }
             ea = eb;
         }
-        let sol = spd_solve32(&a, &b)?;
+        let sol = crate::linalg::spd_solve(&a, &b)?;
         let mut chi2 = 0.0f32;
         for (x, c) in self.w.iter().zip(cols.iter()) {
             let r = x.y - c[0] * sol[0] - c[1] * sol[1] - c[2] * sol[2];
@@ -1211,7 +1211,7 @@ impl Problem<'_> {
         let m3: [[f32; 3]; 3] =
             core::array::from_fn(|i| core::array::from_fn(|j| n.jtj[i + 2][j + 2]));
         let r3: [f32; 3] = core::array::from_fn(|i| n.jtr[i + 2]);
-        let step = spd_solve32(&m3, &r3)?;
+        let step = crate::linalg::spd_solve(&m3, &r3)?;
         Some(p.stepped(&[0.0, 0.0, step[0] as f64, step[1] as f64, step[2] as f64]))
     }
 }
@@ -1503,7 +1503,7 @@ fn damped_solve32(n: &Normal, lambda: f64) -> Option<[f32; 5]> {
     for (i, row) in m.iter_mut().enumerate() {
         row[i] *= 1.0 + lambda as f32;
     }
-    spd_solve32(&m, &n.jtr)
+    crate::linalg::spd_solve(&m, &n.jtr)
 }
 
 /// The decrease of χ²/wt the quadratic model of `n` predicts for the scaled step `x`:
@@ -1519,48 +1519,6 @@ fn predicted_decrease(n: &Normal, x: &[f32; 5]) -> f32 {
         sum += x[i] * (2.0 * n.jtr[i] - jx);
     }
     sum
-}
-
-/// `x` with `a x = b` for a symmetric positive-definite `a` (its lower triangle), in `f32`,
-/// by Cholesky factorisation; `None` when `a` is not positive definite.
-#[allow(clippy::needless_range_loop)] // triangular index arithmetic reads best as indices
-fn spd_solve32<const N: usize>(a: &[[f32; N]; N], b: &[f32; N]) -> Option<[f32; N]> {
-    let mut l = [[0.0f32; N]; N];
-    let mut rd = [0.0f32; N];
-    for i in 0..N {
-        for k in 0..=i {
-            let mut s = a[i][k];
-            for m in 0..k {
-                s -= l[i][m] * l[k][m];
-            }
-            if i == k {
-                if !(s > 0.0) || !s.is_finite() {
-                    return None;
-                }
-                l[i][i] = crate::dsp::trig::sqrtf(s);
-                rd[i] = 1.0 / l[i][i];
-            } else {
-                l[i][k] = s * rd[k];
-            }
-        }
-    }
-    let mut y = [0.0f32; N];
-    for i in 0..N {
-        let mut s = b[i];
-        for m in 0..i {
-            s -= l[i][m] * y[m];
-        }
-        y[i] = s * rd[i];
-    }
-    let mut x = [0.0f32; N];
-    for i in (0..N).rev() {
-        let mut s = y[i];
-        for m in i + 1..N {
-            s -= l[m][i] * x[m];
-        }
-        x[i] = s * rd[i];
-    }
-    x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
 /// `exp(z)` by the `libm` crate's `expf` and [`crate::dsp::trig::sincos`] (`f32` arithmetic
