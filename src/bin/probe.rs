@@ -9,18 +9,18 @@
 //!
 //! | task | priority | what |
 //! |---|---|---|
-//! | `sample` (hardware) | 3 | per batch: demodulate the ADC half, refill the DAC half ([`SampleEngine`]) |
+//! | `sample` (hardware) | 3 | per batch: demodulate the ADC half, refill the DAC half ([`pzt_probe::engine::SampleEngine`]) |
 //! | `uart_rx` (hardware) | 2 | host bytes from LPUART1's DMA ring (ST-LINK virtual COM port) into a channel |
 //! | `measure` | 1 | the session ([`pzt_probe::session`]): profile, settings, the flash store; readings through [`pzt_probe::reading`] |
 //! | `command` | 1 | bytes → lines → [`pzt_probe::command::parse`] → requests to `measure` (QEMU: the boot command line's script or the built-in one, [`pzt_probe::board::sim_script`]) |
-//! | `report` | 1 | the only place that logs: one defmt line per event ([`pzt_probe::log`]) |
+//! | `report` | 1 | the only place that logs: one defmt line per event (`pzt_probe::log`) |
 //! | `load_cell` | 1 | every 5 ms: the HX711's conversion, if one is ready (80 a second), into the shared force log, stamped with the sample count |
 //! | `guard` | 2 | feeds the independent watchdog every 100 ms while `measure` keeps its liveness promise ([`pzt_probe::watchdog`]) |
 //!
 //! Data flow: `command` → requests → `measure` → plans (capacity 2: the double buffer of the
 //! interrupt's settings, validated before they reach it) → `sample` → points → `measure` →
 //! reports → `report`; the path of one reading is in `docs/architecture.md`, the log lines in
-//! [`pzt_probe::log`]. A stream's readings (`stream <seconds>`) go to the report channel with
+//! `pzt_probe::log`. A stream's readings (`stream <seconds>`) go to the report channel with
 //! `try_send` ([`Io::try_emit`](pzt_probe::session::Io::try_emit)): a full channel drops the
 //! reading (a gap in its `seq`, counted in the `stream end` line) rather than hold up the
 //! measurement task's next plan; the sample interrupt never waits on anything.
