@@ -205,7 +205,12 @@ impl<'a, S: SampleStream> SyncSource<'a, S> {
         let mut error = None;
         let mut dac = [DacCode::MID; BATCH];
         let mut adc = [AdcFrame::default(); BATCH];
-        while (engine.in_flight() as usize) < stream.latency_batches() && error.is_none() {
+        // At most one batch per batch of latency (a stream that claims more than the engine's
+        // ring holds cannot loop here for ever).
+        for _ in 0..stream.latency_batches() {
+            if engine.in_flight() as usize >= stream.latency_batches() || error.is_some() {
+                break;
+            }
             engine.generate(&mut dac);
             match stream.exchange(&dac, &mut adc) {
                 Ok(false) => {}
@@ -251,8 +256,12 @@ impl<S: SampleStream + ForceSource> PointSource for SyncSource<'_, S> {
             self.engine.generate(&mut dac);
             match self.stream.exchange(&dac, &mut adc) {
                 Ok(true) => {}
-                // The pipeline is still filling: nothing played yet.
-                Ok(false) => continue,
+                // The pipeline is still filling: nothing played yet. Counted against the budget,
+                // so that a stream that never plays is a stall, not a hang.
+                Ok(false) => {
+                    used += BATCH as u64;
+                    continue;
+                }
                 Err(e) => {
                     self.error = Some(e);
                     return None;
@@ -279,7 +288,10 @@ impl<S: SampleStream + ForceSource> PointSource for SyncSource<'_, S> {
             self.engine.generate(&mut dac);
             match self.stream.exchange(&dac, &mut adc) {
                 Ok(true) => {}
-                Ok(false) => continue,
+                Ok(false) => {
+                    done += BATCH as u64;
+                    continue;
+                }
                 Err(e) => {
                     self.error = Some(e);
                     return;
@@ -292,5 +304,58 @@ impl<S: SampleStream + ForceSource> PointSource for SyncSource<'_, S> {
     }
     fn contact_force(&mut self, from: u64, to: u64) -> Option<RawForce> {
         self.stream.contact_force(from, to)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hal::FrontEndScale;
+
+    /// A stream whose pipeline never delivers frames, claiming `latency` batches.
+    struct NeverPlays {
+        latency: usize,
+        calls: u32,
+    }
+
+    impl SampleStream for NeverPlays {
+        fn exchange(&mut self, _: &[DacCode], _: &mut [AdcFrame]) -> Result<bool, StreamError> {
+            self.calls += 1;
+            Ok(false)
+        }
+        fn latency_batches(&self) -> usize {
+            self.latency
+        }
+        fn scale(&self) -> FrontEndScale {
+            FrontEndScale::PROBE
+        }
+    }
+
+    impl ForceSource for NeverPlays {
+        fn contact_force(&self, _: u64, _: u64) -> Option<RawForce> {
+            None
+        }
+    }
+
+    /// A stream that never plays is a stall within the window's budget, not a hang, whatever
+    /// latency it claims (the budget and the fill both grow with it: bounded by about twice
+    /// the latency plus the first window's own budget).
+    #[test]
+    fn a_stream_that_never_plays_stalls() {
+        for latency in [2, 1000] {
+            let mut stream = NeverPlays { latency, calls: 0 };
+            let mut engine = SampleEngine::new();
+            let unit = UnitProfile::fallback();
+            let r = crate::runner::run_reading(
+                &mut stream,
+                &mut engine,
+                Method::Hold,
+                &Method::Hold.default_settings(),
+                &unit,
+                |_| {},
+            );
+            assert_eq!(r.err(), Some(crate::runner::RunError::Stalled));
+            assert!(stream.calls < 2 * latency as u32 + 100, "{}", stream.calls);
+        }
     }
 }
