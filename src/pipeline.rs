@@ -85,8 +85,9 @@ pub fn conclude(
         // A press that moved by less than the window allows is still the likely cause when the
         // estimator refused the reading: the resonance moved with it.
         Err(f) => {
+            // (`force` is `None` on a unit without a load cell.)
             let moved = force
-                .filter(|w| unit.load_cell.is_some() && w.moved())
+                .filter(ContactForce::moved)
                 .map(|_| Failure::ForceUnstable);
             let verdict = press
                 .filter(|p| *p != Failure::NoForce)

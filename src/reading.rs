@@ -202,31 +202,41 @@ impl<'a, S: SampleStream> SyncSource<'a, S> {
     /// not yet (as a board fills its DAC buffers before starting the DMA): a plan then takes
     /// effect [`SampleStream::latency_batches`] batches after it is loaded, as on the target.
     pub fn new(stream: &'a mut S, engine: &'a mut SampleEngine) -> Self {
-        let mut error = None;
-        let mut dac = [DacCode::MID; BATCH];
-        let mut adc = [AdcFrame::default(); BATCH];
-        // At most one batch per batch of latency (a stream that claims more than the engine's
-        // ring holds cannot loop here for ever).
-        for _ in 0..stream.latency_batches() {
-            if engine.in_flight() as usize >= stream.latency_batches() || error.is_some() {
-                break;
-            }
-            engine.generate(&mut dac);
-            match stream.exchange(&dac, &mut adc) {
-                Ok(false) => {}
-                // A stream that plays at once has no pipeline to fill.
-                Ok(true) => {
-                    let _ = engine.demodulate(&adc);
-                    break;
-                }
-                Err(e) => error = Some(e),
-            }
-        }
-        Self {
+        let mut src = Self {
             stream,
             engine,
-            error,
+            error: None,
             held: None,
+        };
+        // At most one batch per batch of latency (a stream that claims more than the engine's
+        // ring holds cannot loop here for ever); a stream that plays at once has no pipeline to
+        // fill.
+        for _ in 0..src.stream.latency_batches() {
+            if src.engine.in_flight() as usize >= src.stream.latency_batches() {
+                break;
+            }
+            match src.batch() {
+                Ok(None) => {}
+                Ok(Some(_)) | Err(_) => break,
+            }
+        }
+        src
+    }
+
+    /// One batch: the engine fills the next DAC batch, the stream queues it, and the engine
+    /// demodulates what played — `Ok(None)` while the stream's pipeline is still filling
+    /// (nothing played yet). A stream error is kept in [`Self::error`].
+    fn batch(&mut self) -> Result<Option<crate::engine::Points>, StreamError> {
+        let mut dac = [DacCode::MID; BATCH];
+        let mut adc = [AdcFrame::default(); BATCH];
+        self.engine.generate(&mut dac);
+        match self.stream.exchange(&dac, &mut adc) {
+            Ok(true) => Ok(Some(self.engine.demodulate(&adc))),
+            Ok(false) => Ok(None),
+            Err(e) => {
+                self.error = Some(e);
+                Err(e)
+            }
         }
     }
 }
@@ -249,26 +259,16 @@ impl<S: SampleStream + ForceSource> PointSource for SyncSource<'_, S> {
         if let Some(raw) = self.held.take().filter(|r| r.plan == *plan) {
             return Some(raw);
         }
-        let mut dac = [DacCode::MID; BATCH];
-        let mut adc = [AdcFrame::default(); BATCH];
         let mut used = 0u64;
         while used <= budget {
-            self.engine.generate(&mut dac);
-            match self.stream.exchange(&dac, &mut adc) {
-                Ok(true) => {}
-                // The pipeline is still filling: nothing played yet. Counted against the budget,
-                // so that a stream that never plays is a stall, not a hang.
-                Ok(false) => {
-                    used += BATCH as u64;
-                    continue;
-                }
-                Err(e) => {
-                    self.error = Some(e);
-                    return None;
-                }
-            }
+            // A batch still filling the pipeline counts against the budget too, so that a
+            // stream that never plays is a stall, not a hang.
+            let played = self.batch().ok()?;
             used += BATCH as u64;
-            let mut points = self.engine.demodulate(&adc).into_iter();
+            let Some(points) = played else {
+                continue;
+            };
+            let mut points = points.into_iter();
             if let Some(raw) = points.by_ref().find(|r| r.plan == *plan) {
                 self.held = points.find(|r| r.plan == *plan);
                 return Some(raw);
@@ -281,25 +281,15 @@ impl<S: SampleStream + ForceSource> PointSource for SyncSource<'_, S> {
     }
     async fn idle(&mut self, samples: u64) {
         self.engine.stop();
-        let mut dac = [DacCode::MID; BATCH];
-        let mut adc = [AdcFrame::default(); BATCH];
         let mut done = 0u64;
         while done < samples {
-            self.engine.generate(&mut dac);
-            match self.stream.exchange(&dac, &mut adc) {
-                Ok(true) => {}
-                Ok(false) => {
-                    done += BATCH as u64;
-                    continue;
-                }
-                Err(e) => {
-                    self.error = Some(e);
-                    return;
-                }
-            }
-            let _ = self.engine.demodulate(&adc);
+            let Ok(played) = self.batch() else {
+                return;
+            };
             done += BATCH as u64;
-            self.held = None;
+            if played.is_some() {
+                self.held = None;
+            }
         }
     }
     fn contact_force(&mut self, from: u64, to: u64) -> Option<RawForce> {

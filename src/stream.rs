@@ -84,10 +84,10 @@ pub struct TrackerConfig {
 
 impl TrackerConfig {
     /// Band 170–290 Hz seeded at 230 Hz, acquisition 20 + 20 ms seed and 100 ms hold, segments
-    /// of 25 ms (five or six one-cycle windows at 240 Hz; with the two batches every plan waits
-    /// in the DAC's pipeline and the wait for a cycle boundary, a reading every 38 ms: 26
-    /// readings/s, docs/methods.md) with the drive a quarter half-linewidth off the resonance
-    /// alternately, Q prior ±50 %, re-acquire after three unlocked segments in a row, 5 V.
+    /// of 30 ms (seven one-cycle windows at 240 Hz; with the two batches every plan waits in the
+    /// DAC's pipeline and the wait for a cycle boundary, a reading every 44 ms: 23 readings/s,
+    /// docs/methods.md) with the drive a quarter half-linewidth off the resonance alternately,
+    /// Q prior ±50 %, re-acquire after three unlocked segments in a row, 5 V.
     pub const DEFAULT: Self = Self {
         band_start: Hz(170.0),
         band_stop: Hz(290.0),
@@ -254,7 +254,7 @@ pub fn conclude(
 }
 
 /// Shortest stretch of time a stream reading's contact force is taken over, s: eight of the
-/// load cell's conversions at 80 SPS (a 35 ms segment holds two or three, too few to tell a
+/// load cell's conversions at 80 SPS (a 30 ms segment holds two or three, too few to tell a
 /// steady press from a moving one).
 pub const FORCE_WINDOW_S: f64 = 0.1;
 
@@ -487,7 +487,7 @@ impl Tracker {
         };
         let h = hold::fit(seg, self.f_est, (self.q_est, q_sd))?;
         // A segment the resonator's model does not explain (a knock, a tone) is no reading,
-        // and the drive does not follow it: the next segment, 35 ms on, will be clean.
+        // and the drive does not follow it: the next segment (30 ms on by default) will be clean.
         if h.reduced_chi2 > GROSS_CHI2 {
             return Err(Failure::Interference);
         }

@@ -1039,8 +1039,9 @@ fn evaluate(pb: &Problem, p: &Params, jac: bool, mut res: Option<&mut [C32]>) ->
 /// The normal equations of the fit over (f0, Q, g, Re z, Im z) in `f32`, each column of the
 /// Jacobian multiplied by `scale` (to about unit size) and the weight `1/var` left out:
 /// `JᵀWJ = wt S⁻¹ jtj S⁻¹`, `JᵀW r = wt S⁻¹ jtr` (`S = diag(scale)`). The steps are solved
-/// in these units ([`crate::linalg::spd_solve`] in `f32`: on the Cortex-M4F's single-precision FPU, where the `f64`
-/// solve was emulated, a tenth of the work); only the covariance is formed in `f64`.
+/// in these units ([`crate::linalg::spd_solve`] in `f32`: on the Cortex-M4F's single-precision
+/// FPU, where the `f64` solve was emulated, a tenth of the work); only the covariance is formed
+/// in `f64`.
 #[derive(Clone, Copy, Debug, Default)]
 struct Normal {
     /// `JᵀJ` (scaled), lower triangle.
@@ -1460,7 +1461,6 @@ fn fit_segments(
             }
         }
     }
-    // Mains hum near the drive turns in the residuals at its offset: no reading.
     // A blind placement that left the band found no resonance in it: its residuals are those of
     // a model fitted to something else (an open circuit, a resonance below the band), which
     // project on any turn; they are not for the hum test to judge (measured: 14 of 40 open-PZT
@@ -1470,6 +1470,7 @@ fn fit_segments(
             return Err(Failure::OutOfBand);
         }
     }
+    // Mains hum near the drive turns in the residuals at its offset: no reading.
     super::interference::hum(segs, &res, p.f0)?;
     let cov = n.variances(pb.wt).ok_or(Failure::NoResonance)?;
     let dof = (2 * pb.w.len() + 1).saturating_sub(5).max(1) as f64;
