@@ -32,6 +32,12 @@ pub struct PointPlan {
     /// [`MAX_POINTS_PER_BATCH`] complete per batch; a further one is dropped and counted as an
     /// overrun.
     pub windows: u16,
+    /// Open: after its `windows`, keep closing windows of the same length, numbered on, until
+    /// the next plan takes effect (the batch a later [`SampleEngine::load`] reaches the DAC).
+    /// A measurement that chooses its next plan from this one's windows then loses no drive time
+    /// to the DAC's pipeline: the windows that close while the next plan is on its way are
+    /// data of this plan's drive (a cut-off last one is dropped with the switch).
+    pub open: bool,
     /// Caller's tag, echoed in the result (must differ from the previous plan's).
     pub tag: u16,
 }
@@ -75,9 +81,9 @@ const RING: usize = 4;
 /// Most windows that close in one batch: a window of at least [`MIN_WINDOW_SAMPLES`].
 pub const MAX_POINTS_PER_BATCH: usize = 2;
 
-/// Shortest window a plan may ask for, samples: half a batch, so that at most
-/// [`MAX_POINTS_PER_BATCH`] close in one (one cycle at up to 400 Hz at 10 kHz).
-pub const MIN_WINDOW_SAMPLES: u32 = (crate::reading::BATCH / 2) as u32;
+/// Shortest window a plan may ask for, samples: half a batch (rounded up), so that at most
+/// [`MAX_POINTS_PER_BATCH`] close in one (one cycle at up to 769 Hz at 10 kHz).
+pub const MIN_WINDOW_SAMPLES: u32 = crate::reading::BATCH.div_ceil(2) as u32;
 
 /// The windows that closed in one batch, in order.
 pub type Points = heapless::Vec<PointRaw, MAX_POINTS_PER_BATCH>;
@@ -197,11 +203,14 @@ impl SampleEngine {
         self.overruns
     }
 
-    /// True while a loaded point is still being measured.
+    /// True while a loaded point is still being measured (an open plan's windows after its
+    /// `windows` are extra: it is no longer busy).
     pub fn busy(&self) -> bool {
         self.pending.is_some()
-            || (self.plan.is_some_and(|p| p.cycles > 0)
-                && (self.stage != Stage::Done || self.demod_tag != self.plan.map(|p| p.tag)))
+            || self.plan.is_some_and(|p| {
+                let finished = self.stage == Stage::Done || self.window >= p.windows.max(1);
+                p.cycles > 0 && (!finished || self.demod_tag != Some(p.tag))
+            })
     }
 
     /// Fill the next DAC batch.
@@ -309,8 +318,8 @@ impl SampleEngine {
                             if out.push(point).is_err() {
                                 self.overruns = self.overruns.saturating_add(1);
                             }
-                            if self.window.saturating_add(1) < plan.windows {
-                                self.window += 1;
+                            if plan.open || self.window.saturating_add(1) < plan.windows {
+                                self.window = self.window.saturating_add(1);
                                 self.sums = LockInSums::default();
                                 self.stage = Stage::Integrating(plan.cycles);
                             }
@@ -348,6 +357,7 @@ mod tests {
             settle_samples,
             cycles,
             windows,
+            open: false,
             tag,
         });
         e
@@ -416,7 +426,7 @@ mod tests {
         assert!(!e.busy());
     }
 
-    /// Windows of one cycle (4.1 ms at 241 Hz, shorter than a 5 ms batch): two may
+    /// Windows of one cycle (4.1 ms at 241 Hz, shorter than the test's 5 ms batch): two may
     /// close in one batch, and every one is handed on, in order, gap-free; none is an overrun.
     #[test]
     fn windows_shorter_than_a_batch_are_all_handed_on() {
@@ -439,7 +449,58 @@ mod tests {
         }
         assert_eq!(e.overruns(), 0);
         assert!(!e.busy());
-        // 400 Hz is the fastest one-cycle window of half a batch.
+        // 400 Hz (the top of any band) is slower than the fastest one-cycle window of half a
+        // batch.
         assert!(10_000.0 / 400.0 >= MIN_WINDOW_SAMPLES as f64);
+    }
+    /// An open plan goes on closing windows of its length after its own, numbered on and
+    /// gap-free, until the next plan takes effect: none of it closes after the switch, the one
+    /// the switch cut is dropped, and the engine is not busy once the plan's own windows are in.
+    #[test]
+    fn an_open_plan_closes_windows_until_the_next_plan_takes_effect() {
+        let mut e = SampleEngine::new();
+        let plan = PointPlan {
+            ftw: tuning_word(241.0, 10_000.0),
+            amplitude_codes: 800,
+            settle_samples: 10,
+            cycles: 1,
+            windows: 3,
+            open: true,
+            tag: 7,
+        };
+        e.load(plan);
+        let mut got = std::vec::Vec::new();
+        while got.len() < 3 {
+            got.extend(loopback_batch(&mut e));
+        }
+        assert!(!e.busy());
+        for _ in 0..4 {
+            got.extend(loopback_batch(&mut e));
+        }
+        assert!(got.len() >= 6, "{} windows", got.len());
+        for (k, w) in got.iter().enumerate() {
+            assert_eq!((w.window as usize, w.plan), (k, plan));
+        }
+        for w in got.windows(2) {
+            assert_eq!(
+                w[1].end_sample - w[0].end_sample,
+                w[1].sums.reference.n as u64
+            );
+        }
+        // The next plan: the batch it takes effect in starts at the engine's present sample.
+        let switch = e.samples();
+        e.load(PointPlan {
+            tag: 8,
+            open: false,
+            windows: 1,
+            ..plan
+        });
+        let mut after = std::vec::Vec::new();
+        for _ in 0..10 {
+            after.extend(loopback_batch(&mut e));
+        }
+        assert!(after.iter().all(|w| w.plan.tag == 8), "{after:?}");
+        assert_eq!(after.len(), 1);
+        assert!(got.last().is_some_and(|w| w.end_sample <= switch));
     }
 }

@@ -10,7 +10,7 @@
 //! never waits for the chip: [`Hx711::read`] returns `Ok(None)` until a conversion is ready.
 //! A read is 25 clock pulses of 1 µs high and 1 µs low; a pulse held high beyond 60 µs powers the
 //! chip down (the read is lost), so on the target a read runs in a critical section (about
-//! 50 µs: well inside the sample interrupt's slack of 5 ms per batch).
+//! 50 µs: well inside the sample interrupt's slack of 2.5 ms per batch).
 //!
 //! # Force over a window
 //!

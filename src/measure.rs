@@ -529,19 +529,21 @@ enum Inner {
     },
 }
 
-/// Hold's settings as the first stage of [`Method::Auto`]: its defaults over auto's band.
+/// Hold's settings as the first stage of [`Method::Auto`]: the fast hold over auto's band,
+/// seeded at its centre.
 ///
 /// The fast hold ([`HoldSettings::FAST`]: no seed, four one-cycle windows at the band's centre,
-/// then on their estimate, one joint fit; 132 ms, 9.6 τ at 500 kPa with the DAC's pipeline) is
-/// measured but is not the default: its error from noise is 1.1–1.5× the Cramér–Rao bound where
-/// the default's is 1.0–1.3×, and on the M4 its fits take about 2.2 % of the 170 MHz core over
-/// so short a reading (budget 2 %, `tests/qemu_cost.rs`; docs/methods.md, session 8).
+/// then on their estimate, one joint fit) reads 500 kPa in 134.6 ms (9.8 τ) at 1.28× the
+/// Cramér–Rao bound (1.09–1.44× over 200–2500 kPa), where the seeded hold took 369 ms at 1.21×
+/// (docs/methods.md, session 9). Its price: on the M4 its fits and the pipeline's inversion take
+/// 2.1–2.6 % of the 170 MHz core over so short a reading, over the 2 % budget
+/// (`tests/qemu_cost.rs`, `KNOWN_OVER_BUDGET`; docs/firmware.md).
 fn auto_hold(s: &StagedSettings) -> HoldSettings {
     HoldSettings {
         band_start: s.band_start,
         band_stop: s.band_stop,
         seed: Hz(0.5 * (s.band_start.0 + s.band_stop.0)),
-        ..HoldSettings::DEFAULT
+        ..HoldSettings::FAST
     }
 }
 

@@ -131,7 +131,8 @@ pub struct UnitProfile {
 /// air reference and the calibration — a term of every reading's combined σ, through the curve
 /// (the contact law with its free resonance moved by it). Its source: the simulated probe's
 /// thermal drift scenes move the free resonance by 0.3 Hz/s (hal-sim `catalogue::DRIFT_HZ_S`),
-/// 0.11 Hz over a default reading (0.37 s); rounded up to 0.12 Hz so that the catalogue's
+/// 0.11 Hz over a reading of 0.37 s (the default until 2026-11-24; 0.04 Hz over today's 0.13 s);
+/// rounded up to 0.12 Hz so that the catalogue's
 /// second mode, which the calibration never saw and which pulls the resonance by about
 /// 0.33 Hz (1.1 % at 300 kPa), stays within 3σ (the stability statement,
 /// bench/tests/stability.rs) — a choice, not a derivation. A unit whose probe drifts more needs
@@ -143,16 +144,16 @@ pub const FREE_RESONANCE_ALLOWANCE: Hz = Hz(0.12);
 /// probe is specified for (the stability catalogue's drift scenes, hal-sim
 /// `catalogue::DRIFT_HZ_S`). A reading of probe time `t` allows `DRIFT_EPOCH t` times it on top of
 /// [`FREE_RESONANCE_ALLOWANCE`] ([`drift_allowance`]): a long reading (a stepped sweep, the
-/// adaptive and track procedures, 1–6 s) sees more of the drift than the default's 0.37 s.
+/// adaptive and track procedures, 1–6 s) sees more of the drift than the default's 0.13 s.
 pub const FREE_RESONANCE_DRIFT_HZ_S: f32 = 0.3;
 
 /// Where in its probe time a reading's resonance lies, as a fraction of it: the
 /// information-weighted epoch of the default method (a steady drift of the free resonance moves
-/// auto's reading by `DRIFT_EPOCH × rate × probe time`; measured 0.62 at 1000 kPa, test
-/// `bench/tests/accuracy.rs::a_steady_drift_moves_the_reading_by_its_epoch`). Uniform weighting
+/// auto's reading by `DRIFT_EPOCH × rate × probe time`; measured 0.57–0.69 over 300–2500 kPa,
+/// test `bench/tests/accuracy.rs::a_steady_drift_moves_the_reading_by_its_epoch`). Uniform weighting
 /// would give 0.5; hold's information builds up with the response, so its later windows weigh
 /// more.
-pub const DRIFT_EPOCH: f32 = 0.62;
+pub const DRIFT_EPOCH: f32 = 0.63;
 
 /// The free resonance's allowance of a reading that took `probe_time`:
 /// [`FREE_RESONANCE_ALLOWANCE`] and [`FREE_RESONANCE_DRIFT_HZ_S`] × [`DRIFT_EPOCH`] ×

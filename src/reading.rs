@@ -14,8 +14,13 @@ use crate::status::Failure;
 use crate::sweep::SweepPoint;
 use crate::units::{DacCode, Seconds};
 
-/// Samples per batch (one DMA half-buffer on the STM32: 5 ms at 10 kHz).
-pub const BATCH: usize = 50;
+/// Samples per batch (one DMA half-buffer on the STM32: 2.5 ms at 10 kHz). Short, because every
+/// plan waits [`PIPELINE_BATCHES`] of them (and the rest of the batch it was loaded in) before it
+/// plays: with 50-sample batches a hold's first segment drove 10 ms longer off the resonance
+/// and the default read at 1.38× the Cramér–Rao bound at 9.9 τ; with 25, 1.28× at 9.8 τ
+/// (docs/methods.md, session 9). The sample interrupt's overhead per batch doubles with it
+/// (docs/firmware.md).
+pub const BATCH: usize = 25;
 
 /// Batches between the sample engine's generating a DAC batch and the ADC batch captured while
 /// it played, on every board: the DAC's DMA runs over two half-buffers, both filled before it
@@ -46,9 +51,10 @@ pub trait PointSource {
     fn now_sample(&self) -> u64;
     /// Hand `plan` to the engine; false when the engine can no longer be reached.
     async fn load(&mut self, plan: PointPlan) -> bool;
-    /// The next finished window of `plan`, or `None` when none came within `budget`
-    /// samples (stalled) or the source failed.
-    async fn next(&mut self, plan: &PointPlan, budget: u64) -> Option<PointRaw>;
+    /// The next finished window that `wanted` [matches](Wanted::matches) (the plan in progress,
+    /// or the open plan before it), or `None` when none came within `budget` samples (stalled)
+    /// or the source failed.
+    async fn next(&mut self, wanted: &Wanted, budget: u64) -> Option<PointRaw>;
     /// Stop the drive.
     async fn stop(&mut self);
     /// Let `samples` of the engine's samples pass with the drive stopped (the load cell keeps
@@ -61,6 +67,32 @@ pub trait PointSource {
     /// firmware logs it; the default ignores it).
     async fn point(&mut self, tag: u16, point: &SweepPoint) {
         let _ = (tag, point);
+    }
+}
+
+/// The windows a reading waits for: those of the plan in progress, and those of the plan before
+/// it when that plan is [open](PointPlan::open) (its windows go on closing until the new plan
+/// takes effect). Every other window is stale and dropped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Wanted {
+    /// The plan in progress.
+    pub plan: PointPlan,
+    /// The open plan before it, if any.
+    pub open_before: Option<PointPlan>,
+}
+
+impl Wanted {
+    /// Only the windows of `plan`.
+    pub fn plan(plan: PointPlan) -> Self {
+        Self {
+            plan,
+            open_before: None,
+        }
+    }
+
+    /// True when `raw` answers the plan in progress or the open plan before it.
+    pub fn matches(&self, raw: &PointRaw) -> bool {
+        raw.plan == self.plan || Some(raw.plan) == self.open_before
     }
 }
 
@@ -126,23 +158,35 @@ pub async fn run_plans<S: PointSource, P: Plans>(
 ) -> Result<u16, (Stop, u16)> {
     let fs = src.scale().sample_rate.0 as f64;
     let mut points: u16 = 0;
+    let mut open_before = None;
     while !m.is_complete() {
         let Some(plan) = m.next_plan() else { break };
         if !src.load(plan).await {
             break;
         }
         let budget = window_budget_samples(&plan, fs, src.latency_batches());
-        for _ in 0..plan.windows.max(1) {
-            let Some(raw) = src.next(&plan, budget).await else {
+        let wanted = Wanted { plan, open_before };
+        let mut got = 0u16;
+        // Each of the plan's windows within its budget; the open plan's before it (the drive
+        // time while this plan is on its way) are accepted as they come, not counted.
+        let mut deadline = src.now_sample().saturating_add(budget);
+        while got < plan.windows.max(1) {
+            let left = deadline.saturating_sub(src.now_sample());
+            let Some(raw) = src.next(&wanted, left).await else {
                 src.stop().await;
                 return Err((Stop::Stalled(plan.tag), points));
             };
+            if raw.plan == plan {
+                got += 1;
+                deadline = src.now_sample().saturating_add(budget);
+            }
             if let Some(p) = m.accept(&raw) {
                 points = points.saturating_add(1);
-                on_point(plan.tag, &p);
-                src.point(plan.tag, &p).await;
+                on_point(raw.plan.tag, &p);
+                src.point(raw.plan.tag, &p).await;
             }
         }
+        open_before = plan.open.then_some(plan);
     }
     src.stop().await;
     Ok(points)
@@ -255,8 +299,8 @@ impl<S: SampleStream + ForceSource> PointSource for SyncSource<'_, S> {
         self.engine.load(plan);
         self.error.is_none()
     }
-    async fn next(&mut self, plan: &PointPlan, budget: u64) -> Option<PointRaw> {
-        if let Some(raw) = self.held.take().filter(|r| r.plan == *plan) {
+    async fn next(&mut self, wanted: &Wanted, budget: u64) -> Option<PointRaw> {
+        if let Some(raw) = self.held.take().filter(|r| wanted.matches(r)) {
             return Some(raw);
         }
         let mut used = 0u64;
@@ -269,8 +313,8 @@ impl<S: SampleStream + ForceSource> PointSource for SyncSource<'_, S> {
                 continue;
             };
             let mut points = points.into_iter();
-            if let Some(raw) = points.by_ref().find(|r| r.plan == *plan) {
-                self.held = points.find(|r| r.plan == *plan);
+            if let Some(raw) = points.by_ref().find(|r| wanted.matches(r)) {
+                self.held = points.find(|r| wanted.matches(r));
                 return Some(raw);
             }
         }
@@ -347,5 +391,104 @@ mod tests {
             assert_eq!(r.err(), Some(crate::runner::RunError::Stalled));
             assert!(stream.calls < 2 * latency as u32 + 100, "{}", stream.calls);
         }
+    }
+    /// A stream that plays each DAC batch back into both ADC channels
+    /// [`PIPELINE_BATCHES`] batches after it was queued, as every board does.
+    struct Loopback {
+        queued: std::collections::VecDeque<[DacCode; BATCH]>,
+    }
+
+    impl SampleStream for Loopback {
+        fn exchange(&mut self, dac: &[DacCode], adc: &mut [AdcFrame]) -> Result<bool, StreamError> {
+            let mut batch = [DacCode::MID; BATCH];
+            batch.copy_from_slice(dac);
+            self.queued.push_back(batch);
+            if self.queued.len() <= PIPELINE_BATCHES {
+                return Ok(false);
+            }
+            let played = self.queued.pop_front().ok_or(StreamError::Overrun)?;
+            for (a, d) in adc.iter_mut().zip(played) {
+                let code = crate::units::AdcCode(d.0);
+                *a = AdcFrame {
+                    current: code,
+                    monitor: code,
+                };
+            }
+            Ok(true)
+        }
+        fn latency_batches(&self) -> usize {
+            PIPELINE_BATCHES
+        }
+        fn scale(&self) -> FrontEndScale {
+            FrontEndScale::PROBE
+        }
+    }
+
+    impl ForceSource for Loopback {
+        fn contact_force(&self, _: u64, _: u64) -> Option<RawForce> {
+            None
+        }
+    }
+
+    /// Two plans, the first open: records every window the plan loop hands on.
+    struct TwoPlans {
+        plans: std::vec::Vec<PointPlan>,
+        next: usize,
+        got: std::vec::Vec<(u16, u16)>,
+    }
+
+    impl Plans for TwoPlans {
+        fn next_plan(&mut self) -> Option<PointPlan> {
+            let p = self.plans.get(self.next).copied();
+            self.next += 1;
+            p
+        }
+        fn accept(&mut self, raw: &PointRaw) -> Option<SweepPoint> {
+            self.got.push((raw.plan.tag, raw.window));
+            None
+        }
+        fn is_complete(&self) -> bool {
+            self.next >= self.plans.len() && self.got.iter().filter(|g| g.0 == 2).count() >= 2
+        }
+    }
+
+    /// The plan loop hands on the windows an open plan closes while the next one passes the
+    /// pipeline (after its own, before the next plan's), and counts only each plan's own
+    /// towards its end: one-cycle windows at 241 Hz (41 samples) in a wait of two to three
+    /// 25-sample batches give one or two.
+    #[test]
+    fn the_windows_of_an_open_plan_come_before_the_next_plans() {
+        let a = PointPlan {
+            ftw: crate::dsp::dds::tuning_word(241.0, 10_000.0),
+            amplitude_codes: 800,
+            settle_samples: 10,
+            cycles: 1,
+            windows: 2,
+            open: true,
+            tag: 1,
+        };
+        let b = PointPlan {
+            tag: 2,
+            open: false,
+            ..a
+        };
+        let mut m = TwoPlans {
+            plans: std::vec![a, b],
+            next: 0,
+            got: std::vec::Vec::new(),
+        };
+        let mut stream = Loopback {
+            queued: Default::default(),
+        };
+        let mut engine = SampleEngine::new();
+        let mut src = SyncSource::new(&mut stream, &mut engine);
+        assert_eq!(block_on(run_plans(&mut src, &mut m, |_, _| {})), Ok(0));
+        let extra = m.got.len() - 4;
+        assert!((1..=2).contains(&extra), "{:?}", m.got);
+        let expected: std::vec::Vec<(u16, u16)> = (0..2 + extra as u16)
+            .map(|k| (1, k))
+            .chain([(2, 0), (2, 1)])
+            .collect();
+        assert_eq!(m.got, expected);
     }
 }

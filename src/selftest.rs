@@ -286,6 +286,7 @@ impl SelfTest {
                 settle_samples: settle as u32,
                 cycles: WINDOW_CYCLES,
                 windows: WINDOWS as u16,
+                open: false,
                 tag: TAG,
             },
             issued: false,

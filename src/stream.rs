@@ -44,7 +44,7 @@ use crate::hal::FrontEndScale;
 use crate::loadcell::RawForce;
 use crate::measure::{Method, Reading};
 use crate::profile::UnitProfile;
-use crate::reading::{window_budget_samples, PointSource};
+use crate::reading::{window_budget_samples, PointSource, Wanted};
 use crate::status::{Failure, Status};
 use crate::sweep::{amplitude_codes, Drive, SettingsError};
 use crate::units::{Hz, Seconds, Volts};
@@ -69,7 +69,7 @@ pub struct TrackerConfig {
     pub acquire_hold: Seconds,
     /// Length of one tracking segment: one reading each (25–1000 ms). A segment is at least
     /// four windows of one cycle (hold's fit needs four windows; an engine window must span
-    /// half a 5 ms batch), 17 ms at 238 Hz.
+    /// half a batch), 17 ms at 238 Hz.
     pub segment: Seconds,
     /// Offset of the drive from the estimate, alternately above and below, in half-linewidths
     /// `f0/(2Q)` (0–2).
@@ -306,6 +306,7 @@ impl Tracker {
                     settle_samples: 0,
                     cycles: cycles as u32,
                     windows: n as u16,
+                    open: false,
                     tag: TRACK_TAG | (self.tag & 0xff),
                 };
                 self.plan = Some(plan);
@@ -541,7 +542,7 @@ pub async fn run_with<S: PointSource>(
         }
         let budget = window_budget_samples(&plan, fs, src.latency_batches());
         for _ in 0..plan.windows.max(1) {
-            let r = match src.next(&plan, budget).await {
+            let r = match src.next(&Wanted::plan(plan), budget).await {
                 Some(raw) => tracker.accept(&raw, &scale, unit, |a, b| src.contact_force(a, b)),
                 None => Some(tracker.stalled(src.now_sample(), &scale, unit)),
             };

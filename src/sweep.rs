@@ -224,6 +224,7 @@ impl Sweep {
             settle_samples: settle,
             cycles,
             windows: 1,
+            open: false,
             tag,
         }
     }

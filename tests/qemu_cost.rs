@@ -26,7 +26,7 @@ const CORE_HZ: f64 = 170e6;
 /// simulated front end of the QEMU image runs at the same rate).
 const FIRMWARE_FS_HZ: f64 = 10_000.0;
 /// Samples per batch (`pzt_probe::runner::BATCH`).
-const BATCH: f64 = 50.0;
+const BATCH: f64 = 25.0;
 /// The largest single measurement call must leave the measurement task free to feed the
 /// watchdog at its 100 ms interval (`FEED_MS` in `src/bin/probe.rs`; the STM32's independent
 /// watchdog bites after 500 ms).
@@ -48,7 +48,15 @@ struct Known {
 }
 
 /// The methods over budget (see `docs/firmware.md`).
-const KNOWN_OVER_BUDGET: &[Known] = &[];
+const KNOWN_OVER_BUDGET: &[Known] = &[Known {
+    method: "auto",
+    why: "its first stage, the fast hold, does about the work of the seeded hold it replaced \
+          (its fits 0.32-0.38 M instructions, the pipeline's inversion 0.16 M) in a third of the \
+          probe time (0.13 s): 2.1-2.6 % of the core, measured 2026-11-24",
+    reading_pct: 3.2,
+    // Its calls stay within the general bound (the sweep-G fallback's 14 ms at 60 kPa).
+    call_us: CALL_MAX_US,
+}];
 
 /// A `cost` line with its `split` line.
 struct Case {

@@ -13,7 +13,7 @@ use pzt_probe::boot::BootError;
 use pzt_probe::command::parse;
 use pzt_probe::engine::{PointPlan, PointRaw, SampleEngine};
 use pzt_probe::hal::{FrontEndScale, SampleStream};
-use pzt_probe::reading::{block_on, PointSource, SyncSource};
+use pzt_probe::reading::{block_on, PointSource, SyncSource, Wanted};
 use pzt_probe::session::{Event, Io, Refusal, Session};
 use pzt_probe::store::{Saved, Store, StoreError};
 use pzt_probe::{Failure, Method, Status, UnitProfile};
@@ -70,12 +70,12 @@ impl PointSource for SimIo {
     async fn load(&mut self, plan: PointPlan) -> bool {
         self.source().load(plan).await
     }
-    async fn next(&mut self, plan: &PointPlan, budget: u64) -> Option<PointRaw> {
+    async fn next(&mut self, wanted: &Wanted, budget: u64) -> Option<PointRaw> {
         // The second window of a batch, kept from the last call's source.
         let held = self.held.take();
         let mut src = self.source();
         src.held = held;
-        let got = src.next(plan, budget).await;
+        let got = src.next(wanted, budget).await;
         let held = src.held.take();
         self.held = held;
         got

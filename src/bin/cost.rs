@@ -93,7 +93,7 @@ mod harness {
     use pzt_probe::loadcell::{ForceLog, RawForce};
     use pzt_probe::measure::{Measurement, Procedure};
     use pzt_probe::profile::UnitProfile;
-    use pzt_probe::reading::{block_on, drive, PointSource, BATCH};
+    use pzt_probe::reading::{block_on, drive, PointSource, Wanted, BATCH};
     use pzt_probe::sweep::SweepPoint;
     use pzt_probe::{Failure, Method, Reading, Seconds, Status};
 
@@ -251,8 +251,8 @@ mod harness {
             self.intake = Some(plan);
             true
         }
-        async fn next(&mut self, plan: &PointPlan, budget: u64) -> Option<PointRaw> {
-            if let Some(raw) = self.held.take().filter(|r| r.plan == *plan) {
+        async fn next(&mut self, wanted: &Wanted, budget: u64) -> Option<PointRaw> {
+            if let Some(raw) = self.held.take().filter(|r| wanted.matches(r)) {
                 return Some(raw);
             }
             let mut used = 0u64;
@@ -275,8 +275,8 @@ mod harness {
                 compiler_fence(Ordering::SeqCst);
                 used += BATCH as u64;
                 let mut points = point.into_iter();
-                if let Some(raw) = points.by_ref().find(|r| r.plan == *plan) {
-                    self.held = points.find(|r| r.plan == *plan);
+                if let Some(raw) = points.by_ref().find(|r| wanted.matches(r)) {
+                    self.held = points.find(|r| wanted.matches(r));
                     return Some(raw);
                 }
             }

@@ -111,7 +111,7 @@ mod app {
     use pzt_probe::engine::{PointPlan, PointRaw, SampleEngine};
     use pzt_probe::hal::FrontEndScale;
     use pzt_probe::loadcell::ForceLog;
-    use pzt_probe::reading::{PointSource, BATCH};
+    use pzt_probe::reading::{PointSource, Wanted, BATCH};
     use pzt_probe::session::{Event, Io, Session};
     use pzt_probe::store::{Loaded, Saved, Store, StoreError};
     use pzt_probe::watchdog::{fit_bound, Millis};
@@ -259,7 +259,7 @@ mod app {
         }
     }
 
-    /// The sample interrupt: one batch ([`BATCH`] samples, 5 ms at 10 kHz) per call.
+    /// The sample interrupt: one batch ([`BATCH`] samples, 2.5 ms at 10 kHz) per call.
     ///
     /// Bound to the ADC DMA half/full-transfer interrupt `DMA1_CHANNEL1` on the STM32; on QEMU the
     /// same vector is the batch timer, whose driver first emulates the DMA of the period. It
@@ -366,13 +366,13 @@ mod app {
             }
             self.plans.send(Some(plan)).await.is_ok()
         }
-        async fn next(&mut self, plan: &PointPlan, budget: u64) -> Option<PointRaw> {
+        async fn next(&mut self, wanted: &Wanted, budget: u64) -> Option<PointRaw> {
             // The budget in ms, with a watchdog period of margin for this task's own delay.
             let ms = (budget as f32 / self.scale.sample_rate.0 * 1000.0) as u32 + FEED_MS;
             let got = loop {
                 promise(ms + ALIVE_MS);
                 match Mono::timeout_after(ms.millis(), self.points.recv()).await {
-                    Ok(Ok(raw)) if raw.plan == *plan => break Some(raw),
+                    Ok(Ok(raw)) if wanted.matches(&raw) => break Some(raw),
                     Ok(Ok(_stale)) => continue,
                     _ => break None,
                 }

@@ -3,7 +3,7 @@
 //! `no_std`) behind the same stream interface as the STM32's DAC/ADC DMA driver.
 //!
 //! * **Sample cadence.** CMSDK APB timer 0 (IRQ 8) fires once per batch period
-//!   ([`BATCH`] samples at the simulated front end's sample rate: 5 ms at 10 kHz), standing in for
+//!   ([`BATCH`] samples at the simulated front end's sample rate: 2.5 ms at 10 kHz), standing in for
 //!   the STM32's ADC DMA half/full-transfer interrupt (and bound under its name, `DMA1_CHANNEL1`, as embassy-stm32's device crate calls it). [`Stream::capture`] then does what the two
 //!   DMA channels did during that period — play the DAC half-buffer through [`SimProbe`] and fill
 //!   the ADC half-buffer — and hands both halves to the interrupt, exactly as the STM32 driver

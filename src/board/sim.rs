@@ -230,7 +230,7 @@ impl<F: FnMut(f64) -> Option<Option<hal_sim::Tissue>>> crate::reading::PointSour
     }
     async fn next(
         &mut self,
-        plan: &crate::engine::PointPlan,
+        wanted: &crate::reading::Wanted,
         budget: u64,
     ) -> Option<crate::engine::PointRaw> {
         let probe = &mut self.inner.stream.probe;
@@ -239,7 +239,7 @@ impl<F: FnMut(f64) -> Option<Option<hal_sim::Tissue>>> crate::reading::PointSour
                 probe.set_tissue(t);
             }
         }
-        self.inner.next(plan, budget).await
+        self.inner.next(wanted, budget).await
     }
     async fn stop(&mut self) {
         self.inner.stop().await

@@ -314,7 +314,7 @@ const HSE_TIMEOUT: u32 = 16_000_000 / 10;
 /// The second ADC's last sample of a batch, after the first ADC's DMA interrupt: both convert
 /// on the same trigger, so it is there within a few bus cycles; 2 000 cycles (12 µs) of margin.
 const ADC_PAIR_TIMEOUT: u32 = 2_000;
-/// One batch period in core cycles (5 ms).
+/// One batch period in core cycles (2.5 ms).
 const BATCH_CYCLES: u32 = SYSCLK_HZ / SAMPLE_RATE_HZ * BATCH as u32;
 /// HSE frequency of the NUCLEO-G474RE's crystal X3.
 const HSE_HZ: u32 = 24_000_000;

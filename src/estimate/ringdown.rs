@@ -49,7 +49,7 @@ pub struct RingdownSettings {
     pub ring: Seconds,
     /// Stages (1–4): each later stage bursts at the previous estimate.
     pub stages: u8,
-    /// Drive cycles per demodulation window (1–8; a window must outlast one 5 ms batch).
+    /// Drive cycles per demodulation window (1–8; a window must outlast 6 ms at the band's top).
     pub window_cycles: u8,
     /// Burst amplitude at the PZT.
     pub drive: Volts,
@@ -130,7 +130,7 @@ impl RingdownSettings {
             return Err(SettingsError::KnobOutOfRange);
         }
         let fs = scale.sample_rate.0 as f64;
-        // A window must be longer than a batch (50 samples) at the highest frequency.
+        // A window at least 60 samples long at the highest frequency (longer than a batch).
         if (self.window_cycles as f64) * fs / (self.band_stop.0 as f64) < 60.0 {
             return Err(SettingsError::IntegrationShorterThanCycle);
         }
@@ -171,6 +171,7 @@ impl<const W: usize> Ringdown<W> {
                 settle_samples: (self.s.burst.0 as f64 * self.fs) as u32,
                 cycles: 1,
                 windows: 1,
+                open: false,
                 tag: self.tag,
             },
             _ => {
@@ -184,6 +185,7 @@ impl<const W: usize> Ringdown<W> {
                     settle_samples: (HOLD_SETTLE_S as f64 * self.fs) as u32,
                     cycles: self.s.window_cycles as u32,
                     windows: self.n_windows,
+                    open: false,
                     tag: self.tag,
                 }
             }

@@ -204,6 +204,7 @@ impl Staged {
             settle_samples: (settle_s * self.fs) as u32,
             cycles,
             windows: 1,
+            open: false,
             tag: self.tag,
         })
     }
