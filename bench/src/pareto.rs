@@ -122,7 +122,7 @@ pub fn configs() -> Vec<Config> {
     }
     // hold subtracts the unit's static admittance: the profile's air reference supplies it.
     let air = HoldSettings::DEFAULT;
-    // The fast hold (not auto's default: its on-target cost, docs/methods.md).
+    // The fast hold: auto's first stage (docs/methods.md, session 9).
     let fast = HoldSettings::FAST;
     v.push(Config {
         method: Method::Hold,
