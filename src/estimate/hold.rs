@@ -439,17 +439,9 @@ impl Hold {
                 }
                 self.clipped |= s.current_rail_hits > 0;
                 add_sums(&mut self.monitor, &s.monitor, &s.reference);
-                match solve_value(&s.current, &s.reference) {
-                    Some((value, variance)) => {
-                        let ai = scale.amps_per_code as f64;
-                        let len = s.reference.n as f64 / self.fs;
-                        let end = raw.end_sample as f64 / self.fs;
-                        let _ = self.windows.push(HoldWindow {
-                            t0: end - len,
-                            len,
-                            y: value * ai,
-                            var: variance * ai * ai,
-                        });
+                match self.current_window(raw, scale) {
+                    Some(w) => {
+                        let _ = self.windows.push(w);
                     }
                     None => self.finish(Err(Failure::BadSettings)),
                 }
@@ -467,7 +459,6 @@ impl Hold {
                             let e = h.estimate;
                             self.segment = 1;
                             self.first_len = self.windows.len() as u8;
-                            self.first_cap = self.first_cap.max(self.first_len);
                             self.f_first = self.f_hold;
                             self.q_first = e.q.map_or(self.q_seed, |q| q as f64);
                             self.linear_first = h.linear;
@@ -485,6 +476,21 @@ impl Hold {
         }
     }
 
+    /// A finished window's current phasor, A, and its variance per component (its start and
+    /// length from the engine's sample count); `None` when its sums do not solve.
+    fn current_window(&self, raw: &PointRaw, scale: &FrontEndScale) -> Option<HoldWindow> {
+        let s = &raw.sums;
+        let (value, variance) = solve_value(&s.current, &s.reference)?;
+        let ai = scale.amps_per_code as f64;
+        let len = s.reference.n as f64 / self.fs;
+        Some(HoldWindow {
+            t0: raw.end_sample as f64 / self.fs - len,
+            len,
+            y: value * ai,
+            var: variance * ai * ai,
+        })
+    }
+
     /// A window of the first segment's open plan that closed after the second segment was
     /// planned, before the second's plan took effect: more of the first segment's drive, kept
     /// for the joint fit while none of the second's has come and there is room
@@ -493,18 +499,9 @@ impl Hold {
         if self.windows.len() != self.first_len as usize || self.first_len >= self.first_cap {
             return;
         }
-        let s = &raw.sums;
-        self.clipped |= s.current_rail_hits > 0;
-        let Some((value, variance)) = solve_value(&s.current, &s.reference) else {
+        self.clipped |= raw.sums.current_rail_hits > 0;
+        let Some(mut w) = self.current_window(raw, scale) else {
             return;
-        };
-        let ai = scale.amps_per_code as f64;
-        let len = s.reference.n as f64 / self.fs;
-        let mut w = HoldWindow {
-            t0: raw.end_sample as f64 / self.fs - len,
-            len,
-            y: value * ai,
-            var: variance * ai * ai,
         };
         to_admittance(
             core::slice::from_mut(&mut w),
