@@ -2,7 +2,7 @@
 //!
 //! The STM32 board (`src/board/stm32g474.rs`) records the first one ([`BootError`] is its
 //! type); the session refuses what the failed step makes impossible with the step's name and
-//! message ([`crate::session::Refusal::Boot`]) and shows it in `status`. Portable, so the
+//! message ([`crate::instrument::session::Refusal::Boot`]) and shows it in `status`. Portable, so the
 //! session's handling is tested on the host.
 
 /// A bring-up step that failed. The board carries on degraded.

@@ -317,7 +317,7 @@ impl ContactForce {
 /// [`FORCE_LOG`] one by one, and the last [`FORCE_BLOCKS`] means of [`FORCE_BLOCK`]
 /// consecutive ones, so that a window is covered whole whether it is a 0.4 s hold or a 6 s
 /// sweep (in 1.5 KiB). Counts, not newtons: the calibration is unit data
-/// ([`crate::profile::UnitProfile`]) and applies in the reading's pipeline. Each entry keeps the
+/// ([`crate::unit::profile::UnitProfile`]) and applies in the reading's pipeline. Each entry keeps the
 /// low 32 bits of its sample count: a count is recovered against the window asked for, exact
 /// while the entries lie within 2³² samples (5 days at 10 kHz) of it.
 #[derive(Clone, Debug, Default)]

@@ -25,9 +25,9 @@
 //! Jacobians: relative 1e-4 (the forward differences' 1e-6 error per slope, amplified by the
 //! conditioning of `JᵀWJ`). The held-out decision (contact law kept or not) must be the same.
 
-use pzt_probe::calibration::PowerLaw;
-use pzt_probe::contact_law::ContactLaw;
-use pzt_probe::profile::{calibrate, Calibration, Reference};
+use pzt_probe::unit::calibration::PowerLaw;
+use pzt_probe::unit::contact_law::ContactLaw;
+use pzt_probe::unit::profile::{calibrate, Calibration, Reference};
 use pzt_probe::units::Hz;
 use pzt_probe::AirReference;
 use pzt_probe::Farads;

@@ -4,7 +4,7 @@
 
 use hal_sim::{NoiseScene, Scene};
 use pzt_probe::board::sim::read;
-use pzt_probe::sweep::SweepSettings;
+use pzt_probe::engine::sweep::SweepSettings;
 use pzt_probe::{Hz, Method, Seconds, Volts};
 
 #[test]
@@ -22,7 +22,7 @@ fn conductance_is_unbiased_where_impedance_minimum_is_not() {
         y.im / y.re
     );
     // Only resonances are compared: no unit profile is needed.
-    let cal = pzt_probe::profile::UnitProfile::fallback();
+    let cal = pzt_probe::unit::profile::UnitProfile::fallback();
     // 2 V keeps the larger capacitive current inside the ADC range.
     let sweep = |m: Method| SweepSettings {
         drive: Volts(2.0),

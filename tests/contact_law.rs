@@ -4,8 +4,8 @@
 //! fitted on the same five, is off by up to 1.3 %.
 
 use hal_sim::{phantoms, Scene};
-use pzt_probe::calibration::{PowerLaw, RefPoint};
-use pzt_probe::contact_law::ContactLaw;
+use pzt_probe::unit::calibration::{PowerLaw, RefPoint};
+use pzt_probe::unit::contact_law::ContactLaw;
 use pzt_probe::Hz;
 
 fn reference(e_kpa: f64) -> RefPoint {

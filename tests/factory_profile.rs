@@ -6,8 +6,8 @@
 
 use hal_sim::NoiseScene;
 use pzt_probe::board::{sim, sim_factory};
-use pzt_probe::measure::DEFAULT_METHOD;
-use pzt_probe::store::encode;
+use pzt_probe::reading::DEFAULT_METHOD;
+use pzt_probe::unit::store::encode;
 
 #[test]
 fn the_factory_record_is_the_units_profile_today() {

@@ -2,8 +2,8 @@
 //! `cargo fuzz run command`) through the command parser and the UART line buffer, as the fuzz
 //! target does: no input may panic. The hand-written seeds must parse to commands.
 
-use pzt_probe::command::{parse, LineBuffer};
 use pzt_probe::hal::FrontEndScale;
+use pzt_probe::instrument::command::{parse, LineBuffer};
 
 fn feed(data: &[u8]) -> usize {
     let s = FrontEndScale::PROBE;

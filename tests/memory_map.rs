@@ -16,7 +16,7 @@ mod build_script;
 
 use build_script::{link_plan, LinkPlan, QEMU_MAP, STM32_MAP};
 use hal_sim::flash::SimFlash;
-use pzt_probe::store::Store;
+use pzt_probe::unit::store::Store;
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
 

@@ -7,10 +7,10 @@
 //! `df/dE = b c E^(c−1)`, evaluated here with `f64::powf`; the Q model `Q = q0 + q1 ln E` through
 //! two hand-picked points; the stable names the calibration file and the log print.
 
-use pzt_probe::calibration::{QModel, RefPoint, Source};
 use pzt_probe::estimate::Estimate;
-use pzt_probe::measure::Resonance;
-use pzt_probe::pipeline::conclude;
+use pzt_probe::estimate::Resonance;
+use pzt_probe::reading::pipeline::conclude;
+use pzt_probe::unit::calibration::{QModel, RefPoint, Source};
 use pzt_probe::UnitProfile;
 use pzt_probe::{AirReference, Failure, Farads, Hz, Method, PowerLaw, Seconds, Siemens, Status};
 
@@ -302,7 +302,7 @@ fn looks_free_thresholds() {
     assert!(!a.looks_free(Hz(231.0), 20.0)); // damped: contact
     assert!(!a.looks_free(Hz(250.0), 35.0)); // rings, but 20 Hz above: rigid contact
     assert!(!a.looks_free(Hz(235.0), 35.0)); // exactly 5 Hz: not within
-    let q_edge = pzt_probe::profile::NO_CONTACT_Q_FRACTION * a.free_q;
+    let q_edge = pzt_probe::unit::profile::NO_CONTACT_Q_FRACTION * a.free_q;
     assert!(!a.looks_free(Hz(230.0), q_edge)); // exactly at the Q fraction: not above
 }
 
@@ -345,7 +345,7 @@ fn reference_of_a_reading_needs_finite_values_and_positive_q() {
         )
     };
     let e = pzt_probe::KPa(1000.0);
-    let r = pzt_probe::profile::Reference::of(e, &reading(251.1, 0.1, 20.0)).expect("a reference");
+    let r = reading(251.1, 0.1, 20.0).reference(e).expect("a reference");
     assert_eq!((r.modulus_kpa, r.q), (1000.0, 20.0));
     for (f, s, q) in [
         (f32::NAN, 0.1, 20.0),
@@ -355,10 +355,6 @@ fn reference_of_a_reading_needs_finite_values_and_positive_q() {
         (251.1, 0.1, 0.0),
         (251.1, 0.1, -20.0),
     ] {
-        assert_eq!(
-            pzt_probe::profile::Reference::of(e, &reading(f, s, q)),
-            None,
-            "f {f} s {s} q {q}"
-        );
+        assert_eq!(reading(f, s, q).reference(e), None, "f {f} s {s} q {q}");
     }
 }

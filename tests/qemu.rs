@@ -208,7 +208,7 @@ fn qemu_image_measures_phantom_b() {
     assert!(num(&counters, "batches") > 0.0);
     assert_eq!(counters["unit"], "instructions");
     let isr_max = num(&counters, "isr_max");
-    let budget = 0.02 * 170e6 / 10_000.0 * pzt_probe::reading::BATCH as f64;
+    let budget = 0.02 * 170e6 / 10_000.0 * pzt_probe::engine::BATCH as f64;
     assert!(
         isr_max > 0.0 && isr_max < budget,
         "isr_max {isr_max} of {budget}"
@@ -342,7 +342,7 @@ fn qemu_session_air_calibrate_store_reload_measure() {
     }
     let help = all("help");
     assert_eq!(help.len(), 1);
-    assert_eq!(help[0]["methods"], pzt_probe::measure::METHOD_NAMES);
+    assert_eq!(help[0]["methods"], pzt_probe::reading::METHOD_NAMES);
     assert_eq!(help[0]["default"], "auto");
     assert_eq!(all("exit").len(), 1);
 }

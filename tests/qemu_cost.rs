@@ -25,7 +25,7 @@ const CORE_HZ: f64 = 170e6;
 /// ... at the firmware's sample rate (`SAMPLE_RATE_HZ` of `src/board/stm32g474.rs`; the
 /// simulated front end of the QEMU image runs at the same rate).
 const FIRMWARE_FS_HZ: f64 = 10_000.0;
-/// Samples per batch (`pzt_probe::runner::BATCH`).
+/// Samples per batch (`pzt_probe::engine::BATCH`).
 const BATCH: f64 = 25.0;
 /// The largest single measurement call must leave the measurement task free to feed the
 /// watchdog at its 100 ms interval (`FEED_MS` in `src/bin/probe.rs`; the STM32's independent
@@ -328,7 +328,7 @@ fn print_tables(cases: &[Case]) {
 
 /// `calibrate fit` on the M4 (`fit` lines): every case ended with a calibration, took at most
 /// half the watchdog promise the firmware makes for its reference count
-/// (`pzt_probe::watchdog::fit_bound`, recomputed here), and its milliseconds agree with its
+/// (`pzt_probe::instrument::watchdog::fit_bound`, recomputed here), and its milliseconds agree with its
 /// instruction count at 170 MHz. Prints the table of `docs/firmware.md`.
 fn check_fits(parsed: &[(String, HashMap<String, String>)]) {
     let fits: Vec<_> = parsed
@@ -355,7 +355,7 @@ fn check_fits(parsed: &[(String, HashMap<String, String>)]) {
     for f in fits {
         let refs = num(f, "refs") as usize;
         let ms = num(f, "ms");
-        let bound = pzt_probe::watchdog::fit_bound(refs).0 as f64;
+        let bound = pzt_probe::instrument::watchdog::fit_bound(refs).0 as f64;
         assert_eq!(f["ok"], "true", "{f:?}");
         assert_eq!(num(f, "bound_ms"), bound, "{f:?}");
         assert!(

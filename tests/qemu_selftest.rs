@@ -12,7 +12,7 @@
 #[allow(dead_code)] // run_image (the built-in script) is not used here
 mod qemu_support;
 
-use pzt_probe::selftest::{Channel, SelfTestFault};
+use pzt_probe::instrument::selftest::{Channel, SelfTestFault};
 use qemu_support::{build_image, fields, last, num, require_tools, run_script, Fields};
 use std::collections::HashMap;
 use std::time::{Duration, Instant};

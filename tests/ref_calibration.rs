@@ -6,7 +6,7 @@
 //! reference modulus at the f32 neighbours of the asymptote and of the span's ends.
 
 mod reference;
-use pzt_probe::calibration::Source;
+use pzt_probe::unit::calibration::Source;
 use pzt_probe::{Failure, Hz, PowerLaw};
 use reference::modulus_by_bisection;
 

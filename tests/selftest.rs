@@ -11,10 +11,10 @@
 use hal_sim::{phantoms, AdcChannel, Fault, NoiseScene, Scene, SimProbe, StuckAdc};
 use pzt_probe::board::sim::SimBoard;
 use pzt_probe::engine::SampleEngine;
-use pzt_probe::reading::{block_on, SyncSource};
-use pzt_probe::selftest::{
+use pzt_probe::instrument::selftest::{
     self, Channel, SelfTestFault, SelfTestReport, MOTIONAL_BOUND, NOMINAL_TOLERANCE, TEST_HZ,
 };
+use pzt_probe::reading::driver::{block_on, SyncSource};
 use pzt_probe::UnitProfile;
 use std::f64::consts::PI;
 

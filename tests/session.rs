@@ -10,12 +10,12 @@ use hal_sim::flash::SimFlash;
 use hal_sim::{phantoms, NoiseScene, Phantom, Scene, SimProbe};
 use pzt_probe::board::sim::SimBoard;
 use pzt_probe::boot::BootError;
-use pzt_probe::command::parse;
 use pzt_probe::engine::{PointPlan, PointRaw, SampleEngine};
 use pzt_probe::hal::{FrontEndScale, SampleStream};
-use pzt_probe::reading::{block_on, PointSource, SyncSource, Wanted};
-use pzt_probe::session::{Event, Io, Refusal, Session};
-use pzt_probe::store::{Saved, Store, StoreError};
+use pzt_probe::instrument::command::parse;
+use pzt_probe::instrument::session::{Event, Io, Refusal, Session};
+use pzt_probe::reading::driver::{block_on, PointSource, SyncSource, Wanted};
+use pzt_probe::unit::store::{Saved, Store, StoreError};
 use pzt_probe::{Failure, Method, Status, UnitProfile};
 
 type Flash = SimFlash<4096, 2048, 8>;
@@ -89,7 +89,7 @@ impl PointSource for SimIo {
     fn contact_force(&mut self, from: u64, to: u64) -> Option<pzt_probe::loadcell::RawForce> {
         pzt_probe::loadcell::ForceSource::contact_force(&self.board, from, to)
     }
-    async fn point(&mut self, tag: u16, point: &pzt_probe::sweep::SweepPoint) {
+    async fn point(&mut self, tag: u16, point: &pzt_probe::engine::sweep::SweepPoint) {
         self.events.push(Event::Point { tag, point: *point });
     }
 }
@@ -115,7 +115,7 @@ impl Io for SimIo {
     fn save(&mut self, p: &UnitProfile) -> Result<Saved, StoreError> {
         self.store.save(p)
     }
-    fn load_profile(&mut self) -> pzt_probe::store::Loaded {
+    fn load_profile(&mut self) -> pzt_probe::unit::store::Loaded {
         self.store.load()
     }
     fn boot_error(&self) -> Option<BootError> {
@@ -215,7 +215,7 @@ fn a_user_session_from_fresh_unit_to_stored_profile_and_back() {
     assert!(send(&mut s, &mut io, "reload"));
     assert_eq!(
         s.profile().calibration.source,
-        pzt_probe::calibration::Source::Fitted
+        pzt_probe::unit::calibration::Source::Fitted
     );
     // ... and a reboot is a new session on what the store loads.
     let mut s = boot(&mut io);
@@ -272,12 +272,12 @@ fn settings_that_do_not_suit_the_method_are_refused() {
 #[test]
 fn help_lists_every_method_and_the_default() {
     let names: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
-    assert_eq!(pzt_probe::measure::METHOD_NAMES, names.join(","));
+    assert_eq!(pzt_probe::reading::METHOD_NAMES, names.join(","));
     let mut io = SimIo::new(Flash::new());
     let mut s = boot(&mut io);
     assert!(send(&mut s, &mut io, "help"));
     assert_eq!(io.events.last(), Some(&Event::Help));
-    assert_eq!(s.method(), pzt_probe::measure::DEFAULT_METHOD);
+    assert_eq!(s.method(), pzt_probe::reading::DEFAULT_METHOD);
 }
 
 /// An air reference taken while the drive does not follow the command (a DAC stuck at mid
@@ -309,7 +309,7 @@ fn air_with_a_stuck_drive_is_refused_as_a_drive_fault() {
 #[test]
 fn a_failed_selftest_refuses_every_reading_until_one_passes() {
     use hal_sim::{Fault, StuckAdc};
-    use pzt_probe::selftest::{Channel, SelfTestFault};
+    use pzt_probe::instrument::selftest::{Channel, SelfTestFault};
     let factory = pzt_probe::board::sim_factory::profile().expect("factory record");
     for fault in Fault::ALL {
         let mut io = SimIo::new(Flash::new());
@@ -399,7 +399,7 @@ fn boot_selftest_passes_on_a_healthy_probe() {
 /// works; the air reference re-measures C0), and the self-test then passes against it.
 #[test]
 fn a_capacitance_fault_lets_the_air_reference_be_retaken() {
-    use pzt_probe::selftest::SelfTestFault;
+    use pzt_probe::instrument::selftest::SelfTestFault;
     let mut io = SimIo::new(Flash::new());
     let mut plate = Scene::free_air();
     plate.pzt.c0_f *= 1.3;
@@ -527,7 +527,12 @@ fn factory(io: &mut SimIo) -> Session {
     boot(io)
 }
 
-fn stream_events(io: &SimIo) -> (Vec<pzt_probe::stream::StreamReading>, Option<Event>) {
+fn stream_events(
+    io: &SimIo,
+) -> (
+    Vec<pzt_probe::instrument::continuous::StreamReading>,
+    Option<Event>,
+) {
     let readings = io
         .events
         .iter()

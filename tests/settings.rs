@@ -2,9 +2,9 @@
 
 use probe_rng::Rng;
 use pzt_probe::board::sim::scale_of;
-use pzt_probe::calibration::RefPoint;
+use pzt_probe::engine::sweep::{SettingsError, SweepPoint, SweepSettings};
 use pzt_probe::estimate::{conductance, paper};
-use pzt_probe::sweep::{SettingsError, SweepPoint, SweepSettings};
+use pzt_probe::unit::calibration::RefPoint;
 use pzt_probe::{Hz, Method, PowerLaw, Seconds, Volts};
 
 fn base() -> SweepSettings {
@@ -226,9 +226,9 @@ fn auto_falls_back_and_names_the_method_used() {
     use hal_sim::{NoiseScene, Scene};
     use pzt_probe::board::sim::read;
     use pzt_probe::estimate::staged::{Refine, StagedSettings};
-    use pzt_probe::measure::Settings;
+    use pzt_probe::reading::Settings;
     // Only the method used and the resonance are checked: no unit profile is needed.
-    let cal = pzt_probe::profile::UnitProfile::fallback();
+    let cal = pzt_probe::unit::profile::UnitProfile::fallback();
     let scene = Scene::on_modulus_kpa(1000.0).with_noise(NoiseScene::Bench);
     let f0 = scene.resonance_hz();
     // Default: its first stage, hold, finds it.

@@ -4,8 +4,8 @@ use hal_sim::plant::mechanics;
 use hal_sim::tissue::Kelvin;
 use hal_sim::{NoiseScene, Scene};
 use pzt_probe::board::sim::read;
-use pzt_probe::profile::UnitProfile;
-use pzt_probe::sweep::SweepSettings;
+use pzt_probe::engine::sweep::SweepSettings;
+use pzt_probe::unit::profile::UnitProfile;
 use pzt_probe::{Hz, Method, PowerLaw, Seconds, Volts};
 
 /// Free decay of the exactly discretised mechanics (`plant::mechanics` at 10 kHz, 12 time

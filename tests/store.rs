@@ -2,9 +2,9 @@
 //! point of a save leaves a valid record, corruption is detected, and the fallback is reported.
 
 use hal_sim::flash::SimFlash;
-use pzt_probe::calibration::QModel;
-use pzt_probe::calibration::Source;
-use pzt_probe::store::{
+use pzt_probe::unit::calibration::QModel;
+use pzt_probe::unit::calibration::Source;
+use pzt_probe::unit::store::{
     AirReference, LoadSource, SlotState, Store, StoreError, UnitProfile, RECORD_LEN,
 };
 use pzt_probe::{Farads, Hz, PowerLaw, Siemens};
@@ -20,9 +20,9 @@ fn record(n: u32) -> UnitProfile {
     UnitProfile {
         calibration: cal,
         resonance: if n.is_multiple_of(2) {
-            pzt_probe::measure::Resonance::Motional
+            pzt_probe::estimate::Resonance::Motional
         } else {
-            pzt_probe::measure::Resonance::ImpedanceDip
+            pzt_probe::estimate::Resonance::ImpedanceDip
         },
         q_model: Some(QModel {
             q0: 4.0 + n as f64,
@@ -154,7 +154,7 @@ fn bad_geometry_is_refused() {
 #[test]
 fn power_loss_at_every_program_byte_keeps_a_valid_record() {
     for previous in 1..=3u32 {
-        let full = pzt_probe::store::encode(&record(previous + 1), previous + 1);
+        let full = pzt_probe::unit::store::encode(&record(previous + 1), previous + 1);
         for cut in 0..=RECORD_LEN {
             let mut s = store_after(previous);
             s.flash_mut().cut_power_after_program(cut);

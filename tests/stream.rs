@@ -1,4 +1,4 @@
-//! The continuous tracker (`pzt_probe::stream`) on the simulated probe: the resonance against
+//! The continuous tracker (`pzt_probe::instrument::continuous`) on the simulated probe: the resonance against
 //! the simulator's closed form, readings numbered from 0 and stamped from the engine's sample
 //! count, and windows of any content after lock handled without a panic or a gap.
 
@@ -7,9 +7,9 @@ use pzt_probe::board::sim::{self as simboard, SimBoard};
 use pzt_probe::dsp::lockin::{ChannelSums, LockInSums, ReferenceSums};
 use pzt_probe::engine::{PointRaw, SampleEngine};
 use pzt_probe::hal::SampleStream;
-use pzt_probe::measure::Method;
-use pzt_probe::reading::{block_on, SyncSource};
-use pzt_probe::stream::{run, StreamReading, TrackerConfig, METHOD};
+use pzt_probe::instrument::continuous::{run, StreamReading, TrackerConfig, METHOD};
+use pzt_probe::reading::driver::{block_on, SyncSource};
+use pzt_probe::reading::Method;
 use pzt_probe::{Status, UnitProfile};
 
 /// The simulated unit as `probe-bench stream` reads with it: calibrated with hold's defaults
@@ -80,7 +80,7 @@ fn follows_the_closed_form_resonance() {
 }
 
 /// Seconds in a batch of the engine at the probe's 10 kHz.
-const BATCH_S: f64 = pzt_probe::reading::BATCH as f64 / 10_000.0;
+const BATCH_S: f64 = pzt_probe::engine::BATCH as f64 / 10_000.0;
 
 /// Readings are numbered from 0 without gaps and stamped with the probe time of their last
 /// window: consecutive segments lie a segment's windows apart (whole one-cycle windows within

@@ -5,7 +5,7 @@
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use hal_sim::{AdcPair, NoiseScene, Scene, SimProbe};
 use pzt_probe::board::sim::read;
-use pzt_probe::profile::UnitProfile;
+use pzt_probe::unit::profile::UnitProfile;
 use pzt_probe::Method;
 
 fn chain(c: &mut Criterion) {

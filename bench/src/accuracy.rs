@@ -12,8 +12,8 @@ use crate::pareto::{evaluate, Config};
 use anyhow::{anyhow, Result};
 use hal_sim::{NoiseScene, Scene};
 use pzt_probe::board::sim::read;
-use pzt_probe::measure::{Method, Reading};
-use pzt_probe::profile::{
+use pzt_probe::reading::{Method, Reading};
+use pzt_probe::unit::profile::{
     drift_allowance, UnitProfile, FREE_RESONANCE_ALLOWANCE, FREE_RESONANCE_DRIFT_HZ_S,
 };
 use pzt_probe::{Hz, Newtons};

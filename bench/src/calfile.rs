@@ -3,11 +3,11 @@
 //! `measure --profile unit.json`), and the names of the built-in curves.
 
 use anyhow::{bail, Context, Result};
-use pzt_probe::calibration::{PowerLaw, QModel, Source};
-use pzt_probe::contact_law::{self, ContactLaw};
+use pzt_probe::estimate::Resonance;
 use pzt_probe::loadcell::{ForceWindow, LoadCellCal, LoadCellCounts};
-use pzt_probe::measure::Resonance;
-use pzt_probe::profile::{AirReference, UnitProfile};
+use pzt_probe::unit::calibration::{PowerLaw, QModel, Source};
+use pzt_probe::unit::contact_law::{self, ContactLaw};
+use pzt_probe::unit::profile::{AirReference, UnitProfile};
 
 fn motional() -> String {
     Resonance::Motional.name().to_owned()

@@ -46,8 +46,8 @@
 //! `σ_Y² = (σ_I² + |Y|² σ_V²) / |V|²`, the same propagation as the firmware's integer lock-in.
 #![allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > y)` also rejects NaN, deliberately
 
+use pzt_probe::engine::sweep::SweepPoint;
 use pzt_probe::linalg::{damped_solve, Lsq3};
-use pzt_probe::sweep::SweepPoint;
 use pzt_probe::Hz;
 use std::f64::consts::PI;
 use std::fmt;

@@ -11,7 +11,7 @@ use anyhow::{anyhow, Result};
 use hal_sim::{NoiseScene, Scene, SimProbe};
 use probe_rng::Rng;
 use pzt_probe::board::sim as simboard;
-use pzt_probe::sweep::SweepSettings;
+use pzt_probe::engine::sweep::SweepSettings;
 use pzt_probe::Method;
 use std::f64::consts::PI;
 use std::path::Path;
@@ -29,7 +29,7 @@ pub fn sim_sweep(
         seed,
         method,
         settings,
-        &pzt_probe::profile::UnitProfile::fallback(),
+        &pzt_probe::unit::profile::UnitProfile::fallback(),
         |p| pts.push((p.freq.0 as f64, p.g_s as f64, p.b_s as f64)),
     )
     .map_err(|e| anyhow!("simulated reading failed: {e:?}"))?;

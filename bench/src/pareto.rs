@@ -3,13 +3,13 @@
 
 use hal_sim::{NoiseScene, Scene};
 use pzt_probe::board::sim::read;
-use pzt_probe::calibration::PowerLaw;
+use pzt_probe::engine::sweep::SweepSettings;
 use pzt_probe::estimate::hold::HoldSettings;
 use pzt_probe::estimate::ringdown::RingdownSettings;
 use pzt_probe::estimate::staged::{Refine, StagedSettings};
-use pzt_probe::measure::{Method, Settings};
-use pzt_probe::profile::UnitProfile;
-use pzt_probe::sweep::SweepSettings;
+use pzt_probe::reading::{Method, Settings};
+use pzt_probe::unit::calibration::PowerLaw;
+use pzt_probe::unit::profile::UnitProfile;
 use pzt_probe::{Hz, Seconds};
 use std::f64::consts::PI;
 
@@ -321,7 +321,7 @@ pub const STREAM_SECONDS: f64 = 3.0;
 
 pub use crate::stream::SETTLE_S as STREAM_SETTLE_S;
 
-/// The continuous tracker (`pzt_probe::stream`) at one segment length on one scene, streamed as
+/// The continuous tracker (`pzt_probe::instrument::continuous`) at one segment length on one scene, streamed as
 /// `probe-bench stream` streams ([`crate::stream::run`]).
 #[derive(Clone, Debug, Default)]
 pub struct StreamCell {
@@ -356,7 +356,7 @@ impl StreamCell {
 /// default settings on A–E × 20 (noise seeds from 1000) — at bench noise the unit
 /// `probe-bench stream` reads with (`crate::unit::default_for`).
 pub fn stream_unit(noise: NoiseScene) -> Option<UnitProfile> {
-    let m = pzt_probe::stream::METHOD;
+    let m = pzt_probe::instrument::continuous::METHOD;
     crate::unit::simulated(m, &m.default_settings(), noise, 20, 1000).ok()
 }
 
@@ -375,13 +375,14 @@ pub fn evaluate_stream(
     seed0: u64,
 ) -> Option<StreamCell> {
     use crate::stream::{run, summarize, StreamScene};
-    use pzt_probe::stream::TrackerConfig;
+    use pzt_probe::instrument::continuous::TrackerConfig;
     let e = target.modulus_kpa()?;
     let config = TrackerConfig {
         segment: Seconds(segment_s as f32),
         ..TrackerConfig::DEFAULT
     };
-    let after = |r: &&pzt_probe::stream::StreamReading| r.t_s.0 as f64 > STREAM_SETTLE_S;
+    let after =
+        |r: &&pzt_probe::instrument::continuous::StreamReading| r.t_s.0 as f64 > STREAM_SETTLE_S;
     let quiet = run(
         &StreamScene::on(target, NoiseScene::Quiet),
         &config,
@@ -697,9 +698,9 @@ pub fn crb_pct(cal: &PowerLaw, e: f64, noise: NoiseScene, drive_v: f64, t_s: f64
 /// The steady-state bound of [`steady_crb_hz`] for `t_s` seconds on `scene` (true modulus `e`,
 /// kPa) as a relative modulus error (%) through `cal`'s slope, with the load cell's limit for
 /// the force a stream reading inverts at (averaged over at least
-/// `pzt_probe::stream::FORCE_WINDOW_S`) added in quadrature.
+/// `pzt_probe::instrument::continuous::FORCE_WINDOW_S`) added in quadrature.
 pub fn steady_crb_pct(cal: &PowerLaw, scene: &Scene, e: f64, drive_v: f64, t_s: f64) -> f64 {
-    let force_s = t_s.max(pzt_probe::stream::FORCE_WINDOW_S);
+    let force_s = t_s.max(pzt_probe::instrument::continuous::FORCE_WINDOW_S);
     bound_pct(cal, scene, e, steady_crb_hz(scene, drive_v, t_s), force_s)
 }
 
@@ -774,7 +775,7 @@ mod tests {
         let tau = 1e-3 * tau_ms(500.0);
         for x in [2.5, 10.0] {
             let closed = steady_crb_hz(&scene, 5.0, x * tau);
-            let q_prior = pzt_probe::stream::TrackerConfig::DEFAULT.q_prior as f64;
+            let q_prior = pzt_probe::instrument::continuous::TrackerConfig::DEFAULT.q_prior as f64;
             let numeric = fisher_crb_hz_after(&scene, 5.0, 15.0 * tau, x * tau, 0.0, q_prior);
             let from_rest = crb_hz(&scene, 5.0, x * tau);
             println!(

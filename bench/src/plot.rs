@@ -2,7 +2,7 @@
 
 use anyhow::{anyhow, Result};
 use plotters::prelude::*;
-use pzt_probe::sweep::SweepPoint;
+use pzt_probe::engine::sweep::SweepPoint;
 use std::path::Path;
 use std::sync::Once;
 

@@ -12,8 +12,8 @@ use crate::report;
 use crate::scene::Target;
 use anyhow::{bail, Context, Result};
 use hal_sim::NoiseScene;
-use pzt_probe::command::SettingsLine;
-use pzt_probe::measure::{Method, Settings};
+use pzt_probe::instrument::command::SettingsLine;
+use pzt_probe::reading::{Method, Settings};
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -78,8 +78,8 @@ pub fn stream(
     a: &crate::cmd::stream::StreamArgs,
     target: &Target,
     noise: NoiseScene,
-) -> Result<Vec<pzt_probe::stream::StreamReading>> {
-    use pzt_probe::stream::{StreamReading, TrackerConfig};
+) -> Result<Vec<pzt_probe::instrument::continuous::StreamReading>> {
+    use pzt_probe::instrument::continuous::{StreamReading, TrackerConfig};
     let d = TrackerConfig::DEFAULT;
     if a.segment_s != d.segment.0 as f64
         || a.dither != d.dither as f64
@@ -93,7 +93,8 @@ pub fn stream(
     if a.lift_off_ramp_s != 0.0 {
         bail!("with --qemu the lift-off is a step (no --lift-off-ramp-s)");
     }
-    if !(pzt_probe::command::STREAM_SECONDS.0 as f64..=pzt_probe::command::STREAM_SECONDS.1 as f64)
+    if !(pzt_probe::instrument::command::STREAM_SECONDS.0 as f64
+        ..=pzt_probe::instrument::command::STREAM_SECONDS.1 as f64)
         .contains(&a.seconds)
     {
         bail!("with --qemu --seconds must be in [0.1, 600]");

@@ -1,6 +1,6 @@
 //! Readings as JSON and as a bench log line.
 
-use pzt_probe::measure::Reading;
+use pzt_probe::reading::Reading;
 use serde_json::{json, Value};
 
 fn opt(v: Option<f32>) -> Value {

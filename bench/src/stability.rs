@@ -8,9 +8,9 @@ use crate::stream::{settled_after, summarize, StreamScene, Streamed};
 use hal_sim::catalogue::Case;
 use hal_sim::{phantoms, ForceChange, LiftOff, NoiseScene};
 use pzt_probe::board::sim::read;
-use pzt_probe::measure::{Method, Reading, Settings};
-use pzt_probe::profile::UnitProfile;
-use pzt_probe::stream::{StreamReading, TrackerConfig};
+use pzt_probe::instrument::continuous::{StreamReading, TrackerConfig};
+use pzt_probe::reading::{Method, Reading, Settings};
+use pzt_probe::unit::profile::UnitProfile;
 use pzt_probe::Status;
 
 /// How one reading turned out.

@@ -1,6 +1,6 @@
 //! Continuous reading on the simulated probe: a scene with its events in probe time (a step in
 //! stiffness, a lift-off, a new contact, a change of press, knocks), its truth, the core's
-//! tracker (`pzt_probe::stream`) driven over it, and the stream's figures against the truth.
+//! tracker (`pzt_probe::instrument::continuous`) driven over it, and the stream's figures against the truth.
 //! `probe-bench stream`, the speed–accuracy study's tracker curve (`crate::pareto`) and the
 //! continuous-mode scenes of the stability map (`crate::stability`) all stream through [`run`].
 
@@ -10,8 +10,8 @@ use hal_sim::catalogue::KNOCKS;
 use hal_sim::phantoms::Phantom;
 use hal_sim::{ForceChange, Knocks, LiftOff, NoiseScene, Scene, Step};
 use pzt_probe::board::sim as simboard;
-use pzt_probe::profile::UnitProfile;
-use pzt_probe::stream::{StreamReading, TrackerConfig};
+use pzt_probe::instrument::continuous::{StreamReading, TrackerConfig};
+use pzt_probe::unit::profile::UnitProfile;
 use pzt_probe::Status;
 
 /// A continuous scene: what the probe is on, how hard, in which noise, and what happens on the

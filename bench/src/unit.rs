@@ -7,8 +7,8 @@
 use anyhow::{anyhow, Result};
 use hal_sim::NoiseScene;
 use pzt_probe::board::sim as simboard;
-use pzt_probe::measure::{Method, Settings};
-use pzt_probe::profile::UnitProfile;
+use pzt_probe::reading::{Method, Settings};
+use pzt_probe::unit::profile::UnitProfile;
 use std::collections::HashMap;
 use std::sync::{Mutex, OnceLock};
 

@@ -62,8 +62,8 @@ fn the_budget_terms_add_up_to_the_reported_sigma() {
             .find(|d| d.e_kpa == x.e_kpa)
             .expect("its drift row");
         let per_hz = d.pct_per_hz.iter().map(|v| v.abs()).sum::<f64>() / d.pct_per_hz.len() as f64;
-        let lo = pzt_probe::profile::drift_allowance(pzt_probe::Seconds(0.33)).0 as f64;
-        let hi = pzt_probe::profile::drift_allowance(pzt_probe::Seconds(0.40)).0 as f64;
+        let lo = pzt_probe::unit::profile::drift_allowance(pzt_probe::Seconds(0.33)).0 as f64;
+        let hi = pzt_probe::unit::profile::drift_allowance(pzt_probe::Seconds(0.40)).0 as f64;
         let hz = t.drift / per_hz;
         assert!(
             hz > 0.85 * lo && hz < 1.15 * hi,
@@ -115,8 +115,8 @@ fn measured_terms_agree_with_their_predictions() {
 #[test]
 fn a_steady_drift_moves_the_reading_by_its_epoch() {
     use hal_sim::{NoiseScene, Scene};
-    use pzt_probe::measure::Method;
-    use pzt_probe::profile::{DRIFT_EPOCH, FREE_RESONANCE_DRIFT_HZ_S};
+    use pzt_probe::reading::Method;
+    use pzt_probe::unit::profile::{DRIFT_EPOCH, FREE_RESONANCE_DRIFT_HZ_S};
     let unit = probe_bench::unit::default_for(Method::Auto).expect("the unit");
     let read = |s: &Scene| {
         let settings = Method::Auto.default_settings();

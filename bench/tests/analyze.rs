@@ -8,7 +8,7 @@ use hal_sim::{phantoms, Scene};
 use probe_bench::capture::{self, CaptureError, DemodOptions, Layout, SweepShape};
 use probe_bench::cmd::analyze::{analysis_json, analyze, offline_method, Analysis};
 use probe_bench::gen;
-use pzt_probe::profile::NOMINAL_FORCE;
+use pzt_probe::unit::profile::NOMINAL_FORCE;
 use pzt_probe::{Failure, Method, Status};
 use std::path::PathBuf;
 
@@ -26,7 +26,7 @@ fn read(name: &str) -> String {
 /// `probe-bench analyze` reads a capture by default.
 /// The papers' curve maps the motional resonance; paper's |Z| dip is read with the simulated
 /// unit's own paper calibration (a curve maps only the resonance it was calibrated on).
-fn unit(method: Method) -> pzt_probe::profile::UnitProfile {
+fn unit(method: Method) -> pzt_probe::unit::profile::UnitProfile {
     let curve = if method == Method::Paper {
         "unit"
     } else {

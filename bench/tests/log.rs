@@ -6,7 +6,7 @@ mod common;
 use common::{bin, run_fails_one_line, run_ok};
 
 use probe_bench::defmt_log::{self, compile, parse_line, render, Piece, Ty, Value, TEMPLATES};
-use pzt_probe::sweep::SweepPoint;
+use pzt_probe::engine::sweep::SweepPoint;
 use pzt_probe::{Hz, Method};
 use std::collections::BTreeSet;
 use std::path::PathBuf;

@@ -162,8 +162,9 @@ fn cli_writes_the_map() {
 #[test]
 fn a_sliding_scan_finds_the_coin() {
     use probe_bench::cmd::slide::{slide, Slide};
-    let unit = probe_bench::unit::default_for(pzt_probe::stream::METHOD).expect("unit");
-    let config = pzt_probe::stream::TrackerConfig::DEFAULT;
+    let unit =
+        probe_bench::unit::default_for(pzt_probe::instrument::continuous::METHOD).expect("unit");
+    let config = pzt_probe::instrument::continuous::TrackerConfig::DEFAULT;
     for (k, (v, coin_x)) in [(1.0, 1.5), (5.0, 1.5), (20.0, 1.5), (5.0, -3.0)]
         .into_iter()
         .enumerate()

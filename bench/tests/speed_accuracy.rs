@@ -5,9 +5,9 @@
 
 use hal_sim::NoiseScene;
 use probe_bench::pareto::{calibrate, crb_pct, evaluate, tau_ms, Config};
+use pzt_probe::engine::sweep::SweepSettings;
 use pzt_probe::estimate::hold::HoldSettings;
-use pzt_probe::measure::{Method, Settings};
-use pzt_probe::sweep::SweepSettings;
+use pzt_probe::reading::{Method, Settings};
 use pzt_probe::Seconds;
 
 fn config(method: Method, settings: Settings) -> Config {

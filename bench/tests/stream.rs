@@ -13,7 +13,7 @@ use common::{bin, run_fails_one_line, run_ok};
 use hal_sim::NoiseScene;
 use probe_bench::stability::{calibrated, stream_catalogue, Must, Outcome, StreamCase, FIRST_SEED};
 use probe_bench::unit::default_for;
-use pzt_probe::stream::METHOD;
+use pzt_probe::instrument::continuous::METHOD;
 use serde_json::Value;
 
 fn stream(args: &[&str]) -> Vec<Value> {
@@ -276,7 +276,7 @@ fn the_trackers_speed_accuracy_point_on_phantom_c() {
     use hal_sim::{phantoms, NoiseScene};
     use probe_bench::pareto::{evaluate_stream, stream_unit};
     use probe_bench::scene::Target;
-    use pzt_probe::stream::TrackerConfig;
+    use pzt_probe::instrument::continuous::TrackerConfig;
     let unit = stream_unit(NoiseScene::Bench).unwrap();
     let c = Target::Phantom(phantoms::by_name("C").unwrap());
     let seg = TrackerConfig::DEFAULT.segment.0 as f64;

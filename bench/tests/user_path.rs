@@ -5,7 +5,7 @@
 mod common;
 
 use common::{bin, run_json, run_ok};
-use pzt_probe::measure::DEFAULT_METHOD;
+use pzt_probe::reading::DEFAULT_METHOD;
 use pzt_probe::Method;
 
 fn measure(args: &[&str]) -> serde_json::Value {

@@ -3,7 +3,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use pzt_probe::command::{parse, LineBuffer};
+use pzt_probe::instrument::command::{parse, LineBuffer};
 use pzt_probe::hal::FrontEndScale;
 use pzt_probe::Hz;
 

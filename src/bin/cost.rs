@@ -88,13 +88,14 @@ mod harness {
     use core::cell::RefCell;
     use core::sync::atomic::{compiler_fence, Ordering};
     use hal_sim::{NoiseScene, Scene, SimProbe};
+    use pzt_probe::engine::sweep::SweepPoint;
+    use pzt_probe::engine::BATCH;
     use pzt_probe::engine::{PointPlan, PointRaw, SampleEngine};
     use pzt_probe::hal::FrontEndScale;
     use pzt_probe::loadcell::{ForceLog, RawForce};
-    use pzt_probe::measure::{Measurement, Procedure};
-    use pzt_probe::profile::UnitProfile;
-    use pzt_probe::reading::{block_on, drive, PointSource, Wanted, BATCH};
-    use pzt_probe::sweep::SweepPoint;
+    use pzt_probe::reading::driver::{block_on, drive, PointSource, Wanted};
+    use pzt_probe::reading::{Measurement, Procedure};
+    use pzt_probe::unit::profile::UnitProfile;
     use pzt_probe::{Failure, Method, Reading, Seconds, Status};
 
     /// Core clock the budget is stated for: the STM32G474 at 170 MHz.
@@ -242,7 +243,7 @@ mod harness {
         }
         /// As the firmware's interrupt: a plan applies from the next batch.
         fn latency_batches(&self) -> usize {
-            pzt_probe::reading::PIPELINE_BATCHES
+            pzt_probe::engine::PIPELINE_BATCHES
         }
         fn now_sample(&self) -> u64 {
             self.engine.samples()
@@ -444,7 +445,7 @@ mod harness {
     }
 
     /// The `calibrate fit` cases: the QEMU session test's five moduli (twice each, as it adds
-    /// them), the session's most references ([`pzt_probe::session::MAX_REFERENCES`]) on as
+    /// them), the session's most references ([`pzt_probe::instrument::session::MAX_REFERENCES`]) on as
     /// many distinct moduli — every one held out in turn —, on the curve and scattered, and a
     /// unit's factory calibration: A–E × 20 (100 references, `probe-bench calibrate --repeats
     /// 20`) at the calibration's forces, set and measured.
@@ -463,13 +464,13 @@ mod harness {
         },
         FitCase {
             name: "max-on-curve",
-            refs: pzt_probe::session::MAX_REFERENCES,
+            refs: pzt_probe::instrument::session::MAX_REFERENCES,
             scattered: false,
             measured_forces: false,
         },
         FitCase {
             name: "max-scattered",
-            refs: pzt_probe::session::MAX_REFERENCES,
+            refs: pzt_probe::instrument::session::MAX_REFERENCES,
             scattered: true,
             measured_forces: false,
         },
@@ -487,12 +488,12 @@ mod harness {
         },
     ];
 
-    /// Measure one `calibrate fit` ([`pzt_probe::profile::calibrate`] with the unit's air
+    /// Measure one `calibrate fit` ([`pzt_probe::unit::profile::calibrate`] with the unit's air
     /// reference, as the session calls it) and log its line; true when it took at most half
-    /// the watchdog promise made for it ([`pzt_probe::watchdog::fit_bound`]).
+    /// the watchdog promise made for it ([`pzt_probe::instrument::watchdog::fit_bound`]).
     pub fn fit_cost(case: &FitCase, unit: &UnitProfile) -> bool {
-        use pzt_probe::profile::{calibrate, Reference};
-        let mut refs: heapless::Vec<Reference, { pzt_probe::profile::MAX_REFERENCES }> =
+        use pzt_probe::unit::profile::{calibrate, Reference};
+        let mut refs: heapless::Vec<Reference, { pzt_probe::unit::calibration::MAX_REFERENCES }> =
             heapless::Vec::new();
         let q_model = unit.q_model;
         for i in 0..case.refs {
@@ -543,7 +544,7 @@ mod harness {
         let n = board::elapsed_long(t0);
         compiler_fence(Ordering::SeqCst);
         let ms = n as f32 / (CORE_HZ as f32 / 1e3);
-        let bound = pzt_probe::watchdog::fit_bound(case.refs).0 as f32;
+        let bound = pzt_probe::instrument::watchdog::fit_bound(case.refs).0 as f32;
         defmt::info!(
             "fit case={=str} refs={=u16} ok={=bool} contact={=bool} instructions={=u64} ms={=f32} bound_ms={=f32}",
             case.name,

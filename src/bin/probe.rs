@@ -11,17 +11,17 @@
 //! |---|---|---|
 //! | `sample` (hardware) | 3 | per batch: demodulate the ADC half, refill the DAC half ([`pzt_probe::engine::SampleEngine`]) |
 //! | `uart_rx` (hardware) | 2 | host bytes from LPUART1's DMA ring (ST-LINK virtual COM port) into a channel |
-//! | `measure` | 1 | the session ([`pzt_probe::session`]): profile, settings, the flash store; readings through [`pzt_probe::reading`] |
-//! | `command` | 1 | bytes → lines → [`pzt_probe::command::parse`] → requests to `measure` (QEMU: the boot command line's script or the built-in one, [`pzt_probe::board::sim_script`]) |
-//! | `report` | 1 | the only place that logs: one defmt line per event (`pzt_probe::log`) |
+//! | `measure` | 1 | the session ([`pzt_probe::instrument::session`]): profile, settings, the flash store; readings through [`pzt_probe::reading::driver`] |
+//! | `command` | 1 | bytes → lines → [`pzt_probe::instrument::command::parse`] → requests to `measure` (QEMU: the boot command line's script or the built-in one, [`pzt_probe::board::sim_script`]) |
+//! | `report` | 1 | the only place that logs: one defmt line per event (`pzt_probe::instrument::log`) |
 //! | `load_cell` | 1 | every 5 ms: the HX711's conversion, if one is ready (80 a second), into the shared force log, stamped with the sample count |
-//! | `guard` | 2 | feeds the independent watchdog every 100 ms while `measure` keeps its liveness promise ([`pzt_probe::watchdog`]) |
+//! | `guard` | 2 | feeds the independent watchdog every 100 ms while `measure` keeps its liveness promise ([`pzt_probe::instrument::watchdog`]) |
 //!
 //! Data flow: `command` → requests → `measure` → plans (capacity 2: the double buffer of the
 //! interrupt's settings, validated before they reach it) → `sample` → points → `measure` →
 //! reports → `report`; the path of one reading is in `docs/architecture.md`, the log lines in
-//! `pzt_probe::log`. A stream's readings (`stream <seconds>`) go to the report channel with
-//! `try_send` ([`Io::try_emit`](pzt_probe::session::Io::try_emit)): a full channel drops the
+//! `pzt_probe::instrument::log`. A stream's readings (`stream <seconds>`) go to the report channel with
+//! `try_send` ([`Io::try_emit`](pzt_probe::instrument::session::Io::try_emit)): a full channel drops the
 //! reading (a gap in its `seq`, counted in the `stream end` line) rather than hold up the
 //! measurement task's next plan; the sample interrupt never waits on anything.
 #![cfg_attr(target_os = "none", no_std, no_main)]
@@ -90,9 +90,9 @@ mod shared {
     /// What the measurement task asks of the interrupt: a plan to load, or `None` to stop.
     pub type EngineCmd = Option<PointPlan>;
 
-    pub use pzt_probe::log::Report;
+    pub use pzt_probe::instrument::log::Report;
 
-    use pzt_probe::watchdog::{Liveness, Millis};
+    use pzt_probe::instrument::watchdog::{Liveness, Millis};
 
     /// The measurement task's liveness promise, kept by `measure`, read by `guard`. The first
     /// promise covers the boot up to the measurement task's first sign of life (the monotonic
@@ -106,15 +106,16 @@ mod app {
     use crate::board;
     use crate::shared::*;
     use core::sync::atomic::Ordering;
-    use pzt_probe::command::Command;
     use pzt_probe::counters::*;
+    use pzt_probe::engine::BATCH;
     use pzt_probe::engine::{PointPlan, PointRaw, SampleEngine};
     use pzt_probe::hal::FrontEndScale;
+    use pzt_probe::instrument::command::Command;
+    use pzt_probe::instrument::session::{Event, Io, Session};
+    use pzt_probe::instrument::watchdog::{fit_bound, Millis};
     use pzt_probe::loadcell::ForceLog;
-    use pzt_probe::reading::{PointSource, Wanted, BATCH};
-    use pzt_probe::session::{Event, Io, Session};
-    use pzt_probe::store::{Loaded, Saved, Store, StoreError};
-    use pzt_probe::watchdog::{fit_bound, Millis};
+    use pzt_probe::reading::driver::{PointSource, Wanted};
+    use pzt_probe::unit::store::{Loaded, Saved, Store, StoreError};
     use pzt_probe::UnitProfile;
     use rtic_monotonics::systick::prelude::*;
     use rtic_sync::channel::{Receiver, Sender};
@@ -355,7 +356,7 @@ mod app {
         }
         /// The interrupt's double buffer: a plan applies from the batch after the one playing.
         fn latency_batches(&self) -> usize {
-            pzt_probe::reading::PIPELINE_BATCHES
+            pzt_probe::engine::PIPELINE_BATCHES
         }
         fn now_sample(&self) -> u64 {
             now_sample()
@@ -395,7 +396,7 @@ mod app {
             let fs = self.scale.sample_rate.0;
             self.forces.lock(|f| f.over(from, to, fs))
         }
-        async fn point(&mut self, tag: u16, point: &pzt_probe::sweep::SweepPoint) {
+        async fn point(&mut self, tag: u16, point: &pzt_probe::engine::sweep::SweepPoint) {
             let e = Event::Point { tag, point: *point };
             let _ = self.reports.send(Report::Event(e)).await;
         }
@@ -441,7 +442,7 @@ mod app {
     }
 
     /// The watchdog's guard: every [`FEED_MS`] it feeds the independent watchdog, as long as
-    /// the measurement task keeps its liveness promise ([`pzt_probe::watchdog`]). Above the
+    /// the measurement task keeps its liveness promise ([`pzt_probe::instrument::watchdog`]). Above the
     /// measurement task's priority, so it runs through a long `calibrate fit`; a measurement
     /// task that hangs breaks its promise, the feeding stops and the watchdog resets the core.
     #[task(priority = 2, local = [watchdog])]
@@ -544,11 +545,11 @@ mod app {
                     }
                     Step::Command(_) => ok = false,
                     Step::BadSim(e) => {
-                        let _ = reports.send(Report::SimRejected(e)).await;
+                        let _ = reports.send(Report::Rejected(e.message())).await;
                         ok = false;
                     }
                     Step::BadCommand(e) => {
-                        let _ = reports.send(Report::Rejected(e)).await;
+                        let _ = reports.send(Report::Rejected(e.message())).await;
                         ok = false;
                     }
                 }
@@ -558,7 +559,7 @@ mod app {
             drop(rx);
         }
         #[cfg(not(feature = "qemu"))]
-        let (mut rx, mut lines) = (rx, pzt_probe::command::LineBuffer::new());
+        let (mut rx, mut lines) = (rx, pzt_probe::instrument::command::LineBuffer::new());
         #[cfg(not(feature = "qemu"))]
         while let Ok(b) = rx.recv().await {
             // A stale completion from an earlier request is of no interest here.
@@ -566,13 +567,13 @@ mod app {
             // A parse error is reported and the line dropped.
             match lines
                 .push(b)
-                .map(|l| l.and_then(|l| pzt_probe::command::parse(l, &scale)))
+                .map(|l| l.and_then(|l| pzt_probe::instrument::command::parse(l, &scale)))
             {
                 Some(Ok(c)) => {
                     let _ = requests.send(c).await;
                 }
                 Some(Err(e)) => {
-                    let _ = reports.send(Report::Rejected(e)).await;
+                    let _ = reports.send(Report::Rejected(e.message())).await;
                 }
                 None => {}
             }
@@ -585,7 +586,8 @@ mod app {
         let mut seen = Overruns::default();
         while let Ok(r) = rx.recv().await {
             #[allow(unused_variables)] // the exit status ends only the QEMU image
-            if let Some(ok) = pzt_probe::log::report(r, board::ELAPSED_UNIT, &mut seen) {
+            if let Some(ok) = pzt_probe::instrument::log::report(r, board::ELAPSED_UNIT, &mut seen)
+            {
                 #[cfg(feature = "qemu")]
                 board::exit(ok);
             }

@@ -22,9 +22,9 @@
 //! -semihosting-config enable=on,target=native` (see `scripts/qemu-run`).
 
 use crate::engine::SampleEngine;
+use crate::engine::BATCH;
 use crate::hal::{AdcFrame, FrontEndScale};
 use crate::loadcell::Hx711;
-use crate::runner::BATCH;
 use crate::units::{AdcCode, DacCode};
 use core::ptr::{addr_of, addr_of_mut, read_volatile, write_volatile};
 use hal_sim::flash::SimFlash;
@@ -292,7 +292,7 @@ pub const ELAPSED_UNIT: &str = "instructions";
 
 // Two DAC halves: the pipeline of `reading::PIPELINE_BATCHES` that the host's simulated board
 // models too.
-const _: () = assert!(crate::reading::PIPELINE_BATCHES == 2);
+const _: () = assert!(crate::engine::PIPELINE_BATCHES == 2);
 
 /// The simulated sample stream: a double-buffered DAC/ADC exchange with the simulated probe.
 pub struct Stream {

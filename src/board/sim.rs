@@ -1,8 +1,8 @@
 //! The simulated probe (`hal-sim`) behind the driver traits.
 
+use crate::engine::PIPELINE_BATCHES;
 use crate::hal::{AdcFrame, FrontEndScale, SampleStream, StreamError};
 use crate::loadcell::{ForceLog, ForceSource, Hx711, LoadCellError, RawForce};
-use crate::reading::PIPELINE_BATCHES;
 use crate::units::{AdcCode, DacCode, Hz};
 use core::cell::RefCell;
 use hal_sim::loadcell::{Delay, Dout, Hx711Sim, Sck};
@@ -122,14 +122,14 @@ impl SampleStream for SimBoard {
     }
 }
 
-use crate::calibration::FitError;
+use crate::engine::sweep::{SettingsError, SweepPoint};
 use crate::engine::SampleEngine;
 use crate::loadcell::LoadCellCal;
-use crate::measure::{Method, Procedure, Reading, Settings};
-use crate::profile::{air_from_points, calibrate, AirReference, Reference, UnitProfile};
-use crate::runner::{run_reading, RunError};
+use crate::reading::runner::{run_reading, RunError};
+use crate::reading::{Method, Procedure, Reading, Settings};
 use crate::status::Failure;
-use crate::sweep::{SettingsError, SweepPoint};
+use crate::unit::calibration::FitError;
+use crate::unit::profile::{air_from_points, calibrate, AirReference, Reference, UnitProfile};
 use crate::units::{KPa, Newtons};
 use hal_sim::{NoiseScene, Phantom, Scene};
 
@@ -170,10 +170,10 @@ pub fn read(
 pub fn stream(
     scene: &Scene,
     seed: u64,
-    config: &crate::stream::TrackerConfig,
+    config: &crate::instrument::continuous::TrackerConfig,
     unit: &UnitProfile,
     seconds: f64,
-    on_reading: impl FnMut(&crate::stream::StreamReading),
+    on_reading: impl FnMut(&crate::instrument::continuous::StreamReading),
 ) -> Result<u32, SimError> {
     stream_moving(scene, seed, config, unit, seconds, |_| None, on_reading)
 }
@@ -184,11 +184,11 @@ pub fn stream(
 pub fn stream_moving(
     scene: &Scene,
     seed: u64,
-    config: &crate::stream::TrackerConfig,
+    config: &crate::instrument::continuous::TrackerConfig,
     unit: &UnitProfile,
     seconds: f64,
     tissue_at: impl FnMut(f64) -> Option<Option<hal_sim::Tissue>>,
-    mut on_reading: impl FnMut(&crate::stream::StreamReading),
+    mut on_reading: impl FnMut(&crate::instrument::continuous::StreamReading),
 ) -> Result<u32, SimError> {
     let mut board = SimBoard::new(SimProbe::new(*scene, seed));
     let mut engine = SampleEngine::new();
@@ -196,24 +196,29 @@ pub fn stream_moving(
         .validate(&board.scale(), unit)
         .map_err(SimError::Settings)?;
     let mut src = Moving {
-        inner: crate::reading::SyncSource::new(&mut board, &mut engine),
+        inner: crate::reading::driver::SyncSource::new(&mut board, &mut engine),
         tissue_at,
     };
-    let n = crate::reading::block_on(crate::stream::run(&mut src, &mut tracker, unit, |r| {
-        on_reading(r);
-        (r.t_s.0 as f64) < seconds
-    }));
+    let n = crate::reading::driver::block_on(crate::instrument::continuous::run(
+        &mut src,
+        &mut tracker,
+        unit,
+        |r| {
+            on_reading(r);
+            (r.t_s.0 as f64) < seconds
+        },
+    ));
     Ok(n)
 }
 
-/// A [`SyncSource`](crate::reading::SyncSource) on a [`SimBoard`] whose tissue follows a path
+/// A [`SyncSource`](crate::reading::driver::SyncSource) on a [`SimBoard`] whose tissue follows a path
 /// in time ([`stream_moving`]).
 struct Moving<'a, F> {
-    inner: crate::reading::SyncSource<'a, SimBoard>,
+    inner: crate::reading::driver::SyncSource<'a, SimBoard>,
     tissue_at: F,
 }
 
-impl<F: FnMut(f64) -> Option<Option<hal_sim::Tissue>>> crate::reading::PointSource
+impl<F: FnMut(f64) -> Option<Option<hal_sim::Tissue>>> crate::reading::driver::PointSource
     for Moving<'_, F>
 {
     fn scale(&self) -> FrontEndScale {
@@ -230,7 +235,7 @@ impl<F: FnMut(f64) -> Option<Option<hal_sim::Tissue>>> crate::reading::PointSour
     }
     async fn next(
         &mut self,
-        wanted: &crate::reading::Wanted,
+        wanted: &crate::reading::driver::Wanted,
         budget: u64,
     ) -> Option<crate::engine::PointRaw> {
         let probe = &mut self.inner.stream.probe;
@@ -361,7 +366,7 @@ pub fn calibrate_unit_with(
             let seed = seed0 + (pi * MAX_REPEATS + r) as u64;
             let reading = read(&scene, seed, method, settings, &uncalibrated, |_| {})?;
             // The reference moduli (paper 003's A–E) are exact in f32.
-            if let Some(x) = Reference::of(KPa(p.modulus_kpa as f32), &reading) {
+            if let Some(x) = reading.reference(KPa(p.modulus_kpa as f32)) {
                 refs[n] = x;
                 n += 1;
             }
@@ -381,7 +386,7 @@ pub fn calibrate_unit_with(
 }
 
 /// The air reference of a simulated unit, taken as the firmware's `air` command takes it: a
-/// sweep of the free probe ([`crate::profile::AIR_SWEEP`], 9.2 s of probe time) and
+/// sweep of the free probe ([`crate::unit::profile::AIR_SWEEP`], 9.2 s of probe time) and
 /// [`air_from_points`], with the load cell's counts over the sweep (its tare; `None` without a
 /// load cell). `hardware` is the unit (its PZT, front end and load cell; its tissue is
 /// ignored), `seed` the noise stream.
@@ -407,7 +412,7 @@ pub fn air_reference_on(
     let mut points: heapless::Vec<SweepPoint, 64> = heapless::Vec::new();
     let mut board = SimBoard::new(SimProbe::new(*scene, seed));
     let mut engine = SampleEngine::new();
-    let settings: Settings = (&crate::profile::AIR_SWEEP).into();
+    let settings: Settings = (&crate::unit::profile::AIR_SWEEP).into();
     run_reading(
         &mut board,
         &mut engine,
@@ -433,9 +438,9 @@ pub fn weigh(hardware: &Scene, weight_n: f64, seed: u64) -> Option<RawForce> {
     }
     .with_preload_n(weight_n);
     let mut board = SimBoard::new(SimProbe::new(scene, seed));
-    let dac = [DacCode::MID; crate::reading::BATCH];
-    let mut adc = [AdcFrame::default(); crate::reading::BATCH];
-    let n = (0.5 * scene.front_end.sample_rate_hz) as usize / crate::reading::BATCH;
+    let dac = [DacCode::MID; crate::engine::BATCH];
+    let mut adc = [AdcFrame::default(); crate::engine::BATCH];
+    let n = (0.5 * scene.front_end.sample_rate_hz) as usize / crate::engine::BATCH;
     let mut played = 0;
     while played < n {
         played += board.exchange(&dac, &mut adc).ok()? as usize;

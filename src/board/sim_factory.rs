@@ -4,8 +4,8 @@
 //! `cargo run --release -p probe-bench -- calibrate --method auto --noise bench --repeats 20 --seed 1000 --out unit.json --firmware-record src/board/sim_factory.rs`.
 //! `tests/factory_profile.rs` checks it is current.
 
-use crate::profile::UnitProfile;
-use crate::store::{decode, RECORD_LEN};
+use crate::unit::profile::UnitProfile;
+use crate::unit::store::{decode, RECORD_LEN};
 
 /// The record bytes, in hex.
 const HEX: &[u8; 2 * RECORD_LEN] =

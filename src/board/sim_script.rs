@@ -30,8 +30,8 @@
 //! Every other line is a probe command for the firmware's own parser. The boot command line is
 //! a list of lines separated by `;`.
 
-use crate::command::{parse, Command, CommandError, MAX_LINE};
 use crate::hal::FrontEndScale;
+use crate::instrument::command::{parse, Command, CommandError, MAX_LINE};
 use hal_sim::events::{ForceChange, LiftOff, Step as TissueStep};
 use hal_sim::{phantoms, Fault, NoiseScene, Scene};
 

@@ -49,8 +49,8 @@
 //! HX711 `DOUT` (input, pull-up), PB5 (D4) its `PD_SCK` (push-pull output).
 
 use crate::engine::SampleEngine;
+use crate::engine::BATCH;
 use crate::hal::{AdcFrame, FrontEndScale};
-use crate::runner::BATCH;
 use crate::units::{AdcCode, DacCode, Hz};
 use core::mem::MaybeUninit;
 use core::ptr::{addr_of, addr_of_mut};
@@ -447,7 +447,7 @@ fn prio(logical: u8) -> Priority {
 
 // Two DMA half-buffers: the pipeline of `reading::PIPELINE_BATCHES` that the host's simulated
 // board models too.
-const _: () = assert!(crate::reading::PIPELINE_BATCHES == 2);
+const _: () = assert!(crate::engine::PIPELINE_BATCHES == 2);
 
 /// DMA buffers: the DMA owns them once started; the interrupt touches only the DAC half the DMA
 /// has just left, and reads the ADC rings through embassy.

@@ -13,9 +13,9 @@
 //! no peak stands 5 σ out of the floor, `low_snr` when the fit's relative uncertainty is too large.
 
 use super::{argmax, screen, Estimate};
+use crate::engine::sweep::SweepPoint;
 use crate::linalg::Lsq3;
 use crate::status::Failure;
-use crate::sweep::SweepPoint;
 use crate::units::Hz;
 
 /// Reduced χ² above which the fit is a gross misfit and its uncertainty is scaled by it.

@@ -16,8 +16,8 @@
 //! first stage's underestimate of its peak); a lift-off gives 3–4. Points spoiled by a knock are
 //! the business of [`super::interference::transients`], which should run first.
 
+use crate::engine::sweep::SweepPoint;
 use crate::status::Failure;
-use crate::sweep::SweepPoint;
 
 /// The later points' largest conductance above this multiple of the first stage's peak means
 /// the contact was lost between the stages.

@@ -10,9 +10,9 @@
 
 use super::model::Motional;
 use super::{screen, Estimate};
+use crate::engine::sweep::SweepPoint;
 use crate::linalg::{levenberg_marquardt, spd_inverse, Fit3, LmStop, Lsq3};
 use crate::status::Failure;
-use crate::sweep::SweepPoint;
 use crate::units::Hz;
 
 /// Fitted Butterworth–Van Dyke parameters.

@@ -45,12 +45,12 @@ use super::ringdown::{Ringdown, RingdownSettings};
 use super::Estimate;
 use crate::dsp::dds::{frequency_hz, tuning_word};
 use crate::dsp::lockin::{solve_value, ChannelSums, ReferenceSums};
+use crate::engine::sweep::{
+    amplitude_codes, check_band, check_durations, check_frequency, Drive, SettingsError,
+};
 use crate::engine::{PointPlan, PointRaw};
 use crate::hal::FrontEndScale;
 use crate::status::Failure;
-use crate::sweep::{
-    amplitude_codes, check_band, check_durations, check_frequency, Drive, SettingsError,
-};
 use crate::units::{Farads, Hz, Seconds, Siemens, Volts};
 use core::f64::consts::PI;
 use num_complex::Complex64 as C64;
@@ -392,7 +392,7 @@ impl Hold {
                 let open = self.s.refine.0 > 0.0 && self.segment == 0;
                 if open {
                     let window = cycles * per_cycle * self.fs;
-                    let wait = (crate::reading::PIPELINE_BATCHES + 1) * crate::reading::BATCH;
+                    let wait = (crate::engine::PIPELINE_BATCHES + 1) * crate::engine::BATCH;
                     let extra = libm::floor(wait as f64 / window) as u8;
                     self.first_cap = (self.n_windows as u8).saturating_add(extra);
                 }
@@ -1941,13 +1941,13 @@ mod tests {
     #[cfg(feature = "sim")]
     #[test]
     fn the_first_segment_keeps_its_windows_while_the_second_is_on_its_way() {
-        use crate::reading::{block_on, run_plans, Plans, SyncSource};
+        use crate::reading::driver::{block_on, run_plans, Plans, SyncSource};
         struct P(Hold, FrontEndScale);
         impl Plans for P {
             fn next_plan(&mut self) -> Option<PointPlan> {
                 self.0.next_plan()
             }
-            fn accept(&mut self, raw: &PointRaw) -> Option<crate::sweep::SweepPoint> {
+            fn accept(&mut self, raw: &PointRaw) -> Option<crate::engine::sweep::SweepPoint> {
                 self.0.accept(raw, &self.1);
                 None
             }

@@ -44,10 +44,10 @@
 //! non-finite values): the estimators' own checks see those.
 
 use super::model::Motional;
+use crate::engine::sweep::SweepPoint;
 use crate::estimate::hold::Segment;
 use crate::linalg::LineFit;
 use crate::status::Failure;
-use crate::sweep::SweepPoint;
 use num_complex::Complex64;
 
 /// One or two adjacent points whose residuals exceed this many times the residuals on either

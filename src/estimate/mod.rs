@@ -16,9 +16,30 @@ pub mod paper;
 pub mod ringdown;
 pub mod staged;
 
+use crate::engine::sweep::SweepPoint;
 use crate::status::Failure;
-use crate::sweep::SweepPoint;
 use crate::units::Hz;
+
+/// Which resonance a method reports and a calibration curve maps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Resonance {
+    /// The motional (series) resonance of the mode: every method but `paper`, and the papers'
+    /// published curves (the simulated unit's motional resonance follows paper 003's `f_e`).
+    Motional,
+    /// The |Z| dip of paper 003's method, between the series and the parallel resonance.
+    ImpedanceDip,
+}
+
+impl Resonance {
+    /// Stable name (`motional`, `impedance-dip`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Resonance::Motional => "motional",
+            Resonance::ImpedanceDip => "impedance-dip",
+        }
+    }
+}
 
 /// A resonance estimate.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -19,9 +19,9 @@
 //! scatter 2–3× in the paper's noise).
 
 use super::{screen, Estimate};
+use crate::engine::sweep::SweepPoint;
 use crate::linalg::Lsq3;
 use crate::status::Failure;
-use crate::sweep::SweepPoint;
 use crate::units::Hz;
 
 /// Estimate the resonance as the `|Z|` dip.

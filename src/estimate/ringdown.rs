@@ -19,14 +19,14 @@
 use super::Estimate;
 use crate::dsp::dds::{frequency_hz, tuning_word};
 use crate::dsp::lockin::solve;
+use crate::engine::sweep::{
+    amplitude_codes, check_band, check_durations, check_frequency, point_from_raw, PointError,
+    SettingsError,
+};
 use crate::engine::{PointPlan, PointRaw};
 use crate::hal::FrontEndScale;
 use crate::linalg::Line;
 use crate::status::Failure;
-use crate::sweep::{
-    amplitude_codes, check_band, check_durations, check_frequency, point_from_raw, PointError,
-    SettingsError,
-};
 use crate::units::{Hz, Seconds, Volts};
 use core::f64::consts::PI;
 

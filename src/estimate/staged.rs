@@ -18,13 +18,13 @@
 use super::fit::{fit_bvd, Bvd};
 use super::{argmax, conductance, Estimate};
 use crate::dsp::dds::tuning_word;
-use crate::engine::{PointPlan, PointRaw};
-use crate::hal::FrontEndScale;
-use crate::status::Failure;
-use crate::sweep::{
+use crate::engine::sweep::{
     amplitude_codes, check_band, check_durations, point_from_raw, PointError, SettingsError,
     SweepPoint,
 };
+use crate::engine::{PointPlan, PointRaw};
+use crate::hal::FrontEndScale;
+use crate::status::Failure;
 use crate::units::{Hz, Seconds, Volts};
 use heapless::Vec;
 

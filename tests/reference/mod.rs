@@ -29,7 +29,7 @@ pub fn modulus_by_bisection(a: f64, b: f64, c: f64, f: f64) -> Option<f64> {
 /// tissue's Hertz stiffness `A E^(2/3)` and co-moving mass `B/E` behind a coupling `Ks`, all per
 /// modal mass — has the resonance `f`, by bisection of `ln E` between 1e-3 and 1e9 kPa with
 /// `f64::powf`; `None` outside that range. Written from the mechanics, not from
-/// `pzt_probe::contact_law`.
+/// `pzt_probe::unit::contact_law`.
 #[allow(dead_code)] // tests/qemu.rs uses it; tests/ref_calibration.rs shares the module
 pub fn modulus_by_contact_law(f_free: f64, ks: f64, a: f64, b: f64, f: f64) -> Option<f64> {
     let w = 2.0 * std::f64::consts::PI;

@@ -7,10 +7,10 @@ use crate::capture::{self, Capture, CaptureError, DemodOptions, Layout, SweepSha
 use crate::{plot, report};
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use pzt_probe::engine::sweep::SweepPoint;
 use pzt_probe::estimate::Estimate;
-use pzt_probe::measure::Reading;
-use pzt_probe::profile::UnitProfile;
-use pzt_probe::sweep::SweepPoint;
+use pzt_probe::reading::Reading;
+use pzt_probe::unit::profile::UnitProfile;
 use pzt_probe::{Failure, Method, Newtons, Seconds, Status};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
@@ -98,7 +98,7 @@ pub const fn auto_method(layout: Layout) -> Method {
 }
 
 /// Failures of `auto`'s fit after which sweep-G reads the same points, as the firmware's
-/// `auto` falls back to a sweep-G sweep (`pzt_probe::measure`): the resonance missed or not
+/// `auto` falls back to a sweep-G sweep (`pzt_probe::reading`): the resonance missed or not
 /// resolved.
 fn fit_failure_retryable(f: Failure) -> bool {
     matches!(
@@ -157,7 +157,7 @@ pub fn analyze(
     };
     let n = pts.len().min(u16::MAX as usize) as u16;
     let force = unit.load_cell.map(|c| c.stated(force));
-    let reading = pzt_probe::pipeline::conclude(method, est, unit, probe_time, n, force);
+    let reading = pzt_probe::reading::pipeline::conclude(method, est, unit, probe_time, n, force);
     Ok(Analysis { capture, reading })
 }
 

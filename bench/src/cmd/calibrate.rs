@@ -7,8 +7,8 @@ use anyhow::{bail, Result};
 use clap::Args;
 use hal_sim::NoiseScene;
 use pzt_probe::board::sim::{self as simboard, CALIBRATION_PHANTOMS};
-use pzt_probe::measure::{Procedure, Settings};
-use pzt_probe::profile::UnitProfile;
+use pzt_probe::reading::{Procedure, Settings};
+use pzt_probe::unit::profile::UnitProfile;
 use pzt_probe::Method;
 use std::path::PathBuf;
 
@@ -105,7 +105,7 @@ fn taken_cmd(a: &CalibrateArgs, method: Method) -> String {
 /// The Rust source of the simulated unit's factory record: `profile` encoded as the store
 /// writes it (sequence number 1).
 pub fn firmware_record(profile: &UnitProfile, cmd: &str) -> String {
-    let hex: String = pzt_probe::store::encode(profile, 1)
+    let hex: String = pzt_probe::unit::store::encode(profile, 1)
         .iter()
         .map(|b| format!("{b:02x}"))
         .collect();
@@ -116,8 +116,8 @@ pub fn firmware_record(profile: &UnitProfile, cmd: &str) -> String {
          //! `{cmd}`.\n\
          //! `tests/factory_profile.rs` checks it is current.\n\
          \n\
-         use crate::profile::UnitProfile;\n\
-         use crate::store::{{decode, RECORD_LEN}};\n\
+         use crate::unit::profile::UnitProfile;\n\
+         use crate::unit::store::{{decode, RECORD_LEN}};\n\
          \n\
          /// The record bytes, in hex.\n\
          const HEX: &[u8; 2 * RECORD_LEN] =\n    b\"{hex}\";\n\

@@ -7,9 +7,9 @@ use crate::{plot, report};
 use anyhow::{bail, Result};
 use clap::Args;
 use pzt_probe::board::sim as simboard;
-use pzt_probe::measure::{Procedure, Settings};
-use pzt_probe::profile::UnitProfile;
-use pzt_probe::sweep::SweepPoint;
+use pzt_probe::engine::sweep::SweepPoint;
+use pzt_probe::reading::{Procedure, Settings};
+use pzt_probe::unit::profile::UnitProfile;
 use std::path::PathBuf;
 
 #[derive(Args)]

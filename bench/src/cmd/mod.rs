@@ -17,8 +17,8 @@ pub mod stream;
 use anyhow::{Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use pzt_probe::measure::Settings;
-use pzt_probe::sweep::SweepSettings;
+use pzt_probe::engine::sweep::SweepSettings;
+use pzt_probe::reading::Settings;
 use pzt_probe::{Hz, Method, Seconds, Volts};
 
 #[derive(Args, Clone)]
@@ -28,7 +28,7 @@ pub struct MethodArgs {
     /// maximum), `adaptive`, `fit`, `track`, `ringdown` or `hold` (see docs/methods.md).
     /// For the two-stage methods `--start-hz/--stop-hz` set the band, `--settle-s` the coarse
     /// settling and `--integrate-s` the integration per point; for ringdown and hold the band.
-    #[arg(long, default_value = pzt_probe::measure::DEFAULT_METHOD.name())]
+    #[arg(long, default_value = pzt_probe::reading::DEFAULT_METHOD.name())]
     pub method: String,
     /// Sweep start frequency, Hz (default: the method's).
     #[arg(long)]

@@ -12,8 +12,8 @@ use anyhow::{anyhow, Result};
 use clap::Args;
 use hal_sim::{phantoms, NoiseScene, Scene};
 use plotters::prelude::*;
-use pzt_probe::calibration::PowerLaw;
-use pzt_probe::profile::UnitProfile;
+use pzt_probe::unit::calibration::PowerLaw;
+use pzt_probe::unit::profile::UnitProfile;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::Mutex;
@@ -57,7 +57,7 @@ pub struct ParetoArgs {
 /// `--hold-knobs`, `--auto`: one line per (config, modulus).
 fn focused(a: &ParetoArgs) -> Result<()> {
     use pzt_probe::estimate::hold::HoldSettings;
-    use pzt_probe::measure::{Method, Settings};
+    use pzt_probe::reading::{Method, Settings};
     use pzt_probe::Seconds;
     let mut cfgs = Vec::new();
     if a.auto {

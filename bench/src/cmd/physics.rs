@@ -3,7 +3,7 @@
 use anyhow::Result;
 use clap::Args;
 use hal_sim::{phantoms, Scene};
-use pzt_probe::calibration::PowerLaw;
+use pzt_probe::unit::calibration::PowerLaw;
 
 #[derive(Args)]
 pub struct PhysicsArgs {

@@ -20,9 +20,9 @@ use hal_sim::lump::{self, Inclusion, LumpPhantom};
 use hal_sim::Scene;
 use plotters::prelude::*;
 use pzt_probe::board::sim as simboard;
-use pzt_probe::measure::{Reading, Settings};
-use pzt_probe::profile::UnitProfile;
-use pzt_probe::sweep::SweepSettings;
+use pzt_probe::engine::sweep::SweepSettings;
+use pzt_probe::reading::{Reading, Settings};
+use pzt_probe::unit::profile::UnitProfile;
 use pzt_probe::{Method, PowerLaw, Status};
 use serde_json::{json, Value};
 use std::io::Write;
@@ -417,8 +417,8 @@ fn run_continuous(a: &ScanArgs) -> Result<()> {
         ScanScene::Coin => (a.coin_at_mm[1], (-13.5, 13.5)),
         ScanScene::Ball => (0.0, (-4.0, 24.0)),
     };
-    let unit = crate::unit::default_for(pzt_probe::stream::METHOD)?;
-    let config = pzt_probe::stream::TrackerConfig::DEFAULT;
+    let unit = crate::unit::default_for(pzt_probe::instrument::continuous::METHOD)?;
+    let config = pzt_probe::instrument::continuous::TrackerConfig::DEFAULT;
     let mut results = Vec::new();
     for (k, &v) in a.speed_mm_s.iter().enumerate() {
         let s = super::slide::Slide {
@@ -448,7 +448,7 @@ fn run_continuous(a: &ScanArgs) -> Result<()> {
 /// The scan the arguments ask for: method, preload, noise, scene and the unit's profile.
 fn spec_of(a: &ScanArgs) -> Result<ScanSpec> {
     let method = Method::from_name(&a.method)
-        .filter(|m| matches!(m.default_settings(), pzt_probe::measure::Settings::Sweep(_)))
+        .filter(|m| matches!(m.default_settings(), pzt_probe::reading::Settings::Sweep(_)))
         .ok_or_else(|| {
             anyhow!(
                 "scan needs a stepped-sweep method (sweep-g or paper), not `{}`",

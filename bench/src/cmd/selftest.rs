@@ -9,8 +9,8 @@ use clap::Args;
 use hal_sim::{Fault, SimProbe};
 use pzt_probe::board::sim::SimBoard;
 use pzt_probe::engine::SampleEngine;
-use pzt_probe::reading::{block_on, SyncSource};
-use pzt_probe::selftest::{self, SelfTestReport};
+use pzt_probe::instrument::selftest::{self, SelfTestReport};
+use pzt_probe::reading::driver::{block_on, SyncSource};
 use pzt_probe::UnitProfile;
 use std::path::PathBuf;
 

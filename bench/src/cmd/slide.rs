@@ -1,5 +1,5 @@
 //! `probe-bench scan --continuous`: the probe slides across a lump phantom at a constant speed
-//! while the core's tracker (`pzt_probe::stream`) reads continuously; the lump is located
+//! while the core's tracker (`pzt_probe::instrument::continuous`) reads continuously; the lump is located
 //! from the stream (issue #14, point 5).
 //!
 //! The tip moves along a line through the lump at `y` from `x0` to `x1` after half a second of
@@ -18,7 +18,7 @@ use hal_sim::lump::LumpPhantom;
 use hal_sim::Scene;
 use plotters::prelude::*;
 use pzt_probe::board::sim as simboard;
-use pzt_probe::stream::{StreamReading, TrackerConfig};
+use pzt_probe::instrument::continuous::{StreamReading, TrackerConfig};
 use pzt_probe::{Status, UnitProfile};
 use serde_json::{json, Value};
 use std::path::Path;

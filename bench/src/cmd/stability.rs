@@ -133,7 +133,7 @@ pub fn run(a: StabilityArgs) -> Result<()> {
         grid.push(row);
         if m == Method::Auto {
             auto_unit = Some(unit);
-        } else if m == pzt_probe::stream::METHOD {
+        } else if m == pzt_probe::instrument::continuous::METHOD {
             stream_unit = Some(unit);
         }
     }

@@ -1,5 +1,5 @@
 //! `probe-bench stream`: continuous reading on the simulated probe (the core's tracker,
-//! `pzt_probe::stream`), with a step in stiffness, a lift-off and a new contact on the way.
+//! `pzt_probe::instrument::continuous`), with a step in stiffness, a lift-off and a new contact on the way.
 
 use crate::report;
 use crate::scene::{layer_names, noise_name, parse_noise, SceneArgs};
@@ -8,7 +8,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use hal_sim::{phantoms, ForceChange, LiftOff};
 use plotters::prelude::*;
-use pzt_probe::stream::{StreamReading, TrackerConfig, METHOD};
+use pzt_probe::instrument::continuous::{StreamReading, TrackerConfig, METHOD};
 use pzt_probe::{Seconds, Status};
 use serde_json::json;
 use std::io::Write;

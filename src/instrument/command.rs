@@ -11,7 +11,7 @@
 //! are refused); counts (`coarse_points`, `refine_points`, `stages`, `window_cycles`) are whole
 //! numbers 0–255. Settings are checked against the board here; that they are settings of the
 //! active method (and within that method's knob ranges) is checked when the firmware applies
-//! them, by the method's own validation ([`crate::measure::Procedure::new`]).
+//! them, by the method's own validation ([`crate::reading::Procedure::new`]).
 //!
 //! | line | command |
 //! |---|---|
@@ -29,14 +29,14 @@
 //! | `store` | write calibration and air reference to flash |
 //! | `status` | report settings, calibration and counters |
 //! | `selftest` | run the self-test of the analog chain (as at power-on); readings are refused while it fails |
-//! | `stream <seconds>` | read continuously (0.1–600 s): numbered, time-stamped readings ([`crate::stream`]) |
+//! | `stream <seconds>` | read continuously (0.1–600 s): numbered, time-stamped readings ([`crate::instrument::continuous`]) |
 
+use crate::engine::sweep::{SettingsError, SweepSettings};
 use crate::estimate::ringdown::RingdownSettings;
 use crate::estimate::staged::{Refine, StagedSettings};
 use crate::hal::FrontEndScale;
 use crate::loadcell::ForceWindow;
-use crate::measure::{Method, Settings};
-use crate::sweep::{SettingsError, SweepSettings};
+use crate::reading::{Method, Settings};
 use crate::units::{Hz, KPa, Newtons, Seconds, Volts};
 
 /// Longest accepted line in bytes (without the terminator).
@@ -89,7 +89,7 @@ pub enum Command {
     /// Take the load cell's sensitivity from this known weight resting on the tip
     /// (`weigh <grams>`, after an air reference gave the zero).
     Weigh(Newtons),
-    /// Read continuously for this long ([`crate::stream`]): numbered, time-stamped readings
+    /// Read continuously for this long ([`crate::instrument::continuous`]): numbered, time-stamped readings
     /// until then.
     Stream(Seconds),
 }

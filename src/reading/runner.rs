@@ -1,15 +1,13 @@
-//! The host's blocking call of the one reading driver ([`crate::reading::read`]) over any
+//! The host's blocking call of the one reading driver ([`crate::reading::driver::read`]) over any
 //! [`SampleStream`]: for `probe-bench`, the tests and single-threaded images.
 
+use crate::engine::sweep::SweepPoint;
 use crate::engine::SampleEngine;
 use crate::hal::{SampleStream, StreamError};
 use crate::loadcell::ForceSource;
-use crate::measure::{Method, Reading, Settings};
-use crate::profile::UnitProfile;
-use crate::reading::{block_on, read, Stop, SyncSource};
-use crate::sweep::SweepPoint;
-
-pub use crate::reading::{window_budget_samples, BATCH};
+use crate::reading::driver::{block_on, read, Stop, SyncSource};
+use crate::reading::{Method, Reading, Settings};
+use crate::unit::profile::UnitProfile;
 
 /// Why a run stopped early.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -15,9 +15,9 @@
 
 use crate::estimate::Estimate;
 use crate::loadcell::{ContactForce, RawForce, MAX_FORCE_CHANGE, NO_CONTACT_FORCE};
-use crate::measure::{Method, Reading};
-use crate::profile::UnitProfile;
+use crate::reading::{Method, Reading};
 use crate::status::{Failure, Status};
+use crate::unit::profile::UnitProfile;
 use crate::units::Seconds;
 
 /// Largest relative repeatability uncertainty of a modulus that is still a reading. The

@@ -5,15 +5,15 @@
 //! covariance and valid span), the contact condition the curve holds for (the [`QModel`]), and
 //! the air reference — the free probe's resonance and Q, which tell contact from no contact,
 //! and its static admittance `G0 + j2πfC0`, which `hold` subtracts. All of it lives in one
-//! [`UnitProfile`]; the firmware keeps it in flash ([`crate::store`]), the bench in a file, and
-//! every reading goes through [`crate::pipeline`] with it.
+//! [`UnitProfile`]; the firmware keeps it in flash ([`crate::unit::store`]), the bench in a file, and
+//! every reading goes through [`crate::reading::pipeline`] with it.
 
-use crate::calibration::{held_out_rms, Modulus, PowerLaw, QModel, RefPoint};
-use crate::contact_law::ContactLaw;
+use crate::engine::sweep::{SweepPoint, SweepSettings};
 use crate::estimate::fit::fit_bvd;
 use crate::loadcell::{ContactForce, ForceWindow, LoadCellCal};
 use crate::status::Failure;
-use crate::sweep::{SweepPoint, SweepSettings};
+use crate::unit::calibration::{held_out_rms, Modulus, PowerLaw, QModel, RefPoint, MAX_REFERENCES};
+use crate::unit::contact_law::ContactLaw;
 use crate::units::{Farads, Hz, Seconds, Siemens, Volts};
 
 /// A reading whose Q exceeds this fraction of the free Q may be free air.
@@ -107,7 +107,7 @@ pub struct UnitProfile {
     pub calibration: PowerLaw,
     /// The resonance the curve maps (that of the method it was calibrated with): readings by a
     /// method that reports another are refused (`uncalibrated`).
-    pub resonance: crate::measure::Resonance,
+    pub resonance: crate::estimate::Resonance,
     /// The contact condition of the calibration: Q against modulus on the reference phantoms.
     /// Without it no reading is given (`uncalibrated`).
     pub q_model: Option<QModel>,
@@ -169,7 +169,7 @@ pub fn drift_allowance(probe_time: crate::units::Seconds) -> Hz {
 }
 
 /// The force the paper calibrated at, and the power law's: 30 mN (paper 003, a balance and a
-/// motorised stage). References read at it (within [`crate::calibration::SAME_FORCE`]), or
+/// motorised stage). References read at it (within [`crate::unit::calibration::SAME_FORCE`]), or
 /// without a measured force, make the power law.
 pub const NOMINAL_FORCE: crate::units::Newtons = crate::units::Newtons(0.030);
 
@@ -180,7 +180,7 @@ impl UnitProfile {
     pub fn fallback() -> Self {
         Self {
             calibration: PowerLaw::paper_experiment(),
-            resonance: crate::measure::Resonance::Motional,
+            resonance: crate::estimate::Resonance::Motional,
             q_model: None,
             air: None,
             contact: None,
@@ -191,7 +191,7 @@ impl UnitProfile {
 
     /// Read through the power law `law` (mapping `resonance`) from now on: the contact law, if
     /// any, goes (it belongs to the calibration `law` replaces).
-    pub fn use_power_law(&mut self, law: PowerLaw, resonance: crate::measure::Resonance) {
+    pub fn use_power_law(&mut self, law: PowerLaw, resonance: crate::estimate::Resonance) {
         self.calibration = law;
         self.resonance = resonance;
         self.contact = None;
@@ -201,7 +201,7 @@ impl UnitProfile {
     /// curve: the contact law at that force when the calibration chose it, else the power law
     /// (which holds at [`NOMINAL_FORCE`] alone).
     ///
-    /// Its combined σ is the curve's ([`crate::calibration::Modulus::propagated`]: the
+    /// Its combined σ is the curve's ([`crate::unit::calibration::Modulus::propagated`]: the
     /// resonance's and the force's repeatability, the calibration's parameter covariance and
     /// its held-out misfit) and the free resonance's allowance over a reading of `probe_time`
     /// ([`drift_allowance`]), in quadrature.
@@ -283,40 +283,6 @@ pub struct Reference {
     pub force_n: f64,
 }
 
-impl Reference {
-    /// The reference a reading on a phantom of `modulus` gives, when it has a resonance with
-    /// its uncertainty and a Q, and — with a load cell — a steady force inside the window
-    /// (its status does not matter otherwise: the uncalibrated unit refuses the modulus, not
-    /// the resonance; a reference pressed too lightly, too hard, unsteadily or not at all is
-    /// no reference).
-    pub fn of(modulus: crate::units::KPa, r: &crate::measure::Reading) -> Option<Reference> {
-        if let crate::status::Status::Failed(f) = r.status {
-            if f.is_press() {
-                return None;
-            }
-        }
-        match (r.resonance, r.resonance_sigma, r.q) {
-            (Some(f), Some(s), Some(q)) if f.0.is_finite() && s.0.is_finite() && q > 0.0 => {
-                Some(Reference {
-                    modulus_kpa: modulus.0 as f64,
-                    resonance_hz: f.0 as f64,
-                    sigma_hz: (s.0 as f64).max(1e-4),
-                    q: q as f64,
-                    force_n: r
-                        .force
-                        .map(|w| w.mean.0 as f64)
-                        .filter(|f| f.is_finite() && *f > 0.0)
-                        .unwrap_or(0.0),
-                })
-            }
-            _ => None,
-        }
-    }
-}
-
-/// Most reference readings one calibration takes.
-pub const MAX_REFERENCES: usize = 128;
-
 /// What a calibration gives a unit.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Calibration {
@@ -347,7 +313,7 @@ pub struct Calibration {
 pub fn calibrate(
     refs: &[Reference],
     air: Option<&AirReference>,
-) -> Result<Calibration, crate::calibration::FitError> {
+) -> Result<Calibration, crate::unit::calibration::FitError> {
     let n = refs.len().min(MAX_REFERENCES);
     let refs = &refs[..n];
     let mut points = [RefPoint::default(); MAX_REFERENCES];
@@ -399,14 +365,14 @@ pub fn calibrate(
     let mut m = 0;
     for i in 0..n {
         let d = points[i];
-        if !any_force || libm::fabs(d.force_n / f0 - 1.0) <= crate::calibration::SAME_FORCE {
+        if !any_force || libm::fabs(d.force_n / f0 - 1.0) <= crate::unit::calibration::SAME_FORCE {
             points.swap(i, m);
             m += 1;
         }
     }
     let law = PowerLaw::fit_robust(&mut points[..m])?;
     let q_model = QModel::fit(refs.iter().map(|r| (r.modulus_kpa, r.force_n, r.q)))
-        .ok_or(crate::calibration::FitError::TooFewPoints)?;
+        .ok_or(crate::unit::calibration::FitError::TooFewPoints)?;
     Ok(Calibration {
         law,
         q_model,

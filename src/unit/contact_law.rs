@@ -17,7 +17,7 @@
 //! law `f = a + b E^c` is the same rise in three empirical constants.
 //!
 //! Which of the two a unit uses is chosen at calibration by the reference phantoms held out
-//! one at a time ([`crate::profile::calibrate`]): the simulated probe is built on these
+//! one at a time ([`crate::unit::profile::calibrate`]): the simulated probe is built on these
 //! mechanics, so there the contact law fits by construction; on a real probe it has to earn its
 //! place the same way.
 //!
@@ -28,12 +28,14 @@
 //! `B(F) = B F/F0` (docs/physics.md): the law covers every force with the same three
 //! constants, and a reading inverts at the force its load cell measured. References read at
 //! several forces are fitted together. The exponents are Hertz's, not fitted: the held-out
-//! references (each modulus at every force, [`crate::profile::calibrate`]) are what tells
+//! references (each modulus at every force, [`crate::unit::profile::calibrate`]) are what tells
 //! whether a probe follows them.
 
-use crate::calibration::{checked_span_of, inversion_input, span, FitError, Modulus, RefPoint};
 use crate::linalg::{levenberg_marquardt, spd_inverse, LmStop};
 use crate::status::Failure;
+use crate::unit::calibration::{
+    checked_span_of, inversion_input, span, FitError, Modulus, RefPoint,
+};
 use crate::units::Hz;
 use core::f64::consts::PI;
 
@@ -210,7 +212,7 @@ type Normal = ([[f64; 3]; 3], [f64; 3]);
 /// forces, one per modulus and force.
 struct Terms {
     /// `u`, `v`, `W`, `f̄` of each term.
-    t: [[f64; 4]; crate::profile::MAX_REFERENCES],
+    t: [[f64; 4]; crate::unit::calibration::MAX_REFERENCES],
     /// Terms in `t`.
     len: usize,
     /// `C`.
@@ -221,7 +223,7 @@ struct Terms {
 
 impl Terms {
     /// Fill empty terms with those of `data` for a law of reference force `force_n`; false with
-    /// more distinct terms than [`crate::profile::MAX_REFERENCES`].
+    /// more distinct terms than [`crate::unit::calibration::MAX_REFERENCES`].
     fn fill<'a>(&mut self, data: impl Iterator<Item = &'a RefPoint> + Clone, force_n: f64) -> bool {
         let terms = self;
         let uv = |d: &RefPoint| factors(d.modulus_kpa, force_ratio(force_n, d.force_n));
@@ -389,7 +391,7 @@ impl ContactLaw {
 
     /// Modulus of a resonance `f ± sigma` read at the contact force `force` (mean and standard
     /// uncertainty, N; `None`: at the reference force), with the law's own uncertainty and the
-    /// force's propagated: as [`crate::calibration::PowerLaw::invert`] (the same failures for
+    /// force's propagated: as [`crate::unit::calibration::PowerLaw::invert`] (the same failures for
     /// the same cases). The force's uncertainty counts as the resonance's (`∂f/∂F σ_F` added
     /// in quadrature): a force read anew each reading scatters with it.
     pub fn invert(&self, f: Hz, sigma: Hz, force: Option<(f64, f64)>) -> Result<Modulus, Failure> {
@@ -398,7 +400,7 @@ impl ContactLaw {
     }
 
     /// [`ContactLaw::invert`], and the same with the free resonance moved by `moved_hz` (the
-    /// unit's drift allowance, [`crate::profile::UnitProfile::invert`]): the second shares the
+    /// unit's drift allowance, [`crate::unit::profile::UnitProfile::invert`]): the second shares the
     /// first's constants (the free resonance enters only `K1`) and starts its Newton steps at
     /// the first's root (two or three evaluations instead of eight). The same roots to the
     /// same tolerance as two calls of `invert`.
@@ -519,14 +521,14 @@ impl ContactLaw {
     /// force, with the free resonance `free_hz` held (Levenberg–Marquardt from the best of a
     /// coarse grid of starts; the covariance from the Jacobian at the optimum, scaled by the
     /// reduced χ² when it exceeds 1; the misfit as the RMS residual corrected for the three
-    /// constants). `BadInput` for readings at more than [`crate::profile::MAX_REFERENCES`]
+    /// constants). `BadInput` for readings at more than [`crate::unit::calibration::MAX_REFERENCES`]
     /// distinct pairs of modulus and force.
     pub fn fit(data: &[RefPoint], free_hz: f64, force_n: f64) -> Result<ContactLaw, FitError> {
         Self::fit_leaving_out(data, free_hz, force_n, None)
     }
 
     /// [`fit`](Self::fit) to the readings of `data` not at the modulus `leave_out` (kPa): the
-    /// held-out fits of [`crate::profile::calibrate`], without a copy of the others.
+    /// held-out fits of [`crate::unit::profile::calibrate`], without a copy of the others.
     ///
     /// Cost (the firmware's `calibrate fit`, every `f64` operation software on the M4): the
     /// readings are reduced once to the law's two force-and-modulus factors per distinct pair
@@ -549,7 +551,7 @@ impl ContactLaw {
         }
         // Filled in place: a 4 KiB value moved through `Option`/`Result` would be copied.
         let mut terms = Terms {
-            t: [[0.0; 4]; crate::profile::MAX_REFERENCES],
+            t: [[0.0; 4]; crate::unit::calibration::MAX_REFERENCES],
             len: 0,
             c: 0.0,
             points: 0,
@@ -704,7 +706,7 @@ mod tests {
             }
         });
         let mut terms = Terms {
-            t: [[0.0; 4]; crate::profile::MAX_REFERENCES],
+            t: [[0.0; 4]; crate::unit::calibration::MAX_REFERENCES],
             len: 0,
             c: 0.0,
             points: 0,

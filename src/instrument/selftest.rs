@@ -5,7 +5,7 @@
 //! loaded 136–267 Hz over 1 kPa to rigid contact at any preload, `hal-sim`), where the plate is
 //! its static capacitance: `Y = G0 + j 2 pi f C0` plus a motional remainder of at most
 //! [`MOTIONAL_BOUND`] of `C0`. Four gap-free windows of one plan go through the one plan loop
-//! ([`crate::reading::run_plans`], the readings' stall rule); each is converted by the readings'
+//! ([`crate::reading::driver::run_plans`], the readings' stall rule); each is converted by the readings'
 //! [`point_from_raw`] and the four points pass the readings' [`screen`] (clipping, no current,
 //! knocks). What the screen cannot tell apart is told from the raw demodulator sums, which
 //! carry both channels' rail counts and offsets: a channel that reads one rail throughout is a
@@ -16,17 +16,19 @@
 //! plate ([`NOMINAL_C0`]) under its manufacturing tolerance.
 //!
 //! The session runs it at power-on and on the `selftest` command; while its last run failed,
-//! every reading is refused with the fault's message ([`crate::session`]). Allocation free,
+//! every reading is refused with the fault's message ([`crate::instrument::session`]). Allocation free,
 //! panic free; host-tested on `hal-sim`'s fault scenes (`tests/selftest.rs`).
 
 use crate::dsp::lockin::solve;
+use crate::engine::sweep::{
+    amplitude_codes, check_frequency, point_from_raw, PointError, SweepPoint,
+};
 use crate::engine::{PointPlan, PointRaw};
 use crate::estimate::{screen, OPEN_CIRCUIT_A};
 use crate::hal::FrontEndScale;
-use crate::profile::UnitProfile;
-use crate::reading::{run_plans, Plans, PointSource, Stop};
+use crate::reading::driver::{run_plans, Plans, PointSource, Stop};
 use crate::status::Failure;
-use crate::sweep::{amplitude_codes, check_frequency, point_from_raw, PointError, SweepPoint};
+use crate::unit::profile::UnitProfile;
 use crate::units::{Farads, Hz, Seconds, Siemens, Volts};
 
 /// The test frequency: 3.8 times the highest loaded resonance (267 Hz, rigid contact) and 4.3

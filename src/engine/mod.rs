@@ -9,10 +9,38 @@
 //! hands back the integer [`LockInSums`] as a [`PointRaw`]. Work per sample is bounded (integer
 //! only, no branches on data except rail detection); nothing here allocates, logs or panics.
 
+pub mod sweep;
+
 use crate::dsp::dds::{cos_q15, sin_q15, Dds};
 use crate::dsp::lockin::LockInSums;
 use crate::hal::AdcFrame;
 use crate::units::{DacCode, MAX_CODE, MID_CODE};
+
+/// Samples per batch (one DMA half-buffer on the STM32: 2.5 ms at 10 kHz). Short, because every
+/// plan waits [`PIPELINE_BATCHES`] of them (and the rest of the batch it was loaded in) before it
+/// plays: with 50-sample batches a hold's first segment drove 10 ms longer off the resonance
+/// and the default read at 1.38× the Cramér–Rao bound at 9.9 τ; with 25, 1.28× at 9.8 τ
+/// (docs/methods.md). The sample interrupt's overhead per batch doubles with it
+/// (docs/firmware.md).
+pub const BATCH: usize = 25;
+
+/// Batches between the sample engine's generating a DAC batch and the ADC batch captured while
+/// it played, on every board: the DAC's DMA runs over two half-buffers, both filled before it
+/// starts, and the sample interrupt refills the half that just played, which plays again two
+/// periods later (the STM32's circular DMA, the QEMU board's emulation of it, and the host's
+/// simulated board, so that a plan takes effect as late on the host as on the target).
+pub const PIPELINE_BATCHES: usize = 2;
+
+/// The stall rule: samples a window of `plan` may take before it counts as lost — its
+/// settling, its cycles and two more (to find the window's boundary), and the stream's
+/// pipeline of `latency_batches` plus two batches of margin.
+pub fn window_budget_samples(plan: &PointPlan, fs: f64, latency_batches: usize) -> u64 {
+    let f = crate::dsp::dds::frequency_hz(plan.ftw, fs).max(1.0);
+    let period = fs / f;
+    plan.settle_samples as u64
+        + ((plan.cycles as f64 + 2.0) * period) as u64
+        + (BATCH * (latency_batches + 2)) as u64
+}
 
 /// What the measurement asks the interrupt for: one point.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -83,7 +111,7 @@ pub const MAX_POINTS_PER_BATCH: usize = 2;
 
 /// Shortest window a plan may ask for, samples: half a batch (rounded up), so that at most
 /// [`MAX_POINTS_PER_BATCH`] close in one (one cycle at up to 769 Hz at 10 kHz).
-pub const MIN_WINDOW_SAMPLES: u32 = crate::reading::BATCH.div_ceil(2) as u32;
+pub const MIN_WINDOW_SAMPLES: u32 = crate::engine::BATCH.div_ceil(2) as u32;
 
 /// The windows that closed in one batch, in order.
 pub type Points = heapless::Vec<PointRaw, MAX_POINTS_PER_BATCH>;

@@ -3,23 +3,23 @@
 //! It owns the unit's [`UnitProfile`] (loaded from the store at boot), the active method and
 //! settings, and the reference readings of a calibration in progress. Each [`Command`] is
 //! served by [`Session::handle`] through an [`Io`]: the board's point source (readings go
-//! through the one driver, [`crate::reading::read`], and end in the one pipeline), the store,
+//! through the one driver, [`crate::reading::driver::read`], and end in the one pipeline), the store,
 //! and the sink of [`Event`]s (the firmware's defmt log; the host tests' list). The RTIC
 //! application only binds these to its channels; the host tests drive the same code on the
 //! simulated probe.
 
 use crate::boot::BootError;
-use crate::calibration::PowerLaw;
-use crate::command::{Command, CommandError};
+use crate::engine::sweep::SweepPoint;
+use crate::instrument::command::{Command, CommandError};
+use crate::instrument::continuous::{StreamReading, TrackerConfig};
+use crate::instrument::selftest::{self, SelfTestFault, SelfTestReport};
 use crate::loadcell::{ForceWindow, LoadCellCal, RawForce};
-use crate::measure::{Method, Procedure, Reading, Settings, DEFAULT_METHOD};
-use crate::profile::{self, AirReference, Reference, UnitProfile, AIR_SWEEP};
-use crate::reading::{read, PointSource, Stop};
-use crate::selftest::{self, SelfTestFault, SelfTestReport};
+use crate::reading::driver::{read, PointSource, Stop};
+use crate::reading::{Method, Procedure, Reading, Settings, DEFAULT_METHOD};
 use crate::status::{Failure, Status};
-use crate::store::{LoadSource, Loaded, Saved, StoreError};
-use crate::stream::{StreamReading, TrackerConfig};
-use crate::sweep::SweepPoint;
+use crate::unit::calibration::PowerLaw;
+use crate::unit::profile::{self, AirReference, Reference, UnitProfile, AIR_SWEEP};
+use crate::unit::store::{LoadSource, Loaded, Saved, StoreError};
 use crate::units::{KPa, Newtons, Seconds};
 
 /// Reference readings kept for a calibration fit.
@@ -203,7 +203,7 @@ pub const WEIGH_S: f32 = 0.25;
 
 impl Session {
     /// Power-on: load the profile from the store (and say where it came from), with the
-    /// default method, then the self-test of the analog chain ([`crate::selftest`]): while it
+    /// default method, then the self-test of the analog chain ([`crate::instrument::selftest`]): while it
     /// has failed, every reading is refused.
     pub async fn boot<I: Io>(io: &mut I) -> Self {
         let mut s = Self::load(io).await;
@@ -368,7 +368,7 @@ impl Session {
             Command::CalibratePaper => {
                 self.profile.use_power_law(
                     PowerLaw::paper_experiment(),
-                    crate::measure::Resonance::Motional,
+                    crate::estimate::Resonance::Motional,
                 );
                 io.emit(Event::Calibration(self.profile.calibration)).await;
                 true
@@ -521,7 +521,7 @@ impl Session {
         }
     }
 
-    /// `stream <seconds>`: the continuous tracker ([`crate::stream`]) with its default
+    /// `stream <seconds>`: the continuous tracker ([`crate::instrument::continuous`]) with its default
     /// configuration and the session's profile, until a reading ends `seconds` after the
     /// start. Every reading is offered to the outside world without waiting
     /// ([`Io::try_emit`]): the tracker's plans and the sample interrupt never wait on a slow
@@ -544,12 +544,13 @@ impl Session {
         let end = start + seconds.0 as f64;
         let (mut ok, mut dropped) = (0u32, 0u32);
         let _ = io.take_plan_work();
-        let readings = crate::stream::run_with(io, tracker, &self.profile, |io, r| {
-            ok += r.reading.status.is_ok() as u32;
-            dropped += !io.try_emit(Event::Stream(*r)) as u32;
-            (r.t_s.0 as f64) < end
-        })
-        .await;
+        let readings =
+            crate::instrument::continuous::run_with(io, tracker, &self.profile, |io, r| {
+                ok += r.reading.status.is_ok() as u32;
+                dropped += !io.try_emit(Event::Stream(*r)) as u32;
+                (r.t_s.0 as f64) < end
+            })
+            .await;
         let plan_work = io.take_plan_work();
         io.emit(Event::StreamEnd {
             start: Seconds(start as f32),
@@ -566,7 +567,7 @@ impl Session {
     async fn calibrate_add<I: Io>(&mut self, io: &mut I, e: KPa) -> bool {
         let r = self.reading(io, self.method, self.settings).await;
         io.emit(Event::Reading(r)).await;
-        let why = match Reference::of(e, &r) {
+        let why = match r.reference(e) {
             Some(x) => match self.refs.push(x) {
                 Ok(()) => {
                     io.emit(Event::Reference {

@@ -10,6 +10,9 @@ use crate::linalg::inverse3;
 use crate::status::Failure;
 use crate::units::{Hz, KPa};
 
+/// Most reference readings one calibration takes.
+pub const MAX_REFERENCES: usize = 128;
+
 /// `x^y` of the power law. On the host `libm::pow`; in the firmware images
 /// (`target_os = "none"`) `exp(y ln x)`, which keeps libm's `pow` (2.5 KiB) out of the STM32
 /// image's 64 KiB of flash (`docs/firmware.md`): for the exponents and moduli of a calibration
@@ -300,7 +303,7 @@ fn interior_loo_sigma(data: &[RefPoint]) -> Option<f64> {
 /// but the lowest and the highest modulus), of the mean over the group of the resonance read
 /// less what the curve `fit` makes of the other moduli's readings (at every force) predicts
 /// for that reading (at its modulus, and at its force for a curve that takes one). `None` with
-/// fewer than five distinct moduli, more than [`crate::profile::MAX_REFERENCES`] readings (a
+/// fewer than five distinct moduli, more than [`MAX_REFERENCES`] readings (a
 /// fit's scratch copy is on the stack) or a fit that fails. `fit` is given all of `data` and the
 /// modulus to leave out of its fit ([`PowerLaw::fit_without`] copies the others). The leave-one-out test of
 /// the power law's misfit and of the choice between the power law and the contact law
@@ -310,7 +313,7 @@ pub(crate) fn held_out_rms<F: Fn(&RefPoint) -> f64>(
     interior: bool,
     fit: impl Fn(&[RefPoint], f64) -> Option<F>,
 ) -> Option<f64> {
-    if distinct_moduli(data) < 5 || data.len() > crate::profile::MAX_REFERENCES {
+    if distinct_moduli(data) < 5 || data.len() > MAX_REFERENCES {
         return None;
     }
     let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
@@ -540,7 +543,7 @@ impl PowerLaw {
     }
 
     /// `fit` (a fit of this law) of the readings of `data` not at modulus `e` (the first
-    /// [`crate::profile::MAX_REFERENCES`] of them), copied to a scratch array: the held-out
+    /// [`MAX_REFERENCES`] of them), copied to a scratch array: the held-out
     /// fits of [`held_out_rms`]. Not inlined: the copy (4 KiB) sits on the stack only while it
     /// runs.
     #[inline(never)]
@@ -549,7 +552,7 @@ impl PowerLaw {
         e: f64,
         fit: fn(&[RefPoint]) -> Result<PowerLaw, FitError>,
     ) -> Result<PowerLaw, FitError> {
-        let mut scratch = [RefPoint::default(); crate::profile::MAX_REFERENCES];
+        let mut scratch = [RefPoint::default(); MAX_REFERENCES];
         let mut n = 0;
         for (s, x) in scratch
             .iter_mut()

@@ -2,22 +2,26 @@
 //! and the typed [`Reading`] it ends in.
 //!
 //! The same state machine runs in the firmware's measurement task and on the host (through
-//! [`crate::runner`]): it hands out one [`PointPlan`] at a time, takes back each finished
+//! [`crate::reading::runner`]): it hands out one [`PointPlan`] at a time, takes back each finished
 //! [`PointRaw`], and at the end estimates the resonance and maps it through the calibration.
 
+pub mod driver;
+pub mod pipeline;
+pub mod runner;
+
+use crate::engine::sweep::{
+    point_from_raw, PointError, SettingsError, Sweep, SweepPoint, SweepSettings, MAX_POINTS,
+};
 use crate::engine::{PointPlan, PointRaw};
 use crate::estimate::hold::{Hold, HoldSettings};
 use crate::estimate::ringdown::{Ringdown, RingdownSettings};
 use crate::estimate::staged::{Refine, Staged, StagedSettings};
-use crate::estimate::{self, Estimate};
+use crate::estimate::{self, Estimate, Resonance};
 use crate::hal::FrontEndScale;
 use crate::loadcell::RawForce;
-use crate::pipeline::conclude;
-use crate::profile::UnitProfile;
+use crate::reading::pipeline::conclude;
 use crate::status::{Failure, Status};
-use crate::sweep::{
-    point_from_raw, PointError, SettingsError, Sweep, SweepPoint, SweepSettings, MAX_POINTS,
-};
+use crate::unit::profile::{Reference, UnitProfile};
 use crate::units::{Hz, KPa, Seconds, Volts};
 use heapless::Vec;
 
@@ -59,27 +63,6 @@ pub enum Settings {
     Ringdown(RingdownSettings),
     /// hold.
     Hold(HoldSettings),
-}
-
-/// Which resonance a method reports and a calibration curve maps.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Resonance {
-    /// The motional (series) resonance of the mode: every method but `paper`, and the papers'
-    /// published curves (the simulated unit's motional resonance follows paper 003's `f_e`).
-    Motional,
-    /// The |Z| dip of paper 003's method, between the series and the parallel resonance.
-    ImpedanceDip,
-}
-
-impl Resonance {
-    /// Stable name (`motional`, `impedance-dip`).
-    pub const fn name(self) -> &'static str {
-        match self {
-            Resonance::Motional => "motional",
-            Resonance::ImpedanceDip => "impedance-dip",
-        }
-    }
 }
 
 /// The default method of every caller: the firmware's measurement task and `probe-bench`.
@@ -218,7 +201,7 @@ impl Method {
     }
 }
 
-pub use crate::profile::AirReference;
+pub use crate::unit::profile::AirReference;
 
 /// The outcome of one reading: a number with its uncertainty, or a failure code.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -250,6 +233,36 @@ pub struct Reading {
 }
 
 impl Reading {
+    /// The reference a reading on a phantom of `modulus` gives, when it has a resonance with
+    /// its uncertainty and a Q, and — with a load cell — a steady force inside the window
+    /// (its status does not matter otherwise: the uncalibrated unit refuses the modulus, not
+    /// the resonance; a reference pressed too lightly, too hard, unsteadily or not at all is
+    /// no reference).
+    pub fn reference(&self, modulus: KPa) -> Option<Reference> {
+        let r = self;
+        if let crate::status::Status::Failed(f) = r.status {
+            if f.is_press() {
+                return None;
+            }
+        }
+        match (r.resonance, r.resonance_sigma, r.q) {
+            (Some(f), Some(s), Some(q)) if f.0.is_finite() && s.0.is_finite() && q > 0.0 => {
+                Some(Reference {
+                    modulus_kpa: modulus.0 as f64,
+                    resonance_hz: f.0 as f64,
+                    sigma_hz: (s.0 as f64).max(1e-4),
+                    q: q as f64,
+                    force_n: r
+                        .force
+                        .map(|w| w.mean.0 as f64)
+                        .filter(|f| f.is_finite() && *f > 0.0)
+                        .unwrap_or(0.0),
+                })
+            }
+            _ => None,
+        }
+    }
+
     /// A reading that failed before any estimate.
     pub fn failed(method: Method, failure: Failure, probe_time: Seconds, points: u16) -> Self {
         Self {
@@ -463,7 +476,7 @@ impl SweepMeasurement {
         }
     }
 
-    /// The reading, through the one [`pipeline`](crate::pipeline) with the unit's profile and
+    /// The reading, through the one [`pipeline`](crate::reading::pipeline) with the unit's profile and
     /// the load cell's counts over the reading's window.
     pub fn finish(&self, unit: &UnitProfile, force: Option<RawForce>) -> Reading {
         conclude(
@@ -485,7 +498,7 @@ pub trait Measurement {
     fn accept(&mut self, raw: &PointRaw) -> Option<SweepPoint>;
     /// True when no more points are needed.
     fn is_complete(&self) -> bool;
-    /// The reading, through the one [`pipeline`](crate::pipeline) with the unit's profile and
+    /// The reading, through the one [`pipeline`](crate::reading::pipeline) with the unit's profile and
     /// the load cell's counts over the reading's window (`None`: no load cell, or it was
     /// silent).
     fn finish(&self, unit: &UnitProfile, force: Option<RawForce>) -> Reading;

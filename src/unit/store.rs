@@ -47,10 +47,10 @@
 //! reference, and says so in [`Loaded::source`] so the caller can log a warning and raise a
 //! status flag. Nothing here panics, whatever the flash contains.
 
-use crate::calibration::{PowerLaw, QModel, Source};
-use crate::contact_law::{self, ContactLaw};
 use crate::loadcell::{ForceWindow, LoadCellCal, LoadCellCounts};
-pub use crate::profile::{AirReference, UnitProfile};
+use crate::unit::calibration::{PowerLaw, QModel, Source};
+use crate::unit::contact_law::{self, ContactLaw};
+pub use crate::unit::profile::{AirReference, UnitProfile};
 use crate::units::{Farads, Hz, Newtons, Siemens};
 use embedded_storage::nor_flash::NorFlash;
 
@@ -417,8 +417,8 @@ pub fn encode(record: &UnitProfile, seq: u32) -> [u8; RECORD_LEN] {
             },
         source_code(c.source),
         match record.resonance {
-            crate::measure::Resonance::Motional => 0,
-            crate::measure::Resonance::ImpedanceDip => 1,
+            crate::estimate::Resonance::Motional => 0,
+            crate::estimate::Resonance::ImpedanceDip => 1,
         },
         0,
     ]);
@@ -487,8 +487,8 @@ pub fn decode(buf: &[u8; RECORD_LEN]) -> Option<(u32, UnitProfile)> {
     let seq = u32::from_le_bytes(r.take());
     let [flags, source, resonance, _] = r.take::<4>();
     let resonance = match resonance {
-        0 => crate::measure::Resonance::Motional,
-        1 => crate::measure::Resonance::ImpedanceDip,
+        0 => crate::estimate::Resonance::Motional,
+        1 => crate::estimate::Resonance::ImpedanceDip,
         _ => return None,
     };
     let source = source_of(source)?;
@@ -561,7 +561,7 @@ mod tests {
         cal.source = Source::Fitted;
         let rec = UnitProfile {
             calibration: cal,
-            resonance: crate::measure::Resonance::ImpedanceDip,
+            resonance: crate::estimate::Resonance::ImpedanceDip,
             q_model: Some(QModel {
                 q0: 2.5,
                 q1: 1.25,

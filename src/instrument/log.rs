@@ -43,27 +43,27 @@
 //! coarse settling and `integrate_s` the integration; for ring-down the band, `NaN`, the burst
 //! and the ring. `status` of a reading is `ok` or a failure code of
 //! [`pzt_probe::Failure::code`]. `selftest` of `status` and `result` of `selftest` are
-//! `passed`, a fault code of [`crate::selftest::SelfTestFault::code`] (`status`: also
+//! `passed`, a fault code of [`crate::instrument::selftest::SelfTestFault::code`] (`status`: also
 //! `not_run`); `ref` is `air` (the air reference's `C0`) or `nominal` (the nominal plate).
 //! `isr_mean`
 //! and `isr_max` are the sample interrupt's work per batch (plan intake, demodulation, DAC
 //! refill, point hand-off) in `unit`: instructions under QEMU, core cycles on the STM32.
 
-use crate::measure::Settings;
-use crate::session::Event;
-use crate::store::{SlotState, StoreError};
+use crate::instrument::session::Event;
+use crate::reading::Settings;
+use crate::unit::store::{SlotState, StoreError};
 
 /// One defmt line per session event (formats in the crate docs).
 pub fn event(e: Event) {
     match e {
         Event::Loaded(source) => match source {
-            crate::store::LoadSource::Stored { slot, seq, other } => defmt::info!(
+            crate::unit::store::LoadSource::Stored { slot, seq, other } => defmt::info!(
                 "store loaded slot={=u8} seq={=u32} other={=str}",
                 slot,
                 seq,
                 slot_name(other)
             ),
-            crate::store::LoadSource::Fallback { slots } => defmt::warn!(
+            crate::unit::store::LoadSource::Fallback { slots } => defmt::warn!(
                 "store fallback slot0={=str} slot1={=str} calibration=paper-experiment",
                 slot_name(slots[0]),
                 slot_name(slots[1])
@@ -150,8 +150,8 @@ pub fn event(e: Event) {
         Event::Help => defmt::info!(
             "help commands={=str} methods={=str} default={=str}",
             "measure,stream,method,sweep,staged,ringdown,air,calibrate,force,weigh,store,reload,status,selftest,help",
-            crate::measure::METHOD_NAMES,
-            crate::measure::DEFAULT_METHOD.name()
+            crate::reading::METHOD_NAMES,
+            crate::reading::DEFAULT_METHOD.name()
         ),
         Event::Stalled(tag) => defmt::error!("stalled tag={=u16}", tag),
         Event::LoadCell { cal, window } => defmt::info!(
@@ -188,12 +188,12 @@ pub fn event(e: Event) {
             c.min_kpa as f32,
             c.max_kpa as f32
         ),
-        Event::Refused(crate::session::Refusal::SelfTest(f)) => defmt::warn!(
+        Event::Refused(crate::instrument::session::Refusal::SelfTest(f)) => defmt::warn!(
             "refused selftest={=str} message={=str}",
             f.code(),
             f.message()
         ),
-        Event::Refused(crate::session::Refusal::Boot(e)) => defmt::warn!(
+        Event::Refused(crate::instrument::session::Refusal::Boot(e)) => defmt::warn!(
             "refused boot={=str} message={=str}",
             e.code(),
             e.message()
@@ -218,7 +218,7 @@ pub fn event(e: Event) {
                 air,
                 q_model,
                 references,
-                crate::selftest::outcome_code(selftest)
+                crate::instrument::selftest::outcome_code(selftest)
             );
             // A failed bring-up step, on a line of its own (the status line's format stays).
             if let Some(b) = boot {
@@ -230,11 +230,11 @@ pub fn event(e: Event) {
 }
 
 /// The `selftest` line (and, when it failed, the fault's line).
-fn selftest(r: &crate::selftest::SelfTestReport) {
+fn selftest(r: &crate::instrument::selftest::SelfTestReport) {
     let e = &r.expected;
     defmt::info!(
         "selftest result={=str} f_hz={=f32} c_pf={=f32} c_sigma_pf={=f32} ref_c_pf={=f32} tol={=f32} ref={=str} g_s={=f32} i_a={=f32} v={=f32} probe_time_s={=f32}",
-        crate::selftest::outcome_code(Some(r.outcome)),
+        crate::instrument::selftest::outcome_code(Some(r.outcome)),
         r.freq.0,
         r.capacitance.0 * 1e12,
         r.capacitance_sigma.0 * 1e12,
@@ -365,11 +365,9 @@ pub fn overruns_if_grew(seen: &mut crate::counters::Overruns) {
 pub enum Report {
     /// A session event.
     Event(Event),
-    /// A host line the parser refused.
-    Rejected(crate::command::CommandError),
-    /// A `sim` line of the QEMU image's script that is refused.
-    #[cfg(feature = "sim")]
-    SimRejected(crate::board::sim_script::SimError),
+    /// A host line the parser refused, or a `sim` line of the QEMU image's script: the
+    /// refusal's message.
+    Rejected(&'static str),
     /// The health counters.
     Counters,
     /// The end of the QEMU image's script, with its overall success.
@@ -384,13 +382,8 @@ pub fn report(r: Report, unit: &str, seen: &mut crate::counters::Overruns) -> Op
             event(e);
             None
         }
-        Report::Rejected(e) => {
-            defmt::warn!("rejected error={=str}", e.message());
-            None
-        }
-        #[cfg(feature = "sim")]
-        Report::SimRejected(e) => {
-            defmt::warn!("rejected error={=str}", e.message());
+        Report::Rejected(message) => {
+            defmt::warn!("rejected error={=str}", message);
             None
         }
         Report::Counters => {

@@ -31,22 +31,23 @@
 //! `not_locked` or with the fit's failure); the drive still follows a moved estimate, and after
 //! [`TrackerConfig::lost_after`] such segments in a row the tracker acquires again (so a new
 //! contact after a lift-off is found without a command). Every reading, acquisition or segment,
-//! is concluded by the one pipeline ([`crate::pipeline::conclude`], in [`conclude`] here) with
+//! is concluded by the one pipeline ([`crate::reading::pipeline::conclude`], in [`conclude`] here) with
 //! the unit's profile: lift-off becomes `no_contact`, a light touch `bad_contact`, and so on.
 
 use crate::dsp::dds::{frequency_hz, tuning_word};
 use crate::dsp::lockin::{solve, ChannelSums, ReferenceSums};
+use crate::engine::sweep::{amplitude_codes, Drive, SettingsError};
+use crate::engine::window_budget_samples;
 use crate::engine::{PointPlan, PointRaw};
 use crate::estimate::conductance::GROSS_CHI2;
 use crate::estimate::hold::{self, Hold, HoldSettings, HoldWindow, MAX_WINDOWS};
 use crate::estimate::Estimate;
 use crate::hal::FrontEndScale;
 use crate::loadcell::RawForce;
-use crate::measure::{Method, Reading};
-use crate::profile::UnitProfile;
-use crate::reading::{window_budget_samples, PointSource, Wanted};
+use crate::reading::driver::{PointSource, Wanted};
+use crate::reading::{Method, Reading};
 use crate::status::{Failure, Status};
-use crate::sweep::{amplitude_codes, Drive, SettingsError};
+use crate::unit::profile::UnitProfile;
 use crate::units::{Hz, Seconds, Volts};
 use core::f64::consts::PI;
 use num_complex::Complex64 as C64;
@@ -250,7 +251,7 @@ pub fn conclude(
     points: u16,
     force: Option<RawForce>,
 ) -> Reading {
-    crate::pipeline::conclude(METHOD, est, unit, took, points, force)
+    crate::reading::pipeline::conclude(METHOD, est, unit, took, points, force)
 }
 
 /// Shortest stretch of time a stream reading's contact force is taken over, s: eight of the
@@ -564,7 +565,7 @@ pub async fn run_with<S: PointSource>(
 mod tests {
     use super::*;
     use crate::dsp::lockin::LockInSums;
-    use crate::profile::AirReference;
+    use crate::unit::profile::AirReference;
     use crate::units::{Farads, Siemens};
 
     fn unit() -> UnitProfile {

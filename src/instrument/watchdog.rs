@@ -2,7 +2,7 @@
 //! life, and the watchdog is fed only while that promise holds.
 //!
 //! The measurement task (priority 1) serves commands one at a time; some run long stretches of
-//! synchronous code with no await in them — `calibrate fit` ([`crate::profile::calibrate`]: the
+//! synchronous code with no await in them — `calibrate fit` ([`crate::unit::profile::calibrate`]: the
 //! contact law's Levenberg–Marquardt fit, once over all references and once per held-out
 //! modulus, and the power law's, in software `f64`) takes 0.24 s on the Cortex-M4 for 10
 //! references on 5 moduli, 0.8–1.1 s for 100 on 5 and 3 minutes for 32 on 32
@@ -30,8 +30,8 @@ use core::sync::atomic::{AtomicU32, Ordering};
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Millis(pub u32);
 
-/// The most references a `calibrate fit` takes in the firmware ([`crate::session::MAX_REFERENCES`]).
-pub const FIT_MAX_REFERENCES: usize = crate::session::MAX_REFERENCES;
+/// The most references a `calibrate fit` takes in the firmware ([`crate::instrument::session::MAX_REFERENCES`]).
+pub const FIT_MAX_REFERENCES: usize = crate::instrument::session::MAX_REFERENCES;
 
 /// The longest `calibrate fit` measured on the Cortex-M4, in ms at 170 MHz (one cycle per
 /// instruction), rounded up: [`FIT_MAX_REFERENCES`] references on as many moduli — 30.31 G

@@ -5,40 +5,14 @@
 //! interrupt), the host ([`SyncSource`]: engine and stream in one loop, for `probe-bench` and
 //! the tests) and the QEMU cost image all take readings through [`read`].
 
-use crate::engine::{PointPlan, PointRaw, SampleEngine};
+use crate::engine::sweep::SweepPoint;
+use crate::engine::{window_budget_samples, PointPlan, PointRaw, SampleEngine, BATCH};
 use crate::hal::{AdcFrame, FrontEndScale, SampleStream, StreamError};
 use crate::loadcell::{ForceSource, RawForce};
-use crate::measure::{Measurement, Method, Procedure, Reading, Settings};
-use crate::profile::UnitProfile;
+use crate::reading::{Measurement, Method, Procedure, Reading, Settings};
 use crate::status::Failure;
-use crate::sweep::SweepPoint;
+use crate::unit::profile::UnitProfile;
 use crate::units::{DacCode, Seconds};
-
-/// Samples per batch (one DMA half-buffer on the STM32: 2.5 ms at 10 kHz). Short, because every
-/// plan waits [`PIPELINE_BATCHES`] of them (and the rest of the batch it was loaded in) before it
-/// plays: with 50-sample batches a hold's first segment drove 10 ms longer off the resonance
-/// and the default read at 1.38× the Cramér–Rao bound at 9.9 τ; with 25, 1.28× at 9.8 τ
-/// (docs/methods.md, session 9). The sample interrupt's overhead per batch doubles with it
-/// (docs/firmware.md).
-pub const BATCH: usize = 25;
-
-/// Batches between the sample engine's generating a DAC batch and the ADC batch captured while
-/// it played, on every board: the DAC's DMA runs over two half-buffers, both filled before it
-/// starts, and the sample interrupt refills the half that just played, which plays again two
-/// periods later (the STM32's circular DMA, the QEMU board's emulation of it, and the host's
-/// simulated board, so that a plan takes effect as late on the host as on the target).
-pub const PIPELINE_BATCHES: usize = 2;
-
-/// The stall rule: samples a window of `plan` may take before it counts as lost — its
-/// settling, its cycles and two more (to find the window's boundary), and the stream's
-/// pipeline of `latency_batches` plus two batches of margin.
-pub fn window_budget_samples(plan: &PointPlan, fs: f64, latency_batches: usize) -> u64 {
-    let f = crate::dsp::dds::frequency_hz(plan.ftw, fs).max(1.0);
-    let period = fs / f;
-    plan.settle_samples as u64
-        + ((plan.cycles as f64 + 2.0) * period) as u64
-        + (BATCH * (latency_batches + 2)) as u64
-}
 
 /// Where a reading's points come from: the sample engine behind the board's streams.
 #[allow(async_fn_in_trait)] // used with concrete types only, in one task at a time
@@ -123,7 +97,7 @@ pub async fn read<S: PointSource>(
 
 /// What the plan loop ([`run_plans`]) needs of a measurement: its plans, one at a time, and
 /// the windows that answer them. Every [`Measurement`] is one; the power-on self-test
-/// ([`crate::selftest`]) is one without a reading at its end.
+/// ([`crate::instrument::selftest`]) is one without a reading at its end.
 pub trait Plans {
     /// The next point to ask for, or `None` (done, or waiting for the point in flight).
     fn next_plan(&mut self) -> Option<PointPlan>;
@@ -344,6 +318,7 @@ impl<S: SampleStream + ForceSource> PointSource for SyncSource<'_, S> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::engine::PIPELINE_BATCHES;
     use crate::hal::FrontEndScale;
 
     /// A stream whose pipeline never delivers frames, claiming `latency` batches.
@@ -380,7 +355,7 @@ mod tests {
             let mut stream = NeverPlays { latency, calls: 0 };
             let mut engine = SampleEngine::new();
             let unit = UnitProfile::fallback();
-            let r = crate::runner::run_reading(
+            let r = crate::reading::runner::run_reading(
                 &mut stream,
                 &mut engine,
                 Method::Hold,
@@ -388,7 +363,7 @@ mod tests {
                 &unit,
                 |_| {},
             );
-            assert_eq!(r.err(), Some(crate::runner::RunError::Stalled));
+            assert_eq!(r.err(), Some(crate::reading::runner::RunError::Stalled));
             assert!(stream.calls < 2 * latency as u32 + 100, "{}", stream.calls);
         }
     }
