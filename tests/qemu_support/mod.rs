@@ -64,7 +64,8 @@ pub fn require_tools() {
     }
     assert!(
         missing.is_empty(),
-        "this test runs the firmware image in QEMU and cannot run without its tools:\n  {}",
+        "this test runs the firmware image in QEMU and cannot run without its tools \
+         (`scripts/test` installs them all through `scripts/setup`):\n  {}",
         missing.join("\n  ")
     );
 }
