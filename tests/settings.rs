@@ -225,7 +225,7 @@ fn random_input_never_panics() {
 fn auto_falls_back_and_names_the_method_used() {
     use hal_sim::{NoiseScene, Scene};
     use pzt_probe::board::sim::read;
-    use pzt_probe::estimate::staged::{Refine, StagedSettings};
+    use pzt_probe::estimate::staged::StagedSettings;
     use pzt_probe::reading::Settings;
     // Only the method used and the resonance are checked: no unit profile is needed.
     let cal = pzt_probe::unit::profile::UnitProfile::fallback();
@@ -248,7 +248,7 @@ fn auto_falls_back_and_names_the_method_used() {
     let narrow = StagedSettings {
         band_start: Hz(170.0),
         band_stop: Hz(200.0),
-        ..StagedSettings::default_for(Refine::Bvd)
+        ..StagedSettings::DEFAULT
     };
     let r = read(
         &scene,

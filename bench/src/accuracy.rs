@@ -49,14 +49,7 @@ impl Options {
     /// The generator's set (`probe-bench accuracy`).
     pub fn full() -> Self {
         Self {
-            noise_methods: vec![
-                Method::Auto,
-                Method::Hold,
-                Method::Fit,
-                Method::Track,
-                Method::Ringdown,
-                Method::Adaptive,
-            ],
+            noise_methods: vec![Method::Auto, Method::Hold, Method::Fit],
             noise_moduli: vec![200.0, 500.0, 1500.0],
             noise_seeds: 20,
             bias_moduli: vec![200.0, 350.0, 500.0, 700.0, 1000.0, 1500.0, 2000.0],

@@ -5,8 +5,7 @@ use hal_sim::{NoiseScene, Scene};
 use pzt_probe::board::sim::read;
 use pzt_probe::engine::sweep::SweepSettings;
 use pzt_probe::estimate::hold::HoldSettings;
-use pzt_probe::estimate::ringdown::RingdownSettings;
-use pzt_probe::estimate::staged::{Refine, StagedSettings};
+use pzt_probe::estimate::staged::StagedSettings;
 use pzt_probe::reading::{Method, Settings};
 use pzt_probe::unit::calibration::PowerLaw;
 use pzt_probe::unit::profile::UnitProfile;
@@ -74,55 +73,16 @@ pub fn configs() -> Vec<Config> {
             &s,
         ));
     }
-    for int in [10.0, 20.0, 40.0] {
-        let s = StagedSettings {
-            integrate: ms(int),
-            ..StagedSettings::default_for(Refine::Conductance)
-        };
-        v.push(Config::new(Method::Adaptive, format!("{int} ms"), &s));
-    }
     for int in [10.0, 20.0, 40.0, 80.0] {
         let s = StagedSettings {
             integrate: ms(int),
-            ..StagedSettings::default_for(Refine::Bvd)
+            ..StagedSettings::DEFAULT
         };
         v.push(Config::new(Method::Fit, format!("{int} ms"), &s));
     }
-    for (steps, int) in [(4u8, 20.0), (8, 20.0), (8, 40.0), (16, 40.0), (16, 80.0)] {
-        let s = StagedSettings {
-            refine_points: steps,
-            integrate: ms(int),
-            ..StagedSettings::default_for(Refine::Track)
-        };
-        v.push(Config::new(
-            Method::Track,
-            format!("{steps} steps, {int} ms"),
-            &s,
-        ));
-    }
-    for (stages, burst, ring) in [
-        (1u8, 20.0, 20.0),
-        (1, 40.0, 40.0),
-        (2, 20.0, 20.0),
-        (2, 40.0, 40.0),
-        (2, 60.0, 60.0),
-        (3, 60.0, 60.0),
-    ] {
-        let s = RingdownSettings {
-            stages,
-            burst: ms(burst),
-            ring: ms(ring),
-            ..RingdownSettings::DEFAULT
-        };
-        v.push(Config::new(
-            Method::Ringdown,
-            format!("{stages}× {burst}+{ring} ms"),
-            &s,
-        ));
-    }
     // hold subtracts the unit's static admittance: the profile's air reference supplies it.
     let air = HoldSettings::DEFAULT;
-    // The fast hold: auto's first stage (docs/methods.md, session 9).
+    // The fast hold: auto's first stage (docs/methods.md).
     let fast = HoldSettings::FAST;
     v.push(Config {
         method: Method::Hold,

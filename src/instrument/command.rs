@@ -16,10 +16,9 @@
 //! | line | command |
 //! |---|---|
 //! | `measure` | take a reading with the current method and settings |
-//! | `method <name>` | choose the method by its [`Method::name`] — `auto` (the default: hold, falling back to fit, then sweep-G), `fit`, `sweep-g`, `paper`, `adaptive`, `track`, `ringdown`, ... — with its default settings |
+//! | `method <name>` | choose the method by its [`Method::name`] — `auto` (the default: hold, falling back to fit, then sweep-G), `hold`, `fit`, `sweep-g`, `paper` — with its default settings |
 //! | `sweep <start_hz> <stop_hz> <step_hz> <settle_s> <integrate_s> <drive_v>` | stepped-sweep settings (paper, sweep-g), validated against the board |
-//! | `staged <band_start_hz> <band_stop_hz> <coarse_points> <coarse_settle_s> <integrate_s> <refine_points> <refine_span> <settle_tau> <drive_v>` | two-stage settings (auto, fit, adaptive, track), validated against the board |
-//! | `ringdown <band_start_hz> <band_stop_hz> <seed_hz> <burst_s> <ring_s> <stages> <window_cycles> <drive_v>` | ring-down settings, validated against the board |
+//! | `staged <band_start_hz> <band_stop_hz> <coarse_points> <coarse_settle_s> <integrate_s> <refine_points> <refine_span> <settle_tau> <drive_v>` | the fit method's settings (also auto's fit stage), validated against the board |
 //! | `sweep default` | back to the method's default settings |
 //! | `air` | measure the air reference (probe lifted off) |
 //! | `calibrate add <modulus_kpa>` | measure a reference sample of known modulus |
@@ -32,8 +31,7 @@
 //! | `stream <seconds>` | read continuously (0.1–600 s): numbered, time-stamped readings ([`crate::instrument::continuous`]) |
 
 use crate::engine::sweep::{SettingsError, SweepSettings};
-use crate::estimate::ringdown::RingdownSettings;
-use crate::estimate::staged::{Refine, StagedSettings};
+use crate::estimate::staged::StagedSettings;
 use crate::hal::FrontEndScale;
 use crate::loadcell::ForceWindow;
 use crate::reading::{Method, Settings};
@@ -140,9 +138,7 @@ impl CommandError {
             CommandError::MissingArgument => "missing argument",
             CommandError::TooManyArguments => "too many arguments",
             CommandError::BadNumber => "not a finite number",
-            CommandError::UnknownMethod => {
-                "unknown method (auto, fit, sweep-g, paper, adaptive, track, ringdown, hold)"
-            }
+            CommandError::UnknownMethod => "unknown method (auto, hold, fit, sweep-g, paper)",
             CommandError::UnknownSubcommand => {
                 "unknown calibrate sub-command (add, fit, clear, paper)"
             }
@@ -270,8 +266,8 @@ const POW10: [f64; 23] = [
     1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
 ];
 
-/// The command line that sets a method's settings: the inverse of [`parse`] for `sweep`,
-/// `staged` and `ringdown` lines (`Display` writes the line; `f32` prints its shortest exact
+/// The command line that sets a method's settings: the inverse of [`parse`] for `sweep` and
+/// `staged` lines (`Display` writes the line; `f32` prints its shortest exact
 /// form, so the line parses back to the same settings). Hold's settings have no command.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SettingsLine(Settings);
@@ -307,18 +303,6 @@ impl core::fmt::Display for SettingsLine {
                 s.settle_tau,
                 s.drive.0
             ),
-            Settings::Ringdown(s) => write!(
-                f,
-                "ringdown {} {} {} {} {} {} {} {}",
-                s.band_start.0,
-                s.band_stop.0,
-                s.seed.0,
-                s.burst.0,
-                s.ring.0,
-                s.stages,
-                s.window_cycles,
-                s.drive.0
-            ),
             Settings::Hold(_) => Ok(()),
         }
     }
@@ -352,7 +336,6 @@ pub fn parse(line: &[u8], scale: &FrontEndScale) -> Result<Command, CommandError
         }
         "sweep" => sweep(args, scale).map(|s| Command::Settings(Settings::Sweep(s))),
         "staged" => staged(args, scale).map(|s| Command::Settings(Settings::Staged(s))),
-        "ringdown" => ringdown(args, scale).map(|s| Command::Settings(Settings::Ringdown(s))),
         "calibrate" => calibrate(args),
         "force" => force_window(args),
         "weigh" => {
@@ -423,8 +406,7 @@ fn sweep(args: &[&str], scale: &FrontEndScale) -> Result<SweepSettings, CommandE
 }
 
 /// `staged <band_start_hz> <band_stop_hz> <coarse_points> <coarse_settle_s> <integrate_s>
-/// <refine_points> <refine_span> <settle_tau> <drive_v>`: valid for one of the two-stage
-/// refinements at least (the firmware checks the active method's own).
+/// <refine_points> <refine_span> <settle_tau> <drive_v>`: the fit method's settings.
 fn staged(args: &[&str], scale: &FrontEndScale) -> Result<StagedSettings, CommandError> {
     arity(args, 9)?;
     let [start, stop, coarse_points, coarse_settle, integrate, refine_points, refine_span, settle_tau, drive] =
@@ -440,35 +422,7 @@ fn staged(args: &[&str], scale: &FrontEndScale) -> Result<StagedSettings, Comman
         settle_tau,
         drive: Volts(drive),
     };
-    let bvd = s.validate(Refine::Bvd, scale).map(|_| ());
-    let any = bvd.or_else(|e| {
-        [Refine::Conductance, Refine::Track]
-            .iter()
-            .any(|r| s.validate(*r, scale).is_ok())
-            .then_some(())
-            .ok_or(e)
-    });
-    any.map_err(CommandError::Settings)?;
-    Ok(s)
-}
-
-/// `ringdown <band_start_hz> <band_stop_hz> <seed_hz> <burst_s> <ring_s> <stages>
-/// <window_cycles> <drive_v>`.
-fn ringdown(args: &[&str], scale: &FrontEndScale) -> Result<RingdownSettings, CommandError> {
-    arity(args, 8)?;
-    let [start, stop, seed, burst, ring, stages, window_cycles, drive] = numbers(args)?;
-    let s = RingdownSettings {
-        band_start: Hz(start),
-        band_stop: Hz(stop),
-        seed: Hz(seed),
-        burst: Seconds(burst),
-        ring: Seconds(ring),
-        stages: count(stages)?,
-        window_cycles: count(window_cycles)?,
-        drive: Volts(drive),
-    };
-    s.validate::<{ crate::estimate::ringdown::MAX_WINDOWS }>(scale)
-        .map_err(CommandError::Settings)?;
+    s.validate(scale).map_err(CommandError::Settings)?;
     Ok(s)
 }
 
@@ -620,15 +574,9 @@ mod tests {
                 drive: Volts(5.0),
             })))
         );
-        // Every method's defaults (and the other two-stage refinements'), as `SettingsLine`
-        // spells them, parse back to themselves; hold's have no line.
-        let staged = [Refine::Conductance, Refine::Bvd, Refine::Track]
-            .map(|r| Settings::Staged(StagedSettings::default_for(r)));
-        for s in Method::ALL
-            .map(|m| m.default_settings())
-            .iter()
-            .chain(&staged)
-        {
+        // Every method's defaults, as `SettingsLine` spells them, parse back to themselves;
+        // hold's have no line.
+        for s in Method::ALL.map(|m| m.default_settings()).iter() {
             match SettingsLine::of(s) {
                 Some(line) => {
                     let line = std::format!("{line}");
@@ -637,10 +585,9 @@ mod tests {
                 None => assert!(matches!(s, Settings::Hold(_))),
             }
         }
-        // Settings valid for one two-stage refinement only: adaptive's three coarse points,
-        // track's zero span.
-        assert!(p("staged 170 290 3 0.02 0.02 5 0.8 3 5").is_ok());
-        assert!(p("staged 170 290 6 0.02 0.02 8 0 2 5").is_ok());
+        // Settings the fit method cannot take: three coarse points, a zero span.
+        assert!(p("staged 170 290 3 0.02 0.02 5 0.8 3 5").is_err());
+        assert!(p("staged 170 290 6 0.02 0.02 8 0 2 5").is_err());
         assert_eq!(
             p("calibrate add 279"),
             Ok(Command::CalibrateAdd(KPa(279.0)))
@@ -696,16 +643,7 @@ mod tests {
                 "staged 170 290 6 0.02 0.02 5 0.8 3 500",
                 set(S::DriveOutOfRange),
             ),
-            ("ringdown 170 290 230 0.04 0.04 2 2", MissingArgument),
-            (
-                "ringdown 170 290 230 0.04 0.04 5 2 5",
-                set(S::KnobOutOfRange),
-            ),
-            ("ringdown 170 290 230 0.04 0.04 2 2.5 5", OutOfRange),
-            (
-                "ringdown 170 290 9000 0.04 0.04 2 2 5",
-                set(S::AboveNyquist),
-            ),
+            ("ringdown 170 290 230 0.04 0.04 2 2 5", UnknownCommand),
             ("calibrate", MissingArgument),
             ("calibrate add", MissingArgument),
             ("calibrate add 0", OutOfRange),
@@ -827,7 +765,7 @@ mod tests {
     fn arbitrary_bytes_never_panic() {
         let mut x: u64 = 0x2545_F491_4F6C_DD1D;
         let mut lb = LineBuffer::new();
-        let alphabet = b"measure method sweep staged ringdown calibrate add fit auto status store air paper sweep-g default 0123456789.-e+ \n\r\xff\xc3\x80NaNinf";
+        let alphabet = b"measure method sweep staged calibrate add fit auto status store air paper sweep-g default 0123456789.-e+ \n\r\xff\xc3\x80NaNinf";
         let mut lines = 0;
         for _ in 0..200_000 {
             x ^= x << 13;

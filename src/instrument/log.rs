@@ -38,10 +38,9 @@
 //! exit ok=<bool>                                           (QEMU script end)
 //! ```
 //!
-//! `settings` carries a stepped sweep's own fields; for the two-stage methods (auto, fit,
-//! adaptive, track) `start_hz`/`stop_hz` are the band, `step_hz` is `NaN`, `settle_s` the
-//! coarse settling and `integrate_s` the integration; for ring-down the band, `NaN`, the burst
-//! and the ring. `status` of a reading is `ok` or a failure code of
+//! `settings` carries a stepped sweep's own fields; for the fit method's settings (fit,
+//! auto) `start_hz`/`stop_hz` are the band, `step_hz` is `NaN`, `settle_s` the coarse settling
+//! and `integrate_s` the integration. `status` of a reading is `ok` or a failure code of
 //! [`pzt_probe::Failure::code`]. `selftest` of `status` and `result` of `selftest` are
 //! `passed`, a fault code of [`crate::instrument::selftest::SelfTestFault::code`] (`status`: also
 //! `not_run`); `ref` is `air` (the air reference's `C0`) or `nominal` (the nominal plate).
@@ -149,7 +148,7 @@ pub fn event(e: Event) {
         ),
         Event::Help => defmt::info!(
             "help commands={=str} methods={=str} default={=str}",
-            "measure,stream,method,sweep,staged,ringdown,air,calibrate,force,weigh,store,reload,status,selftest,help",
+            "measure,stream,method,sweep,staged,air,calibrate,force,weigh,store,reload,status,selftest,help",
             crate::reading::METHOD_NAMES,
             crate::reading::DEFAULT_METHOD.name()
         ),
@@ -294,14 +293,6 @@ pub fn settings_fields(s: &Settings) -> [f32; 6] {
             f32::NAN,
             s.coarse_settle.0,
             s.integrate.0,
-            s.drive.0,
-        ],
-        Settings::Ringdown(s) => [
-            s.band_start.0,
-            s.band_stop.0,
-            f32::NAN,
-            s.burst.0,
-            s.ring.0,
             s.drive.0,
         ],
         Settings::Hold(_) => [f32::NAN; 6],

@@ -14,8 +14,7 @@ use crate::engine::sweep::{
 };
 use crate::engine::{PointPlan, PointRaw};
 use crate::estimate::hold::{Hold, HoldSettings};
-use crate::estimate::ringdown::{Ringdown, RingdownSettings};
-use crate::estimate::staged::{Refine, Staged, StagedSettings};
+use crate::estimate::staged::{Staged, StagedSettings};
 use crate::estimate::{self, Estimate, Resonance};
 use crate::hal::FrontEndScale;
 use crate::loadcell::RawForce;
@@ -35,14 +34,8 @@ pub enum Method {
     Paper,
     /// Stepped sweep, conductance maximum with a weighted `1/G` fit.
     SweepG,
-    /// Coarse sweep, then refine points around the peak settled from the estimated Q.
-    Adaptive,
     /// A few points, Butterworth–Van Dyke fit of the complex admittance.
     Fit,
-    /// Phase tracking onto the resonance after a coarse fit.
-    Track,
-    /// Burst, hold the drive, fit the free decay.
-    Ringdown,
     /// Seed with a ring-down, then hold the drive on the resonance and fit its response.
     Hold,
     /// The default strategy: hold (0.37 s), falling back to fit (0.7 s) and then to sweep-G
@@ -57,10 +50,8 @@ pub enum Method {
 pub enum Settings {
     /// paper, sweep-g.
     Sweep(SweepSettings),
-    /// adaptive, fit, track.
+    /// fit (and auto, whose fit stage it sets).
     Staged(StagedSettings),
-    /// ringdown.
-    Ringdown(RingdownSettings),
     /// hold.
     Hold(HoldSettings),
 }
@@ -70,7 +61,7 @@ pub const DEFAULT_METHOD: Method = Method::Auto;
 
 /// The names of [`Method::ALL`], as the firmware's `help` lists them (a test checks they are
 /// the same list).
-pub const METHOD_NAMES: &str = "paper,sweep-g,adaptive,fit,track,ringdown,hold,auto";
+pub const METHOD_NAMES: &str = "paper,sweep-g,fit,hold,auto";
 
 /// `Settings::from(&s)` for each method family's settings.
 macro_rules! settings_from {
@@ -85,7 +76,6 @@ macro_rules! settings_from {
 settings_from!(
     SweepSettings => Sweep,
     StagedSettings => Staged,
-    RingdownSettings => Ringdown,
     HoldSettings => Hold
 );
 impl From<&Settings> for Settings {
@@ -96,13 +86,10 @@ impl From<&Settings> for Settings {
 
 impl Method {
     /// Every method.
-    pub const ALL: [Method; 8] = [
+    pub const ALL: [Method; 5] = [
         Method::Paper,
         Method::SweepG,
-        Method::Adaptive,
         Method::Fit,
-        Method::Track,
-        Method::Ringdown,
         Method::Hold,
         Method::Auto,
     ];
@@ -112,10 +99,7 @@ impl Method {
         match self {
             Method::Paper => "paper",
             Method::SweepG => "sweep-g",
-            Method::Adaptive => "adaptive",
             Method::Fit => "fit",
-            Method::Track => "track",
-            Method::Ringdown => "ringdown",
             Method::Hold => "hold",
             Method::Auto => "auto",
         }
@@ -141,12 +125,7 @@ impl Method {
     pub const fn default_settings(self) -> Settings {
         match self {
             Method::Paper | Method::SweepG => Settings::Sweep(self.default_sweep()),
-            Method::Adaptive => Settings::Staged(StagedSettings::default_for(Refine::Conductance)),
-            Method::Fit | Method::Auto => {
-                Settings::Staged(StagedSettings::default_for(Refine::Bvd))
-            }
-            Method::Track => Settings::Staged(StagedSettings::default_for(Refine::Track)),
-            Method::Ringdown => Settings::Ringdown(RingdownSettings::DEFAULT),
+            Method::Fit | Method::Auto => Settings::Staged(StagedSettings::DEFAULT),
             Method::Hold => Settings::Hold(HoldSettings::DEFAULT),
         }
     }
@@ -526,7 +505,6 @@ impl Measurement for SweepMeasurement {
 enum Inner {
     Sweep(SweepMeasurement),
     Staged(Staged),
-    Ringdown(Ringdown),
     Hold(Hold),
     Auto {
         /// The first stage, hold (`None` when the band does not suit it).
@@ -608,14 +586,7 @@ impl Procedure {
             (Method::Paper | Method::SweepG, Settings::Sweep(s)) => {
                 Inner::Sweep(SweepMeasurement::new(method, s, scale, now_sample)?)
             }
-            (Method::Adaptive, Settings::Staged(s)) => {
-                Inner::Staged(s.validate(Refine::Conductance, scale)?)
-            }
-            (Method::Fit, Settings::Staged(s)) => Inner::Staged(s.validate(Refine::Bvd, scale)?),
-            (Method::Track, Settings::Staged(s)) => {
-                Inner::Staged(s.validate(Refine::Track, scale)?)
-            }
-            (Method::Ringdown, Settings::Ringdown(s)) => Inner::Ringdown(s.validate(scale)?),
+            (Method::Fit, Settings::Staged(s)) => Inner::Staged(s.validate(scale)?),
             (Method::Hold, Settings::Hold(s)) => Inner::Hold(s.validate(scale)?),
             (Method::Auto, Settings::Staged(s)) => {
                 // Validate every stage now: the interrupt must never see bad settings.
@@ -628,7 +599,7 @@ impl Procedure {
                 Inner::Auto {
                     hold: hold.validate(scale).ok(),
                     hold_result: None,
-                    first: s.validate(Refine::Bvd, scale)?,
+                    first: s.validate(scale)?,
                     first_result: None,
                     fallback: None,
                 }
@@ -660,7 +631,6 @@ impl Measurement for Procedure {
         match &mut self.inner {
             Inner::Sweep(m) => m.next_plan(),
             Inner::Staged(m) => m.next_plan(&self.scale),
-            Inner::Ringdown(m) => m.next_plan(),
             Inner::Hold(m) => m.next_plan(),
             Inner::Auto {
                 hold,
@@ -692,10 +662,6 @@ impl Measurement for Procedure {
         match &mut self.inner {
             Inner::Sweep(m) => m.accept(raw),
             Inner::Staged(m) => m.accept(raw, &self.scale),
-            Inner::Ringdown(m) => {
-                m.accept(raw, &self.scale);
-                None
-            }
             Inner::Hold(m) => {
                 m.accept(raw, &self.scale);
                 None
@@ -733,7 +699,6 @@ impl Measurement for Procedure {
         match &self.inner {
             Inner::Sweep(m) => m.is_complete(),
             Inner::Staged(m) => m.is_complete(),
-            Inner::Ringdown(m) => m.is_complete(),
             Inner::Hold(m) => m.is_complete(),
             Inner::Auto {
                 hold,
@@ -762,7 +727,6 @@ impl Measurement for Procedure {
         let (method, est, points) = match &self.inner {
             Inner::Sweep(m) => (self.method, m.estimate(), m.points().len() as u16),
             Inner::Staged(m) => (self.method, m.estimate(), m.len() as u16),
-            Inner::Ringdown(m) => (self.method, m.estimate(), self.windows),
             Inner::Hold(m) => (self.method, m.estimate(), self.windows),
             Inner::Auto {
                 hold_result: Some(r),

@@ -26,7 +26,7 @@ pub struct AnalyzeArgs {
     /// demodulated points of DAQ captures, sweep-G on the same points when the fit finds no
     /// trustworthy resonance), or any estimator that works on measured frequency points
     /// (`fit`; `sweep-g`: conductance maximum; `paper`: |Z| minimum). Methods that steer the
-    /// drive while measuring (adaptive, track, ringdown, hold) are refused.
+    /// drive while measuring (hold) are refused.
     #[arg(long, default_value = "auto")]
     pub method: String,
     /// Calibration curve from resonance (Hz) to modulus (kPa): `paper-experiment` (paper 003

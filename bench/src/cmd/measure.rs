@@ -175,12 +175,6 @@ pub fn describe_settings(s: &Settings) -> String {
             let (span, tau) = (s.refine_span, s.settle_tau);
             format!("band {f0}–{f1} Hz, {coarse} coarse points (settle {settle} ms), {refine} refine points/steps (span {span} linewidths, settle {tau} tau), integrate {int} ms, drive {drive} V")
         }
-        Settings::Ringdown(s) => {
-            let (f0, f1, seed, drive) = (s.band_start.0, s.band_stop.0, s.seed.0, s.drive.0);
-            let (stages, cycles) = (s.stages, s.window_cycles);
-            let (burst, ring) = (ms(s.burst), ms(s.ring));
-            format!("band {f0}–{f1} Hz, seed {seed} Hz, {stages} stage(s) of {burst} ms burst + {ring} ms ring, {cycles}-cycle windows, drive {drive} V")
-        }
         Settings::Hold(s) => {
             let (f0, f1, seed, drive) = (s.band_start.0, s.band_stop.0, s.seed.0, s.drive.0);
             let (burst, ring) = (ms(s.seed_burst), ms(s.seed_ring));

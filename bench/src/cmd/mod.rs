@@ -25,9 +25,9 @@ use pzt_probe::{Hz, Method, Seconds, Volts};
 pub struct MethodArgs {
     /// Resonance method: `auto` (the default, as in the firmware: hold, falling back to fit,
     /// then sweep-g), `paper` (|Z| minimum, 200–300 Hz in 1 Hz steps), `sweep-g` (conductance
-    /// maximum), `adaptive`, `fit`, `track`, `ringdown` or `hold` (see docs/methods.md).
-    /// For the two-stage methods `--start-hz/--stop-hz` set the band, `--settle-s` the coarse
-    /// settling and `--integrate-s` the integration per point; for ringdown and hold the band.
+    /// maximum), `fit` or `hold` (see docs/methods.md). For fit `--start-hz/--stop-hz` set
+    /// the band, `--settle-s` the coarse settling and `--integrate-s` the integration per
+    /// point; for hold the band.
     #[arg(long, default_value = pzt_probe::reading::DEFAULT_METHOD.name())]
     pub method: String,
     /// Sweep start frequency, Hz (default: the method's).
@@ -88,13 +88,6 @@ impl MethodArgs {
                 s.integrate = self.integrate_s.map(Seconds).unwrap_or(s.integrate);
                 s.drive = self.drive_v.map(Volts).unwrap_or(s.drive);
                 Settings::Staged(s)
-            }
-            Settings::Ringdown(mut s) => {
-                s.band_start = self.start_hz.map(Hz).unwrap_or(s.band_start);
-                s.band_stop = self.stop_hz.map(Hz).unwrap_or(s.band_stop);
-                s.seed = Hz(0.5 * (s.band_start.0 + s.band_stop.0));
-                s.drive = self.drive_v.map(Volts).unwrap_or(s.drive);
-                Settings::Ringdown(s)
             }
             Settings::Hold(_) => {
                 // The static admittance comes from the unit profile's air reference.
