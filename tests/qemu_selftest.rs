@@ -157,8 +157,7 @@ fn qemu_nominal_scene_passes_and_the_stack_stays_within_its_margin() {
 
     // The stack. The STM32 image's stack is the RAM region of memory.x (96 KiB: SRAM1 +
     // SRAM2) below its static RAM, which scripts/ci-firmware holds to 55 KiB: at least 41 KiB
-    // (56 192 B of statics today, docs/firmware.md: 42 112 B). The
-    // QEMU image runs the same tasks with the simulator on top (its set-up in `init` and on
+    // (docs/firmware.md gives today's statics and stack). The QEMU image runs the same tasks with the simulator on top (its set-up in `init` and on
     // every `sim` line inside the sample interrupt, which the STM32 does not have), so its
     // marks — the running tasks' and interrupts' (`used_bytes`, since `idle` repainted) and
     // the boot's (`init_bytes`) — bound the STM32's from above; the worst must leave 10 % of

@@ -151,7 +151,7 @@ fn in_the_papers_noise_fit_and_hold_read_to_2500_kpa_where_the_paper_method_stop
 fn every_method_reports_the_scatter_it_has() {
     for m in Method::ALL {
         if m == Method::Auto {
-            continue; // auto is fit here (covered); its fallback is sweep-g (covered)
+            continue; // auto's stages are hold, fit and sweep-g, each covered
         }
         let c = config(m, m.default_settings());
         for noise in [NoiseScene::Bench, NoiseScene::Paper] {

@@ -115,10 +115,9 @@ fn fit_names_interference_and_lost_contact() {
 }
 
 /// fit under mains hum, a known limitation: a harmonic within a linewidth of the resonance
-/// biases some of its readings by 3–5 of their stated σ. Since session 8 its misfit test asks
-/// the χ² that white residuals exceed once in ten thousand (`interference::chi2_limit_per_dof`)
-/// instead of the fixed 16: over 40 seeds mains-50 0 and mains-60 1 silent wrong numbers (with
-/// 16: 1 and 4). The one left scatters at 2.9 its stated σ² per degree of freedom (limit 4.3)
+/// biases some of its readings by 3–5 of their stated σ. Its misfit test asks the χ² that white
+/// residuals exceed once in ten thousand (`interference::chi2_limit_per_dof`): over 40 seeds
+/// mains-50 0 and mains-60 1 silent wrong numbers. The one left scatters at 2.9 its stated σ² per degree of freedom (limit 4.3)
 /// but 0.9 % of the admittance: the hum also inflates each point's own σ. Bounded here at 2 a
 /// scene so that it cannot grow unseen; the default strategy reads both scenes without one
 /// (`the_default_strategy_…`).

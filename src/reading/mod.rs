@@ -38,13 +38,13 @@ pub enum Method {
     Fit,
     /// Seed with a ring-down, then hold the drive on the resonance and fit its response.
     Hold,
-    /// The default strategy: hold (0.37 s), falling back to fit (0.7 s) and then to sweep-G
-    /// (6 s) while the resonance is not found or not resolved; the reading names the method
-    /// that produced it.
+    /// The default strategy: the fast hold over the band (no seed), falling back to fit and
+    /// then to sweep-G while the resonance is not found or not resolved; the reading names the
+    /// method that produced it.
     Auto,
 }
 
-/// Settings of a method: stepped sweeps, two-stage procedures, ring-down or hold.
+/// Settings of a method: stepped sweeps, the fit method's two stages, or hold.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Settings {
@@ -524,11 +524,8 @@ enum Inner {
 /// seeded at its centre.
 ///
 /// The fast hold ([`HoldSettings::FAST`]: no seed, four one-cycle windows at the band's centre,
-/// then on their estimate, one joint fit) reads 500 kPa in 134.6 ms (9.8 τ) at 1.28× the
-/// Cramér–Rao bound (1.09–1.44× over 200–2500 kPa), where the seeded hold took 369 ms at 1.21×
-/// (docs/methods.md, session 9). Its price: on the M4 its fits and the pipeline's inversion take
-/// 2.1–2.6 % of the 170 MHz core over so short a reading, over the 2 % budget
-/// (`tests/qemu_cost.rs`, `KNOWN_OVER_BUDGET`; docs/firmware.md).
+/// then on their estimate, one joint fit): its speed against the Cramér–Rao bound is in
+/// docs/speed-accuracy.md, its cost on the M4 in docs/firmware.md (`tests/qemu_cost.rs`).
 fn auto_hold(s: &StagedSettings) -> HoldSettings {
     HoldSettings {
         band_start: s.band_start,
