@@ -45,7 +45,7 @@
 
 use super::model::Motional;
 use crate::engine::sweep::SweepPoint;
-use crate::estimate::hold::Segment;
+use crate::estimate::resonator::Segment;
 use crate::linalg::LineFit;
 use crate::status::Failure;
 use num_complex::Complex64;
@@ -422,7 +422,7 @@ mod tests {
 
     #[test]
     fn hum_turning_in_the_residuals_is_interference() {
-        use crate::estimate::hold::{HoldWindow, Segment};
+        use crate::estimate::resonator::{HoldWindow, Segment};
         use num_complex::Complex32 as C32;
         let f_h = 225.0;
         let len = 2.0 / f_h;

@@ -4,7 +4,8 @@
 //! standard uncertainty or a [`Failure`] code. The checks every sweep shares (clipping, missing
 //! drive, no current, knocks) live here in [`screen`]; the detectors of interference and of lost
 //! contact that the estimators call on their final points are in [`interference`] and
-//! [`contact`].
+//! [`contact`]; the model of the resonator's driven response and its fit, which hold and the
+//! continuous mode share, in [`resonator`].
 
 pub mod conductance;
 pub mod contact;
@@ -13,6 +14,7 @@ pub mod hold;
 pub mod interference;
 pub mod model;
 pub mod paper;
+pub mod resonator;
 pub mod ringdown;
 pub mod staged;
 

@@ -4,7 +4,7 @@
 //! ```text
 //! acquire (hold: ring-down seed + short hold) ──ok──▶ track: segment k at f_h,k
 //!    ▲                                                   │ windows → Y − (G0 + j2πf C0)
-//!    │ lost (misses in a row, stall)                      │ hold's fit (f0, Q, g, z)
+//!    │ lost (misses in a row, stall)                      │ resonator fit (f0, Q, g, z)
 //!    └───────────────────────────────────────────────────┤ pipeline::conclude → reading seq k
 //!                                                        └ f_h,k+1 = f0 ± dither · f0/(2Q)
 //! ```
@@ -17,14 +17,14 @@
 //! windows at one frequency `f_h`, loaded phase-continuously as the previous one ends (a gap of
 //! at most one batch and one cycle). The segment's windows are turned into admittances with the
 //! segment's drive phasor, the air reference's static branch `G0 + j2πf_h C0` is removed, and
-//! the motional remainder is fitted with hold's model (`Y_m (1 − E_k) + z E_k`,
-//! `Y_m = g/(1 + jQu)`): the steady state's phase gives the detuning (`Y_m` is real at
-//! `f_h = f0`), the switch-on transient from the state the previous segment left (`z`) gives
-//! `Q`. Between segments the drive is retuned to the new estimate, offset by `±dither`
-//! half-linewidths `f0/(2Q)` alternately: a drive on the resonance sees almost no transient
-//! when it is retuned by a small fraction of a linewidth, so `Q` — which the pipeline needs for
-//! its contact checks (`no_contact` on lift-off, the Q model) — would rest on the prior alone;
-//! the alternating offset makes every segment's transient measure it.
+//! the motional remainder is fitted with the resonator's model ([`crate::estimate::resonator`]:
+//! `Y_m (1 − E_k) + z E_k`, `Y_m = g/(1 + jQu)`): the steady state's phase gives the detuning
+//! (`Y_m` is real at `f_h = f0`), the switch-on transient from the state the previous segment
+//! left (`z`) gives `Q`. Between segments the drive is retuned to the new estimate, offset by
+//! `±dither` half-linewidths `f0/(2Q)` alternately: a drive on the resonance sees almost no
+//! transient when it is retuned by a small fraction of a linewidth, so `Q` — which the pipeline
+//! needs for its contact checks (`no_contact` on lift-off, the Q model) — would rest on the prior
+//! alone; the alternating offset makes every segment's transient measure it.
 //!
 //! **Lock**: a segment whose fit fails, leaves the band, or moves the resonance by more than one
 //! linewidth `f0/Q` from the estimate it was driven from is not locked (its reading fails
@@ -40,7 +40,8 @@ use crate::engine::sweep::{amplitude_codes, Drive, SettingsError};
 use crate::engine::window_budget_samples;
 use crate::engine::{PointPlan, PointRaw};
 use crate::estimate::conductance::GROSS_CHI2;
-use crate::estimate::hold::{self, Hold, HoldSettings, HoldWindow, MAX_WINDOWS};
+use crate::estimate::hold::{Hold, HoldSettings};
+use crate::estimate::resonator::{self, HoldWindow, MAX_WINDOWS};
 use crate::estimate::Estimate;
 use crate::hal::FrontEndScale;
 use crate::loadcell::RawForce;
@@ -69,8 +70,8 @@ pub struct TrackerConfig {
     /// The acquisition's hold in all (first half on the seed, second on its estimate).
     pub acquire_hold: Seconds,
     /// Length of one tracking segment: one reading each (25–1000 ms). A segment is at least
-    /// four windows of one cycle (hold's fit needs four windows; an engine window must span
-    /// half a batch), 17 ms at 238 Hz.
+    /// four windows of one cycle (the resonator's fit needs four windows; an engine window must
+    /// span half a batch), 17 ms at 238 Hz.
     pub segment: Seconds,
     /// Offset of the drive from the estimate, alternately above and below, in half-linewidths
     /// `f0/(2Q)` (0–2).
@@ -298,7 +299,7 @@ impl Tracker {
                 let per_cycle = 1.0 / self.f_h.max(1.0);
                 let seg = self.cfg.segment.0 as f64;
                 let cycles = libm::ceil(seg / per_cycle / MAX_WINDOWS as f64)
-                    .max(hold::first_cycles(self.f_h, self.fs));
+                    .max(resonator::first_cycles(self.f_h, self.fs));
                 let n = libm::floor(seg / (cycles * per_cycle)).clamp(4.0, MAX_WINDOWS as f64);
                 self.tag = self.tag.wrapping_add(1);
                 let plan = PointPlan {
@@ -364,7 +365,7 @@ impl Tracker {
                 }
                 let s = &raw.sums;
                 self.clipped |= s.current_rail_hits > 0;
-                hold::add_sums(&mut self.monitor, &s.monitor, &s.reference);
+                resonator::add_sums(&mut self.monitor, &s.monitor, &s.reference);
                 if let Some(p) = solve(&s.current, &s.reference) {
                     let ai = scale.amps_per_code as f64;
                     let len = s.reference.n as f64 / self.fs;
@@ -481,13 +482,13 @@ impl Tracker {
         }
         let y_s = C64::new(self.static_g, 2.0 * PI * self.f_h * self.static_c);
         let q_sd = self.cfg.q_prior as f64 * self.q_est;
-        let seg = hold::Segment {
+        let seg = resonator::Segment {
             windows: &self.windows,
             f_h: self.f_h,
             y_s,
-            mirror: hold::mirror(drive.v),
+            mirror: resonator::mirror(drive.v),
         };
-        let h = hold::fit(seg, self.f_est, (self.q_est, q_sd))?;
+        let h = resonator::fit(seg, self.f_est, (self.q_est, q_sd))?;
         // A segment the resonator's model does not explain (a knock, a tone) is no reading,
         // and the drive does not follow it: the next segment (30 ms on by default) will be clean.
         if h.reduced_chi2 > GROSS_CHI2 {

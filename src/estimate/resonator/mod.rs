@@ -1,0 +1,155 @@
+//! The resonator's driven response and its fit, shared by hold, the continuous mode and the interference checks. May import the leaves, engine and estimate's shared rules (`Estimate`, `interference`); no method.
+//!
+//! A drive held at `f_h` and demodulated in gap-free windows of whole cycles gives one
+//! admittance `Y_k` a window ([`HoldWindow`]). A segment of such windows ([`Segment`]) is fitted
+//! with the exact response of the Butterworth–Van Dyke resonator to a sine switched on at
+//! `t = 0` from an unknown state:
+//!
+//! `Y_k = Y_s + Y_m (1 − E_k) + z E_k`,  `Y_m = g / (1 + j Q (f_h/f0 − f0/f_h))`,
+//!
+//! `E_k` = the mean of `exp(λ t)` over window `k`, `λ = −π f0/Q + j 2π (f_d − f_h)`,
+//! `f_d = f0 sqrt(1 − 1/(4Q²))`, plus the transient's mirror image that a window of whole cycles
+//! lets through ([`mirror`]). The static admittance `Y_s` is the caller's (the air reference).
+//! `f0, Q, g, Re z, Im z` are fitted by Levenberg–Marquardt with a prior on `Q`, weighted by the
+//! windows' common noise variance, and `σ(f0)` is the `(JᵀWJ)⁻¹` standard uncertainty
+//! ([`HoldFit`]). Two segments at different drives are fitted jointly, the state carried through
+//! the switch ([`Carry`], [`fit_two`]); a segment with no start is searched for one
+//! ([`fit_searched`]).
+//!
+//! Here: the windows, the segments, the mirror term, the carry and the fit's result. `model`:
+//! the drive model, χ² and its Jacobian, the normal equations and the covariance. `solver`: the
+//! starts (linear, given, searched) and the Levenberg–Marquardt iteration.
+
+mod model;
+mod solver;
+
+#[cfg(test)]
+mod fixtures;
+
+pub use solver::{fit, fit_searched, fit_two};
+
+use super::Estimate;
+use crate::dsp::lockin::{ChannelSums, ReferenceSums};
+use model::c32;
+use num_complex::Complex64 as C64;
+
+/// Most windows of the hold.
+pub const MAX_WINDOWS: usize = 16;
+
+/// Windows of a hold's first segment with no seed: the fewest its searched fit takes
+/// ([`fit_searched`]; `hold::HoldSettings::min_first`).
+pub(crate) const FIRST_WINDOWS: usize = 3;
+
+/// Whole cycles of the shortest window the engine passes on at `f` Hz sampled at `fs` (a
+/// hold's first segment's, a tracker segment's): the fewest that span half a batch
+/// (`engine::MIN_WINDOW_SAMPLES`; one cycle up to 769 Hz at 10 kHz).
+pub fn first_cycles(f: f64, fs: f64) -> f64 {
+    let per_cycle = fs / f.max(1.0);
+    libm::ceil(crate::engine::MIN_WINDOW_SAMPLES as f64 / per_cycle).max(1.0)
+}
+
+/// Add one window's monitor and reference sums to a segment's (saturating: never overflows).
+pub(crate) fn add_sums(acc: &mut (ChannelSums, ReferenceSums), m: &ChannelSums, r: &ReferenceSums) {
+    let (a, b) = acc;
+    a.xc = a.xc.saturating_add(m.xc);
+    a.xs = a.xs.saturating_add(m.xs);
+    a.x = a.x.saturating_add(m.x);
+    a.xx = a.xx.saturating_add(m.xx);
+    b.cc = b.cc.saturating_add(r.cc);
+    b.ss = b.ss.saturating_add(r.ss);
+    b.cs = b.cs.saturating_add(r.cs);
+    b.c = b.c.saturating_add(r.c);
+    b.s = b.s.saturating_add(r.s);
+    b.n = b.n.saturating_add(r.n);
+}
+
+/// The windows' currents `I` (and their variances) into admittances with the drive phasor `v`
+/// (the variance of each of its components `var_v`): `Y = I / V` and
+/// `var = (var_I + |Y|² var_V) / |V|²` ([`crate::engine::sweep::Drive::admittance`]) with `1/V`
+/// and `1/|V|²` formed once, each window's in f32 (emulated f64 is dear on the Cortex-M4F; f32's
+/// 1e-7 is far below any window's noise, 1e-3 of |Y| and more).
+pub(crate) fn to_admittance(windows: &mut [HoldWindow], v: C64, var_v: f64) {
+    let inv_v = C64::new(1.0, 0.0) / v;
+    let (inv_v32, inv_n) = (c32(inv_v), inv_v.norm_sqr() as f32);
+    let var_v = var_v as f32;
+    for x in windows {
+        let y = c32(x.y) * inv_v32;
+        let var = (x.var as f32 + y.norm_sqr() * var_v) * inv_n;
+        (x.y, x.var) = (C64::new(y.re as f64, y.im as f64), var as f64);
+    }
+}
+
+/// One demodulated window of the hold.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct HoldWindow {
+    /// Start, seconds after the first window's start.
+    pub t0: f64,
+    /// Length, seconds.
+    pub len: f64,
+    /// Measured admittance, S.
+    pub y: C64,
+    /// Variance of each component of `y` (the window's sine-fit residual), S².
+    pub var: f64,
+}
+
+/// A hold fit: the estimate and the standard uncertainty of its `Q`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HoldFit {
+    /// Resonance, its uncertainty and `Q`.
+    pub estimate: Estimate,
+    /// Standard uncertainty of `Q`.
+    pub sigma_q: f64,
+    /// χ² per degree of freedom at the fit (above [`crate::estimate::conductance::GROSS_CHI2`]
+    /// the model does not explain the windows and `sigma` has been scaled by it).
+    pub reduced_chi2: f64,
+    /// The fitted motional peak conductance `g` (S) and state `z` at the start of the first
+    /// window (S): a joint fit that takes these windows goes on from them ([`fit_two`]).
+    pub linear: (f64, C64),
+}
+
+/// One segment of a hold: consecutive windows driven at one frequency `f_h`, with the static
+/// admittance `y_s` at that frequency (from the air reference).
+#[derive(Clone, Copy, Debug)]
+pub struct Segment<'a> {
+    /// The segment's windows, in time order.
+    pub windows: &'a [HoldWindow],
+    /// Drive frequency, Hz.
+    pub f_h: f64,
+    /// Static admittance at `f_h`, S.
+    pub y_s: C64,
+    /// `e^{−2j arg V}` of the segment's drive phasor `V` ([`mirror`]): how a transient's
+    /// counter-rotating part leaks into the windows.
+    pub mirror: C64,
+}
+
+/// `e^{−2j arg v}` (`v̄ / v`) of a drive phasor `v`; 1 for a zero phasor.
+///
+/// A window of whole cycles demodulates `Re(c(t) e^{jφ(t)})` — the current `c = Y V` in the
+/// drive's rotating frame — into the mean of `c` **plus** the mean of `c̄(t) e^{−2jφ(t)}`, the
+/// counter-rotating (mirror) image. A steady `c` leaves no image over whole cycles; a transient
+/// `T e^{λt}` does: `mirror · conj(T e^{λ a}) · (e^{λ̄ L} − 1) / ((λ̄ − j4π f_h) L)` in the
+/// admittance, about `|λ| / (4 ω_h)` of the transient (2 % at `Q` 10), which, left out of the
+/// model, biases a detuned first segment's `f0` by 4 % of the detuning.
+pub fn mirror(v: C64) -> C64 {
+    let n = v.norm_sqr();
+    if n > 0.0 && n.is_finite() {
+        v.conj() * v.conj() / n
+    } else {
+        C64::new(1.0, 0.0)
+    }
+}
+
+/// Most segments a fit takes (a first hold and the one it placed).
+const MAX_SEGMENTS: usize = 2;
+
+/// How the resonator's state passes from the first segment into the second: the drive moved
+/// phase-continuously at `t_switch` (the time base of the windows' `t0`), and the drive phasor
+/// changed by `rho = V₁/V₂` (the same motional current is `rho` times the first segment's
+/// admittance in the second's).
+#[derive(Clone, Copy, Debug)]
+pub struct Carry {
+    /// Time of the frequency switch, s.
+    pub t_switch: f64,
+    /// Ratio of the first segment's drive phasor to the second's.
+    pub rho: C64,
+}

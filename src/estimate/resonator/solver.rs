@@ -1,0 +1,630 @@
+//! The fit of the resonator's model to a hold's windows: the starts (linear, given, searched),
+//! the Levenberg–Marquardt iteration with its prior on `Q`, the checks of the windows and of the
+//! result.
+
+use super::model::{c32, cexp, evaluate, prepare, DriveModel, Normal, Params, Problem, C32};
+use super::{Carry, HoldFit, HoldWindow, Segment, FIRST_WINDOWS, MAX_SEGMENTS, MAX_WINDOWS};
+use crate::estimate::Estimate;
+use crate::status::Failure;
+use crate::units::Hz;
+use num_complex::Complex64 as C64;
+
+impl Problem<'_> {
+    fn eval(&self, p: &Params, jac: bool) -> (f64, Normal) {
+        evaluate(self, p, jac, None)
+    }
+
+    /// A candidate of the start search of a one-segment problem: the linear parameters
+    /// `(g, z)` at `f0`, `q` solved by least squares (the model is linear in them:
+    /// `y_k = g a_k + Re z b_k + Im z c_k`, the three columns formed once, in `f32`, a 3×3
+    /// Cholesky solve), and the χ² there in units of the weight `1/var` (from the residuals,
+    /// not the normal equations, so no cancellation; `f32`, compared between candidates
+    /// alone). A third of the work of [`Self::linear_start`], which forms all five columns and
+    /// evaluates twice. `None` for two segments, a singular system or a non-finite χ².
+    fn linear_candidate(&self, f0: f64, q: f64) -> Option<([f32; 3], f32)> {
+        let [(f_h, _, mirror)] = self.segs[..] else {
+            return None;
+        };
+        let one = C32::new(1.0, 0.0);
+        let j = C32::new(0.0, 1.0);
+        let at = Params {
+            f0,
+            q,
+            g: 0.0,
+            z: C64::new(0.0, 0.0),
+        };
+        let m = DriveModel::new(&at, f_h);
+        let (inv_lam, inv_mu) = (one / m.lam, one / m.mu);
+        let mut cols = [[C32::new(0.0, 0.0); 3]; MAX_WINDOWS];
+        let mut a = [[0.0f32; 3]; 3];
+        let mut b = [0.0f32; 3];
+        let mut ea = one;
+        let mut cache: [(f32, C32); 2] = [(-1.0, one); 2];
+        for (x, c) in self.w.iter().zip(cols.iter_mut()) {
+            if x.gap {
+                ea = if x.a == 0.0 { one } else { cexp(m.lam * x.a) };
+            }
+            let decay = if cache[0].0 == x.len {
+                cache[0].1
+            } else if cache[1].0 == x.len {
+                cache[1].1
+            } else {
+                cache[1] = cache[0];
+                cache[0] = (x.len, cexp(m.lam * x.len));
+                cache[0].1
+            };
+            let eb = ea * decay;
+            let e = (eb - ea) * inv_lam / x.len;
+            // The mirror image's factor on conj(transient at the window's start).
+            let mp = mirror * (decay.conj() - one) * inv_mu / x.len;
+            let image = mp * ea.conj();
+            *c = [
+                m.h * (one - e) - mp * (m.h * ea).conj(),
+                e + image,
+                j * (e - image),
+            ];
+            for i in 0..3 {
+                let ci = c[i] * x.wl;
+                b[i] += ci.re * x.y.re + ci.im * x.y.im;
+                for k in 0..=i {
+                    a[i][k] += ci.re * c[k].re + ci.im * c[k].im;
+                }
+            }
+            ea = eb;
+        }
+        let sol = crate::linalg::spd_solve(&a, &b)?;
+        let mut chi2 = 0.0f32;
+        for (x, c) in self.w.iter().zip(cols.iter()) {
+            let r = x.y - c[0] * sol[0] - c[1] * sol[1] - c[2] * sol[2];
+            chi2 += x.wl * r.norm_sqr();
+        }
+        chi2.is_finite().then_some((sol, chi2))
+    }
+
+    /// The linear parameters (g, z) at `p`'s `f0`, `Q`: one Gauss–Newton step on them alone
+    /// (the model is linear in them).
+    fn linear_start(&self, p: &Params) -> Option<Params> {
+        // The linear parameters' columns are not scaled (their scale is 1).
+        let (_, n) = self.eval(p, true);
+        let m3: [[f32; 3]; 3] =
+            core::array::from_fn(|i| core::array::from_fn(|j| n.jtj[i + 2][j + 2]));
+        let r3: [f32; 3] = core::array::from_fn(|i| n.jtr[i + 2]);
+        let step = crate::linalg::spd_solve(&m3, &r3)?;
+        Some(p.stepped(&[0.0, 0.0, step[0] as f64, step[1] as f64, step[2] as f64]))
+    }
+}
+
+/// Noise variance per component common to all windows: the mean of the second half's own
+/// residual variances (earlier windows' residuals also hold the transient).
+fn noise_variance(w: &[HoldWindow]) -> f64 {
+    let tail = &w[w.len() / 2..];
+    tail.iter().map(|x| x.var).sum::<f64>() / tail.len().max(1) as f64
+}
+
+/// The least-squares fit of the switched-on response ([`super`]) to one segment's
+/// windows, driven at `f_h` with static admittance `y_s`, starting from `f_start`, with a prior
+/// `Q = q_prior.0 ± q_prior.1` (a hold at one frequency measures the phase well and `Q` poorly;
+/// the prior — the seed's `Q` — keeps a noisy hold from trading one for the other).
+pub fn fit(seg: Segment, f_start: f64, q_prior: (f64, f64)) -> Result<HoldFit, Failure> {
+    fit_segments(&[seg], None, (f_start, q_prior.0), q_prior, Start::Linear)
+}
+
+/// The joint fit of two consecutive segments: one `f0`, `Q`, `g`, and the first segment's
+/// initial state carried through the frequency switch into the second (the model is the
+/// resonator's; nothing is re-estimated at the switch), so the first segment's windows count
+/// towards the reading instead of being thrown away when the drive moves.
+///
+/// `start`: `f0`, `Q` to start from (the first segment's own fit); `linear`: its fitted linear
+/// parameters (`g`, `z`: [`HoldFit::linear`]) to go on from — one evaluation of the joint
+/// problem fewer, the Levenberg–Marquardt steps move them with `f0` and `Q` — or `None` to solve
+/// them anew at `start`; `q_prior`: the prior on `Q` (the seed's, not the first segment's,
+/// whose windows are in this fit).
+pub fn fit_two(
+    first: Segment,
+    second: Segment,
+    carry: &Carry,
+    start: (f64, f64),
+    linear: Option<(f64, C64)>,
+    q_prior: (f64, f64),
+) -> Result<HoldFit, Failure> {
+    let start_linear = match linear {
+        Some((g, z)) => Start::Given(g, z),
+        None => Start::Linear,
+    };
+    fit_segments(&[first, second], Some(carry), start, q_prior, start_linear)
+}
+
+/// Where a fit's linear parameters start.
+#[derive(Clone, Copy, Debug)]
+enum Start {
+    /// Solved at the given `f0`, `Q` ([`Problem::linear_start`]).
+    Linear,
+    /// The best of a search of the band `(lo, hi)` for `f0` (each candidate's solved).
+    Search(f64, f64),
+    /// The given `g`, `z`.
+    Given(f64, C64),
+}
+
+/// Steps of the start search over the band, in half-widths `f0/(2Q)` of the prior `Q`.
+const SEARCH_STEP_HALF_WIDTHS: f64 = 1.5;
+/// Most candidates of the start search.
+const SEARCH_MAX: usize = 64;
+
+/// The fit of one segment with no seed: the start is the best of a search over `band` (each
+/// candidate `f0` at the prior `Q`, its linear parameters solved), then the fit from there.
+pub fn fit_searched(
+    seg: Segment,
+    band: (f64, f64),
+    q_prior: (f64, f64),
+) -> Result<HoldFit, Failure> {
+    fit_segments(
+        &[seg],
+        None,
+        (seg.f_h, q_prior.0),
+        q_prior,
+        Start::Search(band.0, band.1),
+    )
+}
+
+/// The fit over the segments from `start` (`f0`, `Q`); `search`: the band to search for a start
+/// `f0` instead. Knocks and mains hum in the windows are `interference` (a first segment's fit
+/// that only places the second judges them too: hum that pulls the placement off the resonance
+/// would otherwise end the hold as `not_locked`, which the default strategy retries).
+fn fit_segments(
+    segs: &[Segment],
+    carry: Option<&Carry>,
+    (f_start, q_begin): (f64, f64),
+    q_prior: (f64, f64),
+    start: Start,
+) -> Result<HoldFit, Failure> {
+    let search = match start {
+        Start::Search(lo, hi) => Some((lo, hi)),
+        _ => None,
+    };
+    let (q_start, q_sd) = q_prior;
+    if !(q_start > 0.0) || !(q_sd > 0.0) || !q_sd.is_finite() || segs.len() > MAX_SEGMENTS {
+        return Err(Failure::NoResonance);
+    }
+    if segs.len() > 1 && carry.is_none_or(|c| !c.t_switch.is_finite() || !c.rho.is_finite()) {
+        return Err(Failure::NoResonance);
+    }
+    if segs.iter().any(|s| !s.mirror.is_finite()) {
+        return Err(Failure::NoResonance);
+    }
+    let q_w = 1.0 / (q_sd * q_sd);
+    let n_windows: usize = segs.iter().map(|s| s.windows.len()).sum();
+    let Some(last) = segs.last() else {
+        return Err(Failure::NoResonance);
+    };
+    // Four windows (eight numbers) for five parameters; three (with the prior on Q) for the
+    // searched first segment of a hold with no seed, which only places the second.
+    let fewest = if search.is_some() { FIRST_WINDOWS } else { 4 };
+    if n_windows < fewest || n_windows > MAX_WINDOWS || last.windows.is_empty() {
+        return Err(Failure::NoResonance);
+    }
+    // A knock in any segment's windows is no reading.
+    for seg in segs {
+        let mut v = [0.0f64; MAX_WINDOWS];
+        for (o, x) in v.iter_mut().zip(seg.windows) {
+            *o = x.var;
+        }
+        crate::estimate::interference::window_spike(&v[..seg.windows.len().min(MAX_WINDOWS)])?;
+    }
+    // The noise from the last segment, where the transients have gone furthest, as the variance
+    // of a window of the mean length.
+    let (w, gs, mean_len) = prepare(segs);
+    let last_len = last.windows.iter().map(|x| x.len).sum::<f64>() / last.windows.len() as f64;
+    let var = noise_variance(last.windows) * last_len / mean_len;
+    if !(var > 0.0) || !var.is_finite() || !f_start.is_finite() || !(f_start > 0.0) {
+        return Err(Failure::NoResonance);
+    }
+    let pb = Problem {
+        w,
+        gs,
+        segs: segs
+            .iter()
+            .map(|s| {
+                (
+                    s.f_h,
+                    s.windows.first().map_or(0.0, |x| x.t0),
+                    c32(s.mirror),
+                )
+            })
+            .collect(),
+        carry,
+        wt: 1.0 / var,
+    };
+    let prior = |q: f64| (q - q_start) * (q - q_start) * q_w;
+    let q0 = if q_begin > 0.0 { q_begin } else { q_start }.clamp(2.0, 200.0);
+    let at = |f0: f64| Params {
+        f0,
+        q: q0,
+        g: 0.0,
+        z: C64::new(0.0, 0.0),
+    };
+    // Start: the seed's f0 and Q (or the search's best), the linear parameters from one
+    // Gauss–Newton step on them alone.
+    let mut p = match search {
+        None => match start {
+            Start::Given(g, z) if g.is_finite() && z.is_finite() => Params {
+                g,
+                z,
+                ..at(f_start)
+            },
+            _ => pb.linear_start(&at(f_start)).ok_or(Failure::NoResonance)?,
+        },
+        Some((lo, hi)) => {
+            if !(lo > 0.0) || !(hi > lo) || !hi.is_finite() {
+                return Err(Failure::NoResonance);
+            }
+            let step = SEARCH_STEP_HALF_WIDTHS * 0.5 * (lo + hi) / (2.0 * q0);
+            let n = (libm::ceil((hi - lo) / step) as usize).clamp(1, SEARCH_MAX - 1);
+            let mut best: Option<(f64, [f32; 3], f32)> = None;
+            let df = (hi - lo) / n as f64;
+            for k in 0..=n {
+                let f = lo + df * k as f64;
+                if let Some((sol, tc)) = pb.linear_candidate(f, q0) {
+                    // Only a positive motional conductance is a resonance.
+                    if sol[0] > 0.0 && best.is_none_or(|(_, _, bc)| tc < bc) {
+                        best = Some((f, sol, tc));
+                    }
+                }
+            }
+            let (f, sol, _) = best.ok_or(Failure::NoResonance)?;
+            Params {
+                g: sol[0] as f64,
+                z: C64::new(sol[1] as f64, sol[2] as f64),
+                ..at(f)
+            }
+        }
+    };
+    let mut lambda = 1e-3;
+    // The normal equations at the current point, with the prior on Q; recomputed only when a
+    // step is taken (a rejected step costs one χ² evaluation).
+    // The residuals come with them (the last call's are the fit's, for the hum check).
+    let mut res = [C32::new(0.0, 0.0); MAX_WINDOWS];
+    // The start's χ² comes with them (the same sum a χ²-only evaluation makes).
+    // The prior in the normal equations' units ([`Normal`]).
+    let q_w_scaled = q_w / pb.wt;
+    let normal = |p: &Params, res: &mut [C32]| {
+        let (chi2, mut n) = evaluate(&pb, p, true, Some(res));
+        let s1 = n.scale[1] as f64;
+        n.jtj[1][1] += (q_w_scaled * s1 * s1) as f32;
+        n.jtr[1] += ((q_start - p.q) * q_w_scaled * s1) as f32;
+        (chi2 + prior(p.q), n)
+    };
+    let (mut c, mut n) = normal(&p, &mut res);
+    if !c.is_finite() {
+        return Err(Failure::NoResonance);
+    }
+    for _ in 0..30 {
+        let Some(step) = damped_solve32(&n, lambda) else {
+            lambda *= 10.0;
+            if lambda > 1e6 {
+                break;
+            }
+            continue;
+        };
+        // The quadratic model's decrease of χ² for this step: when it promises less than a
+        // hundredth of a unit (and the step is near Gauss–Newton's), the fit has converged — a
+        // step the `f32` χ² would then reject is round-off, and each rejection costs an
+        // evaluation.
+        let pred = predicted_decrease(&n, &step) as f64 * pb.wt;
+        if pred <= 1e-2 && lambda <= 1.0 {
+            break;
+        }
+        let t = p.stepped(&core::array::from_fn(|i| {
+            step[i] as f64 * n.scale[i] as f64
+        }));
+        let mut trial_res = [C32::new(0.0, 0.0); MAX_WINDOWS];
+        let tc = if t.f0 > 0.0 && t.q > 0.5 {
+            evaluate(&pb, &t, false, Some(&mut trial_res)).0 + prior(t.q)
+        } else {
+            f64::INFINITY
+        };
+        if tc < c {
+            // Converged when χ² no longer falls by a hundredth of one unit (the parameters then
+            // move by less than a tenth of their standard uncertainty), or by one unit at a
+            // Gauss–Newton step (lightly damped): a step of at most 1 σ, after which the next
+            // would move them by about (1 σ)² over the scale of the model's curvature in σ —
+            // the linewidth, hundreds of σ. The normal equations of the last point serve for the
+            // covariance (not formed again: the Jacobian is the evaluation's dearest part); the
+            // residuals are the trial's own.
+            let done = c - tc <= 1e-2 || (c - tc <= 1.0 && lambda <= 1e-3);
+            (p, c) = (t, tc);
+            if done {
+                res = trial_res;
+                break;
+            }
+            lambda = (lambda * 0.3).max(1e-12);
+            (_, n) = normal(&p, &mut res);
+        } else {
+            lambda *= 10.0;
+            if lambda > 1e6 {
+                break;
+            }
+        }
+    }
+    // A blind placement that left the band found no resonance in it: its residuals are those of
+    // a model fitted to something else (an open circuit, a resonance below the band), which
+    // project on any turn; they are not for the hum test to judge (measured without this check:
+    // 14 of 40 open-PZT and 1 of 40 below-band readings are called interference).
+    if let Some((lo, hi)) = search {
+        if !(p.f0 >= lo && p.f0 <= hi) {
+            return Err(Failure::OutOfBand);
+        }
+    }
+    // Mains hum near the drive turns in the residuals at its offset: no reading.
+    crate::estimate::interference::hum(segs, &res, p.f0)?;
+    let cov = n.variances(pb.wt).ok_or(Failure::NoResonance)?;
+    let dof = (2 * pb.w.len() + 1).saturating_sub(5).max(1) as f64;
+    let red = c / dof;
+    let scale = crate::estimate::gross_scale(red);
+    let sigma = libm::sqrt((cov[0] * scale).max(0.0));
+    let sigma_q = libm::sqrt((cov[1] * scale).max(0.0));
+    let (f0, q) = (p.f0, p.q);
+    if !(p.g > 0.0) || !f0.is_finite() || !q.is_finite() || !sigma.is_finite() {
+        return Err(Failure::NoResonance);
+    }
+    crate::estimate::resolved(sigma, f0 / q)?;
+    Ok(HoldFit {
+        estimate: Estimate {
+            resonance: Hz(f0 as f32),
+            sigma: Hz(sigma as f32),
+            q: Some(q as f32),
+            points_used: pb.w.len() as u16,
+        },
+        sigma_q,
+        reduced_chi2: red,
+        linear: (p.g, p.z),
+    })
+}
+
+/// The Levenberg–Marquardt step of the scaled normal equations `n` with damping `lambda`
+/// (`(JᵀJ + λ diag JᵀJ) x = Jᵀ r`, as [`crate::linalg::damped_solve`], in `f32`): the step in
+/// the scaled parameters (multiply by `n.scale` for the parameters' own units).
+fn damped_solve32(n: &Normal, lambda: f64) -> Option<[f32; 5]> {
+    let mut m = n.jtj;
+    for (i, row) in m.iter_mut().enumerate() {
+        row[i] *= 1.0 + lambda as f32;
+    }
+    crate::linalg::spd_solve(&m, &n.jtr)
+}
+
+/// The decrease of χ²/wt the quadratic model of `n` predicts for the scaled step `x`:
+/// `x · (2 Jᵀr − JᵀJ x)`.
+fn predicted_decrease(n: &Normal, x: &[f32; 5]) -> f32 {
+    let mut sum = 0.0f32;
+    for i in 0..5 {
+        let mut jx = 0.0f32;
+        for (j, xj) in x.iter().enumerate() {
+            // The lower triangle holds JᵀJ[i][j] at [max][min].
+            jx += if j <= i { n.jtj[i][j] } else { n.jtj[j][i] } * xj;
+        }
+        sum += x[i] * (2.0 * n.jtr[i] - jx);
+    }
+    sum
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::estimate::resonator::fixtures::{stepped_two, synthetic};
+    use crate::estimate::resonator::mirror;
+    use core::f64::consts::PI;
+
+    #[test]
+    fn recovers_resonance_off_and_on_tune() {
+        let y_s = C64::new(1e-9, 2.0 * PI * 241.0 * 210e-12);
+        for (f_h, z) in [
+            (241.3, C64::new(0.0, 0.0)),
+            (239.0, C64::new(2e-8, -3e-8)),
+            (244.5, C64::new(-1e-8, 1e-8)),
+        ] {
+            let (f0, q, g) = (241.3, 10.4, 1.5e-7);
+            let w = synthetic(f0, q, g, f_h, z, y_s, 16);
+            let seg = Segment {
+                windows: &w[..16],
+                f_h,
+                y_s,
+                mirror: C64::new(1.0, 0.0),
+            };
+            let e = fit(seg, f_h, (8.0, 4.0)).unwrap().estimate;
+            assert!(
+                (e.resonance.0 as f64 - f0).abs() < 2e-3,
+                "{f_h}: {}",
+                e.resonance.0
+            );
+            assert!((e.q.unwrap() as f64 / q - 1.0).abs() < 1e-3);
+        }
+    }
+
+    /// The joint fit recovers the resonance from two segments with the state carried across
+    /// the switch: a first segment a half-width and more off (from rest and from a ringing
+    /// state), a second near the resonance, the drive phasor changing at the switch.
+    #[test]
+    fn joint_fit_carries_the_state_through_the_switch() {
+        let (f0, q, g) = (241.9, 10.5, 1.5e-7);
+        let y_s = C64::new(0.0, 0.0);
+        for (f1, f2, z0, rho) in [
+            (230.0, 241.5, C64::new(0.0, 0.0), C64::new(1.0, 0.0)),
+            (230.0, 242.4, C64::new(3e-8, -2e-8), C64::new(1.009, 0.048)),
+            (255.0, 241.0, C64::new(-1e-8, 0.0), C64::new(0.99, -0.03)),
+        ] {
+            let t_switch = 0.004 + 3.0 * 2.0 / f1 + 0.0045;
+            let (w1, w2) = stepped_two(f0, q, g, z0, (f1, f2), (3, 12), t_switch, rho);
+            let first = Segment {
+                windows: &w1[..3],
+                f_h: f1,
+                y_s,
+                mirror: mirror(C64::new(1.0, 0.0)),
+            };
+            let second = Segment {
+                windows: &w2[..12],
+                f_h: f2,
+                y_s,
+                mirror: mirror(C64::new(1.0, 0.0) / rho),
+            };
+            let carry = Carry { t_switch, rho };
+            let e = fit_two(first, second, &carry, (f2, 10.0), None, (10.0, 10.0))
+                .unwrap()
+                .estimate;
+            assert!(
+                (e.resonance.0 as f64 - f0).abs() < 2e-3,
+                "{f1} → {f2}: {}",
+                e.resonance.0
+            );
+            assert!((e.q.unwrap() as f64 / q - 1.0).abs() < 2e-3, "{:?}", e.q);
+            // Without the carry's drive ratio the fit is biased: the test can fail.
+            let wrong = Carry {
+                t_switch,
+                rho: C64::new(1.0, 0.0),
+            };
+            if rho != C64::new(1.0, 0.0) {
+                // Biased, or refused for the misfit it leaves.
+                if let Ok(b) = fit_two(first, second, &wrong, (f2, 10.0), None, (10.0, 10.0)) {
+                    let b = b.estimate.resonance.0 as f64;
+                    assert!((b - f0).abs() > 5e-3, "{b}");
+                }
+            }
+        }
+    }
+
+    /// A seedless first segment finds a resonance a band-quarter away from its drive.
+    #[test]
+    fn searched_fit_finds_a_resonance_far_from_the_drive() {
+        let (q, g) = (10.5, 1.5e-7);
+        let y_s = C64::new(0.0, 0.0);
+        for f0 in [195.0, 241.9, 270.0] {
+            let (w1, _) = stepped_two(
+                f0,
+                q,
+                g,
+                C64::new(0.0, 0.0),
+                (230.0, 230.0),
+                (4, 0),
+                1.0,
+                C64::new(1.0, 0.0),
+            );
+            let seg = Segment {
+                windows: &w1[..4],
+                f_h: 230.0,
+                y_s,
+                mirror: C64::new(1.0, 0.0),
+            };
+            let e = fit_searched(seg, (170.0, 290.0), (10.0, 10.0))
+                .unwrap()
+                .estimate;
+            assert!(
+                (e.resonance.0 as f64 - f0).abs() < 0.01,
+                "{f0}: {}",
+                e.resonance.0
+            );
+        }
+    }
+
+    /// The mirror image: a 20 ms segment from rest a half-width off its resonance (below and
+    /// above, one with a rotated drive), demodulated from the real current, is fitted to
+    /// 0.01 Hz with the image modelled, and reads 0.15–0.36 Hz off without it (`mirror` 0) —
+    /// the bias that, unmodelled, places the second segment of a seedless hold 4 % of the
+    /// detuning off the resonance.
+    #[test]
+    fn the_mirror_image_of_a_detuned_transient_is_modelled() {
+        let (q, g) = (10.4, 1.5e-7);
+        let y_s = C64::new(0.0, 0.0);
+        for (f0, rho) in [(241.9, C64::new(1.0, 0.0)), (218.0, C64::new(0.6, 0.8))] {
+            // The drive phasor of this segment is 1/rho (a rotated drive changes the image).
+            let (_, mut w2) = stepped_two(
+                f0,
+                q,
+                g,
+                C64::new(0.0, 0.0),
+                (230.0, 230.0),
+                (0, 5),
+                0.004,
+                rho,
+            );
+            // Weighted as a 20 ms segment in the bench's noise (1 % of the peak a window),
+            // where the image's misfit passes the knock and hum checks unseen.
+            for x in w2.iter_mut() {
+                x.var = 2e-18;
+            }
+            let fitted = |m: C64| {
+                let seg = Segment {
+                    windows: &w2[..5],
+                    f_h: 230.0,
+                    y_s,
+                    mirror: m,
+                };
+                fit(seg, 230.0, (10.0, 10.0)).map(|h| h.estimate.resonance.0 as f64 - f0)
+            };
+            let with = fitted(mirror(C64::new(1.0, 0.0) / rho)).unwrap();
+            assert!(with.abs() < 0.01, "{f0}: {with}");
+            let without = fitted(C64::new(0.0, 0.0)).unwrap();
+            std::eprintln!("{f0}: with {with:.5} Hz, without {without:.5} Hz");
+            assert!(without.abs() > 0.1, "{f0}: {without}");
+        }
+    }
+
+    /// A seedless first segment at the band's centre on a resonance below the band (soft
+    /// silicone: 140 Hz, Q 8), demodulated from the real current: the search's fit leaves the
+    /// band and the segment says `out_of_band` — never a resonance in the band, and never
+    /// `interference`, which the residuals of a model fitted to something else would otherwise
+    /// project onto a mains harmonic (measured without the band check: 2 of 80 below-band and
+    /// 14 of 40 open-PZT readings of the default strategy with the fast hold).
+    #[test]
+    fn a_blind_first_segment_below_the_band_is_out_of_band() {
+        for (f0, q) in [(140.0, 8.0), (150.0, 12.0)] {
+            let (_, mut w) = stepped_two(
+                f0,
+                q,
+                1.5e-7,
+                C64::new(0.0, 0.0),
+                (230.0, 230.0),
+                (0, 5),
+                0.004,
+                C64::new(1.0, 0.0),
+            );
+            for x in w.iter_mut() {
+                x.var = 2e-18;
+            }
+            let seg = Segment {
+                windows: &w[..5],
+                f_h: 230.0,
+                y_s: C64::new(0.0, 0.0),
+                mirror: mirror(C64::new(1.0, 0.0)),
+            };
+            let r = fit_searched(seg, (170.0, 290.0), (10.0, 10.0));
+            assert!(
+                matches!(r, Err(Failure::OutOfBand | Failure::NoResonance)),
+                "{f0}: {r:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn garbage_windows_give_a_failure_not_a_panic() {
+        let mut w = [HoldWindow::default(); 8];
+        fn seg(w: &[HoldWindow]) -> Segment<'_> {
+            Segment {
+                windows: w,
+                f_h: 230.0,
+                y_s: C64::new(0.0, 0.0),
+                mirror: C64::new(1.0, 0.0),
+            }
+        }
+        assert!(fit(seg(&w), 230.0, (10.0, 1.0)).is_err());
+        for (k, x) in w.iter_mut().enumerate() {
+            x.t0 = k as f64 * 0.01;
+            x.len = 0.01;
+            x.y = C64::new(f64::NAN, 1.0);
+            x.var = 1e-20;
+        }
+        assert!(fit(seg(&w), 230.0, (10.0, 1.0)).is_err());
+        assert!(fit(seg(&w[..2]), f64::NAN, (10.0, 1.0)).is_err());
+        assert!(fit(seg(&w), 230.0, (10.0, 0.0)).is_err());
+        let mut bad = seg(&w);
+        bad.mirror = C64::new(f64::NAN, f64::INFINITY);
+        assert!(fit(bad, 230.0, (10.0, 1.0)).is_err());
+    }
+}
