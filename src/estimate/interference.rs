@@ -331,9 +331,8 @@ pub fn bvd_misfit(points: &[SweepPoint], f0_hz: f64, q: f64) -> Option<Misfit> {
 /// residuals exceed once in ten thousand, [`chi2_limit_per_dof`]), by more than the model's own
 /// residue ([`MIN_RELATIVE_MISFIT`]), at random (see the module's notes). Call it with the
 /// points of a final estimate, settled as the method settles them, in frequency or measurement
-/// order. (Until session 8 the χ² limit was the estimators' [`GROSS_CHI2`], 16 whatever the
-/// points: five refine points of fit under 60 Hz hum then passed at 5–9 with their misfit at
-/// 1.2–1.6 % of the admittance, and 5 of 80 such readings were off by 3–5 σ.)
+/// order. The limit depends on the points' degrees of freedom: a fixed limit such as the
+/// estimators' [`GROSS_CHI2`] lets five refine points under hum pass.
 pub fn misfit(points: &[SweepPoint], f0_hz: f64, q: f64) -> Result<(), Failure> {
     if !(q <= SETTLED_Q) {
         return Ok(());
