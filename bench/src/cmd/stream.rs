@@ -2,7 +2,7 @@
 //! `pzt_probe::instrument::continuous`), with a step in stiffness, a lift-off and a new contact on the way.
 
 use crate::report;
-use crate::scene::{layer_names, noise_name, parse_noise, SceneArgs};
+use crate::scene::{parse_noise, print_scene_header, SceneArgs};
 use crate::stream::{self, settled_after, summarize, StreamScene, Truth};
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -126,16 +126,7 @@ pub fn run(a: StreamArgs) -> Result<()> {
     };
     let unit = crate::unit::default_for(METHOD)?;
     if !a.json {
-        println!(
-            "probe-bench stream: simulated probe on {}",
-            target.describe()
-        );
-        println!(
-            "  preload {:.0} mN, noise {}, layers: {}",
-            a.scene.preload_n * 1e3,
-            noise_name(noise),
-            layer_names(&scene)
-        );
+        print_scene_header("stream", &target, a.scene.preload_n, noise, &scene);
         if !a.qemu {
             println!(
             "  tracker: segments of {:.0} ms, drive ±{} half-linewidths off the resonance; unit profile of the simulated unit ({} calibration)",
