@@ -47,6 +47,14 @@ impl SimIo {
             held: None,
         }
     }
+    /// A fresh board whose store holds the simulated unit's factory profile (as the QEMU
+    /// image boots with).
+    fn with_factory() -> Self {
+        let mut io = Self::new(Flash::new());
+        let p = pzt_probe::board::sim_factory::profile().expect("factory profile");
+        io.store.save(&p).expect("store the factory profile");
+        io
+    }
     fn put_on(&mut self, scene: Scene) {
         self.board
             .probe
@@ -310,10 +318,8 @@ fn air_with_a_stuck_drive_is_refused_as_a_drive_fault() {
 fn a_failed_selftest_refuses_every_reading_until_one_passes() {
     use hal_sim::{Fault, StuckAdc};
     use pzt_probe::instrument::selftest::{Channel, SelfTestFault};
-    let factory = pzt_probe::board::sim_factory::profile().expect("factory record");
     for fault in Fault::ALL {
-        let mut io = SimIo::new(Flash::new());
-        io.store.save(&factory).expect("store the factory profile");
+        let mut io = SimIo::with_factory();
         io.put_on(fault.apply(Scene::on_phantom(&phantoms::B)));
         let b = fault.apply(Scene::on_phantom(&phantoms::B));
         io.board.probe.set_stuck_dac(b.stuck_dac);
@@ -376,9 +382,7 @@ fn a_failed_selftest_refuses_every_reading_until_one_passes() {
 /// readings are served.
 #[test]
 fn boot_selftest_passes_on_a_healthy_probe() {
-    let factory = pzt_probe::board::sim_factory::profile().expect("factory record");
-    let mut io = SimIo::new(Flash::new());
-    io.store.save(&factory).expect("store");
+    let mut io = SimIo::with_factory();
     io.put_on(Scene::on_phantom(&phantoms::B));
     let mut s = block_on(Session::boot(&mut io));
     assert_eq!(s.selftest_outcome(), Some(Ok(())));
@@ -426,10 +430,8 @@ fn a_capacitance_fault_lets_the_air_reference_be_retaken() {
 /// failed step that leaves the stream running (the store's flash) refuses no reading.
 #[test]
 fn a_failed_boot_step_is_named_in_refusals_and_status() {
-    let factory = pzt_probe::board::sim_factory::profile().expect("factory record");
     for e in BootError::ALL {
-        let mut io = SimIo::new(Flash::new());
-        io.store.save(&factory).expect("store");
+        let mut io = SimIo::with_factory();
         io.put_on(Scene::on_phantom(&phantoms::B));
         io.boot = Some(e);
         let mut s = Session::new(&io.store.load());
@@ -520,13 +522,6 @@ fn the_load_cell_is_weighed_tared_and_bounds_the_readings() {
     assert_eq!(last_reading(&io).status, Status::Failed(Failure::TooLight));
 }
 
-/// A session on the simulated unit's factory profile (as the QEMU image boots with).
-fn factory(io: &mut SimIo) -> Session {
-    let p = pzt_probe::board::sim_factory::profile().expect("factory profile");
-    io.store.save(&p).expect("store the factory profile");
-    boot(io)
-}
-
 fn stream_events(
     io: &SimIo,
 ) -> (
@@ -554,8 +549,8 @@ fn stream_events(
 /// the acquisition, until a reading ends a second after the start; the end says how many.
 #[test]
 fn stream_serves_numbered_readings_until_its_time_is_up() {
-    let mut io = SimIo::new(Flash::new());
-    let mut s = factory(&mut io);
+    let mut io = SimIo::with_factory();
+    let mut s = boot(&mut io);
     io.put_on(Scene::on_phantom(&phantoms::C));
     assert!(send(&mut s, &mut io, "stream 1"));
     let (rs, end) = stream_events(&io);
@@ -592,8 +587,8 @@ fn stream_serves_numbered_readings_until_its_time_is_up() {
 /// room are dropped and counted, the stream goes on.
 #[test]
 fn stream_drops_and_counts_readings_a_slow_host_has_no_room_for() {
-    let mut io = SimIo::new(Flash::new());
-    let mut s = factory(&mut io);
+    let mut io = SimIo::with_factory();
+    let mut s = boot(&mut io);
     io.put_on(Scene::on_phantom(&phantoms::C));
     io.room = Some(5);
     send(&mut s, &mut io, "stream 0.5");
@@ -612,8 +607,8 @@ fn stream_drops_and_counts_readings_a_slow_host_has_no_room_for() {
 /// A failed self-test refuses a stream as it refuses a reading.
 #[test]
 fn stream_is_refused_while_the_selftest_fails() {
-    let mut io = SimIo::new(Flash::new());
-    let mut s = factory(&mut io);
+    let mut io = SimIo::with_factory();
+    let mut s = boot(&mut io);
     io.board
         .probe
         .set_scene(hal_sim::Fault::OpenPzt.apply(Scene::free_air()));
