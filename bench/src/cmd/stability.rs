@@ -91,6 +91,20 @@ impl Cell {
     }
 }
 
+/// The CSV cells `outcome,status,modulus_kpa,modulus_sigma_kpa,truth_kpa` of reading `r` with
+/// outcome `o` against the truth `truth` (kPa); empty cells for what is missing.
+fn outcome_cells(o: Outcome, r: &Reading, truth: Option<f64>) -> String {
+    format!(
+        "{},{},{},{},{}",
+        o.name(),
+        r.status.code(),
+        r.modulus.map_or(String::new(), |x| format!("{:.2}", x.0)),
+        r.modulus_sigma
+            .map_or(String::new(), |x| format!("{:.2}", x.0)),
+        truth.map_or(String::new(), |x| format!("{x}"))
+    )
+}
+
 /// Run the subcommand.
 pub fn run(a: StabilityArgs) -> Result<()> {
     let cases = catalogue(NoiseScene::Bench);
@@ -115,16 +129,11 @@ pub fn run(a: StabilityArgs) -> Result<()> {
                 cell.add(o, &r, case.truth_kpa);
                 let _ = writeln!(
                     csv,
-                    "{},{},{},{},{},{},{},{},",
+                    "{},{},{},{},",
                     m.name(),
                     case.name,
                     seed,
-                    o.name(),
-                    r.status.code(),
-                    r.modulus.map_or(String::new(), |x| format!("{:.2}", x.0)),
-                    r.modulus_sigma
-                        .map_or(String::new(), |x| format!("{:.2}", x.0)),
-                    case.truth_kpa.map_or(String::new(), |x| format!("{x}"))
+                    outcome_cells(o, &r, case.truth_kpa)
                 );
             }
             row.push(cell);
@@ -163,18 +172,12 @@ pub fn run(a: StabilityArgs) -> Result<()> {
                 let o = case.classify(&s, r);
                 let truth = s.truth.at(r.t_s.0 as f64);
                 row.cell.add(o, &r.reading, truth);
-                let x = &r.reading;
                 let _ = writeln!(
                     csv,
-                    "stream,{},{},{},{},{},{},{},{:.4}",
+                    "stream,{},{},{},{:.4}",
                     case.name,
                     seed,
-                    o.name(),
-                    x.status.code(),
-                    x.modulus.map_or(String::new(), |v| format!("{:.2}", v.0)),
-                    x.modulus_sigma
-                        .map_or(String::new(), |v| format!("{:.2}", v.0)),
-                    truth.map_or(String::new(), |v| format!("{v}")),
+                    outcome_cells(o, &r.reading, truth),
                     r.t_s.0
                 );
             }
