@@ -13,6 +13,7 @@ use pzt_probe::boot::BootError;
 use pzt_probe::engine::{PointPlan, PointRaw, SampleEngine};
 use pzt_probe::hal::{FrontEndScale, SampleStream};
 use pzt_probe::instrument::command::parse;
+use pzt_probe::instrument::selftest::SelfTestReport;
 use pzt_probe::instrument::session::{Event, Io, Refusal, Session};
 use pzt_probe::reading::driver::{block_on, PointSource, SyncSource, Wanted};
 use pzt_probe::unit::store::{Saved, Store, StoreError};
@@ -135,6 +136,14 @@ impl Io for SimIo {
 fn send(s: &mut Session, io: &mut SimIo, line: &str) -> bool {
     let cmd = parse(line.as_bytes(), &io.scale()).unwrap_or_else(|e| panic!("{line}: {e:?}"));
     block_on(s.handle(cmd, io))
+}
+
+/// The report of the first self-test the board saw (the boot's).
+fn first_selftest(io: &SimIo) -> Option<SelfTestReport> {
+    io.events.iter().find_map(|e| match e {
+        Event::SelfTest(r) => Some(*r),
+        _ => None,
+    })
 }
 
 fn last_reading(io: &SimIo) -> pzt_probe::Reading {
@@ -331,10 +340,7 @@ fn a_failed_selftest_refuses_every_reading_until_one_passes() {
             Fault::StuckDac => SelfTestFault::NoDrive,
             Fault::AdcRail => SelfTestFault::AdcRail(Channel::Current),
         };
-        let report = io.events.iter().find_map(|e| match e {
-            Event::SelfTest(r) => Some(*r),
-            _ => None,
-        });
+        let report = first_selftest(&io);
         assert_eq!(
             report.map(|r| r.outcome),
             Some(Err(want)),
@@ -386,14 +392,7 @@ fn boot_selftest_passes_on_a_healthy_probe() {
     io.put_on(Scene::on_phantom(&phantoms::B));
     let mut s = block_on(Session::boot(&mut io));
     assert_eq!(s.selftest_outcome(), Some(Ok(())));
-    let r = io
-        .events
-        .iter()
-        .find_map(|e| match e {
-            Event::SelfTest(r) => Some(*r),
-            _ => None,
-        })
-        .expect("a self-test event");
+    let r = first_selftest(&io).expect("a self-test event");
     assert!(r.expected.from_air);
     assert!(send(&mut s, &mut io, "measure"), "{:?}", last_reading(&io));
 }
