@@ -1,7 +1,7 @@
 //! `probe-bench stability`: methods × the scene catalogue, the stability map.
 
 use super::progress;
-use crate::plot::with_backend;
+use crate::plot::{err, with_backend};
 use crate::stability::{
     calibrated, classify, run_case, statement, stream_catalogue, tally, Must, Outcome, StreamCase,
     FIRST_SEED, STREAM_SETTLE_S,
@@ -420,8 +420,7 @@ fn draw<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let e = |x: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("{x}");
-    root.fill(&WHITE).map_err(e)?;
+    root.fill(&WHITE).map_err(err)?;
     let colors = [
         RGBColor(90, 180, 90),
         RGBColor(150, 200, 240),
@@ -434,19 +433,19 @@ where
         (10, 12),
         ("sans-serif", 18),
     ))
-    .map_err(e)?;
+    .map_err(err)?;
     for (i, m) in Method::ALL.iter().enumerate() {
         root.draw(&Text::new(
             m.name(),
             (x0 + i as i32 * w + 8, y0 - 20),
             ("sans-serif", 15),
         ))
-        .map_err(e)?;
+        .map_err(err)?;
     }
     for (j, n) in names.iter().enumerate() {
         let y = y0 + j as i32 * h;
         root.draw(&Text::new(*n, (8, y + 10), ("sans-serif", 14)))
-            .map_err(e)?;
+            .map_err(err)?;
         for (i, row) in grid.iter().enumerate() {
             let c = &row[j];
             let worst = c.worst();
@@ -455,29 +454,29 @@ where
                 [(x, y), (x + w - 3, y + h - 3)],
                 colors[worst].filled(),
             ))
-            .map_err(e)?;
+            .map_err(err)?;
             root.draw(&Text::new(c.label(), (x + 5, y + 9), ("sans-serif", 12)))
-                .map_err(e)?;
+                .map_err(err)?;
         }
     }
     // The continuous scenes: one row each, in a column of their own.
     let xs = x0 + Method::ALL.len() as i32 * w;
     root.draw(&Text::new("stream", (xs + 8, y0 - 20), ("sans-serif", 15)))
-        .map_err(e)?;
+        .map_err(err)?;
     for (j, (name, row, seeds)) in stream.iter().enumerate() {
         let y = y0 + (names.len() + j) as i32 * h;
         root.draw(&Text::new(name.as_str(), (8, y + 10), ("sans-serif", 14)))
-            .map_err(e)?;
+            .map_err(err)?;
         let c = &row.cell;
         let worst = c.worst();
         root.draw(&Rectangle::new(
             [(xs, y), (xs + STREAM_W - 3, y + h - 3)],
             colors[worst].filled(),
         ))
-        .map_err(e)?;
+        .map_err(err)?;
         let label = format!("{}; {}/{} streams do it", c.label(), row.met, seeds);
         root.draw(&Text::new(label, (xs + 5, y + 9), ("sans-serif", 12)))
-            .map_err(e)?;
+            .map_err(err)?;
     }
     let ly = y0 + (names.len() + stream.len()) as i32 * h + 12;
     for (k, (c, t)) in colors
@@ -492,9 +491,9 @@ where
     {
         let x = x0 + k as i32 * 200;
         root.draw(&Rectangle::new([(x, ly), (x + 16, ly + 16)], c.filled()))
-            .map_err(e)?;
+            .map_err(err)?;
         root.draw(&Text::new(t, (x + 22, ly + 2), ("sans-serif", 13)))
-            .map_err(e)?;
+            .map_err(err)?;
     }
     Ok(())
 }

@@ -321,10 +321,7 @@ where
         .map_err(|e| anyhow::anyhow!("{e:?}"))?
         .label("ok reading ± σ")
         .legend(move |(x, y)| Circle::new((x, y), 3, col.filled()));
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
+        crate::plot::draw_legend(&mut c, SeriesLabelPosition::MiddleRight, 0.8)
             .map_err(|e| anyhow::anyhow!("{e:?}"))?;
         let mut l = ChartBuilder::on(&lower)
             .margin(10)
@@ -359,10 +356,7 @@ where
             .map_err(|e| anyhow::anyhow!("{e:?}"))?
             .label("ok")
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], o));
-        l.configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
+        crate::plot::draw_legend(&mut l, SeriesLabelPosition::MiddleRight, 0.8)
             .map_err(|e| anyhow::anyhow!("{e:?}"))?;
         Ok(())
     }
