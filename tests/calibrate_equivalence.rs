@@ -81,17 +81,19 @@ fn sets() -> Vec<(&'static str, Vec<Reference>)> {
     let law = truth();
     let mut rng = Lcg(7);
     let mut out = Vec::new();
-    // The cost image's 100-reference case: A–E × 20, exact calibration forces, ±0.3 Hz.
-    out.push((
-        "cost-100",
-        (0..100)
+    // `per` references on each of A–E in turn, at the exact calibration forces in turn,
+    // alternately 0.3 Hz above and below the law.
+    let exact = |per: usize| -> Vec<Reference> {
+        (0..PHANTOMS.len() * per)
             .map(|i| {
-                let (e, force) = (PHANTOMS[i / 20], FORCES[i % 3]);
+                let (e, force) = (PHANTOMS[i / per], FORCES[i % 3]);
                 let w = if i % 2 == 0 { 0.3 } else { -0.3 };
                 reference(e, law.frequency_at(e, force) + w, 0.2, force)
             })
-            .collect(),
-    ));
+            .collect()
+    };
+    // The cost image's 100-reference case: A–E × 20, exact calibration forces, ±0.3 Hz.
+    out.push(("cost-100", exact(20)));
     // Measured forces and noise.
     out.push((
         "measured-100",
@@ -126,16 +128,7 @@ fn sets() -> Vec<(&'static str, Vec<Reference>)> {
             .collect(),
     ));
     // The session test's ten.
-    out.push((
-        "ten",
-        (0..10)
-            .map(|i| {
-                let (e, force) = (PHANTOMS[i / 2], FORCES[i % 3]);
-                let w = if i % 2 == 0 { 0.3 } else { -0.3 };
-                reference(e, law.frequency_at(e, force) + w, 0.2, force)
-            })
-            .collect(),
-    ));
+    out.push(("ten", exact(2)));
     // Off a power law at one force: the power law should be kept.
     let p = PowerLaw::paper_simulation();
     out.push((

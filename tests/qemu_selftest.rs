@@ -15,6 +15,7 @@ mod qemu_support;
 use pzt_probe::instrument::selftest::{Channel, SelfTestFault};
 use qemu_support::{build_image, fields, last, num, require_tools, run_script, Fields};
 use std::collections::HashMap;
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 /// A run takes 2–4 s of wall time; a hang is caught well before this.
@@ -26,6 +27,19 @@ fn all<'a>(parsed: &'a [Fields], name: &str) -> Vec<&'a HashMap<String, String>>
         .filter(|(n, _)| n == name)
         .map(|(_, m)| m)
         .collect()
+}
+
+/// Run `script` on the image `elf`: whether it exited ok, its log lines and their fields; the
+/// log (without the sweep points) printed under `--- <what> (<wall time>)`.
+fn run_shown(elf: &Path, script: &str, what: &str) -> (bool, Vec<String>, Vec<Fields>) {
+    let wall = Instant::now();
+    let (exited_ok, lines) = run_script(elf, TIMEOUT, Some(script));
+    println!("--- {what} ({:.1} s)", wall.elapsed().as_secs_f64());
+    for l in lines.iter().filter(|l| !l.contains(" point ")) {
+        println!("{l}");
+    }
+    let parsed: Vec<Fields> = lines.iter().filter_map(|l| fields(l)).collect();
+    (exited_ok, lines, parsed)
 }
 
 #[test]
@@ -43,17 +57,8 @@ fn qemu_fault_scenes_end_in_their_selftest_fault_and_refuse_readings() {
             "sim fault {};measure;status;selftest;sim fault none;selftest;measure;status",
             fault.name()
         );
-        let wall = Instant::now();
-        let (exited_ok, lines) = run_script(&elf, TIMEOUT, Some(&script));
-        println!(
-            "--- sim fault {} ({:.1} s)",
-            fault.name(),
-            wall.elapsed().as_secs_f64()
-        );
-        for l in lines.iter().filter(|l| !l.contains(" point ")) {
-            println!("{l}");
-        }
-        let parsed: Vec<Fields> = lines.iter().filter_map(|l| fields(l)).collect();
+        let (exited_ok, lines, parsed) =
+            run_shown(&elf, &script, &format!("sim fault {}", fault.name()));
         let code = want.code();
         // The boot self-test, then the `selftest` on the faulty probe, then the repaired one.
         let results: Vec<&str> = all(&parsed, "selftest")
@@ -199,17 +204,8 @@ fn qemu_boot_fault_is_named_in_refusals_and_status() {
     ] {
         assert_eq!(e.blocks_readings(), blocks);
         let script = format!("sim boot-fault {};measure;selftest;air;status", e.code());
-        let wall = Instant::now();
-        let (exited_ok, lines) = run_script(&elf, TIMEOUT, Some(&script));
-        println!(
-            "--- sim boot-fault {} ({:.1} s)",
-            e.code(),
-            wall.elapsed().as_secs_f64()
-        );
-        for l in lines.iter().filter(|l| !l.contains(" point ")) {
-            println!("{l}");
-        }
-        let parsed: Vec<Fields> = lines.iter().filter_map(|l| fields(l)).collect();
+        let (exited_ok, lines, parsed) =
+            run_shown(&elf, &script, &format!("sim boot-fault {}", e.code()));
         assert!(
             lines
                 .iter()

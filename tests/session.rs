@@ -13,6 +13,7 @@ use pzt_probe::boot::BootError;
 use pzt_probe::engine::{PointPlan, PointRaw, SampleEngine};
 use pzt_probe::hal::{FrontEndScale, SampleStream};
 use pzt_probe::instrument::command::parse;
+use pzt_probe::instrument::selftest::SelfTestReport;
 use pzt_probe::instrument::session::{Event, Io, Refusal, Session};
 use pzt_probe::reading::driver::{block_on, PointSource, SyncSource, Wanted};
 use pzt_probe::unit::store::{Saved, Store, StoreError};
@@ -46,6 +47,14 @@ impl SimIo {
             room: None,
             held: None,
         }
+    }
+    /// A fresh board whose store holds the simulated unit's factory profile (as the QEMU
+    /// image boots with).
+    fn with_factory() -> Self {
+        let mut io = Self::new(Flash::new());
+        let p = pzt_probe::board::sim_factory::profile().expect("factory profile");
+        io.store.save(&p).expect("store the factory profile");
+        io
     }
     fn put_on(&mut self, scene: Scene) {
         self.board
@@ -127,6 +136,14 @@ impl Io for SimIo {
 fn send(s: &mut Session, io: &mut SimIo, line: &str) -> bool {
     let cmd = parse(line.as_bytes(), &io.scale()).unwrap_or_else(|e| panic!("{line}: {e:?}"));
     block_on(s.handle(cmd, io))
+}
+
+/// The report of the first self-test the board saw (the boot's).
+fn first_selftest(io: &SimIo) -> Option<SelfTestReport> {
+    io.events.iter().find_map(|e| match e {
+        Event::SelfTest(r) => Some(*r),
+        _ => None,
+    })
 }
 
 fn last_reading(io: &SimIo) -> pzt_probe::Reading {
@@ -310,10 +327,8 @@ fn air_with_a_stuck_drive_is_refused_as_a_drive_fault() {
 fn a_failed_selftest_refuses_every_reading_until_one_passes() {
     use hal_sim::{Fault, StuckAdc};
     use pzt_probe::instrument::selftest::{Channel, SelfTestFault};
-    let factory = pzt_probe::board::sim_factory::profile().expect("factory record");
     for fault in Fault::ALL {
-        let mut io = SimIo::new(Flash::new());
-        io.store.save(&factory).expect("store the factory profile");
+        let mut io = SimIo::with_factory();
         io.put_on(fault.apply(Scene::on_phantom(&phantoms::B)));
         let b = fault.apply(Scene::on_phantom(&phantoms::B));
         io.board.probe.set_stuck_dac(b.stuck_dac);
@@ -325,10 +340,7 @@ fn a_failed_selftest_refuses_every_reading_until_one_passes() {
             Fault::StuckDac => SelfTestFault::NoDrive,
             Fault::AdcRail => SelfTestFault::AdcRail(Channel::Current),
         };
-        let report = io.events.iter().find_map(|e| match e {
-            Event::SelfTest(r) => Some(*r),
-            _ => None,
-        });
+        let report = first_selftest(&io);
         assert_eq!(
             report.map(|r| r.outcome),
             Some(Err(want)),
@@ -376,20 +388,11 @@ fn a_failed_selftest_refuses_every_reading_until_one_passes() {
 /// readings are served.
 #[test]
 fn boot_selftest_passes_on_a_healthy_probe() {
-    let factory = pzt_probe::board::sim_factory::profile().expect("factory record");
-    let mut io = SimIo::new(Flash::new());
-    io.store.save(&factory).expect("store");
+    let mut io = SimIo::with_factory();
     io.put_on(Scene::on_phantom(&phantoms::B));
     let mut s = block_on(Session::boot(&mut io));
     assert_eq!(s.selftest_outcome(), Some(Ok(())));
-    let r = io
-        .events
-        .iter()
-        .find_map(|e| match e {
-            Event::SelfTest(r) => Some(*r),
-            _ => None,
-        })
-        .expect("a self-test event");
+    let r = first_selftest(&io).expect("a self-test event");
     assert!(r.expected.from_air);
     assert!(send(&mut s, &mut io, "measure"), "{:?}", last_reading(&io));
 }
@@ -426,10 +429,8 @@ fn a_capacitance_fault_lets_the_air_reference_be_retaken() {
 /// failed step that leaves the stream running (the store's flash) refuses no reading.
 #[test]
 fn a_failed_boot_step_is_named_in_refusals_and_status() {
-    let factory = pzt_probe::board::sim_factory::profile().expect("factory record");
     for e in BootError::ALL {
-        let mut io = SimIo::new(Flash::new());
-        io.store.save(&factory).expect("store");
+        let mut io = SimIo::with_factory();
         io.put_on(Scene::on_phantom(&phantoms::B));
         io.boot = Some(e);
         let mut s = Session::new(&io.store.load());
@@ -520,13 +521,6 @@ fn the_load_cell_is_weighed_tared_and_bounds_the_readings() {
     assert_eq!(last_reading(&io).status, Status::Failed(Failure::TooLight));
 }
 
-/// A session on the simulated unit's factory profile (as the QEMU image boots with).
-fn factory(io: &mut SimIo) -> Session {
-    let p = pzt_probe::board::sim_factory::profile().expect("factory profile");
-    io.store.save(&p).expect("store the factory profile");
-    boot(io)
-}
-
 fn stream_events(
     io: &SimIo,
 ) -> (
@@ -554,8 +548,8 @@ fn stream_events(
 /// the acquisition, until a reading ends a second after the start; the end says how many.
 #[test]
 fn stream_serves_numbered_readings_until_its_time_is_up() {
-    let mut io = SimIo::new(Flash::new());
-    let mut s = factory(&mut io);
+    let mut io = SimIo::with_factory();
+    let mut s = boot(&mut io);
     io.put_on(Scene::on_phantom(&phantoms::C));
     assert!(send(&mut s, &mut io, "stream 1"));
     let (rs, end) = stream_events(&io);
@@ -592,8 +586,8 @@ fn stream_serves_numbered_readings_until_its_time_is_up() {
 /// room are dropped and counted, the stream goes on.
 #[test]
 fn stream_drops_and_counts_readings_a_slow_host_has_no_room_for() {
-    let mut io = SimIo::new(Flash::new());
-    let mut s = factory(&mut io);
+    let mut io = SimIo::with_factory();
+    let mut s = boot(&mut io);
     io.put_on(Scene::on_phantom(&phantoms::C));
     io.room = Some(5);
     send(&mut s, &mut io, "stream 0.5");
@@ -612,8 +606,8 @@ fn stream_drops_and_counts_readings_a_slow_host_has_no_room_for() {
 /// A failed self-test refuses a stream as it refuses a reading.
 #[test]
 fn stream_is_refused_while_the_selftest_fails() {
-    let mut io = SimIo::new(Flash::new());
-    let mut s = factory(&mut io);
+    let mut io = SimIo::with_factory();
+    let mut s = boot(&mut io);
     io.board
         .probe
         .set_scene(hal_sim::Fault::OpenPzt.apply(Scene::free_air()));

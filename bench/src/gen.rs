@@ -8,7 +8,7 @@
 
 use crate::capture::{write_admittance_csv, write_impedance_csv};
 use anyhow::{anyhow, Result};
-use hal_sim::{NoiseScene, Scene, SimProbe};
+use hal_sim::{NoiseScene, Phantom, Scene, SimProbe};
 use probe_rng::Rng;
 use pzt_probe::board::sim as simboard;
 use pzt_probe::engine::sweep::SweepSettings;
@@ -164,37 +164,48 @@ pub fn write_golden(dir: &Path) -> Result<Vec<String>> {
     };
     let regen = "regenerate: probe-bench generate-captures --out-dir tests/data".to_owned();
 
-    // (a) The simulated probe's own sweeps.
+    // The comments of a capture of `scene`: what it is and how it was taken, its true
+    // resonance, how to regenerate it.
+    let about = |what: &str, how: &str, scene: &Scene| -> Vec<String> {
+        vec![
+            what.to_owned(),
+            how.to_owned(),
+            format!("true resonance {:.4} Hz", scene.resonance_hz()),
+            regen.clone(),
+        ]
+    };
+
+    // (a) The simulated probe's own sweeps: the firmware's reading of a phantom at 30 mN and
+    // bench noise with the method's default sweep; the comments and the points.
+    let sim = |p: &Phantom, seed: u64, method: Method, how: &str| -> Result<_> {
+        let scene = Scene::on_phantom(p).with_noise(NoiseScene::Bench);
+        let pts = sim_sweep(&scene, seed, method, &method.default_sweep())?;
+        let what = format!(
+            "simulated probe (hal-sim), phantom {} ({:.0} kPa), 30 mN, bench noise, seed {seed}",
+            p.name, p.modulus_kpa
+        );
+        Ok((about(&what, how, &scene), pts))
+    };
     let b = hal_sim::phantoms::B;
-    let scene = Scene::on_phantom(&b).with_noise(NoiseScene::Bench);
-    let pts = sim_sweep(&scene, 1, Method::SweepG, &Method::SweepG.default_sweep())?;
+    let (comments, pts) = sim(
+        &b,
+        1,
+        Method::SweepG,
+        "firmware sweep-G sweep 170-290 Hz step 2 Hz; points as the firmware measured them",
+    )?;
     put(
         "sim_sweep_g_phantom_b.csv",
-        write_admittance_csv(
-            &[
-                "simulated probe (hal-sim), phantom B (279 kPa), 30 mN, bench noise, seed 1".into(),
-                "firmware sweep-G sweep 170-290 Hz step 2 Hz; points as the firmware measured them"
-                    .into(),
-                format!("true resonance {:.4} Hz", scene.resonance_hz()),
-                regen.clone(),
-            ],
-            &pts,
-        ),
+        write_admittance_csv(&comments, &pts),
     )?;
-    let c = hal_sim::phantoms::C;
-    let scene = Scene::on_phantom(&c).with_noise(NoiseScene::Bench);
-    let pts = sim_sweep(&scene, 2, Method::Paper, &Method::Paper.default_sweep())?;
+    let (comments, pts) = sim(
+        &hal_sim::phantoms::C,
+        2,
+        Method::Paper,
+        "firmware paper sweep 200-300 Hz step 1 Hz, exported as impedance",
+    )?;
     put(
         "sim_paper_phantom_c_z.csv",
-        write_impedance_csv(
-            &[
-                "simulated probe (hal-sim), phantom C (414 kPa), 30 mN, bench noise, seed 2".into(),
-                "firmware paper sweep 200-300 Hz step 1 Hz, exported as impedance".into(),
-                format!("true resonance {:.4} Hz", scene.resonance_hz()),
-                regen.clone(),
-            ],
-            &pts,
-        ),
+        write_impedance_csv(&comments, &pts),
     )?;
 
     // (b) Closed-form Butterworth-Van Dyke admittance, no estimator involved.
@@ -202,13 +213,11 @@ pub fn write_golden(dir: &Path) -> Result<Vec<String>> {
     put(
         "bvd_300kpa_y.csv",
         write_admittance_csv(
-            &[
-                "closed-form BVD admittance of the probe on 300 kPa tissue (Scene::admittance)"
-                    .into(),
-                "180-280 Hz step 1 Hz, white noise 0.5 nS per component (seed 7)".into(),
-                format!("true resonance {:.4} Hz", scene.resonance_hz()),
-                regen.clone(),
-            ],
+            &about(
+                "closed-form BVD admittance of the probe on 300 kPa tissue (Scene::admittance)",
+                "180-280 Hz step 1 Hz, white noise 0.5 nS per component (seed 7)",
+                &scene,
+            ),
             &closed_form(&scene, 180.0, 280.0, 1.0, 0.5e-9, 7),
         ),
     )?;
@@ -216,12 +225,11 @@ pub fn write_golden(dir: &Path) -> Result<Vec<String>> {
     put(
         "bvd_1000kpa_z.csv",
         write_impedance_csv(
-            &[
-                "closed-form BVD admittance of the probe on 1000 kPa tissue, as impedance".into(),
-                "200-300 Hz step 2 Hz, noise-free".into(),
-                format!("true resonance {:.4} Hz", scene.resonance_hz()),
-                regen.clone(),
-            ],
+            &about(
+                "closed-form BVD admittance of the probe on 1000 kPa tissue, as impedance",
+                "200-300 Hz step 2 Hz, noise-free",
+                &scene,
+            ),
             &closed_form(&scene, 200.0, 300.0, 2.0, 0.0, 0),
         ),
     )?;
@@ -265,13 +273,11 @@ pub fn write_golden(dir: &Path) -> Result<Vec<String>> {
             5,
             &Drive::Stepped { freqs, step_s: 0.1 },
             5.0,
-            &[
-                "simulated probe (hal-sim SimProbe::exchange) on phantom B, bench noise, seed 5"
-                    .into(),
-                "DAQ at 2 kHz; stepped drive 206-250 Hz step 4 Hz, 100 ms a step, 5 V".into(),
-                format!("true resonance {:.4} Hz", scene.resonance_hz()),
-                regen,
-            ],
+            &about(
+                "simulated probe (hal-sim SimProbe::exchange) on phantom B, bench noise, seed 5",
+                "DAQ at 2 kHz; stepped drive 206-250 Hz step 4 Hz, 100 ms a step, 5 V",
+                &scene,
+            ),
         ),
     )?;
     Ok(written)

@@ -43,32 +43,25 @@ impl Config {
 pub fn configs() -> Vec<Config> {
     let mut v = Vec::new();
     let ms = |x: f32| Seconds(x / 1000.0);
-    for (settle, int) in [(10.0, 10.0), (25.0, 25.0), (50.0, 50.0), (100.0, 100.0)] {
-        let s = SweepSettings {
-            settle: ms(settle),
-            integrate: ms(int),
-            ..Method::Paper.default_sweep()
-        };
-        v.push(Config::new(
-            Method::Paper,
-            format!("1 Hz, {settle}+{int} ms"),
-            &s,
-        ));
-    }
-    for (step, settle, int) in [
-        (4.0, 15.0, 10.0),
-        (2.0, 30.0, 20.0),
-        (2.0, 50.0, 40.0),
-        (2.0, 100.0, 100.0),
+    // The stepped sweeps: paper at its own 1 Hz step, sweep-G coarser.
+    for (method, step, settle, int) in [
+        (Method::Paper, 1.0, 10.0, 10.0),
+        (Method::Paper, 1.0, 25.0, 25.0),
+        (Method::Paper, 1.0, 50.0, 50.0),
+        (Method::Paper, 1.0, 100.0, 100.0),
+        (Method::SweepG, 4.0, 15.0, 10.0),
+        (Method::SweepG, 2.0, 30.0, 20.0),
+        (Method::SweepG, 2.0, 50.0, 40.0),
+        (Method::SweepG, 2.0, 100.0, 100.0),
     ] {
         let s = SweepSettings {
             step: Hz(step),
             settle: ms(settle),
             integrate: ms(int),
-            ..Method::SweepG.default_sweep()
+            ..method.default_sweep()
         };
         v.push(Config::new(
-            Method::SweepG,
+            method,
             format!("{step} Hz, {settle}+{int} ms"),
             &s,
         ));

@@ -1,6 +1,7 @@
 //! Plots of sweeps.
 
 use anyhow::{anyhow, Result};
+use plotters::coord::CoordTranslate;
 use plotters::prelude::*;
 use pzt_probe::engine::sweep::SweepPoint;
 use std::path::Path;
@@ -53,6 +54,25 @@ pub fn padded_range(values: impl Iterator<Item = f64>, pad: f64, empty: (f64, f6
     } else {
         empty
     }
+}
+
+/// A drawing error of plotters as an error of ours, with its message.
+pub fn err(e: impl std::fmt::Display) -> anyhow::Error {
+    anyhow!("{e}")
+}
+
+/// Draw the legend of `chart` at `position` on a white box of `opacity`, bordered in black.
+pub fn draw_legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+    opacity: f64,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    chart
+        .configure_series_labels()
+        .position(position)
+        .background_style(WHITE.mix(opacity))
+        .border_style(BLACK)
+        .draw()
 }
 
 /// Draw onto an SVG or a PNG file chosen by the extension of `path` (`.png` → PNG).
@@ -118,20 +138,20 @@ where
         .iter()
         .map(|p| p.g_s as f64 * 1e9)
         .fold(0.0, f64::min);
-    root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    root.fill(&WHITE).map_err(err)?;
     let mut chart = ChartBuilder::on(root)
         .caption(title, ("sans-serif", 20))
         .margin(12)
         .x_label_area_size(45)
         .y_label_area_size(70)
         .build_cartesian_2d(f0..f1, ymin..ymax)
-        .map_err(|e| anyhow!("{e}"))?;
+        .map_err(err)?;
     chart
         .configure_mesh()
         .x_desc("drive frequency (Hz)")
         .y_desc("admittance (nS)")
         .draw()
-        .map_err(|e| anyhow!("{e}"))?;
+        .map_err(err)?;
     let g: Vec<(f64, f64)> = points
         .iter()
         .map(|p| (p.freq.0 as f64, p.g_s as f64 * 1e9))
@@ -142,7 +162,7 @@ where
         .collect();
     chart
         .draw_series(LineSeries::new(g.clone(), &BLUE))
-        .map_err(|e| anyhow!("{e}"))?
+        .map_err(err)?
         .label("conductance G = Re(Y)")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
     chart
@@ -150,10 +170,10 @@ where
             g.iter()
                 .map(|&(x, y)| Circle::new((x, y), 2, BLUE.filled())),
         )
-        .map_err(|e| anyhow!("{e}"))?;
+        .map_err(err)?;
     chart
         .draw_series(LineSeries::new(m, &RED))
-        .map_err(|e| anyhow!("{e}"))?
+        .map_err(err)?
         .label("|Y| (1/|Z|)")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
     if let Some(fr) = resonance_hz {
@@ -163,15 +183,10 @@ where
                 vec![(fr, ymin), (fr, ymax)],
                 BLACK.stroke_width(1),
             ))
-            .map_err(|e| anyhow!("{e}"))?
+            .map_err(err)?
             .label(format!("estimate {fr:.3} Hz"))
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|e| anyhow!("{e}"))?;
+    draw_legend(&mut chart, SeriesLabelPosition::MiddleRight, 0.8).map_err(err)?;
     Ok(())
 }

@@ -71,6 +71,30 @@ pub fn run_script(script: &str) -> Result<String> {
     Ok(log)
 }
 
+/// `probe-bench <command> --qemu`: `lines` as the image's script on `target` (the header and
+/// the script printed unless `json`); the decoded log and its parse, which must be clean.
+fn run_lines(
+    command: &str,
+    target: &Target,
+    lines: &[String],
+    json: bool,
+) -> Result<(String, defmt_log::Session)> {
+    let script = lines.join(";");
+    if !json {
+        println!(
+            "probe-bench {command} --qemu: the firmware image on {}",
+            target.describe()
+        );
+        println!("  script: {script}");
+    }
+    let log = run_script(&script)?;
+    let session = defmt_log::parse_log(&log);
+    if let Some(e) = session.errors.first() {
+        bail!("the image's log does not parse: {e}");
+    }
+    Ok((log, session))
+}
+
 /// `stream --qemu`: the image's `stream` command on the scene and its events (`sim` lines,
 /// which count from the scene's start, 10 ms before the stream's), its readings with `t_s`
 /// from the stream's start (as the host's stream, which starts at probe time 0).
@@ -118,19 +142,7 @@ pub fn stream(
         }
     }
     lines.push(format!("stream {}", a.seconds));
-    let script = lines.join(";");
-    if !a.json {
-        println!(
-            "probe-bench stream --qemu: the firmware image on {}",
-            target.describe()
-        );
-        println!("  script: {script}");
-    }
-    let log = run_script(&script)?;
-    let session = defmt_log::parse_log(&log);
-    if let Some(e) = session.errors.first() {
-        bail!("the image's log does not parse: {e}");
-    }
+    let (log, session) = run_lines("stream", target, &lines, a.json)?;
     let [x] = session.streams.as_slice() else {
         bail!(
             "the image logged {} streams, not one:\n{log}",
@@ -195,19 +207,7 @@ pub fn measure(
         lines.push(format!("sim seed {}", a.seed + k as u64));
         lines.push("measure".to_owned());
     }
-    let script = lines.join(";");
-    if !a.json {
-        println!(
-            "probe-bench measure --qemu: the firmware image on {}",
-            target.describe()
-        );
-        println!("  script: {script}");
-    }
-    let log = run_script(&script)?;
-    let session = defmt_log::parse_log(&log);
-    if let Some(e) = session.errors.first() {
-        bail!("the image's log does not parse: {e}");
-    }
+    let (log, session) = run_lines("measure", target, &lines, a.json)?;
     if session.readings.len() != a.repeat as usize {
         bail!(
             "the image logged {} readings of {}:\n{log}",

@@ -147,3 +147,24 @@ pub fn layer_names(scene: &Scene) -> String {
         .collect::<Vec<_>>()
         .join(", ")
 }
+
+/// The first lines of a command's bench log on the simulated probe: `probe-bench <command>:`
+/// on `target`, then the preload, the noise and the layers of `scene`.
+pub fn print_scene_header(
+    command: &str,
+    target: &Target,
+    preload_n: f64,
+    noise: NoiseScene,
+    scene: &Scene,
+) {
+    println!(
+        "probe-bench {command}: simulated probe on {}",
+        target.describe()
+    );
+    println!(
+        "  preload {:.0} mN, noise {}, layers: {}",
+        preload_n * 1e3,
+        noise_name(noise),
+        layer_names(scene)
+    );
+}

@@ -3,7 +3,7 @@
 //! reading the firmware made.
 
 mod common;
-use common::{bin, run_fails_one_line, run_ok};
+use common::{bin, run_fails_one_line, run_ok, run_ok_containing};
 
 use probe_bench::defmt_log::{self, compile, parse_line, render, Piece, Ty, Value, TEMPLATES};
 use pzt_probe::engine::sweep::SweepPoint;
@@ -299,13 +299,9 @@ fn cli_table_stdin_plot_and_errors() {
     let dir = std::env::temp_dir().join(format!("probe-bench-log-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let svg = dir.join("log.svg");
-    let out = run_ok(bin().arg("log").arg(&log).arg("--plot").arg(&svg));
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        stdout.contains("227.976 ± 0.043")
-            && stdout.contains("280.3 ± 3.6")
-            && stdout.contains("29.96 ± 0.01"),
-        "{stdout}"
+    run_ok_containing(
+        bin().arg("log").arg(&log).arg("--plot").arg(&svg),
+        &["227.976 ± 0.043", "280.3 ± 3.6", "29.96 ± 0.01"],
     );
     assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
     // stdin, JSON.
@@ -415,13 +411,13 @@ fn missing_stream_readings_are_counted_from_seq_gaps() {
     std::fs::create_dir_all(&dir).unwrap();
     let f = dir.join("cut.log");
     std::fs::write(&f, &cut).unwrap();
-    let out = run_ok(bin().arg("log").arg(&f));
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        stdout.contains("2 streams")
-            && stdout.contains("32 readings logged, 4 missing")
-            && stdout.contains("firmware: 36 readings, 0 dropped"),
-        "{stdout}"
+    run_ok_containing(
+        bin().arg("log").arg(&f),
+        &[
+            "2 streams",
+            "32 readings logged, 4 missing",
+            "firmware: 36 readings, 0 dropped",
+        ],
     );
     let out = run_ok(bin().arg("log").arg(&f).arg("--json"));
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();

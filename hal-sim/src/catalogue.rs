@@ -111,6 +111,13 @@ pub fn catalogue(noise: NoiseScene) -> [Case; SCENES] {
     let s = phantoms::silicones();
     // Lift-off: the preload falls to nothing in 50 ms (a hand lifting the probe).
     let lift = |at_s: f64| LiftOff { at_s, ramp_s: 0.05 };
+    let mains = |fundamental_hz: f64, harmonic_amplitude_a: [f64; 8]| {
+        nominal.with_mains(Mains {
+            fundamental_hz,
+            harmonic_amplitude_a,
+        })
+    };
+    let drift = |rate_hz_s: f64| nominal.with_drift(Drift { rate_hz_s });
     // The paper's second mode (326 Hz) pulled down to 295 Hz, Q 40 (the tissue does not load
     // it), its peak motional conductance half of the first mode's on 300 kPa.
     let mode2 = SecondMode::with_peak_conductance(295.0, 40.0, 0.5 * g_peak);
@@ -205,20 +212,14 @@ pub fn catalogue(noise: NoiseScene) -> [Case; SCENES] {
         Case {
             name: "mains-50",
             what: "50 Hz harmonics at 200, 250, 300 Hz, 0.1 uA each",
-            scene: nominal.with_mains(Mains {
-                fundamental_hz: 50.0,
-                harmonic_amplitude_a: h50,
-            }),
+            scene: mains(50.0, h50),
             truth_kpa: Some(NOMINAL_KPA),
             accept: &["interference", "low_snr"],
         },
         Case {
             name: "mains-60",
             what: "60 Hz harmonics at 240, 300 Hz, 0.1 uA each",
-            scene: nominal.with_mains(Mains {
-                fundamental_hz: 60.0,
-                harmonic_amplitude_a: h60,
-            }),
+            scene: mains(60.0, h60),
             truth_kpa: Some(NOMINAL_KPA),
             accept: &["interference", "low_snr"],
         },
@@ -332,18 +333,14 @@ pub fn catalogue(noise: NoiseScene) -> [Case; SCENES] {
         Case {
             name: "drift-up",
             what: "300 kPa, free resonance drifting +0.3 Hz/s (+3 Hz in 10 s)",
-            scene: nominal.with_drift(Drift {
-                rate_hz_s: DRIFT_HZ_S,
-            }),
+            scene: drift(DRIFT_HZ_S),
             truth_kpa: Some(NOMINAL_KPA),
             accept: DRIFTING,
         },
         Case {
             name: "drift-down",
             what: "300 kPa, free resonance drifting -0.3 Hz/s (-3 Hz in 10 s)",
-            scene: nominal.with_drift(Drift {
-                rate_hz_s: -DRIFT_HZ_S,
-            }),
+            scene: drift(-DRIFT_HZ_S),
             truth_kpa: Some(NOMINAL_KPA),
             accept: DRIFTING,
         },

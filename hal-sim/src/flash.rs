@@ -131,6 +131,19 @@ impl<const CAP: usize, const ERASE: usize, const WRITE: usize> SimFlash<CAP, ERA
     }
 }
 
+/// One more byte out of a power-loss `budget` (none: no fault pending); at zero the power is
+/// lost (`dead`) before the byte.
+fn spend(budget: &mut Option<usize>, dead: &mut bool) -> Result<(), SimFlashError> {
+    if let Some(left) = budget.as_mut() {
+        if *left == 0 {
+            *dead = true;
+            return Err(SimFlashError::PowerLoss);
+        }
+        *left -= 1;
+    }
+    Ok(())
+}
+
 impl<const CAP: usize, const ERASE: usize, const WRITE: usize> ErrorType
     for SimFlash<CAP, ERASE, WRITE>
 {
@@ -170,13 +183,7 @@ impl<const CAP: usize, const ERASE: usize, const WRITE: usize> NorFlash
         check_erase(self, from, to)?;
         for sector in (from as usize..to as usize).step_by(ERASE) {
             for b in &mut self.data[sector..sector + ERASE] {
-                if let Some(left) = self.erase_budget.as_mut() {
-                    if *left == 0 {
-                        self.dead = true;
-                        return Err(SimFlashError::PowerLoss);
-                    }
-                    *left -= 1;
-                }
+                spend(&mut self.erase_budget, &mut self.dead)?;
                 *b = 0xFF;
             }
             self.erased_sectors += 1;
@@ -194,13 +201,7 @@ impl<const CAP: usize, const ERASE: usize, const WRITE: usize> NorFlash
             return Err(SimFlashError::NotErased);
         }
         for (dst, src) in self.data[o..o + bytes.len()].iter_mut().zip(bytes) {
-            if let Some(left) = self.program_budget.as_mut() {
-                if *left == 0 {
-                    self.dead = true;
-                    return Err(SimFlashError::PowerLoss);
-                }
-                *left -= 1;
-            }
+            spend(&mut self.program_budget, &mut self.dead)?;
             *dst &= *src;
             self.programmed_bytes += 1;
         }

@@ -3,8 +3,8 @@
 
 use super::progress;
 use crate::accuracy::{binomial_sd, measure, work_units, Budget, Options};
-use crate::plot::{padded_range, with_backend, PALETTE};
-use anyhow::{anyhow, Result};
+use crate::plot::{draw_legend, err, padded_range, with_backend, PALETTE};
+use anyhow::Result;
 use clap::Args;
 use plotters::prelude::*;
 use std::fmt::Write as _;
@@ -321,8 +321,7 @@ fn draw<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let e = |x: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("{x}");
-    root.fill(&WHITE).map_err(e)?;
+    root.fill(&WHITE).map_err(err)?;
     let pts = &b.coverage.points;
     let smax = padded_range(pts.iter().map(|p| p.3), 0.05, (0.0, 1.0)).1;
     let emax = pts
@@ -344,13 +343,13 @@ where
         .x_label_area_size(40)
         .y_label_area_size(60)
         .build_cartesian_2d(0.0..smax, -emax..emax)
-        .map_err(e)?;
+        .map_err(err)?;
     chart
         .configure_mesh()
         .x_desc("reported σ, % of the reading")
         .y_desc("error against the truth, %")
         .draw()
-        .map_err(e)?;
+        .map_err(err)?;
     for (k, lbl) in [(1.0, "±1σ"), (2.0, "±2σ")] {
         let col = PALETTE[7].mix(if k == 1.0 { 0.9 } else { 0.5 });
         for sgn in [1.0, -1.0] {
@@ -359,7 +358,7 @@ where
                     [(0.0, 0.0), (smax, sgn * k * smax)],
                     col.stroke_width(1),
                 ))
-                .map_err(e)?;
+                .map_err(err)?;
             if sgn > 0.0 {
                 s.label(lbl)
                     .legend(move |(x, y)| PathElement::new([(x - 8, y), (x + 8, y)], col));
@@ -375,16 +374,10 @@ where
                     .filter(|p| p.0 == *m)
                     .map(|p| Circle::new((p.3, p.2), 3, col.filled())),
             )
-            .map_err(e)?
+            .map_err(err)?
             .label(format!("{m} kPa"))
             .legend(move |(x, y)| Circle::new((x, y), 4, col.filled()));
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperLeft)
-        .draw()
-        .map_err(e)?;
+    draw_legend(&mut chart, SeriesLabelPosition::UpperLeft, 0.8).map_err(err)?;
     Ok(())
 }

@@ -1,8 +1,8 @@
 //! `probe-bench log`: the readings and sweeps in a decoded defmt log of the firmware.
 
 use crate::defmt_log::{self, Level, LoggedReading, Session};
-use crate::plot::{padded_range, with_backend, PALETTE};
-use anyhow::{anyhow, bail, Context, Result};
+use crate::plot::{draw_legend, err, padded_range, with_backend, PALETTE};
+use anyhow::{bail, Context, Result};
 use clap::Args;
 use plotters::prelude::*;
 use serde_json::{json, Value};
@@ -289,11 +289,10 @@ fn draw<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("{e}");
-    root.fill(&WHITE).map_err(e)?;
+    root.fill(&WHITE).map_err(err)?;
     let root = root
         .titled(&format!("defmt log: {title}"), ("sans-serif", 20))
-        .map_err(e)?;
+        .map_err(err)?;
     let (top, bottom) = root.split_vertically(480);
     // Sweeps.
     let pts = s.sweeps.iter().flat_map(|w| w.points.iter());
@@ -316,13 +315,13 @@ where
         .x_label_area_size(40)
         .y_label_area_size(60)
         .build_cartesian_2d(f0..f1, g0..g1)
-        .map_err(e)?;
+        .map_err(err)?;
     chart
         .configure_mesh()
         .x_desc("drive frequency (Hz)")
         .y_desc("G = Re(Y) (nS)")
         .draw()
-        .map_err(e)?;
+        .map_err(err)?;
     for (k, w) in s.sweeps.iter().enumerate() {
         let c = PALETTE[k % PALETTE.len()];
         let line: Vec<(f64, f64)> = w
@@ -342,7 +341,7 @@ where
         };
         chart
             .draw_series(LineSeries::new(line.clone(), c.stroke_width(2)))
-            .map_err(e)?
+            .map_err(err)?
             .label(label)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
         chart
@@ -350,7 +349,7 @@ where
                 line.iter()
                     .map(|&(x, y)| Circle::new((x, y), 2, c.filled())),
             )
-            .map_err(e)?;
+            .map_err(err)?;
         if let Some(f) = w
             .reading
             .and_then(|r| s.readings.get(r))
@@ -360,17 +359,12 @@ where
             if f > f0 && f < f1 {
                 chart
                     .draw_series(LineSeries::new(vec![(f, g0), (f, g1)], c.mix(0.6)))
-                    .map_err(e)?;
+                    .map_err(err)?;
             }
         }
     }
     if !s.sweeps.is_empty() {
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()
-            .map_err(e)?;
+        draw_legend(&mut chart, SeriesLabelPosition::MiddleRight, 0.85).map_err(err)?;
     }
     // History.
     let rs: Vec<(f64, &LoggedReading)> = s
@@ -395,12 +389,12 @@ where
         .x_label_area_size(40)
         .y_label_area_size(60)
         .build_cartesian_2d(x0..x1, y0..y1)
-        .map_err(e)?;
+        .map_err(err)?;
     hist.configure_mesh()
         .x_desc(if timed { "time (s)" } else { "reading" })
         .y_desc("resonance (Hz)")
         .draw()
-        .map_err(e)?;
+        .map_err(err)?;
     for (x, r) in &rs {
         let Some(f) = r.f_hz else { continue };
         let f = f as f64;
@@ -415,14 +409,14 @@ where
             vec![(*x - cap, f + sf), (*x + cap, f + sf)],
         ] {
             hist.draw_series(std::iter::once(PathElement::new(seg, c.stroke_width(2))))
-                .map_err(e)?;
+                .map_err(err)?;
         }
         if ok {
             hist.draw_series(std::iter::once(Circle::new((*x, f), 4, c.filled())))
-                .map_err(e)?;
+                .map_err(err)?;
         } else {
             hist.draw_series(std::iter::once(Cross::new((*x, f), 5, c.stroke_width(2))))
-                .map_err(e)?;
+                .map_err(err)?;
         }
     }
     Ok(())

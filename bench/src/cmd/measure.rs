@@ -2,7 +2,7 @@
 
 use super::{progress, MethodArgs};
 use crate::calfile;
-use crate::scene::{layer_names, noise_name, parse_noise, SceneArgs};
+use crate::scene::{parse_noise, print_scene_header, SceneArgs};
 use crate::{plot, report};
 use anyhow::{bail, Result};
 use clap::Args;
@@ -72,16 +72,7 @@ pub fn run(a: MeasureArgs) -> Result<()> {
         crate::unit::default_for(method)
     })?;
     if !a.json {
-        println!(
-            "probe-bench measure: simulated probe on {}",
-            target.describe()
-        );
-        println!(
-            "  preload {:.0} mN, noise {}, layers: {}",
-            a.scene.preload_n * 1e3,
-            noise_name(noise),
-            layer_names(&scene)
-        );
+        print_scene_header("measure", &target, a.scene.preload_n, noise, &scene);
         println!(
             "  simulator ground truth: resonance {:.3} Hz, Q {:.2}",
             scene.resonance_hz(),

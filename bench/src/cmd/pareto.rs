@@ -6,7 +6,7 @@ use crate::pareto::{
     stream_unit, tau_ms, Cell, Config, StreamCell, STREAM_SECONDS, STREAM_SEGMENTS_S,
     STREAM_SETTLE_S,
 };
-use crate::plot::{with_backend, PALETTE};
+use crate::plot::{draw_legend, err, with_backend, PALETTE};
 use crate::scene::Target;
 use anyhow::{anyhow, Result};
 use clap::Args;
@@ -531,25 +531,24 @@ fn draw_chart<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let e = |x: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("{x}");
-    root.fill(&WHITE).map_err(e)?;
+    root.fill(&WHITE).map_err(err)?;
     let mut ch = ChartBuilder::on(root)
         .caption(title, ("sans-serif", 18))
         .margin(14)
         .x_label_area_size(45)
         .y_label_area_size(65)
         .build_cartesian_2d((10f64..50_000f64).log_scale(), (ymin..ymax).log_scale())
-        .map_err(e)?;
+        .map_err(err)?;
     ch.configure_mesh()
         .x_desc("probe time per reading (ms)")
         .y_desc("RMS modulus error caused by noise (%)")
         .draw()
-        .map_err(e)?;
+        .map_err(err)?;
     ch.draw_series(LineSeries::new(
         front.iter().copied(),
         ShapeStyle::from(&RGBColor(170, 170, 170)).stroke_width(8),
     ))
-    .map_err(e)?
+    .map_err(err)?
     .label("Pareto front")
     .legend(|(x, y)| {
         PathElement::new(
@@ -558,7 +557,7 @@ where
         )
     });
     ch.draw_series(LineSeries::new(crb.iter().copied(), BLACK.stroke_width(2)))
-        .map_err(e)?
+        .map_err(err)?
         .label("Cramér–Rao bound")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2)));
     let grey = RGBColor(90, 90, 90);
@@ -568,7 +567,7 @@ where
         4,
         grey.stroke_width(2),
     ))
-    .map_err(e)?
+    .map_err(err)?
     .label("Cramér–Rao bound, steady state (the tracker's)")
     .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], grey.stroke_width(1)));
     for (mi, m) in pzt_probe::Method::ALL.iter().enumerate() {
@@ -583,7 +582,7 @@ where
             p.iter().map(|q| (q.1, q.2)),
             col.stroke_width(2),
         ))
-        .map_err(e)?
+        .map_err(err)?
         .label(m.name())
         .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(2)));
         ch.draw_series(p.iter().map(|q| {
@@ -594,7 +593,7 @@ where
             };
             Circle::new((q.1, q.2), 4, style)
         }))
-        .map_err(e)?;
+        .map_err(err)?;
     }
     // The continuous tracker: one reading per segment, so its probe time per reading is the
     // time per ok reading (1 / ok readings per second), segment lengths 35–150 ms.
@@ -603,7 +602,7 @@ where
         tracker.iter().copied(),
         col.stroke_width(3),
     ))
-    .map_err(e)?
+    .map_err(err)?
     .label("stream (tracker): 1 / (ok readings per s)")
     .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(3)));
     ch.draw_series(
@@ -611,13 +610,8 @@ where
             .iter()
             .map(|q| TriangleMarker::new(*q, 6, col.filled())),
     )
-    .map_err(e)?;
-    ch.configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()
-        .map_err(e)?;
+    .map_err(err)?;
+    draw_legend(&mut ch, SeriesLabelPosition::UpperRight, 0.85).map_err(err)?;
     Ok(())
 }
 

@@ -12,7 +12,7 @@
 
 use super::progress;
 use crate::calfile;
-use crate::plot::{padded_range, with_backend};
+use crate::plot::{draw_legend, err, padded_range, with_backend};
 use crate::scene::parse_noise;
 use anyhow::{anyhow, bail, Result};
 use clap::{Args, ValueEnum};
@@ -644,8 +644,7 @@ fn draw_map<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("{e}");
-    root.fill(&WHITE).map_err(e)?;
+    root.fill(&WHITE).map_err(err)?;
     let (fmin, fmax) = resonance_span(res);
     let s = spec.step_mm;
     let (x0, x1) = (
@@ -672,14 +671,14 @@ where
         .x_label_area_size(40)
         .y_label_area_size(50)
         .build_cartesian_2d(x0 - pad_x..x1 + pad_x, y0 - pad_y..y1 + pad_y)
-        .map_err(e)?;
+        .map_err(err)?;
     chart
         .configure_mesh()
         .disable_mesh()
         .x_desc("x (mm)")
         .y_desc("y (mm)")
         .draw()
-        .map_err(e)?;
+        .map_err(err)?;
     chart
         .draw_series(res.points.iter().map(|p| {
             let c = match p.reading.resonance {
@@ -694,7 +693,7 @@ where
                 c,
             )
         }))
-        .map_err(e)?;
+        .map_err(err)?;
     // Readings without a valid modulus (out of range, failed) are crossed.
     chart
         .draw_series(
@@ -703,20 +702,20 @@ where
                 .filter(|p| p.reading.status != Status::Ok)
                 .map(|p| Cross::new((p.x_mm, p.y_mm), 3, BLACK.stroke_width(1))),
         )
-        .map_err(e)?;
+        .map_err(err)?;
     if let Some(r) = spec.phantom.outline_radius_m {
         chart
             .draw_series(LineSeries::new(
                 circle(0.0, 0.0, r * 1e3),
                 BLACK.stroke_width(2),
             ))
-            .map_err(e)?
+            .map_err(err)?
             .label("phantom outline")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2)));
     }
     chart
         .draw_series(LineSeries::new(circle(tx, ty, tr), WHITE.stroke_width(1)))
-        .map_err(e)?
+        .map_err(err)?
         .label("true inclusion outline")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RGBColor(150, 150, 150)));
     if let Some(l) = &res.lump {
@@ -725,7 +724,7 @@ where
                 circle(l.x_mm, l.y_mm, 0.5 * l.diameter_mm),
                 RED.stroke_width(3),
             ))
-            .map_err(e)?
+            .map_err(err)?
             .label("lump found (half-height region, equal-area disc)")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(3)));
         chart
@@ -734,15 +733,9 @@ where
                 8,
                 RED.stroke_width(3),
             )))
-            .map_err(e)?;
+            .map_err(err)?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::LowerRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()
-        .map_err(e)?;
+    draw_legend(&mut chart, SeriesLabelPosition::LowerRight, 0.85).map_err(err)?;
     draw_colour_bar(&bar_area, spec, fmin, fmax)?;
     Ok(())
 }
@@ -789,7 +782,6 @@ fn draw_colour_bar<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("{e}");
     let mut bar = ChartBuilder::on(bar_area)
         .margin_top(40)
         .margin_bottom(50)
@@ -797,13 +789,13 @@ where
         .y_label_area_size(0)
         .right_y_label_area_size(75)
         .build_cartesian_2d(0.0..1.0, fmin..fmax)
-        .map_err(e)?;
+        .map_err(err)?;
     bar.configure_mesh()
         .disable_mesh()
         .disable_x_axis()
         .y_desc("resonance (Hz)")
         .draw()
-        .map_err(e)?;
+        .map_err(err)?;
     let n = 100;
     bar.draw_series((0..n).map(|k| {
         let a = fmin + (fmax - fmin) * k as f64 / n as f64;
@@ -813,7 +805,7 @@ where
             colour(k as f64 / (n - 1) as f64).filled(),
         )
     }))
-    .map_err(e)?;
+    .map_err(err)?;
     // Modulus at the bar's ends by the scan's calibration.
     let span = fmax - fmin;
     for (f, anchor) in [(fmin, fmin + 0.04 * span), (fmax, fmax - 0.005 * span)] {
@@ -827,7 +819,7 @@ where
                 (0.05, anchor),
                 ("sans-serif", 13).into_font().color(&WHITE),
             )))
-            .map_err(e)?;
+            .map_err(err)?;
         }
     }
     Ok(())

@@ -12,7 +12,7 @@
 //! interpolated, its centre their midpoint, its contrast the ratio of the two levels. The
 //! truth is the same rule on the phantom's closed-form apparent modulus along the same line.
 
-use crate::plot::{padded_range, with_backend, PALETTE};
+use crate::plot::{draw_legend, padded_range, with_backend, PALETTE};
 use anyhow::{anyhow, bail, Result};
 use hal_sim::lump::LumpPhantom;
 use hal_sim::Scene;
@@ -305,11 +305,7 @@ where
             }
         }
     }
-    c.configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(err)?;
+    draw_legend(&mut c, SeriesLabelPosition::MiddleRight, 0.8).map_err(err)?;
     root.present().map_err(err)?;
     Ok(())
 }
@@ -388,11 +384,7 @@ where
         .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], col.stroke_width(2)));
     l.draw_series(found.iter().map(|&p| Circle::new(p, 3, col.filled())))
         .map_err(err)?;
-    l.configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(err)?;
+    draw_legend(&mut l, SeriesLabelPosition::MiddleRight, 0.8).map_err(err)?;
     root.present().map_err(err)?;
     Ok(())
 }

@@ -1,7 +1,7 @@
 //! `probe-bench stability`: methods × the scene catalogue, the stability map.
 
 use super::progress;
-use crate::plot::with_backend;
+use crate::plot::{err, with_backend};
 use crate::stability::{
     calibrated, classify, run_case, statement, stream_catalogue, tally, Must, Outcome, StreamCase,
     FIRST_SEED, STREAM_SETTLE_S,
@@ -91,6 +91,20 @@ impl Cell {
     }
 }
 
+/// The CSV cells `outcome,status,modulus_kpa,modulus_sigma_kpa,truth_kpa` of reading `r` with
+/// outcome `o` against the truth `truth` (kPa); empty cells for what is missing.
+fn outcome_cells(o: Outcome, r: &Reading, truth: Option<f64>) -> String {
+    format!(
+        "{},{},{},{},{}",
+        o.name(),
+        r.status.code(),
+        r.modulus.map_or(String::new(), |x| format!("{:.2}", x.0)),
+        r.modulus_sigma
+            .map_or(String::new(), |x| format!("{:.2}", x.0)),
+        truth.map_or(String::new(), |x| format!("{x}"))
+    )
+}
+
 /// Run the subcommand.
 pub fn run(a: StabilityArgs) -> Result<()> {
     let cases = catalogue(NoiseScene::Bench);
@@ -115,16 +129,11 @@ pub fn run(a: StabilityArgs) -> Result<()> {
                 cell.add(o, &r, case.truth_kpa);
                 let _ = writeln!(
                     csv,
-                    "{},{},{},{},{},{},{},{},",
+                    "{},{},{},{},",
                     m.name(),
                     case.name,
                     seed,
-                    o.name(),
-                    r.status.code(),
-                    r.modulus.map_or(String::new(), |x| format!("{:.2}", x.0)),
-                    r.modulus_sigma
-                        .map_or(String::new(), |x| format!("{:.2}", x.0)),
-                    case.truth_kpa.map_or(String::new(), |x| format!("{x}"))
+                    outcome_cells(o, &r, case.truth_kpa)
                 );
             }
             row.push(cell);
@@ -163,18 +172,12 @@ pub fn run(a: StabilityArgs) -> Result<()> {
                 let o = case.classify(&s, r);
                 let truth = s.truth.at(r.t_s.0 as f64);
                 row.cell.add(o, &r.reading, truth);
-                let x = &r.reading;
                 let _ = writeln!(
                     csv,
-                    "stream,{},{},{},{},{},{},{},{:.4}",
+                    "stream,{},{},{},{:.4}",
                     case.name,
                     seed,
-                    o.name(),
-                    x.status.code(),
-                    x.modulus.map_or(String::new(), |v| format!("{:.2}", v.0)),
-                    x.modulus_sigma
-                        .map_or(String::new(), |v| format!("{:.2}", v.0)),
-                    truth.map_or(String::new(), |v| format!("{v}")),
+                    outcome_cells(o, &r.reading, truth),
                     r.t_s.0
                 );
             }
@@ -417,8 +420,7 @@ fn draw<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let e = |x: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("{x}");
-    root.fill(&WHITE).map_err(e)?;
+    root.fill(&WHITE).map_err(err)?;
     let colors = [
         RGBColor(90, 180, 90),
         RGBColor(150, 200, 240),
@@ -431,19 +433,19 @@ where
         (10, 12),
         ("sans-serif", 18),
     ))
-    .map_err(e)?;
+    .map_err(err)?;
     for (i, m) in Method::ALL.iter().enumerate() {
         root.draw(&Text::new(
             m.name(),
             (x0 + i as i32 * w + 8, y0 - 20),
             ("sans-serif", 15),
         ))
-        .map_err(e)?;
+        .map_err(err)?;
     }
     for (j, n) in names.iter().enumerate() {
         let y = y0 + j as i32 * h;
         root.draw(&Text::new(*n, (8, y + 10), ("sans-serif", 14)))
-            .map_err(e)?;
+            .map_err(err)?;
         for (i, row) in grid.iter().enumerate() {
             let c = &row[j];
             let worst = c.worst();
@@ -452,29 +454,29 @@ where
                 [(x, y), (x + w - 3, y + h - 3)],
                 colors[worst].filled(),
             ))
-            .map_err(e)?;
+            .map_err(err)?;
             root.draw(&Text::new(c.label(), (x + 5, y + 9), ("sans-serif", 12)))
-                .map_err(e)?;
+                .map_err(err)?;
         }
     }
     // The continuous scenes: one row each, in a column of their own.
     let xs = x0 + Method::ALL.len() as i32 * w;
     root.draw(&Text::new("stream", (xs + 8, y0 - 20), ("sans-serif", 15)))
-        .map_err(e)?;
+        .map_err(err)?;
     for (j, (name, row, seeds)) in stream.iter().enumerate() {
         let y = y0 + (names.len() + j) as i32 * h;
         root.draw(&Text::new(name.as_str(), (8, y + 10), ("sans-serif", 14)))
-            .map_err(e)?;
+            .map_err(err)?;
         let c = &row.cell;
         let worst = c.worst();
         root.draw(&Rectangle::new(
             [(xs, y), (xs + STREAM_W - 3, y + h - 3)],
             colors[worst].filled(),
         ))
-        .map_err(e)?;
+        .map_err(err)?;
         let label = format!("{}; {}/{} streams do it", c.label(), row.met, seeds);
         root.draw(&Text::new(label, (xs + 5, y + 9), ("sans-serif", 12)))
-            .map_err(e)?;
+            .map_err(err)?;
     }
     let ly = y0 + (names.len() + stream.len()) as i32 * h + 12;
     for (k, (c, t)) in colors
@@ -489,9 +491,9 @@ where
     {
         let x = x0 + k as i32 * 200;
         root.draw(&Rectangle::new([(x, ly), (x + 16, ly + 16)], c.filled()))
-            .map_err(e)?;
+            .map_err(err)?;
         root.draw(&Text::new(t, (x + 22, ly + 2), ("sans-serif", 13)))
-            .map_err(e)?;
+            .map_err(err)?;
     }
     Ok(())
 }

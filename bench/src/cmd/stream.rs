@@ -2,7 +2,7 @@
 //! `pzt_probe::instrument::continuous`), with a step in stiffness, a lift-off and a new contact on the way.
 
 use crate::report;
-use crate::scene::{layer_names, noise_name, parse_noise, SceneArgs};
+use crate::scene::{parse_noise, print_scene_header, SceneArgs};
 use crate::stream::{self, settled_after, summarize, StreamScene, Truth};
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -126,16 +126,7 @@ pub fn run(a: StreamArgs) -> Result<()> {
     };
     let unit = crate::unit::default_for(METHOD)?;
     if !a.json {
-        println!(
-            "probe-bench stream: simulated probe on {}",
-            target.describe()
-        );
-        println!(
-            "  preload {:.0} mN, noise {}, layers: {}",
-            a.scene.preload_n * 1e3,
-            noise_name(noise),
-            layer_names(&scene)
-        );
+        print_scene_header("stream", &target, a.scene.preload_n, noise, &scene);
         if !a.qemu {
             println!(
             "  tracker: segments of {:.0} ms, drive ±{} half-linewidths off the resonance; unit profile of the simulated unit ({} calibration)",
@@ -330,10 +321,7 @@ where
         .map_err(|e| anyhow::anyhow!("{e:?}"))?
         .label("ok reading ± σ")
         .legend(move |(x, y)| Circle::new((x, y), 3, col.filled()));
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
+        crate::plot::draw_legend(&mut c, SeriesLabelPosition::MiddleRight, 0.8)
             .map_err(|e| anyhow::anyhow!("{e:?}"))?;
         let mut l = ChartBuilder::on(&lower)
             .margin(10)
@@ -368,10 +356,7 @@ where
             .map_err(|e| anyhow::anyhow!("{e:?}"))?
             .label("ok")
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], o));
-        l.configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
+        crate::plot::draw_legend(&mut l, SeriesLabelPosition::MiddleRight, 0.8)
             .map_err(|e| anyhow::anyhow!("{e:?}"))?;
         Ok(())
     }

@@ -20,6 +20,15 @@ pub fn run_ok(cmd: &mut Command) -> Output {
     out
 }
 
+/// Run `cmd`, assert it succeeded and that its stdout holds every one of `parts` (showing the
+/// stdout if not); return the output.
+pub fn run_ok_containing(cmd: &mut Command, parts: &[&str]) -> Output {
+    let out = run_ok(cmd);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(parts.iter().all(|p| stdout.contains(p)), "{stdout}");
+    out
+}
+
 /// Run `cmd`, assert it succeeded, and parse its stdout as one JSON value.
 pub fn run_json(cmd: &mut Command) -> serde_json::Value {
     serde_json::from_slice(&run_ok(cmd).stdout).unwrap()
