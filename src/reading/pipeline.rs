@@ -143,8 +143,16 @@ pub fn conclude(
         r.status = Status::Failed(Failure::Uncalibrated);
         return r;
     };
+    // The contact: with a load cell the force window and its stability judge the press, and Q
+    // may only say what tissue loss cannot (a Q above the calibrated contact's); without one,
+    // a Q off the curve either way is the only sign of a press unlike the calibration's.
     let force_n = force.map(|w| w.mean.0 as f64);
-    if !q_model.holds(m.value.0 as f64, force_n, q as f64) {
+    let (e_kpa, q) = (m.value.0 as f64, q as f64);
+    let contact_unlike = match force_n {
+        Some(_) => q_model.exceeded(e_kpa, force_n, q),
+        None => !q_model.holds(e_kpa, force_n, q),
+    };
+    if contact_unlike {
         r.status = Status::Failed(Failure::BadContact);
         return r;
     }
@@ -194,6 +202,41 @@ mod tests {
         };
         let r = conclude(Method::Hold, Ok(est), &unit, t, 8, None);
         assert_eq!(r.status, Status::Failed(Failure::NoForce));
+    }
+
+    /// With a load cell the press is judged by its force: a Q far below the calibrated
+    /// contact's (lossy tissue adds damping) still gives a modulus, a Q above it (a contact
+    /// unlike the calibration's, which no tissue loss can cause) is `bad_contact`. (Without a
+    /// force the Q model judges both ways: `tests/mutants_gaps.rs`.)
+    #[test]
+    fn with_a_load_cell_only_a_q_above_the_contact_model_is_bad_contact() {
+        let unit = crate::board::sim_factory::profile().expect("the factory profile");
+        let cal = unit.load_cell.expect("a load cell");
+        let q_model = unit.q_model.expect("a Q model");
+        let press = cal.stated(crate::units::Newtons(0.030));
+        let t = Seconds(0.125);
+        let air = unit.air.expect("an air reference");
+        let f = crate::units::Hz(air.free_resonance.0 - 4.0);
+        let at = |q: f32, force| {
+            let est = Estimate {
+                resonance: f,
+                sigma: crate::units::Hz(0.01),
+                q: Some(q),
+                points_used: 8,
+            };
+            conclude(Method::Hold, Ok(est), &unit, t, 8, force)
+        };
+        let nominal = at(10.0, Some(press));
+        let e = nominal
+            .modulus
+            .expect("a modulus on the calibrated curve")
+            .0 as f64;
+        let expect = q_model.q_at(e, Some(0.030)) as f32;
+        assert_eq!(at(0.3 * expect, Some(press)).status, Status::Ok);
+        assert_eq!(
+            at(1.5 * expect, Some(press)).status,
+            Status::Failed(Failure::BadContact)
+        );
     }
 
     /// A refused estimate during a press that moved by less than the force window allows, but

@@ -149,6 +149,15 @@ impl QModel {
         expect > 0.0 && libm::fabs(q / expect - 1.0) <= Self::TOLERANCE
     }
 
+    /// True when `q` at `e_kpa` (and `force_n`) stands more than [`Self::TOLERANCE`] above the
+    /// curve: a contact narrower or looser than the calibration's (a tip touching on its edge
+    /// radiates less into the tissue). Tissue loss only ever lowers Q, so unlike [`Self::holds`]
+    /// no lossy tissue can trigger it.
+    pub fn exceeded(&self, e_kpa: f64, force_n: Option<f64>, q: f64) -> bool {
+        let expect = self.q_at(e_kpa, force_n);
+        !(expect > 0.0) || q / expect - 1.0 > Self::TOLERANCE
+    }
+
     /// True when every coefficient is finite.
     pub fn is_valid(&self) -> bool {
         self.q0.is_finite() && self.q1.is_finite() && self.q2.is_finite()
