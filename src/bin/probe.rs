@@ -37,49 +37,8 @@ use pzt_probe::board::qemu as board;
 #[cfg(all(target_os = "none", feature = "stm32"))]
 use pzt_probe::board::stm32g474 as board;
 
-#[cfg(all(target_os = "none", feature = "stm32"))]
-use defmt_rtt as _;
-
-#[cfg(all(target_os = "none", feature = "qemu"))]
-use defmt_semihosting as _;
-
-// The STM32 image's panic handler: panic-probe logs the panic's message and location over defmt
-// (feature `print-defmt`), then takes a HardFault (`udf`): probe-rs shows the backtrace and,
-// without a debugger, the watchdog resets the core.
-#[cfg(all(target_os = "none", feature = "stm32"))]
-use panic_probe as _;
-
-/// Stop for good: QEMU exits with failure; the STM32 takes a permanent fault (panic-probe's
-/// `hard_fault`: `udf` with UsageFault disabled, so that it escalates to HardFault).
-#[cfg(target_os = "none")]
-fn fail() -> ! {
-    #[cfg(feature = "qemu")]
-    board::exit(false);
-    #[cfg(not(feature = "qemu"))]
-    panic_probe::hard_fault()
-}
-
-/// The QEMU image's panic handler: log the panic's location and message, then exit with
-/// failure.
-#[cfg(all(target_os = "none", feature = "qemu"))]
-#[panic_handler]
-fn panic(info: &core::panic::PanicInfo) -> ! {
-    defmt::error!("panic {}", defmt::Display2Format(info));
-    fail()
-}
-
-/// `defmt::panic!` and its kin have logged their message already: stop without a second line.
-#[cfg(target_os = "none")]
-#[defmt::panic_handler]
-fn defmt_panic() -> ! {
-    fail()
-}
-
-#[cfg(all(target_os = "none", feature = "qemu"))]
-#[cortex_m_rt::exception]
-unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
-    board::exit(false)
-}
+// The boards' defmt loggers, panic handlers and fault handlers are in their modules
+// (`pzt_probe::board::qemu`, `pzt_probe::board::stm32g474`).
 
 #[cfg(target_os = "none")]
 mod shared {
@@ -209,10 +168,7 @@ mod app {
         );
         // A bring-up step that failed (bounded waits, docs/firmware.md): said, not a reset loop.
         if let Some(e) = board::boot_error() {
-            #[cfg(feature = "stm32")]
-            let clock = board::clock_source().name();
-            #[cfg(not(feature = "stm32"))]
-            let clock = board::NAME;
+            let clock = board::clock_name();
             defmt::error!("boot fault={=str} clock={=str}", e.code(), clock);
         }
 

@@ -31,6 +31,30 @@ use hal_sim::flash::SimFlash;
 use hal_sim::loadcell::{ChipHandle, Delay, Dout, Hx711Sim, Sck};
 use hal_sim::{AdcPair, SimProbe};
 
+// The image's defmt global logger: semihosting.
+use defmt_semihosting as _;
+
+/// The image's panic handler: log the panic's location and message, then end the run with
+/// failure.
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    defmt::error!("panic {}", defmt::Display2Format(info));
+    exit(false)
+}
+
+/// `defmt::panic!` and its kin have logged their message already: end the run with failure
+/// without a second line.
+#[defmt::panic_handler]
+fn defmt_panic() -> ! {
+    exit(false)
+}
+
+/// A fault ends the run with failure.
+#[cortex_m_rt::exception]
+unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    exit(false)
+}
+
 /// What RTIC needs of a device crate, for the interrupt lines this image uses.
 ///
 /// AN386 has 32 external interrupt lines (UARTs 0–5, 12; GPIO 6–7, 16–31; timers 8–10; SPI 11;
@@ -103,6 +127,11 @@ pub mod device {
 
 /// Board name in the boot log line.
 pub const NAME: &str = "qemu";
+
+/// The clock in the boot fault line: the machine has one.
+pub fn clock_name() -> &'static str {
+    NAME
+}
 
 /// The probe at power-on: on phantom B of paper 003 (279 kPa) at 30 mN and the bench noise
 /// level, noise seed 1. The command script moves it (`sim ...` lines,

@@ -72,6 +72,20 @@ use embedded_storage::nor_flash::{
     ReadNorFlash,
 };
 
+// The image's defmt global logger (RTT) and panic handler: panic-probe logs the panic's
+// message and location over defmt (feature `print-defmt`), then takes a HardFault (`udf`):
+// probe-rs shows the backtrace and, without a debugger, the watchdog resets the core.
+use defmt_rtt as _;
+use panic_probe as _;
+
+/// `defmt::panic!` and its kin have logged their message already: stop for good without a
+/// second line, with panic-probe's permanent fault (`udf` with UsageFault disabled, so that it
+/// escalates to HardFault).
+#[defmt::panic_handler]
+fn defmt_panic() -> ! {
+    panic_probe::hard_fault()
+}
+
 /// The device crate RTIC binds to (`device = embassy_stm32`, `peripherals = false`).
 pub use embassy_stm32 as device;
 
@@ -262,6 +276,11 @@ impl ClockSource {
 
 /// 1: HSE through the PLL, 2: HSI16 through the PLL, otherwise HSI16 directly.
 static CLOCK: AtomicU8 = AtomicU8::new(0);
+
+/// The clock in the boot fault line: [`clock_source`]'s name.
+pub fn clock_name() -> &'static str {
+    clock_source().name()
+}
 
 /// The oscillator the core runs from (set by [`init`]).
 pub fn clock_source() -> ClockSource {
