@@ -133,6 +133,12 @@ pub fn clock_name() -> &'static str {
     NAME
 }
 
+/// The script the image runs when its boot command line holds none ([`boot_script`]), through
+/// the same line parser as a host's lines: a reading with the default method (auto), one with
+/// sweep-G over a sweep of its own, back to auto with two-stage settings of its own, store,
+/// status.
+pub const SCRIPT: &str = "status;measure;method sweep-g;sweep 200 260 2 0.02 0.03 5;measure;method auto;staged 180 280 6 0.02 0.03 5 0.8 5 4;store;status";
+
 /// The probe at power-on: on phantom B of paper 003 (279 kPa) at 30 mN and the bench noise
 /// level, noise seed 1. The command script moves it (`sim ...` lines,
 /// [`super::sim_script`]).
@@ -524,19 +530,21 @@ pub struct Watchdog {
 /// The STM32's watchdog timeout in instructions of this machine's clock (500 ms).
 const WATCHDOG_INSTRUCTIONS: u32 = 500_000_000;
 
-impl Watchdog {
+impl crate::instrument::watchdog::Watchdog for Watchdog {
     /// Feed; fails the run if the last feed was more than the timeout ago.
-    pub fn feed(&mut self) {
+    fn feed(&mut self) {
         self.check();
         self.last = Some(stamp());
     }
 
     /// Not fed this time (the guard found the measurement task's promise broken): fails the
     /// run once the timeout has passed since the last feed, as the IWDG would reset the core.
-    pub fn starved(&mut self) {
+    fn starved(&mut self) {
         self.check();
     }
+}
 
+impl Watchdog {
     fn check(&self) {
         if let Some(t) = self.last {
             let since = elapsed(t);

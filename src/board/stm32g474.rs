@@ -677,15 +677,15 @@ impl Uart {
 /// frozen while a debugger halts the core.
 pub struct Watchdog(IndependentWatchdog<'static, peripherals::IWDG>);
 
-impl Watchdog {
+impl crate::instrument::watchdog::Watchdog for Watchdog {
     /// Feed the watchdog.
-    pub fn feed(&mut self) {
+    fn feed(&mut self) {
         self.0.pet();
     }
 
     /// Not fed this time: nothing to do, the IWDG resets the core by itself once its timeout
     /// has passed since the last feed (the QEMU board's stand-in checks the same here).
-    pub fn starved(&mut self) {}
+    fn starved(&mut self) {}
 }
 
 // ---- flash -----------------------------------------------------------------------------
