@@ -285,8 +285,9 @@ mod app {
         async fn plan(&mut self, plan: EngineCmd) -> bool {
             self.plans.send(plan).await.is_ok()
         }
-        async fn point(&mut self, within: Millis) -> Recv<PointRaw> {
-            Recv::of(Mono::timeout_after(within.0.millis(), self.points.recv()).await)
+        async fn point(&mut self, within: Millis) -> Option<PointRaw> {
+            let got = Mono::timeout_after(within.0.millis(), self.points.recv()).await;
+            got.ok()?.ok()
         }
         async fn request(&mut self, within: Millis) -> Recv<Command> {
             Recv::of(Mono::timeout_after(within.0.millis(), self.requests.recv()).await)

@@ -52,8 +52,9 @@ pub trait Link {
     /// Hand the sample interrupt a plan to load, or `None` to stop the drive (waits for room);
     /// false when the interrupt can no longer be reached.
     async fn plan(&mut self, plan: Option<PointPlan>) -> bool;
-    /// The interrupt's next finished window, waiting at most `within`.
-    async fn point(&mut self, within: Millis) -> Recv<PointRaw>;
+    /// The interrupt's next finished window, waiting at most `within` (`None`: none came, or
+    /// the interrupt can no longer be reached).
+    async fn point(&mut self, within: Millis) -> Option<PointRaw>;
     /// The command task's next request, waiting at most `within`.
     async fn request(&mut self, within: Millis) -> Recv<Command>;
     /// Tell the command task a request (or the power-on self-test) ended, `ok` or not, without
@@ -115,7 +116,9 @@ impl<'a, L: Link, F: NorFlash> FwIo<'a, L, F> {
         }
     }
 
-    /// The task is alive now and promises its next sign of life within `within`.
+    /// The task is alive now and promises its next sign of life within `within`. Not inlined:
+    /// the monotonic's reading is a critical section, and six call sites would each carry it.
+    #[inline(never)]
     fn promise(&self, within: Millis) {
         self.liveness.promise(self.link.now(), within);
     }
@@ -170,9 +173,9 @@ impl<L: Link, F: NorFlash> PointSource for FwIo<'_, L, F> {
         let got = loop {
             self.promise(watchdog::after_wait(wait));
             match self.link.point(wait).await {
-                Recv::Got(raw) if wanted.matches(&raw) => break Some(raw),
-                Recv::Got(_stale) => continue,
-                Recv::Timeout | Recv::Closed => break None,
+                Some(raw) if wanted.matches(&raw) => break Some(raw),
+                Some(_stale) => continue,
+                None => break None,
             }
         };
         self.promise(ALIVE);
@@ -279,15 +282,13 @@ mod tests {
             self.plans.push(plan);
             true
         }
-        async fn point(&mut self, within: Millis) -> Recv<PointRaw> {
+        async fn point(&mut self, within: Millis) -> Option<PointRaw> {
             self.waits.push(within);
-            match self.points.pop_front() {
-                Some(p) => Recv::Got(p),
-                None => {
-                    self.now += within.0;
-                    Recv::Timeout
-                }
+            let p = self.points.pop_front();
+            if p.is_none() {
+                self.now += within.0;
             }
+            p
         }
         /// A request, the end of the commands, or a wait that never ends (the test is done).
         async fn request(&mut self, _: Millis) -> Recv<Command> {
@@ -576,12 +577,12 @@ mod tests {
             }
             true
         }
-        async fn point(&mut self, within: Millis) -> Recv<PointRaw> {
+        async fn point(&mut self, within: Millis) -> Option<PointRaw> {
             let end = self.engine.samples() + within.0 as u64 * 10;
             while self.points.is_empty() && self.engine.samples() < end {
                 self.batch();
             }
-            self.points.pop_front().map_or(Recv::Timeout, Recv::Got)
+            self.points.pop_front()
         }
         /// A request, a feed period with none, then a wait that never ends (the test is done).
         async fn request(&mut self, within: Millis) -> Recv<Command> {
