@@ -1,6 +1,6 @@
 //! Boot errors: a bring-up step of the board that failed, as the session and the log name it.
 //!
-//! The STM32 board (`src/board/stm32g474.rs`) records the first one ([`BootError`] is its
+//! The STM32 board (`src/board/stm32g474/`) records the first one ([`BootError`] is its
 //! type); the session refuses what the failed step makes impossible with the step's name and
 //! message ([`crate::instrument::session::Refusal::Boot`]) and shows it in `status`. Portable, so the
 //! session's handling is tested on the host.

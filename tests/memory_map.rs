@@ -4,9 +4,10 @@
 //! * build.rs links the STM32 image with the root `memory.x` through `link.x`, the QEMU images
 //!   with `memory/mps2-an386.x` as their top script and `memory.x` remapped away.
 //! * `memory.x` is the STM32G474RE map with FLASH on bank 1 (256 KiB at 0x0800_0000) and the
-//!   96 KiB of SRAM1 + SRAM2; the calibration store (`STORE_BASE` of `src/board/stm32g474.rs`,
-//!   with the footprint `Store` gives it on the chip's 2 KiB pages) lies outside FLASH, inside
-//!   bank 2, and agrees with the map's `_pzt_store_start`/`_pzt_store_end`.
+//!   96 KiB of SRAM1 + SRAM2; the calibration store (`STORE_BASE` of
+//!   `src/board/stm32g474/store.rs`, with the footprint `Store` gives it on the chip's 2 KiB
+//!   pages) lies outside FLASH, inside bank 2, and agrees with the map's
+//!   `_pzt_store_start`/`_pzt_store_end`.
 //! * `memory/mps2-an386.x` puts FLASH at 0 (QEMU loads the image there, the vector table must be
 //!   at 0) and RAM in SSRAM2/3, and includes `link.x` after its regions.
 
@@ -155,11 +156,11 @@ fn qemu_map_loads_at_zero() {
 #[test]
 fn store_is_outside_the_image_and_agrees_with_the_map() {
     // STORE_BASE of the STM32 board (that module builds only for the target).
-    let board = read("src/board/stm32g474.rs");
+    let board = read("src/board/stm32g474/store.rs");
     let line = board
         .lines()
         .find(|l| l.starts_with("pub const STORE_BASE: u32 ="))
-        .expect("STORE_BASE in src/board/stm32g474.rs");
+        .expect("STORE_BASE in src/board/stm32g474/store.rs");
     let base = number(
         &line
             .split_once('=')

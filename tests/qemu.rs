@@ -80,7 +80,7 @@ fn qemu_image_measures_phantom_b() {
         lines.iter().filter_map(|l| fields(l)).collect();
     let last = |name: &str| last(&parsed, name);
 
-    // The script (src/bin/probe.rs, SCRIPT): status, measure (the default method), method
+    // The script (src/board/qemu.rs, SCRIPT): status, measure (the default method), method
     // sweep-g, sweep 200 260 2 0.02 0.03 5, measure, method auto, staged ..., store, status.
     // Every point line belongs to the reading line that follows it.
     type Line = HashMap<String, String>;

@@ -22,14 +22,14 @@ const TIMEOUT: Duration = Duration::from_secs(900);
 const BUDGET_PCT: f64 = 2.0;
 /// ... of the STM32G474's core at 170 MHz, counting one cycle per instruction ...
 const CORE_HZ: f64 = 170e6;
-/// ... at the firmware's sample rate (`SAMPLE_RATE_HZ` of `src/board/stm32g474.rs`; the
+/// ... at the firmware's sample rate (`SAMPLE_RATE_HZ` of `src/board/stm32g474/mod.rs`; the
 /// simulated front end of the QEMU image runs at the same rate).
 const FIRMWARE_FS_HZ: f64 = 10_000.0;
 /// Samples per batch (`pzt_probe::engine::BATCH`).
 const BATCH: f64 = 25.0;
 /// The largest single measurement call must leave the measurement task free to feed the
-/// watchdog at its 100 ms interval (`FEED_MS` in `src/bin/probe.rs`; the STM32's independent
-/// watchdog bites after 500 ms).
+/// watchdog at its 100 ms interval (`FEED` in `src/instrument/watchdog.rs`; the STM32's
+/// independent watchdog bites after 500 ms).
 const CALL_MAX_US: f64 = 100_000.0;
 /// Fewest moduli every method must have been measured at.
 const MIN_MODULI: usize = 3;

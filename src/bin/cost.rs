@@ -58,27 +58,8 @@ compile_error!(
 #[cfg(all(target_os = "none", feature = "qemu"))]
 use pzt_probe::board::qemu as board;
 
-#[cfg(all(target_os = "none", feature = "qemu"))]
-use defmt_semihosting as _;
-
-#[cfg(all(target_os = "none", feature = "qemu"))]
-#[panic_handler]
-fn panic(info: &core::panic::PanicInfo) -> ! {
-    defmt::error!("panic {}", defmt::Display2Format(info));
-    board::exit(false)
-}
-
-#[cfg(all(target_os = "none", feature = "qemu"))]
-#[defmt::panic_handler]
-fn defmt_panic() -> ! {
-    board::exit(false)
-}
-
-#[cfg(all(target_os = "none", feature = "qemu"))]
-#[cortex_m_rt::exception]
-unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
-    board::exit(false)
-}
+// The defmt logger, the panic handlers and the HardFault handler are the QEMU board's
+// (`pzt_probe::board::qemu`): a panic or a fault ends the run with failure.
 
 #[cfg(all(target_os = "none", feature = "qemu"))]
 mod harness {

@@ -11,8 +11,8 @@
 //! |---|---|---|
 //! | `sample` (hardware) | 3 | per batch: demodulate the ADC half, refill the DAC half ([`pzt_probe::engine::SampleEngine`]) |
 //! | `uart_rx` (hardware) | 2 | host bytes from LPUART1's DMA ring (ST-LINK virtual COM port) into a channel |
-//! | `measure` | 1 | the session ([`pzt_probe::instrument::session`]): profile, settings, the flash store; readings through [`pzt_probe::reading::driver`] |
-//! | `command` | 1 | bytes → lines → [`pzt_probe::instrument::command::parse`] → requests to `measure` (QEMU: the boot command line's script or the built-in one, [`pzt_probe::board::sim_script`]) |
+//! | `measure` | 1 | the session ([`pzt_probe::instrument::session`]): profile, settings, the flash store; readings through [`pzt_probe::reading::driver`]; the task's board and loop are [`pzt_probe::instrument::measure`], over the links here |
+//! | `command` | 1 | bytes → lines → [`pzt_probe::instrument::command::parse`] → requests to `measure` (QEMU: the boot command line's script or the built-in one, run by [`pzt_probe::board::sim_script::Runner`]) |
 //! | `report` | 1 | the only place that logs: one defmt line per event (`pzt_probe::instrument::log`) |
 //! | `load_cell` | 1 | every 5 ms: the HX711's conversion, if one is ready (80 a second), into the shared force log, stamped with the sample count |
 //! | `guard` | 2 | feeds the independent watchdog every 100 ms while `measure` keeps its liveness promise ([`pzt_probe::instrument::watchdog`]) |
@@ -37,49 +37,8 @@ use pzt_probe::board::qemu as board;
 #[cfg(all(target_os = "none", feature = "stm32"))]
 use pzt_probe::board::stm32g474 as board;
 
-#[cfg(all(target_os = "none", feature = "stm32"))]
-use defmt_rtt as _;
-
-#[cfg(all(target_os = "none", feature = "qemu"))]
-use defmt_semihosting as _;
-
-// The STM32 image's panic handler: panic-probe logs the panic's message and location over defmt
-// (feature `print-defmt`), then takes a HardFault (`udf`): probe-rs shows the backtrace and,
-// without a debugger, the watchdog resets the core.
-#[cfg(all(target_os = "none", feature = "stm32"))]
-use panic_probe as _;
-
-/// Stop for good: QEMU exits with failure; the STM32 takes a permanent fault (panic-probe's
-/// `hard_fault`: `udf` with UsageFault disabled, so that it escalates to HardFault).
-#[cfg(target_os = "none")]
-fn fail() -> ! {
-    #[cfg(feature = "qemu")]
-    board::exit(false);
-    #[cfg(not(feature = "qemu"))]
-    panic_probe::hard_fault()
-}
-
-/// The QEMU image's panic handler: log the panic's location and message, then exit with
-/// failure.
-#[cfg(all(target_os = "none", feature = "qemu"))]
-#[panic_handler]
-fn panic(info: &core::panic::PanicInfo) -> ! {
-    defmt::error!("panic {}", defmt::Display2Format(info));
-    fail()
-}
-
-/// `defmt::panic!` and its kin have logged their message already: stop without a second line.
-#[cfg(target_os = "none")]
-#[defmt::panic_handler]
-fn defmt_panic() -> ! {
-    fail()
-}
-
-#[cfg(all(target_os = "none", feature = "qemu"))]
-#[cortex_m_rt::exception]
-unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
-    board::exit(false)
-}
+// The boards' defmt loggers, panic handlers and fault handlers are in their modules
+// (`pzt_probe::board::qemu`, `pzt_probe::board::stm32g474`).
 
 #[cfg(target_os = "none")]
 mod shared {
@@ -92,12 +51,10 @@ mod shared {
 
     pub use pzt_probe::instrument::log::Report;
 
-    use pzt_probe::instrument::watchdog::{Liveness, Millis};
+    use pzt_probe::instrument::watchdog::{Liveness, BOOT};
 
-    /// The measurement task's liveness promise, kept by `measure`, read by `guard`. The first
-    /// promise covers the boot up to the measurement task's first sign of life (the monotonic
-    /// starts at 0 in `init`).
-    pub static LIVENESS: Liveness = Liveness::new(Millis(1_000));
+    /// The measurement task's liveness promise, kept by `measure`, read by `guard`.
+    pub static LIVENESS: Liveness = Liveness::new(BOOT);
 }
 
 #[cfg(target_os = "none")]
@@ -107,16 +64,14 @@ mod app {
     use crate::shared::*;
     use core::sync::atomic::Ordering;
     use pzt_probe::counters::*;
-    use pzt_probe::engine::BATCH;
-    use pzt_probe::engine::{PointPlan, PointRaw, SampleEngine};
+    use pzt_probe::engine::{PointRaw, SampleEngine, BATCH};
     use pzt_probe::hal::FrontEndScale;
     use pzt_probe::instrument::command::Command;
-    use pzt_probe::instrument::session::{Event, Io, Session};
-    use pzt_probe::instrument::watchdog::{fit_bound, Millis};
-    use pzt_probe::loadcell::ForceLog;
-    use pzt_probe::reading::driver::{PointSource, Wanted};
-    use pzt_probe::unit::store::{Loaded, Saved, Store, StoreError};
-    use pzt_probe::UnitProfile;
+    use pzt_probe::instrument::measure::{FwIo, Link, Recv};
+    use pzt_probe::instrument::session::Event;
+    use pzt_probe::instrument::watchdog::{self, Millis, FEED};
+    use pzt_probe::loadcell::{ForceLog, RawForce};
+    use pzt_probe::unit::store::Store;
     use rtic_monotonics::systick::prelude::*;
     use rtic_sync::channel::{Receiver, Sender};
     use rtic_sync::make_channel;
@@ -133,26 +88,9 @@ mod app {
     const DONE_CAP: usize = 1;
     /// Received bytes buffered between the UART interrupt and the command task (STM32).
     const RX_CAP: usize = 64;
-    /// The guard task feeds the watchdog this often while the measurement task keeps its
-    /// promise; the measurement task wakes at least this often while it waits for requests (ms).
-    const FEED_MS: u32 = 100;
-    /// After a `sim` line of the QEMU script, the command task waits this long (ms): two
-    /// batches, so that the sample interrupt has put the probe on its new scene.
-    #[cfg(feature = "qemu")]
-    const SCENE_SETTLE_MS: u32 = 10;
     /// The load-cell task looks for a conversion this often (ms): above the HX711's 80 a
     /// second, so each is read before the next overwrites it.
     const LOAD_CELL_POLL_MS: u32 = 5;
-    /// What the measurement task promises between signs of life outside waits and the fit: a
-    /// measurement call's work (at most 100 ms, `tests/qemu_cost.rs`), a store's flash erase
-    /// and program, and the other priority-1 tasks' turns, with room to spare (ms).
-    const ALIVE_MS: u32 = 3 * FEED_MS;
-
-    /// The QEMU image has no host link: it runs this script through the same line parser — a
-    /// reading with the default method (auto), one with sweep-G over a sweep of its own, back to
-    /// auto with two-stage settings of its own, store, status.
-    #[cfg(feature = "qemu")]
-    const SCRIPT: &str = "status;measure;method sweep-g;sweep 200 260 2 0.02 0.03 5;measure;method auto;staged 180 280 6 0.02 0.03 5 0.8 5 4;store;status";
 
     /// The load cell's conversions, stamped with the engine's sample count: written by
     /// `load_cell`, read by `measure` for each reading's window.
@@ -209,10 +147,7 @@ mod app {
         );
         // A bring-up step that failed (bounded waits, docs/firmware.md): said, not a reset loop.
         if let Some(e) = board::boot_error() {
-            #[cfg(feature = "stm32")]
-            let clock = board::clock_source().name();
-            #[cfg(not(feature = "stm32"))]
-            let clock = board::NAME;
+            let clock = board::clock_name();
             defmt::error!("boot fault={=str} clock={=str}", e.code(), clock);
         }
 
@@ -335,98 +270,57 @@ mod app {
         }
     }
 
-    /// The measurement task's board: the interrupt's channels as the session's point source,
-    /// the force log, the flash store, the report channel as its event sink.
-    struct FwIo<'a, F> {
-        plans: &'a mut Sender<'static, EngineCmd, PLAN_CAP>,
-        points: &'a mut Receiver<'static, PointRaw, POINT_CAP>,
-        reports: &'a mut Sender<'static, Report, REPORT_CAP>,
-        store: &'a mut Store<board::StoreFlash>,
-        scale: FrontEndScale,
+    /// The measurement task's links ([`Link`]): the channels it was spawned with, the
+    /// monotonic, the force log.
+    struct Links<F> {
+        requests: Receiver<'static, Command, REQUEST_CAP>,
+        plans: Sender<'static, EngineCmd, PLAN_CAP>,
+        points: Receiver<'static, PointRaw, POINT_CAP>,
+        reports: Sender<'static, Report, REPORT_CAP>,
+        done: Sender<'static, bool, DONE_CAP>,
         forces: F,
-        /// When the last window arrived (`board::stamp`), until the next plan is loaded.
-        window_at: Option<u32>,
-        /// The most work from a window to the next plan's load ([`Io::take_plan_work`]).
-        plan_work: u32,
     }
 
-    impl<F: rtic::Mutex<T = &'static mut ForceLog>> PointSource for FwIo<'_, F> {
-        fn scale(&self) -> FrontEndScale {
-            self.scale
+    impl<F: rtic::Mutex<T = &'static mut ForceLog>> Link for Links<F> {
+        async fn plan(&mut self, plan: EngineCmd) -> bool {
+            self.plans.send(plan).await.is_ok()
         }
-        /// The interrupt's double buffer: a plan applies from the batch after the one playing.
-        fn latency_batches(&self) -> usize {
-            pzt_probe::engine::PIPELINE_BATCHES
+        async fn point(&mut self, within: Millis) -> Option<PointRaw> {
+            let got = Mono::timeout_after(within.0.millis(), self.points.recv()).await;
+            got.ok()?.ok()
+        }
+        async fn request(&mut self, within: Millis) -> Recv<Command> {
+            Recv::of(Mono::timeout_after(within.0.millis(), self.requests.recv()).await)
+        }
+        fn done(&mut self, ok: bool) {
+            let _ = self.done.try_send(ok);
+        }
+        async fn report(&mut self, e: Event) {
+            let _ = self.reports.send(Report::Event(e)).await;
+        }
+        async fn counters(&mut self) {
+            let _ = self.reports.send(Report::Counters).await;
+        }
+        fn try_report(&mut self, e: Event) -> bool {
+            self.reports.try_send(Report::Event(e)).is_ok()
+        }
+        async fn delay(&mut self, ms: Millis) {
+            Mono::delay(ms.0.millis()).await;
+        }
+        fn now(&self) -> Millis {
+            now()
         }
         fn now_sample(&self) -> u64 {
             now_sample()
         }
-        async fn load(&mut self, plan: PointPlan) -> bool {
-            if let Some(t0) = self.window_at.take() {
-                self.plan_work = self.plan_work.max(board::elapsed(t0));
-            }
-            self.plans.send(Some(plan)).await.is_ok()
+        fn stamp(&self) -> u32 {
+            board::stamp()
         }
-        async fn next(&mut self, wanted: &Wanted, budget: u64) -> Option<PointRaw> {
-            // The budget in ms, with a watchdog period of margin for this task's own delay.
-            let ms = (budget as f32 / self.scale.sample_rate.0 * 1000.0) as u32 + FEED_MS;
-            let got = loop {
-                promise(ms + ALIVE_MS);
-                match Mono::timeout_after(ms.millis(), self.points.recv()).await {
-                    Ok(Ok(raw)) if wanted.matches(&raw) => break Some(raw),
-                    Ok(Ok(_stale)) => continue,
-                    _ => break None,
-                }
-            };
-            promise(ALIVE_MS);
-            self.window_at = Some(board::stamp());
-            got
+        fn elapsed(&self, since: u32) -> u32 {
+            board::elapsed(since)
         }
-        async fn stop(&mut self) {
-            let _ = self.plans.send(None).await;
-        }
-        async fn idle(&mut self, samples: u64) {
-            let _ = self.plans.send(None).await;
-            let ms = (samples as f32 / self.scale.sample_rate.0 * 1000.0) as u32;
-            promise(ms + ALIVE_MS);
-            Mono::delay(ms.millis()).await;
-            promise(ALIVE_MS);
-        }
-        fn contact_force(&mut self, from: u64, to: u64) -> Option<pzt_probe::loadcell::RawForce> {
-            let fs = self.scale.sample_rate.0;
-            self.forces.lock(|f| f.over(from, to, fs))
-        }
-        async fn point(&mut self, tag: u16, point: &pzt_probe::engine::sweep::SweepPoint) {
-            let e = Event::Point { tag, point: *point };
-            let _ = self.reports.send(Report::Event(e)).await;
-        }
-    }
-
-    impl<F: rtic::Mutex<T = &'static mut ForceLog>> Io for FwIo<'_, F> {
-        async fn emit(&mut self, e: Event) {
-            // The report task only ends with the image; a closed channel is not an error here.
-            let _ = self.reports.send(Report::Event(e)).await;
-            if matches!(e, Event::Reading(_) | Event::Status { .. }) {
-                let _ = self.reports.send(Report::Counters).await;
-            }
-        }
-        fn try_emit(&mut self, e: Event) -> bool {
-            // Never waits: a full channel drops the event (a stream's reading; its seq gap
-            // shows it).
-            self.reports.try_send(Report::Event(e)).is_ok()
-        }
-        fn save(&mut self, p: &UnitProfile) -> Result<Saved, StoreError> {
-            self.store.save(p)
-        }
-        fn load_profile(&mut self) -> Loaded {
-            self.store.load()
-        }
-        fn boot_error(&self) -> Option<pzt_probe::boot::BootError> {
-            board::boot_error()
-        }
-        fn take_plan_work(&mut self) -> Option<u32> {
-            self.window_at = None;
-            Some(core::mem::take(&mut self.plan_work))
+        fn contact_force(&mut self, from: u64, to: u64, fs_hz: f32) -> Option<RawForce> {
+            self.forces.lock(|f| f.over(from, to, fs_hz))
         }
     }
 
@@ -436,81 +330,47 @@ mod app {
         Millis(Mono::now().ticks())
     }
 
-    /// The measurement task is alive now and promises its next sign of life within `ms`.
-    fn promise(ms: u32) {
-        LIVENESS.promise(now(), Millis(ms));
-    }
-
-    /// The watchdog's guard: every [`FEED_MS`] it feeds the independent watchdog, as long as
-    /// the measurement task keeps its liveness promise ([`pzt_probe::instrument::watchdog`]). Above the
+    /// The watchdog's guard: every [`FEED`] period it feeds the independent watchdog as long
+    /// as the measurement task keeps its liveness promise ([`watchdog::guard`]). Above the
     /// measurement task's priority, so it runs through a long `calibrate fit`; a measurement
     /// task that hangs breaks its promise, the feeding stops and the watchdog resets the core.
     #[task(priority = 2, local = [watchdog])]
     async fn guard(cx: guard::Context) {
         loop {
-            if LIVENESS.alive(now()) {
-                cx.local.watchdog.feed();
-            } else {
-                cx.local.watchdog.starved();
-            }
-            Mono::delay(FEED_MS.millis()).await;
+            watchdog::guard(&LIVENESS, now(), cx.local.watchdog);
+            Mono::delay(FEED.0.millis()).await;
         }
     }
 
-    /// The measurement task: the session (src/session.rs) served one request at a time; it
-    /// keeps the watchdog's liveness promise (`guard`) while alive.
+    /// The measurement task: the session served one request at a time
+    /// ([`FwIo::serve`]), keeping the watchdog's liveness promise (`guard`) while alive.
     #[task(priority = 1, shared = [forces], local = [store, scale])]
     async fn measure(
         cx: measure::Context,
-        mut requests: Receiver<'static, Command, REQUEST_CAP>,
-        mut plans: Sender<'static, EngineCmd, PLAN_CAP>,
-        mut points: Receiver<'static, PointRaw, POINT_CAP>,
-        mut reports: Sender<'static, Report, REPORT_CAP>,
-        mut done: Sender<'static, bool, DONE_CAP>,
+        requests: Receiver<'static, Command, REQUEST_CAP>,
+        plans: Sender<'static, EngineCmd, PLAN_CAP>,
+        points: Receiver<'static, PointRaw, POINT_CAP>,
+        reports: Sender<'static, Report, REPORT_CAP>,
+        done: Sender<'static, bool, DONE_CAP>,
     ) {
-        let mut io = FwIo {
-            plans: &mut plans,
-            points: &mut points,
-            reports: &mut reports,
-            store: cx.local.store,
-            scale: *cx.local.scale,
+        let links = Links {
+            requests,
+            plans,
+            points,
+            reports,
+            done,
             forces: cx.shared.forces,
-            window_at: None,
-            plan_work: 0,
         };
-        // Power-on: the profile, then the self-test (every reading refused while it fails).
-        let mut session = Session::boot(&mut io).await;
-        // The QEMU script starts once the boot is done; elsewhere the slot just stays full.
-        let _ = done.try_send(session.selftest_outcome() == Some(Ok(())));
-        loop {
-            promise(FEED_MS + ALIVE_MS);
-            let req = match Mono::timeout_after(FEED_MS.millis(), requests.recv()).await {
-                Ok(Ok(r)) => r,
-                Ok(Err(_)) => {
-                    // No command source any more: stay alive for the watchdog, serve nothing.
-                    loop {
-                        promise(FEED_MS + ALIVE_MS);
-                        Mono::delay(FEED_MS.millis()).await;
-                    }
-                }
-                Err(_) => continue,
-            };
-            // The fit's synchronous work grows with the references held: 2.2 s on the M4 for
-            // 10, up to 4.5 minutes for 32 (docs/firmware.md); bounded, so promised.
-            promise(match req {
-                Command::CalibrateFit => fit_bound(session.references()).0,
-                _ => ALIVE_MS,
-            });
-            let ok = session.handle(req, &mut io).await;
-            // Only the QEMU script waits for this; elsewhere the slot just stays full.
-            let _ = done.try_send(ok);
-        }
+        let (store, scale) = (cx.local.store, *cx.local.scale);
+        FwIo::new(links, store, scale, &LIVENESS, board::boot_error())
+            .serve()
+            .await
     }
 
     /// The command task: host bytes → lines → requests, one request at a time.
     ///
     /// On QEMU there is no host on the line: the task runs the boot command line's script (or
-    /// the built-in [`SCRIPT`]), waits for each request to finish, then ends the run with
+    /// the board's built-in one), waits for each request to finish, then ends the run with
     /// success iff every request succeeded and no overrun happened.
     #[task(priority = 1)]
     async fn command(
@@ -523,38 +383,29 @@ mod app {
         let scale = board::scale();
         #[cfg(feature = "qemu")]
         {
-            use pzt_probe::board::sim_script::{lines, step, Step};
-            // The boot command line's script, else the built-in one: `sim` lines move the
-            // simulated probe, the others are parsed as host lines are.
+            use pzt_probe::board::sim_script::{lines, Action, Runner, SCENE_SETTLE_MS};
+            // The boot command line's script, else the built-in one.
             let mut cmdline = [0u8; board::CMDLINE_MAX];
-            let script = board::boot_script(&mut cmdline).unwrap_or(SCRIPT);
-            let mut sim = board::sim_state();
+            let script = board::boot_script(&mut cmdline).unwrap_or(board::SCRIPT);
+            let mut run = Runner::new(lines(script), board::sim_state(), scale);
             // After the power-on self-test (on the script's leading `sim` lines' scene).
-            let mut ok = done.recv().await.unwrap_or(false);
-            for line in lines(script) {
-                match step(line, &mut sim, &scale) {
-                    Step::Sim => {
-                        board::set_scene(sim.scene(), sim.seed);
-                        // The probe is on its new scene from the next batch: the next command's
-                        // reading starts after it (a hand presses, then asks), so its force
-                        // window does not straddle the change.
+            run.done(done.recv().await.unwrap_or(false));
+            while let Some(action) = run.next() {
+                match action {
+                    Action::Sim => {
+                        board::set_scene(run.sim().scene(), run.sim().seed);
                         Mono::delay(SCENE_SETTLE_MS.millis()).await;
                     }
-                    Step::Command(c) if requests.send(c).await.is_ok() => {
-                        ok &= done.recv().await.unwrap_or(false);
+                    Action::Send(c) => {
+                        let sent = requests.send(c).await.is_ok();
+                        run.done(sent && done.recv().await.unwrap_or(false));
                     }
-                    Step::Command(_) => ok = false,
-                    Step::BadSim(e) => {
-                        let _ = reports.send(Report::Rejected(e.message())).await;
-                        ok = false;
-                    }
-                    Step::BadCommand(e) => {
-                        let _ = reports.send(Report::Rejected(e.message())).await;
-                        ok = false;
+                    Action::Reject(message) => {
+                        let _ = reports.send(Report::Rejected(message)).await;
                     }
                 }
             }
-            ok &= !Overruns::now().any();
+            let ok = run.ok() && !Overruns::now().any();
             let _ = reports.send(Report::Exit(ok)).await;
             drop(rx);
         }

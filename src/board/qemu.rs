@@ -31,6 +31,30 @@ use hal_sim::flash::SimFlash;
 use hal_sim::loadcell::{ChipHandle, Delay, Dout, Hx711Sim, Sck};
 use hal_sim::{AdcPair, SimProbe};
 
+// The image's defmt global logger: semihosting.
+use defmt_semihosting as _;
+
+/// The image's panic handler: log the panic's location and message, then end the run with
+/// failure.
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    defmt::error!("panic {}", defmt::Display2Format(info));
+    exit(false)
+}
+
+/// `defmt::panic!` and its kin have logged their message already: end the run with failure
+/// without a second line.
+#[defmt::panic_handler]
+fn defmt_panic() -> ! {
+    exit(false)
+}
+
+/// A fault ends the run with failure.
+#[cortex_m_rt::exception]
+unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    exit(false)
+}
+
 /// What RTIC needs of a device crate, for the interrupt lines this image uses.
 ///
 /// AN386 has 32 external interrupt lines (UARTs 0–5, 12; GPIO 6–7, 16–31; timers 8–10; SPI 11;
@@ -103,6 +127,17 @@ pub mod device {
 
 /// Board name in the boot log line.
 pub const NAME: &str = "qemu";
+
+/// The clock in the boot fault line: the machine has one.
+pub fn clock_name() -> &'static str {
+    NAME
+}
+
+/// The script the image runs when its boot command line holds none ([`boot_script`]), through
+/// the same line parser as a host's lines: a reading with the default method (auto), one with
+/// sweep-G over a sweep of its own, back to auto with two-stage settings of its own, store,
+/// status.
+pub const SCRIPT: &str = "status;measure;method sweep-g;sweep 200 260 2 0.02 0.03 5;measure;method auto;staged 180 280 6 0.02 0.03 5 0.8 5 4;store;status";
 
 /// The probe at power-on: on phantom B of paper 003 (279 kPa) at 30 mN and the bench noise
 /// level, noise seed 1. The command script moves it (`sim ...` lines,
@@ -495,19 +530,21 @@ pub struct Watchdog {
 /// The STM32's watchdog timeout in instructions of this machine's clock (500 ms).
 const WATCHDOG_INSTRUCTIONS: u32 = 500_000_000;
 
-impl Watchdog {
+impl crate::instrument::watchdog::Watchdog for Watchdog {
     /// Feed; fails the run if the last feed was more than the timeout ago.
-    pub fn feed(&mut self) {
+    fn feed(&mut self) {
         self.check();
         self.last = Some(stamp());
     }
 
     /// Not fed this time (the guard found the measurement task's promise broken): fails the
     /// run once the timeout has passed since the last feed, as the IWDG would reset the core.
-    pub fn starved(&mut self) {
+    fn starved(&mut self) {
         self.check();
     }
+}
 
+impl Watchdog {
     fn check(&self) {
         if let Some(t) = self.last {
             let since = elapsed(t);

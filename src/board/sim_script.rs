@@ -239,6 +239,81 @@ pub fn step(line: &str, state: &mut SimState, scale: &FrontEndScale) -> Step {
     }
 }
 
+/// After a `sim` line the command task waits this long (ms) before the next line: two
+/// batches, so that the sample interrupt has put the probe on its new scene and the next
+/// command's reading starts after it (a hand presses, then asks), its force window not
+/// straddling the change.
+pub const SCENE_SETTLE_MS: u32 = 10;
+
+/// What the command task does for the next line of a script (a [`Runner`]'s item).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Action {
+    /// Put the probe on [`Runner::sim`]'s scene, then wait [`SCENE_SETTLE_MS`].
+    Sim,
+    /// Send the command to the measurement task, wait for it to end and tell
+    /// [`Runner::done`] how it did (false when it could not be sent).
+    Send(Command),
+    /// Report the refusal of a bad line (the run has failed already).
+    Reject(&'static str),
+}
+
+/// The QEMU image's command script, line by line: `sim` lines move the simulated probe, the
+/// others are parsed as host lines are and served one at a time. The run succeeds when the
+/// power-on self-test and every request succeeded and no line was refused ([`Runner::ok`]).
+pub struct Runner<I> {
+    lines: I,
+    sim: SimState,
+    scale: FrontEndScale,
+    ok: bool,
+}
+
+impl<'a, I: Iterator<Item = &'a str>> Runner<I> {
+    /// A script's [`lines`] from the probe at `sim`, its commands parsed against `scale`.
+    pub fn new(lines: I, sim: SimState, scale: FrontEndScale) -> Self {
+        Self {
+            lines,
+            sim,
+            scale,
+            ok: true,
+        }
+    }
+
+    fn reject(&mut self, message: &'static str) -> Action {
+        self.ok = false;
+        Action::Reject(message)
+    }
+
+    /// How a request (or the power-on self-test) ended.
+    pub fn done(&mut self, ok: bool) {
+        self.ok &= ok;
+    }
+
+    /// The probe as the `sim` lines so far have it.
+    pub fn sim(&self) -> &SimState {
+        &self.sim
+    }
+
+    /// True while everything has succeeded.
+    pub fn ok(&self) -> bool {
+        self.ok
+    }
+}
+
+/// The actions of the script's lines, in order.
+impl<'a, I: Iterator<Item = &'a str>> Iterator for Runner<I> {
+    type Item = Action;
+
+    fn next(&mut self) -> Option<Action> {
+        let line = self.lines.next()?;
+        Some(match step(line, &mut self.sim, &self.scale) {
+            Step::Sim => Action::Sim,
+            Step::Command(c) => Action::Send(c),
+            Step::BadSim(e) => self.reject(e.message()),
+            Step::BadCommand(e) => self.reject(e.message()),
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -362,6 +437,66 @@ mod tests {
             ]
         );
         assert_eq!(s.base, Scene::on_phantom(&phantoms::B));
+    }
+
+    /// Runs `script` as the QEMU image's command task does, every request ending `served`:
+    /// the actions, with the scene each `sim` line put the probe on, and the run's outcome.
+    fn run(script: &str, booted: bool, served: bool) -> (std::vec::Vec<Action>, bool, SimState) {
+        let scale = crate::board::sim::scale_of(&hal_sim::FrontEnd::default());
+        let mut r = Runner::new(lines(script), start(), scale);
+        r.done(booted);
+        let mut actions = std::vec::Vec::new();
+        while let Some(a) = r.next() {
+            if let Action::Send(_) = a {
+                r.done(served);
+            }
+            actions.push(a);
+        }
+        (actions, r.ok(), *r.sim())
+    }
+
+    #[test]
+    fn the_runner_moves_the_probe_sends_commands_and_succeeds_when_all_did() {
+        let (actions, ok, sim) = run("sim phantom C; sim seed 3;measure;\nstatus", true, true);
+        assert_eq!(
+            actions,
+            [
+                Action::Sim,
+                Action::Sim,
+                Action::Send(Command::Measure),
+                Action::Send(Command::Status),
+            ]
+        );
+        assert!(ok);
+        assert_eq!((sim.base, sim.seed), (Scene::on_phantom(&phantoms::C), 3));
+        // An empty script succeeds on the boot's outcome alone.
+        assert_eq!(run(" ; ", true, true), (std::vec![], true, start()));
+        assert!(!run("", false, true).1, "a failed self-test fails the run");
+    }
+
+    #[test]
+    fn the_runner_fails_on_a_bad_line_or_a_failed_request_and_goes_on() {
+        let (actions, ok, sim) = run("sim teleport;measure;method nope;sim free-air", true, true);
+        assert_eq!(
+            actions,
+            [
+                Action::Reject(SimError::Unknown.message()),
+                Action::Send(Command::Measure),
+                Action::Reject(CommandError::UnknownMethod.message()),
+                Action::Sim,
+            ]
+        );
+        assert!(!ok);
+        assert!(
+            sim.scene().tissue.is_none(),
+            "the lines after a bad one still run"
+        );
+        assert!(!run("measure;status", true, false).1);
+        let long = std::format!("measure {}", "x".repeat(MAX_LINE));
+        assert_eq!(
+            run(&long, true, true).0,
+            [Action::Reject(CommandError::Oversized.message())]
+        );
     }
 
     #[test]

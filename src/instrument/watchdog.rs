@@ -24,6 +24,7 @@
 //! Time is the monotonic's milliseconds ([`Millis`], wrapping `u32`: the comparison is modular,
 //! correct across the wrap for promises shorter than 24 days).
 
+use crate::instrument::command::Command;
 use core::sync::atomic::{AtomicU32, Ordering};
 
 /// A time or a duration in milliseconds of the monotonic clock (wrapping).
@@ -53,6 +54,64 @@ pub fn fit_bound(refs: usize) -> Millis {
     let max = FIT_MAX_REFERENCES as u64;
     let ms = 2 * FIT_WORST_MS as u64 * n * n / (max * max);
     Millis(ms.max(1_000) as u32)
+}
+
+/// The guard task feeds the watchdog this often while the measurement task keeps its promise;
+/// the measurement task wakes at least this often while it waits for requests.
+pub const FEED: Millis = Millis(100);
+
+/// What the measurement task promises between signs of life outside waits and the fit: a
+/// measurement call's work (at most 100 ms, `tests/qemu_cost.rs`), a store's flash erase and
+/// program, and the other priority-1 tasks' turns, with room to spare.
+pub const ALIVE: Millis = Millis(3 * FEED.0);
+
+/// The first promise: it covers the boot up to the measurement task's first sign of life (the
+/// monotonic starts at 0 in `init`).
+pub const BOOT: Millis = Millis(1_000);
+
+/// What the measurement task promises before a wait of `wait`: the wait and [`ALIVE`] after it.
+pub fn after_wait(wait: Millis) -> Millis {
+    Millis(wait.0.saturating_add(ALIVE.0))
+}
+
+/// What the measurement task promises before it serves `cmd`: `calibrate fit`, whose
+/// synchronous work grows with the references held, its [`fit_bound`]; every other command
+/// [`ALIVE`] (its work between signs of life).
+pub fn before(cmd: &Command, references: usize) -> Millis {
+    match cmd {
+        Command::CalibrateFit => fit_bound(references),
+        _ => ALIVE,
+    }
+}
+
+/// `samples` of the engine's samples at `fs_hz`, in whole ms (truncated).
+pub fn samples_ms(samples: u64, fs_hz: f32) -> Millis {
+    Millis((samples as f32 / fs_hz * 1000.0) as u32)
+}
+
+/// How long the measurement task waits for a window with `budget` samples of its stall budget
+/// left: the budget in ms ([`samples_ms`]) and a feed period of margin for the task's own delay.
+pub fn window_wait(budget: u64, fs_hz: f32) -> Millis {
+    Millis(samples_ms(budget, fs_hz).0.saturating_add(FEED.0))
+}
+
+/// The hardware watchdog the guard feeds.
+pub trait Watchdog {
+    /// Feed it.
+    fn feed(&mut self);
+    /// Not fed this time (the guarded task broke its promise): a real watchdog resets the core
+    /// by itself once its timeout has passed since the last feed; a stand-in checks that here.
+    fn starved(&mut self);
+}
+
+/// The guard's rule, once per [`FEED`] period: feed `dog` while `liveness` holds at `now`,
+/// starve it otherwise.
+pub fn guard(liveness: &Liveness, now: Millis, dog: &mut impl Watchdog) {
+    if liveness.alive(now) {
+        dog.feed();
+    } else {
+        dog.starved();
+    }
 }
 
 /// The promise of the task the watchdog guards: the deadline of its next sign of life.
@@ -157,6 +216,57 @@ mod tests {
         // A stale deadline far behind `now` (the task hung long ago) stays expired.
         l.promise(Millis(0), Millis(100));
         assert!(!l.alive(Millis(1 << 30)));
+    }
+
+    #[test]
+    fn the_measurement_tasks_promises() {
+        assert_eq!(after_wait(FEED), Millis(400));
+        assert_eq!(after_wait(Millis(u32::MAX)), Millis(u32::MAX));
+        assert_eq!(before(&Command::Measure, 32), ALIVE);
+        assert_eq!(before(&Command::CalibrateFit, 32), fit_bound(32));
+        assert_eq!(before(&Command::CalibrateFit, 0), Millis(1_000));
+        // 1 000 samples at 10 kHz: 100 ms, and a feed period of margin.
+        assert_eq!(samples_ms(1_000, 10_000.0), Millis(100));
+        assert_eq!(samples_ms(19, 10_000.0), Millis(1), "truncated");
+        assert_eq!(window_wait(1_000, 10_000.0), Millis(200));
+        assert_eq!(window_wait(0, 10_000.0), FEED);
+    }
+
+    /// Counts the guard's feeds and starvations.
+    #[derive(Default)]
+    struct Dog {
+        fed: u32,
+        starved: u32,
+    }
+
+    impl Watchdog for Dog {
+        fn feed(&mut self) {
+            self.fed += 1;
+        }
+        fn starved(&mut self) {
+            self.starved += 1;
+        }
+    }
+
+    #[test]
+    fn the_guard_feeds_through_a_promised_fit_and_starves_after_a_hang() {
+        let l = Liveness::new(BOOT);
+        let mut dog = Dog::default();
+        // The boot's promise, then a fit of 16 references promised at 1 s.
+        for t in (0..=1_000).step_by(FEED.0 as usize) {
+            guard(&l, Millis(t), &mut dog);
+        }
+        assert_eq!((dog.fed, dog.starved), (11, 0));
+        let bound = before(&Command::CalibrateFit, 16);
+        l.promise(Millis(1_000), bound);
+        let end = 1_000 + bound.0;
+        for t in (1_100..=end).step_by(FEED.0 as usize) {
+            guard(&l, Millis(t), &mut dog);
+        }
+        assert_eq!(dog.starved, 0, "fed through the whole bound");
+        // The task hangs: no new promise, the next period starves the watchdog.
+        guard(&l, Millis(end + FEED.0), &mut dog);
+        assert_eq!(dog.starved, 1);
     }
 
     #[test]
