@@ -10,7 +10,8 @@
 use pzt_probe::estimate::Estimate;
 use pzt_probe::estimate::Resonance;
 use pzt_probe::reading::pipeline::conclude;
-use pzt_probe::unit::calibration::{QModel, RefPoint, Source};
+use pzt_probe::unit::calibration::{RefPoint, Source};
+use pzt_probe::unit::q_model::QModel;
 use pzt_probe::UnitProfile;
 use pzt_probe::{AirReference, Failure, Farads, Hz, Method, PowerLaw, Seconds, Siemens, Status};
 

@@ -2,8 +2,8 @@
 //! point of a save leaves a valid record, corruption is detected, and the fallback is reported.
 
 use hal_sim::flash::SimFlash;
-use pzt_probe::unit::calibration::QModel;
 use pzt_probe::unit::calibration::Source;
+use pzt_probe::unit::q_model::QModel;
 use pzt_probe::unit::store::{
     AirReference, LoadSource, SlotState, Store, StoreError, UnitProfile, RECORD_LEN,
 };

@@ -5,9 +5,10 @@
 use anyhow::{bail, Context, Result};
 use pzt_probe::estimate::Resonance;
 use pzt_probe::loadcell::{ForceWindow, LoadCellCal, LoadCellCounts};
-use pzt_probe::unit::calibration::{PowerLaw, QModel, Source};
+use pzt_probe::unit::calibration::{PowerLaw, Source};
 use pzt_probe::unit::contact_law::{self, ContactLaw};
 use pzt_probe::unit::profile::{AirReference, UnitProfile};
+use pzt_probe::unit::q_model::QModel;
 
 fn motional() -> String {
     Resonance::Motional.name().to_owned()

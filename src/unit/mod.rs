@@ -5,4 +5,5 @@
 pub mod calibration;
 pub mod contact_law;
 pub mod profile;
+pub mod q_model;
 pub mod store;

@@ -12,8 +12,9 @@ use crate::engine::sweep::{SweepPoint, SweepSettings};
 use crate::estimate::fit::fit_bvd;
 use crate::loadcell::{ContactForce, ForceWindow, LoadCellCal};
 use crate::status::Failure;
-use crate::unit::calibration::{held_out_rms, Modulus, PowerLaw, QModel, RefPoint, MAX_REFERENCES};
+use crate::unit::calibration::{held_out_rms, Modulus, PowerLaw, RefPoint, MAX_REFERENCES};
 use crate::unit::contact_law::ContactLaw;
+use crate::unit::q_model::QModel;
 use crate::units::{Farads, Hz, Seconds, Siemens, Volts};
 
 /// A reading whose Q exceeds this fraction of the free Q may be free air.

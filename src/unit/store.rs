@@ -48,9 +48,10 @@
 //! status flag. Nothing here panics, whatever the flash contains.
 
 use crate::loadcell::{ForceWindow, LoadCellCal, LoadCellCounts};
-use crate::unit::calibration::{PowerLaw, QModel, Source};
+use crate::unit::calibration::{PowerLaw, Source};
 use crate::unit::contact_law::{self, ContactLaw};
 pub use crate::unit::profile::{AirReference, UnitProfile};
+use crate::unit::q_model::QModel;
 use crate::units::{Farads, Hz, Newtons, Siemens};
 use embedded_storage::nor_flash::NorFlash;
 
