@@ -35,9 +35,13 @@ pub enum Failure {
     DriveFault,
     /// The settings given were invalid.
     BadSettings,
-    /// The contact is not the calibrated one: the quality factor is off the unit's calibrated
-    /// Q(E) curve (preload off nominal, or tissue far more or less lossy than the references).
+    /// The contact is not the calibrated one: the quality factor stands above the unit's
+    /// calibrated Q(E, F) curve (a contact narrower or looser than the calibration's; without a
+    /// load cell, off the curve either way).
     BadContact,
+    /// The resonance is too broad to read to the instrument's accuracy: the tissue's loss
+    /// lowers Q below [`crate::reading::pipeline::MIN_READABLE_Q`].
+    BroadResonance,
     /// The unit has no air reference, so contact cannot be told from no contact.
     NoAirReference,
     /// The unit has no calibrated contact condition (Q model): it was never calibrated.
@@ -56,7 +60,7 @@ pub enum Failure {
 
 impl Failure {
     /// Every code, in declaration order.
-    pub const ALL: [Failure; 22] = [
+    pub const ALL: [Failure; 23] = [
         Failure::NoContact,
         Failure::ContactLost,
         Failure::BelowRange,
@@ -72,6 +76,7 @@ impl Failure {
         Failure::DriveFault,
         Failure::BadSettings,
         Failure::BadContact,
+        Failure::BroadResonance,
         Failure::NoAirReference,
         Failure::Uncalibrated,
         Failure::Unstable,
@@ -99,6 +104,7 @@ impl Failure {
             Failure::DriveFault => "drive_fault",
             Failure::BadSettings => "bad_settings",
             Failure::BadContact => "bad_contact",
+            Failure::BroadResonance => "broad_resonance",
             Failure::NoAirReference => "no_air_reference",
             Failure::Uncalibrated => "uncalibrated",
             Failure::Unstable => "unstable",
@@ -127,6 +133,7 @@ impl Failure {
             Failure::DriveFault => "drive does not follow the command",
             Failure::BadSettings => "invalid settings",
             Failure::BadContact => "contact unlike calibration: press at the calibrated force (Q off its curve), or retake the air reference",
+            Failure::BroadResonance => "resonance too broad to read (tissue too lossy at this stiffness): no modulus to the stated accuracy",
             Failure::Unstable => "the resonance moved during the reading: hold the probe still and retry",
             Failure::NoForce => "the load cell gave no contact force: check its cable, or retake the air reference",
             Failure::TooLight => "pressed too lightly: press harder, into the force window",

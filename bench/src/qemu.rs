@@ -9,7 +9,7 @@
 use crate::cmd::measure::MeasureArgs;
 use crate::defmt_log;
 use crate::report;
-use crate::scene::Target;
+use crate::scene::{SceneArgs, Target};
 use anyhow::{bail, Context, Result};
 use hal_sim::NoiseScene;
 use pzt_probe::instrument::command::SettingsLine;
@@ -22,8 +22,9 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// The `sim` lines that put the simulated probe on `target` at `preload_n` under `noise`.
-pub fn scene_lines(target: &Target, preload_n: f64, noise: NoiseScene) -> Vec<String> {
+/// The `sim` lines that put the simulated probe on `target` as `scene` presses it (its preload
+/// and the tissue's loss tangent) under `noise`.
+pub fn scene_lines(target: &Target, scene: &SceneArgs, noise: NoiseScene) -> Vec<String> {
     let on = match target {
         Target::Phantom(p) => format!("sim phantom {}", p.name),
         Target::Modulus(e) => format!("sim modulus {e}"),
@@ -35,11 +36,15 @@ pub fn scene_lines(target: &Target, preload_n: f64, noise: NoiseScene) -> Vec<St
         NoiseScene::Bench => "bench".to_owned(),
         NoiseScene::Density(d) => format!("{d:e}"),
     };
-    vec![
+    let mut lines = vec![
         on,
-        format!("sim preload {preload_n}"),
+        format!("sim preload {}", scene.preload_n),
         format!("sim noise {noise}"),
-    ]
+    ];
+    if let Some(t) = scene.loss_tangent {
+        lines.push(format!("sim loss {t}"));
+    }
+    lines
 }
 
 /// Build the QEMU image and run `script` on it; the decoded log.
@@ -123,7 +128,7 @@ pub fn stream(
     {
         bail!("with --qemu --seconds must be in [0.1, 600]");
     }
-    let mut lines = scene_lines(target, a.scene.preload_n, noise);
+    let mut lines = scene_lines(target, &a.scene, noise);
     lines.push(format!("sim seed {}", a.seed));
     if let (Some(p), Some(t)) = (&a.step_to, a.step_at_s) {
         lines.push(format!("sim step {p} {t}"));
@@ -192,7 +197,7 @@ pub fn measure(
             "with --qemu the image reads with its own factory profile (src/board/sim_factory.rs)"
         );
     }
-    let mut lines = scene_lines(target, a.scene.preload_n, noise);
+    let mut lines = scene_lines(target, &a.scene, noise);
     lines.push(format!("method {}", method.name()));
     if *settings != method.default_settings() {
         match SettingsLine::of(settings) {

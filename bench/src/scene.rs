@@ -47,6 +47,10 @@ pub struct SceneArgs {
     /// Contact preload, N.
     #[arg(long, default_value_t = 0.030)]
     pub preload_n: f64,
+    /// The tissue's viscoelastic loss tangent tan δ at the resonance (0–2; default: the
+    /// target's own).
+    #[arg(long)]
+    pub loss_tangent: Option<f64>,
 }
 
 impl SceneArgs {
@@ -59,10 +63,16 @@ impl SceneArgs {
         if !(self.preload_n.is_finite() && self.preload_n > 0.0 && self.preload_n <= 1.0) {
             bail!("preload {} N is out of range (0 to 1 N)", self.preload_n);
         }
-        let scene = target
+        let mut scene = target
             .scene()
             .with_noise(noise)
             .with_preload_n(self.preload_n);
+        if let Some(t) = self.loss_tangent {
+            if !(t.is_finite() && (0.0..=2.0).contains(&t)) {
+                bail!("loss tangent {t} is out of range (0 to 2)");
+            }
+            scene = scene.with_loss_tangent(t);
+        }
         Ok((target, scene))
     }
 }

@@ -247,6 +247,13 @@ impl Scene {
         self.contact.preload_n = preload_n;
         self
     }
+    /// With the tissue's viscoelastic loss tangent (no effect in free air).
+    pub fn with_loss_tangent(mut self, loss_tangent: f64) -> Self {
+        if let Some(t) = self.tissue.as_mut() {
+            t.loss_tangent = loss_tangent;
+        }
+        self
+    }
     /// With a second mechanical mode.
     pub fn with_second_mode(mut self, mode: SecondMode) -> Self {
         self.second_mode = Some(mode);

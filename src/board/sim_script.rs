@@ -6,6 +6,7 @@
 //! ```text
 //! sim phantom B | sim modulus 300 | sim free-air      what the probe is on (30 mN preload)
 //! sim preload 0.015                                    contact preload, N
+//! sim loss 0.3                                         the tissue's loss tangent (after what it is on)
 //! sim noise bench|paper|quiet|<A/sqrt(Hz)>             front-end noise
 //! sim seed 7                                           noise stream (a fresh probe)
 //! sim fault open|short|dac-stuck|adc-rail|none         an analog-chain fault (hal_sim::Fault)
@@ -175,6 +176,7 @@ pub fn apply(line: &str, state: &mut SimState) -> Result<bool, SimError> {
         Some("modulus") => state.base = Scene::on_modulus_kpa(number(arg, 1e-3, 1e6)?),
         Some("free-air") if arg.is_none() => state.base = Scene::free_air(),
         Some("preload") => state.preload_n = number(arg, 1e-4, 1.0)?,
+        Some("loss") => state.base = state.base.with_loss_tangent(number(arg, 0.0, 2.0)?),
         Some("noise") => {
             state.noise = match arg {
                 Some("bench") => NoiseScene::Bench,
