@@ -37,6 +37,7 @@ fn q_model() -> QModel {
         q0: -10.0,
         q1: 10.0 / std::f64::consts::LN_10,
         q2: 0.0,
+        sigma_rel: 0.0,
     }
 }
 
@@ -64,6 +65,7 @@ fn estimate(f: f64, sigma: f64, q: Option<f32>) -> Estimate {
         resonance: Hz(f as f32),
         sigma: Hz(sigma as f32),
         q,
+        q_sigma: None,
         points_used: 10,
     }
 }
@@ -316,12 +318,14 @@ fn profile_with_non_finite_q_model_is_invalid() {
         q0: f64::NAN,
         q1: 1.0,
         q2: 0.0,
+        sigma_rel: 0.0,
     });
     assert!(!p.is_valid());
     p.q_model = Some(QModel {
         q0: 1.0,
         q1: f64::INFINITY,
         q2: 0.0,
+        sigma_rel: 0.0,
     });
     assert!(!p.is_valid());
 }
@@ -337,6 +341,7 @@ fn reference_of_a_reading_needs_finite_values_and_positive_q() {
                 resonance: Hz(f),
                 sigma: Hz(s),
                 q: Some(q),
+                q_sigma: None,
                 points_used: 10,
             }),
             &UnitProfile::fallback(),

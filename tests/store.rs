@@ -28,6 +28,7 @@ fn record(n: u32) -> UnitProfile {
             q0: 4.0 + n as f64,
             q1: 1.0,
             q2: -0.5 * n as f64,
+            sigma_rel: 0.01 * n as f64,
         }),
         air: Some(AirReference {
             free_resonance: Hz(232.0 + n as f32),

@@ -108,6 +108,9 @@ pub struct QModelFile {
     /// Slope per unit of `ln(F / N)` (0: no force term).
     #[serde(default)]
     pub q2: f64,
+    /// Relative scatter of the references' Q about the curve (0: not known).
+    #[serde(default)]
+    pub sigma_rel: f64,
 }
 
 /// The on-disk form of the load cell's calibration and the force window.
@@ -168,6 +171,7 @@ impl ProfileFile {
                 q0: m.q0,
                 q1: m.q1,
                 q2: m.q2,
+                sigma_rel: m.sigma_rel,
             }),
             air: p.air.map(|a| AirFile {
                 free_resonance_hz: a.free_resonance.0,
@@ -202,6 +206,7 @@ impl ProfileFile {
                 q0: m.q0,
                 q1: m.q1,
                 q2: m.q2,
+                sigma_rel: m.sigma_rel,
             }),
             air: self.air.as_ref().map(|a| AirReference {
                 free_resonance: Hz(a.free_resonance_hz),

@@ -657,6 +657,9 @@ impl LoggedReading {
             modulus_sigma: self.e_sigma_kpa.map(KPa),
             modulus_sigma_repeat: self.e_repeat_kpa.map(KPa),
             q: self.q,
+            // The firmware's reading line does not carry the tissue's loss.
+            loss_tangent: None,
+            loss_tangent_sigma: None,
             probe_time: Seconds(self.probe_time_s.unwrap_or(f32::NAN)),
             points: self.points.min(u16::MAX as u32) as u16,
             force: self.force_n.map(|f| pzt_probe::loadcell::ContactForce {

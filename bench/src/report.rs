@@ -22,6 +22,8 @@ pub fn reading_json(r: &Reading) -> Value {
         "modulus_sigma_kpa": opt(r.modulus_sigma.map(|x| x.0)),
         "modulus_repeatability_kpa": opt(r.modulus_sigma_repeat.map(|x| x.0)),
         "q_factor": opt(r.q),
+        "loss_tangent": opt(r.loss_tangent),
+        "loss_tangent_sigma": opt(r.loss_tangent_sigma),
         "probe_time_ms": r.probe_time.0 * 1e3,
         "points": r.points,
         "contact_force_n": opt(r.force.map(|w| w.mean.0)),
@@ -46,6 +48,9 @@ pub fn reading_line(r: &Reading) -> String {
     }
     if let Some(q) = r.q {
         s += &format!("  Q = {q:.2}");
+    }
+    if let (Some(t), Some(st)) = (r.loss_tangent, r.loss_tangent_sigma) {
+        s += &format!("  tan δ = {t:.3} ± {st:.3}");
     }
     if let Some(w) = r.force {
         s += &format!("  F = {:.2} ± {:.2} mN", w.mean.0 * 1e3, w.sigma.0 * 1e3);

@@ -2,8 +2,9 @@
 //! --loss-tangent T --json`, the default method, bench noise, 30 mN): every steady press inside
 //! the force window reads within 3 σ and within 2 % of the truth, or is refused as
 //! `broad_resonance` — never `bad_contact`, which tissue loss cannot cause when the load cell
-//! judges the press. The truth is the simulated tissue's storage modulus (hal-sim adds the loss
-//! as damping and leaves the stiffness).
+//! judges the press; and its loss tangent lies within 3 of its σ of the truth. The truth is the
+//! simulated tissue's storage modulus and loss tangent (hal-sim adds the loss as damping through
+//! the contact's coupling and leaves the stiffness; the reference phantoms are lossless).
 
 mod common;
 
@@ -38,6 +39,12 @@ fn lossy_tissue_reads_within_its_sigma_or_says_the_resonance_is_too_broad() {
                     let s = r["modulus_sigma_kpa"].as_f64().expect("sigma");
                     assert!((m - e).abs() <= 3.0 * s, "E {e} tan d {t}: {r}");
                     assert!((m / e - 1.0).abs() <= 0.02, "E {e} tan d {t}: {r}");
+                    let l = r["loss_tangent"].as_f64().expect("a loss tangent");
+                    let sl = r["loss_tangent_sigma"].as_f64().expect("its sigma");
+                    assert!(
+                        sl > 0.0 && (l - t).abs() <= 3.0 * sl,
+                        "E {e} tan d {t}: {r}"
+                    );
                     ok += 1;
                 }
                 "broad_resonance" => {

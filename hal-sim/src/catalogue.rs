@@ -190,7 +190,7 @@ pub fn catalogue(noise: NoiseScene) -> [Case; SCENES] {
         },
         Case {
             name: "heavy-damping",
-            what: "300 kPa with loss tangent 0.3 (Q about 3)",
+            what: "300 kPa with loss tangent 0.3",
             scene: Scene::on_tissue(damped_t).with_noise(noise),
             truth_kpa: Some(NOMINAL_KPA),
             accept: OK_OR_WEAK,

@@ -32,8 +32,12 @@ pub struct Tissue {
     pub poisson: f64,
     /// Density in kg/m^3.
     pub density_kg_m3: f64,
-    /// Extra viscoelastic loss tangent `eta` of the tissue (0 for the plain Kelvin model): adds
-    /// a damping `eta * k_m / omega_0` at the contact, so `tan(delta) = eta` at resonance.
+    /// Viscoelastic loss tangent `eta = E''/E'` of the tissue at the resonance (0 for the plain
+    /// Kelvin model). The contact stiffness becomes complex, `k_m (1 + j eta)`; through the
+    /// series coupling it reaches the mode as `s k_m (1 + j s eta)` to first order in `eta`
+    /// (`s = k_s / (k_s + k_m)`), i.e. a loss `s² eta k_m`, added as the viscous damping
+    /// `s² eta k_m / omega_0` that dissipates the same at the loaded resonance `omega_0`. Ours:
+    /// a constant loss tangent over the band (docs/physics.md, "Viscoelastic tissue").
     pub loss_tangent: f64,
 }
 
@@ -125,10 +129,18 @@ impl SensorMech {
         let el = TissueElements::new(tissue, contact, self);
         let s = self.coupling_stiffness_n_m / (self.coupling_stiffness_n_m + el.stiffness_n_m);
         let free = self.free();
+        let mass_kg = free.mass_kg + s * s * el.mass_kg;
+        let stiffness_n_m = free.stiffness_n_m + s * el.stiffness_n_m;
+        let w0 = libm::sqrt(stiffness_n_m / mass_kg);
+        let loss = if tissue.loss_tangent > 0.0 && w0 > 0.0 {
+            s * s * tissue.loss_tangent * el.stiffness_n_m / w0
+        } else {
+            0.0
+        };
         Kelvin {
-            mass_kg: free.mass_kg + s * s * el.mass_kg,
-            stiffness_n_m: free.stiffness_n_m + s * el.stiffness_n_m,
-            damping_n_s_m: free.damping_n_s_m + el.damping_n_s_m,
+            mass_kg,
+            stiffness_n_m,
+            damping_n_s_m: free.damping_n_s_m + el.damping_n_s_m + loss,
         }
     }
 }
@@ -150,7 +162,8 @@ pub struct TissueElements {
     pub contact_radius_m: f64,
     /// `k_m` in N/m.
     pub stiffness_n_m: f64,
-    /// `c_m` in N s/m.
+    /// `c_m` in N s/m: the contact's radiation damping (the tissue's own loss reaches the
+    /// mode through the coupling, [`SensorMech::loaded`]).
     pub damping_n_s_m: f64,
     /// `m_m` in kg.
     pub mass_kg: f64,
@@ -166,11 +179,7 @@ impl TissueElements {
         let area = PI * a * a;
         let k_m = 2.0 * e * a / (1.0 - nu * nu);
         let v = libm::sqrt(e / (2.0 * (1.0 + nu) * rho));
-        let mut c_m = mech.damping_coefficient * rho * v * area / (1.0 - nu);
-        if tissue.loss_tangent > 0.0 {
-            let w0 = 2.0 * PI * mech.free_resonance_hz;
-            c_m += tissue.loss_tangent * k_m / w0;
-        }
+        let c_m = mech.damping_coefficient * rho * v * area / (1.0 - nu);
         let m_m = mech.mass_coefficient * rho * libm::pow(area, 1.5) / (1.0 - nu);
         Self {
             contact_radius_m: a,
@@ -258,6 +267,35 @@ impl Kelvin {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn loss_tangent_adds_s2_eta_km_over_k_to_the_inverse_q() {
+        // 1/Q = C / sqrt(K M); the loss adds C = s² η k_m / ω0 with ω0 = sqrt(K/M), so
+        // Δ(1/Q) = s² η k_m / K, whatever the modulus.
+        let mech = SensorMech::default();
+        let contact = Contact::default();
+        for e_kpa in [150.0, 700.0, 2500.0] {
+            let lossless = Tissue::with_modulus_kpa(e_kpa);
+            let lossy = Tissue {
+                loss_tangent: 0.4,
+                ..lossless
+            };
+            let (a, b) = (
+                mech.loaded(&lossless, &contact),
+                mech.loaded(&lossy, &contact),
+            );
+            assert_eq!(a.stiffness_n_m, b.stiffness_n_m);
+            assert_eq!(a.mass_kg, b.mass_kg);
+            let el = TissueElements::new(&lossless, &contact, &mech);
+            let s = mech.coupling_stiffness_n_m / (mech.coupling_stiffness_n_m + el.stiffness_n_m);
+            let expect = s * s * 0.4 * el.stiffness_n_m / a.stiffness_n_m;
+            let got = 1.0 / b.q() - 1.0 / a.q();
+            assert!(
+                (got / expect - 1.0).abs() < 1e-12,
+                "{e_kpa}: {got} vs {expect}"
+            );
+        }
+    }
 
     #[test]
     fn hertz_radius_closed_form() {

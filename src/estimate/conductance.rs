@@ -21,6 +21,18 @@ use crate::units::Hz;
 /// Reduced χ² above which the fit is a gross misfit and its uncertainty is scaled by it.
 pub const GROSS_CHI2: f64 = 16.0;
 
+/// `Q = x0 sqrt(B / (1/G_peak))` of the fitted `1/G = A + B x² + C / x²`, with
+/// `x0 = (C/B)^(1/4)` and `1/G_peak = A + 2 sqrt(B C)`; NaN where the peak is not positive.
+fn q_of(a: f64, b: f64, c: f64) -> f64 {
+    let x0 = libm::sqrt(libm::sqrt(c / b));
+    let inv_g_peak = a + 2.0 * libm::sqrt(b * c);
+    if inv_g_peak > 0.0 {
+        x0 * libm::sqrt(b / inv_g_peak)
+    } else {
+        f64::NAN
+    }
+}
+
 /// Estimate the resonance of a stepped sweep from its conductance.
 pub fn estimate(points: &[SweepPoint]) -> Result<Estimate, Failure> {
     screen(points)?;
@@ -85,12 +97,23 @@ pub fn estimate(points: &[SweepPoint]) -> Result<Estimate, Failure> {
     let var_x0 =
         scale * (db * db * fit.cov[1][1] + 2.0 * db * dc * fit.cov[1][2] + dc * dc * fit.cov[2][2]);
     let sigma = f_ref * libm::sqrt(var_x0.max(0.0));
-    let inv_g_peak = a + 2.0 * libm::sqrt(b * c);
-    let q = if inv_g_peak > 0.0 {
-        x0 * libm::sqrt(b / inv_g_peak)
-    } else {
-        f64::NAN
-    };
+    let q = q_of(a, b, c);
+    // σ(Q) by the delta method, the gradient by central differences of `q_of`.
+    let grad: [f64; 3] = core::array::from_fn(|i| {
+        let h = 1e-6 * libm::fabs(fit.p[i]).max(1e-30);
+        let (mut lo, mut hi) = (fit.p, fit.p);
+        lo[i] -= h;
+        hi[i] += h;
+        (q_of(hi[0], hi[1], hi[2]) - q_of(lo[0], lo[1], lo[2])) / (2.0 * h)
+    });
+    let var_q = scale
+        * (0..3)
+            .map(|i| {
+                (0..3)
+                    .map(|j| grad[i] * fit.cov[i][j] * grad[j])
+                    .sum::<f64>()
+            })
+            .sum::<f64>();
     let linewidth = if q.is_finite() && q > 0.0 {
         f0 / q
     } else {
@@ -101,6 +124,7 @@ pub fn estimate(points: &[SweepPoint]) -> Result<Estimate, Failure> {
         resonance: Hz(f0 as f32),
         sigma: Hz(sigma as f32),
         q: q.is_finite().then_some(q as f32),
+        q_sigma: (q.is_finite() && var_q.is_finite()).then(|| libm::sqrt(var_q.max(0.0)) as f32),
         points_used: fit.n as u16,
     })
 }

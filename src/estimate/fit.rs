@@ -32,6 +32,8 @@ pub struct Bvd {
     pub q: f64,
     /// Standard uncertainty of `f0`, Hz.
     pub sigma_f0: f64,
+    /// Standard uncertainty of `Q`.
+    pub sigma_q: f64,
     /// Standard uncertainty of `G0` from the noise alone (not scaled by χ²), S.
     pub sigma_g0: f64,
     /// Standard uncertainty of `b0` from the noise alone (not scaled by χ²), S: the part of its
@@ -144,6 +146,7 @@ pub fn fit_bvd(points: &[SweepPoint], f_start: f64, q_start: f64) -> Result<Bvd,
     let sigma_f0 = libm::sqrt((cov[3][3] * scale).max(0.0));
     let sigma_g0 = libm::sqrt(cov[0][0].max(0.0));
     let sigma_b0 = libm::sqrt(cov[1][1].max(0.0));
+    let sigma_q = libm::sqrt((cov[4][4] * scale).max(0.0));
     if !p.iter().all(|v| v.is_finite()) || !sigma_f0.is_finite() {
         return Err(Failure::NoResonance);
     }
@@ -155,6 +158,7 @@ pub fn fit_bvd(points: &[SweepPoint], f_start: f64, q_start: f64) -> Result<Bvd,
         f0: p[3],
         q: p[4],
         sigma_f0,
+        sigma_q,
         sigma_g0,
         sigma_b0,
     })
@@ -174,6 +178,7 @@ pub fn estimate(points: &[SweepPoint], f_start: f64, q_start: f64) -> Result<Est
         resonance: Hz(b.f0 as f32),
         sigma: Hz(b.sigma_f0 as f32),
         q: Some(b.q as f32),
+        q_sigma: Some(b.sigma_q as f32),
         points_used: points.len() as u16,
     })
 }

@@ -53,6 +53,8 @@ pub struct Estimate {
     pub sigma: Hz,
     /// Quality factor, where the method measures it.
     pub q: Option<f32>,
+    /// Standard uncertainty of the quality factor, where the method gives one.
+    pub q_sigma: Option<f32>,
     /// Points the estimate used.
     pub points_used: u16,
 }

@@ -90,11 +90,12 @@ pub fn estimate(points: &[SweepPoint]) -> Result<Estimate, Failure> {
     // conductance peak of the same points (sweep-G's fit), and a sweep whose conductance peak
     // is not resolved (out of band, no peak) is no reading either — a |Z| dip without a
     // motional peak under it is the static branch's curvature, not a resonance.
-    let q = super::conductance::estimate(points)?.q;
+    let peak = super::conductance::estimate(points)?;
     Ok(Estimate {
         resonance: Hz(f0 as f32),
         sigma: Hz(sigma as f32),
-        q,
+        q: peak.q,
+        q_sigma: peak.q_sigma,
         points_used: 3,
     })
 }

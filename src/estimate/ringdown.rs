@@ -330,6 +330,8 @@ fn fit(w: &[Window], f_ref: f64) -> Result<Estimate, Failure> {
         resonance: Hz(f0 as f32),
         sigma: Hz(sigma as f32),
         q: Some(q as f32),
+        // q = π f0 / decay: the decay's relative uncertainty (f0's is far smaller).
+        q_sigma: Some((q * libm::sqrt(m.var_b.max(0.0)) / decay) as f32),
         points_used: used,
     })
 }

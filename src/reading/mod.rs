@@ -202,6 +202,12 @@ pub struct Reading {
     pub modulus_sigma_repeat: Option<KPa>,
     /// Quality factor, where the method measures it.
     pub q: Option<f32>,
+    /// The tissue's loss tangent `tan δ = E''/E'` at the resonance, beyond the reference
+    /// phantoms' (present with the modulus, when the unit has a contact law and the method
+    /// measures Q with its uncertainty; [`crate::unit::profile::UnitProfile::tissue_loss`]).
+    pub loss_tangent: Option<f32>,
+    /// Its standard uncertainty.
+    pub loss_tangent_sigma: Option<f32>,
     /// Probe time the reading took (drive on to last sample).
     pub probe_time: Seconds,
     /// Points measured.
@@ -253,6 +259,8 @@ impl Reading {
             modulus_sigma: None,
             modulus_sigma_repeat: None,
             q: None,
+            loss_tangent: None,
+            loss_tangent_sigma: None,
             probe_time,
             points,
             force: None,

@@ -112,6 +112,8 @@ pub fn conclude(
         modulus_sigma: None,
         modulus_sigma_repeat: None,
         q: est.q,
+        loss_tangent: None,
+        loss_tangent_sigma: None,
         probe_time,
         points,
         force,
@@ -174,6 +176,10 @@ pub fn conclude(
     r.modulus = Some(m.value);
     r.modulus_sigma = Some(m.sigma);
     r.modulus_sigma_repeat = Some(m.sigma_repeat);
+    if let Some((loss, sigma)) = unit.tissue_loss(e_kpa, force_n, q, est.q_sigma.map(f64::from)) {
+        r.loss_tangent = Some(loss as f32);
+        r.loss_tangent_sigma = Some(sigma as f32);
+    }
     r
 }
 
@@ -209,6 +215,7 @@ mod tests {
             resonance: crate::units::Hz(230.0),
             sigma: crate::units::Hz(0.01),
             q: Some(10.0),
+            q_sigma: None,
             points_used: 8,
         };
         let r = conclude(Method::Hold, Ok(est), &unit, t, 8, None);
@@ -233,6 +240,7 @@ mod tests {
                 resonance: f,
                 sigma: crate::units::Hz(0.01),
                 q: Some(q),
+                q_sigma: None,
                 points_used: 8,
             };
             conclude(Method::Hold, Ok(est), &unit, t, 8, force)
@@ -300,6 +308,7 @@ mod tests {
             resonance: crate::units::Hz(air.free_resonance.0 - 4.0),
             sigma: crate::units::Hz(0.01),
             q: Some(10.0),
+            q_sigma: None,
             points_used: 8,
         };
         let r = conclude(Method::Auto, Ok(est), &unit, t, 8, Some(moving));

@@ -369,6 +369,20 @@ impl ContactLaw {
         )
     }
 
+    /// The tissue's share of the mode's loss: `s² k_m / k` at modulus `e_kpa` pressed with
+    /// `force_n` (N; the reference force when `None`), with `k_m = A u` the contact stiffness,
+    /// `s` the series coupling's transfer and `k = K1 + s k_m` the mode's stiffness (all per
+    /// modal mass). A tissue of loss tangent `η` makes the contact stiffness `k_m (1 + jη)`,
+    /// which reaches the mode as `s k_m (1 + j s η)` to first order in `η`: it adds
+    /// `η s² k_m / k` to the mode's `1/Q` (docs/physics.md, "Viscoelastic tissue").
+    pub fn loss_share(&self, e_kpa: f64, force_n: Option<f64>) -> f64 {
+        let ratio = force_ratio(self.force_n, force_n.unwrap_or(0.0));
+        let k = Constants::of(self.free_hz, &self.p, ratio);
+        let km = k.a * libm::cbrt(e_kpa * e_kpa);
+        let s = k.ks / (k.ks + km);
+        s * s * km / (k.k1 + s * km)
+    }
+
     /// The rigid limit `sqrt(K1 + Ks)/2π`, Hz.
     pub fn rigid_hz(&self) -> f64 {
         let k = Constants::of(self.free_hz, &self.p, 1.0);

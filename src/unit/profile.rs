@@ -198,6 +198,33 @@ impl UnitProfile {
         self.contact = None;
     }
 
+    /// The tissue's loss tangent and its standard uncertainty from a reading of modulus `e_kpa`
+    /// at the contact force `force_n` (N) with quality factor `q ± q_sigma`, beyond the
+    /// reference phantoms' own loss: the mode's `1/Q` above the calibrated contact's
+    /// ([`QModel::q_at`]) is the tissue's loss tangent times its share of the mode's loss
+    /// ([`ContactLaw::loss_share`]), `η = (1/Q − 1/Q_cal) / φ`. Its σ combines the reading's
+    /// σ(Q) and the Q model's scatter about the references ([`QModel::sigma_rel`]); the contact
+    /// law's own uncertainty, a common scale on `φ`, is left out. `None` without a contact law, a
+    /// Q model, a σ(Q), or where the tissue's share vanishes.
+    pub fn tissue_loss(
+        &self,
+        e_kpa: f64,
+        force_n: Option<f64>,
+        q: f64,
+        q_sigma: Option<f64>,
+    ) -> Option<(f64, f64)> {
+        let (law, model, q_sigma) = (self.contact?, self.q_model?, q_sigma?);
+        let share = law.loss_share(e_kpa, force_n);
+        let q_cal = model.q_at(e_kpa, force_n);
+        if !(share > 1e-6) || !(q_cal > 0.0) || !(q > 0.0) {
+            return None;
+        }
+        let eta = (1.0 / q - 1.0 / q_cal) / share;
+        let (d_q, d_cal) = (q_sigma / (q * q), model.sigma_rel / q_cal);
+        let sigma = libm::sqrt(d_q * d_q + d_cal * d_cal) / share;
+        (eta.is_finite() && sigma.is_finite()).then_some((eta, sigma))
+    }
+
     /// The modulus of a resonance `f ± sigma` read at the contact force `force` by the unit's
     /// curve: the contact law at that force when the calibration chose it, else the power law
     /// (which holds at [`NOMINAL_FORCE`] alone).

@@ -15,6 +15,10 @@ pub struct QModel {
     /// Slope per unit of `ln(F / N)` of the contact force (0 when the references were read at
     /// one force, or without a load cell).
     pub q2: f64,
+    /// Relative scatter of the references' Q about the curve (the RMS of `Q/Q_model − 1` with
+    /// the fitted terms' degrees of freedom taken off): how well the curve predicts the Q of
+    /// a contact like the calibration's, the floor of a reading's loss uncertainty.
+    pub sigma_rel: f64,
 }
 
 /// Least relative spread (max/min) of the references' contact forces for the Q model to fit a
@@ -58,22 +62,51 @@ impl QModel {
             let inv = crate::linalg::spd_inverse(&a)?;
             let c: [f64; 3] =
                 core::array::from_fn(|i| (0..3).map(|j| inv[i][j] * b[j]).sum::<f64>());
-            return c.iter().all(|v| v.is_finite()).then_some(QModel {
+            let m = QModel {
                 q0: c[0],
                 q1: c[1],
                 q2: c[2],
-            });
+                sigma_rel: 0.0,
+            };
+            return c
+                .iter()
+                .all(|v| v.is_finite())
+                .then(|| m.with_scatter(data.filter(ok), 3));
         }
         let mut l = crate::linalg::Line::default();
-        for (e, _, q) in data.filter(ok) {
+        for (e, _, q) in data.clone().filter(ok) {
             l.add(libm::log(e), q, 1.0);
         }
         let f = l.solve()?;
-        (f.a.is_finite() && f.b.is_finite()).then_some(QModel {
+        let m = QModel {
             q0: f.a,
             q1: f.b,
             q2: 0.0,
-        })
+            sigma_rel: 0.0,
+        };
+        (f.a.is_finite() && f.b.is_finite()).then(|| m.with_scatter(data.filter(ok), 2))
+    }
+
+    /// The model with [`Self::sigma_rel`] from `data`, fitted with `terms` terms.
+    fn with_scatter<I: Iterator<Item = (f64, f64, f64)>>(self, data: I, terms: usize) -> Self {
+        let (mut n, mut ss) = (0usize, 0.0);
+        for (e, f, q) in data {
+            let expect = self.q_at(e, (f > 0.0).then_some(f));
+            if expect > 0.0 {
+                let r = q / expect - 1.0;
+                ss += r * r;
+                n += 1;
+            }
+        }
+        let sigma_rel = libm::sqrt(ss / n.saturating_sub(terms).max(1) as f64);
+        Self {
+            sigma_rel: if sigma_rel.is_finite() {
+                sigma_rel
+            } else {
+                0.0
+            },
+            ..self
+        }
     }
 
     /// Expected Q at `e_kpa` and contact force `force_n` (ignored by a model without a force
@@ -101,8 +134,12 @@ impl QModel {
         !(expect > 0.0) || q / expect - 1.0 > Self::TOLERANCE
     }
 
-    /// True when every coefficient is finite.
+    /// True when every coefficient is finite and the scatter not negative.
     pub fn is_valid(&self) -> bool {
-        self.q0.is_finite() && self.q1.is_finite() && self.q2.is_finite()
+        self.q0.is_finite()
+            && self.q1.is_finite()
+            && self.q2.is_finite()
+            && self.sigma_rel.is_finite()
+            && self.sigma_rel >= 0.0
     }
 }

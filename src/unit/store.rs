@@ -32,7 +32,8 @@
 //! | 304 | 8 | Q model `q2` (per `ln F`, f64) |
 //! | 312 | 8 | load cell: newtons per count (f32), tare counts (i32) |
 //! | 320 | 8 | force window: `min`, `max`, N (f32) |
-//! | 328 | 52 | zero |
+//! | 328 | 8 | Q model `sigma_rel` (f64) |
+//! | 336 | 44 | zero |
 //! | 380 | 4 | CRC-32 (IEEE) of bytes 0..380 |
 //!
 //! [`Store::save`] writes the slot that does **not** hold the newest valid record (erase, program,
@@ -59,7 +60,7 @@ use embedded_storage::nor_flash::NorFlash;
 pub const RECORD_LEN: usize = 384;
 /// Format version written into every record (4: the contact law; 5: the contact force — the
 /// law's reference force, the Q model's force term, the load cell, the force window).
-pub const FORMAT_VERSION: u16 = 5;
+pub const FORMAT_VERSION: u16 = 6;
 const MAGIC: [u8; 4] = *b"PZTC";
 const CRC_AT: usize = RECORD_LEN - 4;
 const FLAG_AIR: u8 = 1;
@@ -460,6 +461,7 @@ pub fn encode(record: &UnitProfile, seq: u32) -> [u8; RECORD_LEN] {
     w.put(&tare.to_le_bytes());
     w.put(&record.force_window.min.0.to_le_bytes());
     w.put(&record.force_window.max.0.to_le_bytes());
+    w.put(&record.q_model.map_or(0.0, |m| m.sigma_rel).to_le_bytes());
     let crc = crc32(w.buf.get(..CRC_AT).unwrap_or(&[]));
     w.at = CRC_AT;
     w.put(&crc.to_le_bytes());
@@ -514,7 +516,6 @@ pub fn decode(buf: &[u8; RECORD_LEN]) -> Option<(u32, UnitProfile)> {
     }
     let contact = (flags & FLAG_CONTACT != 0).then(|| ContactLaw::from_values(&law));
     let q2 = r.f64();
-    let q_model = (flags & FLAG_Q_MODEL != 0).then_some(QModel { q0, q1, q2 });
     let (npc, tare) = (r.f32(), i32::from_le_bytes(r.take()));
     let load_cell = (flags & FLAG_LOAD_CELL != 0).then_some(LoadCellCal {
         newtons_per_count: npc,
@@ -524,6 +525,13 @@ pub fn decode(buf: &[u8; RECORD_LEN]) -> Option<(u32, UnitProfile)> {
         min: Newtons(r.f32()),
         max: Newtons(r.f32()),
     };
+    let sigma_rel = r.f64();
+    let q_model = (flags & FLAG_Q_MODEL != 0).then_some(QModel {
+        q0,
+        q1,
+        q2,
+        sigma_rel,
+    });
     let record = UnitProfile {
         calibration: PowerLaw {
             a,
@@ -567,6 +575,7 @@ mod tests {
                 q0: 2.5,
                 q1: 1.25,
                 q2: -4.5,
+                sigma_rel: 0.0375,
             }),
             air: Some(AirReference {
                 free_resonance: Hz(232.3),

@@ -372,6 +372,7 @@ fn fit_segments(
             resonance: Hz(f0 as f32),
             sigma: Hz(sigma as f32),
             q: Some(q as f32),
+            q_sigma: Some(sigma_q as f32),
             points_used: pb.w.len() as u16,
         },
         sigma_q,
