@@ -5,12 +5,14 @@
 use hal_sim::{phantoms, NoiseScene, Scene, SimProbe};
 use pzt_probe::board::sim::{self as simboard, SimBoard};
 use pzt_probe::dsp::lockin::{ChannelSums, LockInSums, ReferenceSums};
-use pzt_probe::engine::{PointRaw, SampleEngine};
+use pzt_probe::engine::{PointPlan, PointRaw, SampleEngine};
 use pzt_probe::hal::SampleStream;
 use pzt_probe::instrument::continuous::{run, StreamReading, TrackerConfig, METHOD};
 use pzt_probe::reading::driver::{block_on, SyncSource};
 use pzt_probe::reading::Method;
 use pzt_probe::{Status, UnitProfile};
+
+include!("support/arbitrary_window.rs");
 
 /// The simulated unit as `probe-bench stream` reads with it: calibrated with hold's defaults
 /// at bench noise on A–E × 20.
@@ -136,13 +138,7 @@ fn arbitrary_windows_after_lock() {
     }));
     let last = last.unwrap();
     assert!(last.locked && last.reading.status == Status::Ok && !t.acquiring());
-    let mut x = 0x2545_f491_4f6c_dd1du64;
-    let mut next = move || {
-        x ^= x << 13;
-        x ^= x >> 7;
-        x ^= x << 17;
-        x
-    };
+    let mut next = xorshift(0x2545_f491_4f6c_dd1d);
     let mut expect = last.seq + 1;
     let mut sample = 10_000u64;
     let mut segments = 0;
@@ -154,35 +150,8 @@ fn arbitrary_windows_after_lock() {
             assert!(segments <= TrackerConfig::DEFAULT.lost_after as usize);
         }
         for w in 0..plan.windows.max(1) {
-            let mut r = || (next() as i64) >> (next() % 64);
-            let ch = |r: &mut dyn FnMut() -> i64| ChannelSums {
-                xc: r(),
-                xs: r(),
-                x: r(),
-                xx: r().abs(),
-            };
-            let sums = LockInSums {
-                current: ch(&mut r),
-                monitor: ch(&mut r),
-                reference: ReferenceSums {
-                    cc: r(),
-                    ss: r(),
-                    cs: r(),
-                    c: r(),
-                    s: r(),
-                    n: (next() % 400) as u32,
-                },
-                current_rail_hits: 0,
-                monitor_rail_hits: 0,
-            };
             sample += 100;
-            let raw = PointRaw {
-                plan,
-                sums,
-                end_sample: sample,
-                window: w,
-                since_load: 0,
-            };
+            let raw = arbitrary_window(&mut next, plan, w, sample, false);
             let acquiring = t.acquiring();
             if let Some(r) = t.accept(&raw, &scale, &unit, |_, _| None) {
                 assert_eq!(r.seq, expect);

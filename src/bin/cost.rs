@@ -71,10 +71,10 @@ mod harness {
     use hal_sim::{NoiseScene, Scene, SimProbe};
     use pzt_probe::engine::sweep::SweepPoint;
     use pzt_probe::engine::BATCH;
-    use pzt_probe::engine::{PointPlan, PointRaw, SampleEngine};
-    use pzt_probe::hal::FrontEndScale;
+    use pzt_probe::engine::{PointPlan, PointRaw, Points, SampleEngine};
+    use pzt_probe::hal::{FrontEndScale, StreamError};
     use pzt_probe::loadcell::{ForceLog, RawForce};
-    use pzt_probe::reading::driver::{block_on, drive, PointSource, Wanted};
+    use pzt_probe::reading::driver::{block_on, drive, BatchSource, PointSource, Wanted};
     use pzt_probe::reading::{Measurement, Procedure};
     use pzt_probe::unit::profile::UnitProfile;
     use pzt_probe::{Failure, Method, Reading, Seconds, Status};
@@ -218,6 +218,33 @@ mod harness {
         held: Option<PointRaw>,
     }
 
+    impl BatchSource for CostSource<'_> {
+        /// One batch: the plant plays the DAC batch and fills the ADC batch, the load cell is
+        /// read (neither counted), then the engine's counted work — plan intake, demodulation,
+        /// DAC refill.
+        fn batch(&mut self) -> Result<Option<Points>, StreamError> {
+            let (adc, dac) = self.stream.capture();
+            if let Some(Ok(Some(c))) = self.load_cell.as_mut().map(|hx| hx.read()) {
+                self.forces.push(self.engine.samples(), c);
+            }
+            compiler_fence(Ordering::SeqCst);
+            let t0 = board::stamp();
+            compiler_fence(Ordering::SeqCst);
+            if let Some(p) = self.intake.take() {
+                self.engine.load(p);
+            }
+            let points = self.engine.demodulate(adc);
+            self.engine.generate(dac);
+            compiler_fence(Ordering::SeqCst);
+            self.cost.borrow_mut().batch(board::elapsed(t0));
+            compiler_fence(Ordering::SeqCst);
+            Ok(Some(points))
+        }
+        fn held(&mut self) -> &mut Option<PointRaw> {
+            &mut self.held
+        }
+    }
+
     impl PointSource for CostSource<'_> {
         fn scale(&self) -> FrontEndScale {
             self.stream.scale()
@@ -233,36 +260,9 @@ mod harness {
             self.intake = Some(plan);
             true
         }
+        /// The driver's window wait over the counted batches.
         async fn next(&mut self, wanted: &Wanted, budget: u64) -> Option<PointRaw> {
-            if let Some(raw) = self.held.take().filter(|r| wanted.matches(r)) {
-                return Some(raw);
-            }
-            let mut used = 0u64;
-            while used <= budget {
-                // The plant plays the DAC batch and fills the ADC batch: not counted.
-                let (adc, dac) = self.stream.capture();
-                if let Some(Ok(Some(c))) = self.load_cell.as_mut().map(|hx| hx.read()) {
-                    self.forces.push(self.engine.samples(), c);
-                }
-                compiler_fence(Ordering::SeqCst);
-                let t0 = board::stamp();
-                compiler_fence(Ordering::SeqCst);
-                if let Some(p) = self.intake.take() {
-                    self.engine.load(p);
-                }
-                let point = self.engine.demodulate(adc);
-                self.engine.generate(dac);
-                compiler_fence(Ordering::SeqCst);
-                self.cost.borrow_mut().batch(board::elapsed(t0));
-                compiler_fence(Ordering::SeqCst);
-                used += BATCH as u64;
-                let mut points = point.into_iter();
-                if let Some(raw) = points.by_ref().find(|r| wanted.matches(r)) {
-                    self.held = points.find(|r| wanted.matches(r));
-                    return Some(raw);
-                }
-            }
-            None
+            self.next_window(wanted, budget)
         }
         async fn stop(&mut self) {
             self.engine.stop();
@@ -500,20 +500,17 @@ mod harness {
                 Some(c) => c.frequency_at(e, force),
                 None => unit.calibration.frequency(e),
             };
-            let wiggle = if i % 2 == 0 { 0.3 } else { -0.3 };
-            // Scattered: every third reading 30 Hz off, alternately up and down.
+            // Alternately above and below the curve: by 0.3 Hz, and when scattered every third
+            // reading by 30 Hz more.
+            let up = if i % 2 == 0 { 1.0 } else { -1.0 };
             let off = if case.scattered && i % 3 == 0 {
-                if i % 2 == 0 {
-                    30.0
-                } else {
-                    -30.0
-                }
+                30.0
             } else {
                 0.0
             };
             let _ = refs.push(Reference {
                 modulus_kpa: e,
-                resonance_hz: f + wiggle + off,
+                resonance_hz: f + up * 0.3 + up * off,
                 sigma_hz: 0.2,
                 q: q_model.map_or(20.0, |q| q.q_at(e, Some(force))),
                 force_n: force,

@@ -12,6 +12,22 @@ pub mod qemu;
 #[cfg(all(target_os = "none", feature = "stm32"))]
 pub mod stm32g474;
 
+/// A firmware board's parts, as the application takes them over from its `init`: each board
+/// names its own types (`qemu::Parts`, `stm32g474::Parts`).
+#[cfg(target_os = "none")]
+pub struct Parts<Stream, Watchdog, Flash, Uart, LoadCell> {
+    /// The sample stream (not yet started).
+    pub stream: Stream,
+    /// The watchdog.
+    pub watchdog: Watchdog,
+    /// The store's flash.
+    pub flash: Flash,
+    /// Host link.
+    pub uart: Uart,
+    /// The load cell (`None` when there is none, or its pins cannot be driven).
+    pub load_cell: Option<LoadCell>,
+}
+
 /// The NVIC priority register value of RTIC logical priority `logical` on a core that
 /// implements the top `bits` bits of each priority (higher logical priority, lower value).
 pub const fn nvic_priority(logical: u8, bits: u8) -> u8 {

@@ -220,19 +220,8 @@ pub fn scale() -> FrontEndScale {
     crate::board::sim::scale_of(&scene().front_end)
 }
 
-/// The board's parts, as the application takes them over.
-pub struct Parts {
-    /// The sample stream (not yet started).
-    pub stream: Stream,
-    /// The watchdog stand-in.
-    pub watchdog: Watchdog,
-    /// The store's flash.
-    pub flash: StoreFlash,
-    /// Host link.
-    pub uart: Uart,
-    /// The load cell (`None` when its pins cannot be driven).
-    pub load_cell: Option<LoadCell>,
-}
+/// The board's parts, as the application takes them over (the watchdog a stand-in).
+pub type Parts = super::Parts<Stream, Watchdog, StoreFlash, Uart, LoadCell>;
 
 /// Set the board up: the simulated probe on [`boot_state`]'s scene, and its flash as the
 /// factory left it —

@@ -338,24 +338,8 @@ pub fn parse(line: &[u8], scale: &FrontEndScale) -> Result<Command, CommandError
         "staged" => staged(args, scale).map(|s| Command::Settings(Settings::Staged(s))),
         "calibrate" => calibrate(args),
         "force" => force_window(args),
-        "weigh" => {
-            arity(args, 1)?;
-            let g = number(args.first().copied().unwrap_or_default())?;
-            if (WEIGH_GRAMS.0..=WEIGH_GRAMS.1).contains(&g) {
-                Ok(Command::Weigh(Newtons(g * NEWTONS_PER_GRAM)))
-            } else {
-                Err(CommandError::OutOfRange)
-            }
-        }
-        "stream" => {
-            arity(args, 1)?;
-            let t = number(args.first().copied().unwrap_or_default())?;
-            if (STREAM_SECONDS.0..=STREAM_SECONDS.1).contains(&t) {
-                Ok(Command::Stream(Seconds(t)))
-            } else {
-                Err(CommandError::OutOfRange)
-            }
-        }
+        "weigh" => one_in(args, WEIGH_GRAMS).map(|g| Command::Weigh(Newtons(g * NEWTONS_PER_GRAM))),
+        "stream" => one_in(args, STREAM_SECONDS).map(|t| Command::Stream(Seconds(t))),
         _ => Err(CommandError::UnknownCommand),
     }
 }
@@ -386,6 +370,17 @@ fn arity(args: &[&str], want: usize) -> Result<(), CommandError> {
         k if k < want => Err(CommandError::MissingArgument),
         k if k > want => Err(CommandError::TooManyArguments),
         _ => Ok(()),
+    }
+}
+
+/// The one argument of a command, a number within `(lo, hi)` (both included).
+fn one_in(args: &[&str], (lo, hi): (f32, f32)) -> Result<f32, CommandError> {
+    arity(args, 1)?;
+    let v = number(args.first().copied().unwrap_or_default())?;
+    if (lo..=hi).contains(&v) {
+        Ok(v)
+    } else {
+        Err(CommandError::OutOfRange)
     }
 }
 
@@ -441,15 +436,7 @@ fn calibrate(args: &[&str]) -> Result<Command, CommandError> {
     let (&sub, rest) = args.split_first().ok_or(CommandError::MissingArgument)?;
     let none = |c: Command| arity(rest, 0).map(|_| c);
     match sub {
-        "add" => {
-            arity(rest, 1)?;
-            let e = number(rest.first().copied().unwrap_or_default())?;
-            if (REFERENCE_KPA.0..=REFERENCE_KPA.1).contains(&e) {
-                Ok(Command::CalibrateAdd(KPa(e)))
-            } else {
-                Err(CommandError::OutOfRange)
-            }
-        }
+        "add" => one_in(rest, REFERENCE_KPA).map(|e| Command::CalibrateAdd(KPa(e))),
         "fit" => none(Command::CalibrateFit),
         "clear" => none(Command::CalibrateClear),
         "paper" => none(Command::CalibratePaper),

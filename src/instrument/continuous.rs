@@ -569,6 +569,8 @@ mod tests {
     use crate::unit::profile::AirReference;
     use crate::units::{Farads, Siemens};
 
+    include!("../../tests/support/arbitrary_window.rs");
+
     fn unit() -> UnitProfile {
         UnitProfile {
             air: Some(AirReference {
@@ -619,47 +621,14 @@ mod tests {
         let scale = FrontEndScale::PROBE;
         let unit = unit();
         let mut t = TrackerConfig::DEFAULT.validate(&scale, &unit).unwrap();
-        let mut x = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = move || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x
-        };
+        let mut next = xorshift(0x9e37_79b9_7f4a_7c15);
         let mut sample = 0u64;
         let mut expect = 0u32;
         for _ in 0..400 {
             let plan = t.next_plan().expect("a plan after every reading or plan");
             for w in 0..plan.windows.max(1) {
-                let mut r = || (next() as i64) >> (next() % 64);
-                let ch = |r: &mut dyn FnMut() -> i64| ChannelSums {
-                    xc: r(),
-                    xs: r(),
-                    x: r(),
-                    xx: r().abs(),
-                };
-                let sums = LockInSums {
-                    current: ch(&mut r),
-                    monitor: ch(&mut r),
-                    reference: ReferenceSums {
-                        cc: r(),
-                        ss: r(),
-                        cs: r(),
-                        c: r(),
-                        s: r(),
-                        n: (next() % 400) as u32,
-                    },
-                    current_rail_hits: (next() % 3 == 0) as u32,
-                    monitor_rail_hits: 0,
-                };
                 sample += 100;
-                let raw = PointRaw {
-                    plan,
-                    sums,
-                    end_sample: sample,
-                    window: w,
-                    since_load: 0,
-                };
+                let raw = arbitrary_window(&mut next, plan, w, sample, true);
                 if let Some(r) = t.accept(&raw, &scale, &unit, |_, _| None) {
                     assert_eq!(r.seq, expect);
                     expect += 1;

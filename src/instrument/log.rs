@@ -52,6 +52,32 @@ use crate::instrument::session::Event;
 use crate::reading::Settings;
 use crate::unit::store::{SlotState, StoreError};
 
+/// A `reading` or `stream` line: `$format` (written out whole: a defmt format string is one
+/// literal, and the line is a wire format), the arguments `$pre` its own fields before
+/// `status=` take, then the reading `$r`'s fields from `status=` to `force_sigma_n=`, which
+/// both lines end with.
+macro_rules! reading_line {
+    ($format:tt, $r:expr $(, $pre:expr)*) => {{
+        let r = $r;
+        defmt::info!(
+            $format,
+            $($pre,)*
+            r.status.code(),
+            nan_or(r.resonance.map(|v| v.0)),
+            nan_or(r.resonance_sigma.map(|v| v.0)),
+            nan_or(r.modulus.map(|v| v.0)),
+            nan_or(r.modulus_sigma.map(|v| v.0)),
+            nan_or(r.modulus_sigma_repeat.map(|v| v.0)),
+            nan_or(r.q),
+            r.probe_time.0,
+            r.points,
+            r.method.name(),
+            nan_or(r.force.map(|w| w.mean.0)),
+            nan_or(r.force.map(|w| w.sigma.0))
+        )
+    }};
+}
+
 /// One defmt line per session event (formats in the crate docs).
 pub fn event(e: Event) {
     match e {
@@ -91,42 +117,17 @@ pub fn event(e: Event) {
             point.b_s,
             point.sigma_s
         ),
-        Event::Reading(r) => defmt::info!(
+        Event::Reading(r) => reading_line!(
             "reading status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} e_repeat_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str} force_n={=f32} force_sigma_n={=f32}",
-            r.status.code(),
-            nan_or(r.resonance.map(|v| v.0)),
-            nan_or(r.resonance_sigma.map(|v| v.0)),
-            nan_or(r.modulus.map(|v| v.0)),
-            nan_or(r.modulus_sigma.map(|v| v.0)),
-            nan_or(r.modulus_sigma_repeat.map(|v| v.0)),
-            nan_or(r.q),
-            r.probe_time.0,
-            r.points,
-            r.method.name(),
-            nan_or(r.force.map(|w| w.mean.0)),
-            nan_or(r.force.map(|w| w.sigma.0))
+            r
         ),
-        Event::Stream(x) => {
-            let r = x.reading;
-            defmt::info!(
-                "stream seq={=u32} t_s={=f32} locked={=bool} status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} e_repeat_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str} force_n={=f32} force_sigma_n={=f32}",
-                x.seq,
-                x.t_s.0,
-                x.locked,
-                r.status.code(),
-                nan_or(r.resonance.map(|v| v.0)),
-                nan_or(r.resonance_sigma.map(|v| v.0)),
-                nan_or(r.modulus.map(|v| v.0)),
-                nan_or(r.modulus_sigma.map(|v| v.0)),
-                nan_or(r.modulus_sigma_repeat.map(|v| v.0)),
-                nan_or(r.q),
-                r.probe_time.0,
-                r.points,
-                r.method.name(),
-                nan_or(r.force.map(|w| w.mean.0)),
-                nan_or(r.force.map(|w| w.sigma.0))
-            )
-        }
+        Event::Stream(x) => reading_line!(
+            "stream seq={=u32} t_s={=f32} locked={=bool} status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} e_repeat_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str} force_n={=f32} force_sigma_n={=f32}",
+            x.reading,
+            x.seq,
+            x.t_s.0,
+            x.locked
+        ),
         Event::StreamEnd {
             start,
             readings,

@@ -201,6 +201,42 @@ pub fn block_on<F: core::future::Future>(f: F) -> F::Output {
     }
 }
 
+/// A source that runs the engine batch by batch itself ([`SyncSource`], the QEMU cost image's):
+/// its [`PointSource::next`] is [`next_window`](Self::next_window).
+pub trait BatchSource {
+    /// One batch of the engine against the stream: the windows it closed, `Ok(None)` while the
+    /// stream's pipeline is still filling, an error when the stream failed.
+    fn batch(&mut self) -> Result<Option<crate::engine::Points>, StreamError>;
+    /// A second window that closed in the batch of the one [`next_window`](Self::next_window)
+    /// returned.
+    fn held(&mut self) -> &mut Option<PointRaw>;
+
+    /// The window kept in [`held`](Self::held) if `wanted` matches it, else one batch after
+    /// another (an error ends the wait) until one closes a wanted window, within `budget`
+    /// samples; a second wanted window of that batch is kept for the next call.
+    fn next_window(&mut self, wanted: &Wanted, budget: u64) -> Option<PointRaw> {
+        if let Some(raw) = self.held().take().filter(|r| wanted.matches(r)) {
+            return Some(raw);
+        }
+        let mut used = 0u64;
+        while used <= budget {
+            // A batch still filling the pipeline counts against the budget too, so that a
+            // stream that never plays is a stall, not a hang.
+            let played = self.batch().ok()?;
+            used += BATCH as u64;
+            let Some(points) = played else {
+                continue;
+            };
+            let mut points = points.into_iter();
+            if let Some(raw) = points.by_ref().find(|r| wanted.matches(r)) {
+                *self.held() = points.find(|r| wanted.matches(r));
+                return Some(raw);
+            }
+        }
+        None
+    }
+}
+
 /// A [`PointSource`] that runs the engine and a [`SampleStream`] in one loop: batch by batch,
 /// generate, exchange, demodulate.
 pub struct SyncSource<'a, S> {
@@ -240,10 +276,12 @@ impl<'a, S: SampleStream> SyncSource<'a, S> {
         }
         src
     }
+}
 
+impl<S: SampleStream> BatchSource for SyncSource<'_, S> {
     /// One batch: the engine fills the next DAC batch, the stream queues it, and the engine
     /// demodulates what played — `Ok(None)` while the stream's pipeline is still filling
-    /// (nothing played yet). A stream error is kept in [`Self::error`].
+    /// (nothing played yet). A stream error is kept in [`SyncSource::error`].
     fn batch(&mut self) -> Result<Option<crate::engine::Points>, StreamError> {
         let mut dac = [DacCode::MID; BATCH];
         let mut adc = [AdcFrame::default(); BATCH];
@@ -256,6 +294,9 @@ impl<'a, S: SampleStream> SyncSource<'a, S> {
                 Err(e)
             }
         }
+    }
+    fn held(&mut self) -> &mut Option<PointRaw> {
+        &mut self.held
     }
 }
 
@@ -274,25 +315,7 @@ impl<S: SampleStream + ForceSource> PointSource for SyncSource<'_, S> {
         self.error.is_none()
     }
     async fn next(&mut self, wanted: &Wanted, budget: u64) -> Option<PointRaw> {
-        if let Some(raw) = self.held.take().filter(|r| wanted.matches(r)) {
-            return Some(raw);
-        }
-        let mut used = 0u64;
-        while used <= budget {
-            // A batch still filling the pipeline counts against the budget too, so that a
-            // stream that never plays is a stall, not a hang.
-            let played = self.batch().ok()?;
-            used += BATCH as u64;
-            let Some(points) = played else {
-                continue;
-            };
-            let mut points = points.into_iter();
-            if let Some(raw) = points.by_ref().find(|r| wanted.matches(r)) {
-                self.held = points.find(|r| wanted.matches(r));
-                return Some(raw);
-            }
-        }
-        None
+        self.next_window(wanted, budget)
     }
     async fn stop(&mut self) {
         self.engine.stop();

@@ -664,6 +664,20 @@ impl ContactLaw {
 mod tests {
     use super::*;
 
+    /// A law of the simulated probe's size (free resonance 232.3 Hz) over 100–3000 kPa, exact
+    /// (no covariance, no misfit), without a reference force.
+    fn law() -> ContactLaw {
+        ContactLaw {
+            free_hz: 232.3,
+            p: [13.44, 9.26, 4.88],
+            cov: [[0.0; 3]; 3],
+            model_sigma_hz: 0.0,
+            min_kpa: 100.0,
+            max_kpa: 3000.0,
+            force_n: 0.0,
+        }
+    }
+
     /// The analytic slopes against central differences of the law in E and in each constant.
     /// Steps 1e-6: truncation below 1e-7 of the slope; rounding of the two ~260 Hz values
     /// (an ulp, 5.7e-14 Hz, each) over the step 2e-6 is up to 6e-8 Hz per unit.
@@ -772,13 +786,9 @@ mod tests {
     #[test]
     fn an_invalid_law_reads_nothing() {
         let good = ContactLaw {
-            free_hz: 232.3,
-            p: [13.44, 9.26, 4.88],
             cov: [[1e-4, 0.0, 0.0], [0.0, 1e-4, 0.0], [0.0, 0.0, 1e-4]],
             model_sigma_hz: 0.1,
-            min_kpa: 100.0,
-            max_kpa: 3000.0,
-            force_n: 0.0,
+            ..law()
         };
         assert!(good.is_valid());
         let f = Hz(good.frequency(400.0) as f32);
@@ -839,15 +849,7 @@ mod tests {
     /// the free resonance and falling towards 0 at small `E` (the co-moving mass dominates).
     #[test]
     fn limits() {
-        let law = ContactLaw {
-            free_hz: 232.3,
-            p: [13.44, 9.26, 4.88],
-            cov: [[0.0; 3]; 3],
-            model_sigma_hz: 0.0,
-            min_kpa: 100.0,
-            max_kpa: 3000.0,
-            force_n: 0.0,
-        };
+        let law = law();
         let rigid = libm::sqrt((2.0 * PI * 232.3f64).powi(2) + libm::exp(13.44)) / (2.0 * PI);
         assert!((law.rigid_hz() - rigid).abs() < 1e-9);
         assert!((law.frequency(1e12) - rigid).abs() < 1e-3);

@@ -7,7 +7,7 @@ use embassy_stm32::interrupt::Priority;
 use embassy_stm32::pac;
 use embassy_stm32::time::Hertz;
 
-use super::reset::{record, set_step, Step};
+use super::reset::{during, record, Step};
 use super::{device, spin_until, BootError};
 
 /// HSE crystal start-up, at HSI16: 100 ms (ST's HSE_STARTUP_TIMEOUT; typical start-up 2 ms).
@@ -86,9 +86,7 @@ pub(super) fn choose(safe: bool, hse_failed: bool) -> ClockSource {
 /// `embassy_stm32::init` on `clock` (a boot step: [`Step::Clock`]), then the flash prefetch;
 /// the peripherals.
 pub(super) fn start(clock: ClockSource) -> embassy_stm32::Peripherals {
-    set_step(Some(Step::Clock));
-    let p = embassy_stm32::init(embassy_config(clock));
-    set_step(None);
+    let p = during(Step::Clock, || embassy_stm32::init(embassy_config(clock)));
 
     // Gap: embassy 0.6 never sets FLASH_ACR.PRFTEN. RAW 5/12: prefetch on (RM0440 3.3.4
     // ART accelerator / prefetch; FLASH_ACR), after embassy set the wait states.

@@ -59,7 +59,7 @@ pub use watchdog::Watchdog;
 
 use crate::hal::FrontEndScale;
 use crate::units::Hz;
-use reset::{interrupted_step, reset_cause, set_step, Step};
+use reset::{interrupted_step, reset_cause, Step};
 
 // The image's defmt global logger (RTT) and panic handler: panic-probe logs the panic's
 // message and location over defmt (feature `print-defmt`), then takes a HardFault (`udf`):
@@ -134,19 +134,8 @@ fn spin_until(cycles: u32, mut done: impl FnMut() -> bool) -> bool {
     done()
 }
 
-/// The board's parts, as the application takes them over.
-pub struct Parts {
-    /// The sample stream (not yet started).
-    pub stream: Stream,
-    /// The independent watchdog, running.
-    pub watchdog: Watchdog,
-    /// The store's flash.
-    pub flash: StoreFlash,
-    /// Host link.
-    pub uart: Uart,
-    /// The load cell.
-    pub load_cell: Option<LoadCell>,
-}
+/// The board's parts, as the application takes them over (the independent watchdog running).
+pub type Parts = super::Parts<Stream, Watchdog, StoreFlash, Uart, LoadCell>;
 
 /// Set the board up: cycle counter; 170 MHz from the 24 MHz HSE crystal through the PLL
 /// (HSI16 if the crystal does not start), range 1 boost; the converters; UART; watchdog
@@ -179,22 +168,21 @@ pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
         reset::record(BootError::ConverterHang);
         None
     } else {
-        set_step(Some(Step::Converters));
-        let hw = analog::converters(analog::ConverterPins {
-            tim6: p.TIM6,
-            dac1: p.DAC1,
-            dac_dma: p.DMA1_CH3,
-            dac_dma_unused: p.DMA1_CH5,
-            pa4: p.PA4,
-            adc1: p.ADC1,
-            adc1_dma: p.DMA1_CH1,
-            pa0: p.PA0,
-            adc2: p.ADC2,
-            adc2_dma: p.DMA1_CH2,
-            pa1: p.PA1,
-        });
-        set_step(None);
-        Some(hw)
+        Some(reset::during(Step::Converters, || {
+            analog::converters(analog::ConverterPins {
+                tim6: p.TIM6,
+                dac1: p.DAC1,
+                dac_dma: p.DMA1_CH3,
+                dac_dma_unused: p.DMA1_CH5,
+                pa4: p.PA4,
+                adc1: p.ADC1,
+                adc1_dma: p.DMA1_CH1,
+                pa0: p.PA0,
+                adc2: p.ADC2,
+                adc2_dma: p.DMA1_CH2,
+                pa1: p.PA1,
+            })
+        }))
     };
 
     let uart = uart::open(p.LPUART1, p.PA3, p.DMA1_CH4);

@@ -54,7 +54,7 @@ const STEP_MAGIC: u32 = 0x5EB0_0000;
 static mut STEP: MaybeUninit<[u32; 2]> = MaybeUninit::uninit();
 
 /// Mark `step` as the one in progress (`None`: none).
-pub(super) fn set_step(step: Option<Step>) {
+fn set_step(step: Option<Step>) {
     let v = step.map_or(0, |s| STEP_MAGIC | s as u32);
     // SAFETY: two aligned words of our own static; volatile so the marker is in RAM before the
     // step's first wait.
@@ -63,6 +63,15 @@ pub(super) fn set_step(step: Option<Step>) {
         p.write_volatile(v);
         p.add(1).write_volatile(!v);
     }
+}
+
+/// Run `f` as the boot step `step`: marked in progress while it runs (a reset in it is
+/// recorded as that step hanging), no step after.
+pub(super) fn during<R>(step: Step, f: impl FnOnce() -> R) -> R {
+    set_step(Some(step));
+    let r = f();
+    set_step(None);
+    r
 }
 
 /// What caused the last reset, as far as the boot-step marker cares.

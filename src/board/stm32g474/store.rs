@@ -8,7 +8,7 @@ use embedded_storage::nor_flash::{
     ReadNorFlash,
 };
 
-use super::reset::{record, set_step, Step};
+use super::reset::{during, record, Step};
 use super::BootError;
 
 /// Start of the calibration store: the last two 2 KiB pages of bank 2 (0x0807_F000), outside
@@ -92,23 +92,13 @@ impl NorFlash for InternalFlash {
     fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
         check_erase(self, from, to)?;
         let flash = self.flash()?;
-        set_step(Some(Step::Flash));
-        let r = flash
-            .blocking_erase(from, to)
-            .map_err(FlashError::Controller);
-        set_step(None);
-        r
+        during(Step::Flash, || flash.blocking_erase(from, to)).map_err(FlashError::Controller)
     }
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
         check_write(self, offset, bytes.len())?;
         let flash = self.flash()?;
-        set_step(Some(Step::Flash));
-        let r = flash
-            .blocking_write(offset, bytes)
-            .map_err(FlashError::Controller);
-        set_step(None);
-        r
+        during(Step::Flash, || flash.blocking_write(offset, bytes)).map_err(FlashError::Controller)
     }
 }
 
