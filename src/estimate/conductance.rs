@@ -9,7 +9,8 @@
 //! uncertainty of `w0` from the per-point uncertainties (inflated by the reduced χ² when the
 //! residuals grossly exceed them).
 //!
-//! Fails with `out_of_band` when the largest conductance is at a band edge, `no_resonance` when
+//! Fails with `out_of_band` when the largest conductance is at a band edge or the peak does not
+//! fall on both sides within the band (by 5 σ), `no_resonance` when
 //! no peak stands 5 σ out of the floor, `low_snr` when the fit's relative uncertainty is too large.
 
 use super::{argmax, screen, Estimate};
@@ -48,6 +49,14 @@ pub fn estimate(points: &[SweepPoint]) -> Result<Estimate, Failure> {
         return Err(Failure::NoResonance);
     }
     if imax == 0 || imax == n - 1 {
+        return Err(Failure::OutOfBand);
+    }
+    // The peak must be measured on both sides: on each, some point falls below it by more than
+    // the peak's own noise (5 σ). A conductance still falling from a band edge (the resonance
+    // beyond it) with a noise bump next to the edge is no peak.
+    let floor = gmax - 5.0 * sigma_peak;
+    let side_min = |s: &[SweepPoint]| s.iter().map(|p| p.g_s as f64).fold(f64::INFINITY, f64::min);
+    if !(side_min(&points[..imax]) < floor) || !(side_min(&points[imax + 1..]) < floor) {
         return Err(Failure::OutOfBand);
     }
     // Contiguous half-power window around the maximum.
