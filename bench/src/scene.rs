@@ -35,7 +35,9 @@ pub fn noise_name(n: NoiseScene) -> String {
 /// share.
 #[derive(clap::Args, Clone, Debug)]
 pub struct SceneArgs {
-    /// Phantom to press on: A–E (paper 003), ecoflex-00-10, ecoflex-00-30, dragon-skin-20.
+    /// Phantom to press on: A–E (paper 003), ecoflex-00-10, ecoflex-00-30, dragon-skin-20; or a
+    /// named tissue (with its own loss tangent): fat-like, fibrous-breast-like, dcis-like,
+    /// carcinoma-like, prostate-cancer-like.
     #[arg(long)]
     pub phantom: Option<String>,
     /// Tissue of this small-strain Young's modulus, kPa.
@@ -98,7 +100,11 @@ impl Target {
         match (phantom, modulus_kpa, free_air) {
             (Some(p), None, false) => {
                 phantoms::by_name(p).map(Target::Phantom).with_context(|| {
-                    let names: Vec<&str> = phantoms::all().iter().map(|p| p.name).collect();
+                    let names: Vec<&str> = phantoms::all()
+                        .iter()
+                        .chain(phantoms::tissues().iter())
+                        .map(|p| p.name)
+                        .collect();
                     format!("unknown phantom `{p}` (known: {})", names.join(", "))
                 })
             }
@@ -137,6 +143,10 @@ impl Target {
     /// Description for humans.
     pub fn describe(&self) -> String {
         match self {
+            Target::Phantom(p) if p.loss_tangent > 0.0 => format!(
+                "phantom {} ({:.1} kPa, tan d {:.2}, {})",
+                p.name, p.modulus_kpa, p.loss_tangent, p.source
+            ),
             Target::Phantom(p) => format!(
                 "phantom {} ({:.1} kPa, {})",
                 p.name, p.modulus_kpa, p.source

@@ -15,6 +15,9 @@ pub struct Phantom {
     pub poisson: f64,
     /// Density in kg/m^3.
     pub density_kg_m3: f64,
+    /// Viscoelastic loss tangent `tan(delta)` at the resonance (0: lossless, as every silicone
+    /// phantom here; the named tissues of [`tissues`] carry their own).
+    pub loss_tangent: f64,
 }
 
 /// Poisson ratio of the neo-Hookean silicones of paper 001: `nu = (3K - 2mu) / (2 (3K + mu))`
@@ -36,6 +39,7 @@ const fn p003(name: &'static str, modulus_kpa: f64) -> Phantom {
         modulus_kpa,
         poisson: 0.49,
         density_kg_m3: 1000.0,
+        loss_tangent: 0.0,
     }
 }
 
@@ -61,6 +65,7 @@ pub fn silicones() -> [Phantom; 3] {
             modulus_kpa: mooney_rivlin_modulus_kpa(27.147, -25.776),
             poisson: nu,
             density_kg_m3: 1040.0,
+            loss_tangent: 0.0,
         },
         Phantom {
             name: "ecoflex-00-30",
@@ -68,6 +73,7 @@ pub fn silicones() -> [Phantom; 3] {
             modulus_kpa: mooney_rivlin_modulus_kpa(85.157, -80.385),
             poisson: poisson_from_bulk_shear(0.106017, 0.009542),
             density_kg_m3: 1070.0,
+            loss_tangent: 0.0,
         },
         Phantom {
             name: "dragon-skin-20",
@@ -75,6 +81,7 @@ pub fn silicones() -> [Phantom; 3] {
             modulus_kpa: 3.0 * 0.063297e3,
             poisson: poisson_from_bulk_shear(0.703228, 0.063297),
             density_kg_m3: 1080.0,
+            loss_tangent: 0.0,
         },
     ]
 }
@@ -85,21 +92,105 @@ pub fn all() -> [Phantom; 8] {
     [A, B, C, D, E, s[0], s[1], s[2]]
 }
 
-/// Look a phantom up by name (case-insensitive for `A`..`E`).
+/// Soft tissue of Krouskop et al. 1998 (quasi-static compression of excised tissue): `nu` 0.49
+/// and `rho` 1000 kg/m^3 as [`Tissue::with_modulus_kpa`]; `modulus_kpa` is the paper's mean at
+/// the stated precompression and 1 Hz, `loss_tangent` ours (see [`tissues`]).
+const fn krouskop(
+    name: &'static str,
+    source: &'static str,
+    modulus_kpa: f64,
+    loss_tangent: f64,
+) -> Phantom {
+    Phantom {
+        name,
+        source,
+        modulus_kpa,
+        poisson: 0.49,
+        density_kg_m3: 1000.0,
+        loss_tangent,
+    }
+}
+
+/// Breast fat: Krouskop et al. 1998 (Ultrasonic Imaging 20:260), normal fat, 20 %
+/// precompression, 1 Hz: 20 ± 8 kPa (18 ± 7 kPa at 5 %; fat's modulus does not depend on the
+/// strain). Far below the probe's range: the probe reads it as its softest. Loss tangent 0.20 is
+/// ours (below the 0.40 bound of the same paper; see `docs/physics.md`).
+pub const FAT_LIKE: Phantom = krouskop(
+    "fat-like",
+    "Krouskop 1998: breast fat, 20 % precompression, 1 Hz (tan d ours)",
+    20.0,
+    0.20,
+);
+/// Fibrous breast tissue: Krouskop et al. 1998, normal fibrous tissue, 20 % precompression,
+/// 1 Hz: 233 ± 59 kPa (96–116 kPa at 5 %). Loss tangent 0.15 is ours.
+pub const FIBROUS_BREAST_LIKE: Phantom = krouskop(
+    "fibrous-breast-like",
+    "Krouskop 1998: fibrous breast tissue, 20 % precompression, 1 Hz (tan d ours)",
+    233.0,
+    0.15,
+);
+/// Ductal carcinoma in situ: Krouskop et al. 1998, intraductal (in situ) carcinoma, 20 %
+/// precompression, 1 Hz: 301 ± 58 kPa (like fat at 5 %, 22–28 kPa). Loss tangent 0.25 is ours
+/// (malignant lesions are the more liquid-like, Sinkus et al. 2007).
+pub const DCIS_LIKE: Phantom = krouskop(
+    "dcis-like",
+    "Krouskop 1998: ductal carcinoma in situ, 20 % precompression, 1 Hz (tan d ours)",
+    301.0,
+    0.25,
+);
+/// Invasive ductal carcinoma: Krouskop et al. 1998, infiltrating ductal carcinoma, 20 %
+/// precompression, 1 Hz: 490 ± 112 kPa (460–558 kPa over 0.1–4 Hz), the stiffest breast tissue
+/// of the paper. Loss tangent 0.30 is ours (the most liquid-like, Sinkus et al. 2007).
+pub const CARCINOMA_LIKE: Phantom = krouskop(
+    "carcinoma-like",
+    "Krouskop 1998: invasive ductal carcinoma, 20 % precompression, 1 Hz (tan d ours)",
+    490.0,
+    0.30,
+);
+/// Prostate cancer: Krouskop et al. 1998, prostate cancer, 4 % precompression, 1 Hz:
+/// 230 ± 34 kPa (96–100 kPa at 2 %). Loss tangent 0.25 is ours.
+pub const PROSTATE_CANCER_LIKE: Phantom = krouskop(
+    "prostate-cancer-like",
+    "Krouskop 1998: prostate cancer, 4 % precompression, 1 Hz (tan d ours)",
+    230.0,
+    0.25,
+);
+
+/// Named soft-tissue targets: sourced moduli and a viscoelastic loss.
+///
+/// Not phantoms of the papers and not used by any calibration: scenes of what the probe meets
+/// in use. The moduli are Krouskop et al. 1998's quasi-static (0.1–4 Hz) compression moduli;
+/// hal-sim takes them as the storage modulus at the probe's resonance, which a dispersive
+/// tissue exceeds by `(f_res / f_static)^y` (`docs/physics.md`, "Viscoelastic tissue"). No
+/// source gave a loss tangent per tissue: the values are ours, inside Krouskop's bound (the
+/// storage modulus is over 93 % of the complex modulus above 1 Hz, so `tan(delta) < 0.40`) and
+/// ordered as Sinkus et al. 2007 (MRM 58:1135) found (malignant lesions the more liquid-like).
+pub fn tissues() -> [Phantom; 5] {
+    [
+        FAT_LIKE,
+        FIBROUS_BREAST_LIKE,
+        DCIS_LIKE,
+        CARCINOMA_LIKE,
+        PROSTATE_CANCER_LIKE,
+    ]
+}
+
+/// Look a phantom or a named tissue up by name (case-insensitive): [`all`], then [`tissues`].
 pub fn by_name(name: &str) -> Option<Phantom> {
     all()
         .into_iter()
+        .chain(tissues())
         .find(|p| p.name.eq_ignore_ascii_case(name))
 }
 
 impl Phantom {
-    /// The phantom as linear tissue (no extra viscoelastic loss).
+    /// The phantom as linear viscoelastic tissue (its own loss tangent: 0 for the silicones).
     pub fn tissue(&self) -> Tissue {
         Tissue {
             modulus_pa: self.modulus_kpa * 1e3,
             poisson: self.poisson,
             density_kg_m3: self.density_kg_m3,
-            loss_tangent: 0.0,
+            loss_tangent: self.loss_tangent,
         }
     }
 }
@@ -128,5 +219,54 @@ mod tests {
     fn lookup() {
         assert_eq!(by_name("b").unwrap().modulus_kpa, 279.0);
         assert!(by_name("Z").is_none());
+    }
+
+    #[test]
+    fn named_tissues_are_found_and_leave_the_phantoms_alone() {
+        for t in tissues() {
+            assert_eq!(by_name(t.name), Some(t));
+            assert_eq!(by_name(&t.name.to_ascii_uppercase()), Some(t));
+            // No name shadows a phantom of the papers.
+            assert!(all().iter().all(|p| !p.name.eq_ignore_ascii_case(t.name)));
+            // Inside the bound of Krouskop 1998 (E' over 93 % of |E*|: tan d < 0.395).
+            assert!(t.loss_tangent > 0.0 && t.loss_tangent < 0.395, "{}", t.name);
+        }
+        // The papers' phantoms stay lossless, with their published moduli.
+        for p in all() {
+            assert_eq!(p.loss_tangent, 0.0, "{}", p.name);
+            assert_eq!(p.tissue().loss_tangent, 0.0);
+        }
+        let moduli: Vec<f64> = [A, B, C, D, E].iter().map(|p| p.modulus_kpa).collect();
+        assert_eq!(moduli, [157.5, 279.0, 414.0, 1146.0, 2465.0]);
+    }
+
+    #[test]
+    fn each_named_tissue_loss_lowers_the_q_by_the_kelvin_closed_form() {
+        use crate::tissue::{Contact, SensorMech, TissueElements};
+        use crate::Scene;
+        let mech = SensorMech::default();
+        let contact = Contact::default();
+        let w0 = 2.0 * core::f64::consts::PI * mech.free_resonance_hz;
+        for t in tissues() {
+            let lossy = Scene::on_phantom(&t).kelvin();
+            let mut lossless_t = t.tissue();
+            lossless_t.loss_tangent = 0.0;
+            let lossless = Scene::on_tissue(lossless_t).kelvin();
+            // The loss leaves the storage stiffness and the mass: the same resonance.
+            assert_eq!(lossy.stiffness_n_m, lossless.stiffness_n_m, "{}", t.name);
+            assert_eq!(lossy.mass_kg, lossless.mass_kg, "{}", t.name);
+            // It adds tan d * k_m / w0 at the contact (k_m the Hertz stiffness before the
+            // series coupling): Q = sqrt(k m) / (c_lossless + tan d k_m / w0).
+            let k_m = TissueElements::new(&lossless_t, &contact, &mech).stiffness_n_m;
+            let c = lossless.damping_n_s_m + t.loss_tangent * k_m / w0;
+            let q_closed = libm::sqrt(lossless.stiffness_n_m * lossless.mass_kg) / c;
+            assert!(
+                (lossy.q() / q_closed - 1.0).abs() < 1e-12,
+                "{}: Q {} vs closed form {q_closed}",
+                t.name,
+                lossy.q()
+            );
+            assert!(lossy.q() < lossless.q(), "{}", t.name);
+        }
     }
 }

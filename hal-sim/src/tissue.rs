@@ -394,6 +394,57 @@ mod tests {
     }
 
     #[test]
+    fn named_tissues_ring_down_with_their_lossy_q() {
+        // Each named tissue of `phantoms::tissues` as the simulator runs it (the discretised
+        // chain of `SimProbe`, pressed at 30 mN, 10 kHz): ring the probe with a 20 ms burst at
+        // the loaded resonance, hold the DAC at mid-scale and read the free decay of the mode's
+        // velocity from 30 ms to 150 ms by Prony's method. The decay's Q is the Kelvin model's
+        // closed form `sqrt(k m) / c` with the tissue's loss in `c` (below the lossless Q).
+        use crate::frontend::MID_CODE;
+        use crate::{AdcPair, Scene, SimProbe};
+        for t in crate::phantoms::tissues() {
+            let scene = Scene::on_phantom(&t);
+            let k = scene.kelvin();
+            let f0 = k.natural_frequency_hz();
+            let mut p = SimProbe::new(scene, 1);
+            let fs = p.front_end().sample_rate_hz;
+            let mut adc = [AdcPair::default()];
+            let mut decay = Prony::default();
+            for n in 0..(0.15 * fs) as usize {
+                let ts = n as f64 / fs;
+                let code = if ts < 0.02 {
+                    libm::round(MID_CODE as f64 + 600.0 * libm::sin(2.0 * PI * f0 * ts)) as u16
+                } else {
+                    MID_CODE
+                };
+                p.exchange(&[code], &mut adc);
+                if ts >= 0.03 {
+                    decay.push(p.velocity_m_s());
+                }
+            }
+            let (f, q) = decay.natural_hz_and_q(fs);
+            let mut lossless = t.tissue();
+            lossless.loss_tangent = 0.0;
+            let q_lossless = Scene::on_tissue(lossless).kelvin().q();
+            // Noise-free samples of an exact discretisation: Prony is exact up to rounding
+            // (the free probe's test above: 1e-10 relative); 1e-6 leaves room for the faster
+            // decay here.
+            assert!((f / f0 - 1.0).abs() < 1e-6, "{}: {f} Hz vs {f0} Hz", t.name);
+            assert!(
+                (q / k.q() - 1.0).abs() < 1e-6,
+                "{}: Q {q} vs {}",
+                t.name,
+                k.q()
+            );
+            assert!(
+                q < q_lossless,
+                "{}: Q {q} not below lossless {q_lossless}",
+                t.name
+            );
+        }
+    }
+
+    #[test]
     fn rigid_limit() {
         let m = SensorMech::default();
         let k = m.loaded(&Tissue::with_modulus_kpa(1e9), &Contact::default());

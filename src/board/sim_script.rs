@@ -441,6 +441,21 @@ mod tests {
         assert_eq!(s.base, Scene::on_phantom(&phantoms::B));
     }
 
+    #[test]
+    fn sim_phantom_finds_a_named_tissue_with_its_loss() {
+        let scale = crate::board::sim::scale_of(&hal_sim::FrontEnd::default());
+        let mut s = start();
+        assert_eq!(
+            step("sim phantom carcinoma-like", &mut s, &scale),
+            Step::Sim
+        );
+        assert_eq!(s.base, Scene::on_phantom(&phantoms::CARCINOMA_LIKE));
+        assert_eq!(s.base.tissue.map(|t| t.loss_tangent), Some(0.30));
+        // `sim loss` after it overrides the tissue's own loss.
+        assert_eq!(step("sim loss 0", &mut s, &scale), Step::Sim);
+        assert_eq!(s.base.tissue.map(|t| t.loss_tangent), Some(0.0));
+    }
+
     /// Runs `script` as the QEMU image's command task does, every request ending `served`:
     /// the actions, with the scene each `sim` line put the probe on, and the run's outcome.
     fn run(script: &str, booted: bool, served: bool) -> (std::vec::Vec<Action>, bool, SimState) {

@@ -50,7 +50,7 @@ pub fn run(a: PhysicsArgs) -> Result<()> {
     Ok(())
 }
 
-/// List the phantoms.
+/// List the phantoms, then the named tissues (with their loss tangent and the loaded Q).
 pub fn list_phantoms() {
     for p in phantoms::all() {
         let s = Scene::on_phantom(&p);
@@ -61,6 +61,19 @@ pub fn list_phantoms() {
             p.poisson,
             p.density_kg_m3,
             s.resonance_hz(),
+            p.source
+        );
+    }
+    println!("named tissues (viscoelastic; docs/physics.md, \"Viscoelastic tissue\"):");
+    for p in phantoms::tissues() {
+        let s = Scene::on_phantom(&p);
+        println!(
+            "{:>20}  {:>8.2} kPa  tan d {:.2}  resonance {:.2} Hz  Q {:.1}  ({})",
+            p.name,
+            p.modulus_kpa,
+            p.loss_tangent,
+            s.resonance_hz(),
+            s.kelvin().q(),
             p.source
         );
     }

@@ -22,7 +22,7 @@ pub struct StreamArgs {
     /// Probe time to stream for, s.
     #[arg(long, default_value_t = 3.0)]
     pub seconds: f64,
-    /// Slide onto this phantom (A–E, ...) at `--step-at-s`.
+    /// Slide onto this phantom (A–E, ..., or a named tissue) at `--step-at-s`.
     #[arg(long)]
     pub step_to: Option<String>,
     /// Time of the step in stiffness, s.
