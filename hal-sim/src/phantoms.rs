@@ -246,7 +246,6 @@ mod tests {
         use crate::Scene;
         let mech = SensorMech::default();
         let contact = Contact::default();
-        let w0 = 2.0 * core::f64::consts::PI * mech.free_resonance_hz;
         for t in tissues() {
             let lossy = Scene::on_phantom(&t).kelvin();
             let mut lossless_t = t.tissue();
@@ -255,10 +254,12 @@ mod tests {
             // The loss leaves the storage stiffness and the mass: the same resonance.
             assert_eq!(lossy.stiffness_n_m, lossless.stiffness_n_m, "{}", t.name);
             assert_eq!(lossy.mass_kg, lossless.mass_kg, "{}", t.name);
-            // It adds tan d * k_m / w0 at the contact (k_m the Hertz stiffness before the
-            // series coupling): Q = sqrt(k m) / (c_lossless + tan d k_m / w0).
+            // It adds s² tan d k_m / w0 (k_m the Hertz stiffness before the series coupling,
+            // s its transfer, w0 the loaded resonance): Q = sqrt(k m) / (c_lossless + that).
             let k_m = TissueElements::new(&lossless_t, &contact, &mech).stiffness_n_m;
-            let c = lossless.damping_n_s_m + t.loss_tangent * k_m / w0;
+            let s = mech.coupling_stiffness_n_m / (mech.coupling_stiffness_n_m + k_m);
+            let w0 = libm::sqrt(lossless.stiffness_n_m / lossless.mass_kg);
+            let c = lossless.damping_n_s_m + s * s * t.loss_tangent * k_m / w0;
             let q_closed = libm::sqrt(lossless.stiffness_n_m * lossless.mass_kg) / c;
             assert!(
                 (lossy.q() / q_closed - 1.0).abs() < 1e-12,
