@@ -555,7 +555,7 @@ pub fn profile(profile: Option<&Path>, calibration: Option<&str>, method: Method
             sim,
         )?)),
         (None, None) => Unit::Bare,
-        (None, Some(c)) if c == "unit" => {
+        (None, Some("unit")) => {
             let mut u = UnitProfile::fallback();
             let s = sim()?;
             u.use_power_law(s.calibration, s.resonance);
