@@ -1,6 +1,6 @@
 //! Bench captures in CSV, turned into the firmware's [`SweepPoint`]s.
 //!
-//! Three layouts are read (the header row names the layout; column order is free):
+//! The bench's own CSV layouts (the header row names the layout; column order is free):
 //!
 //! | layout | columns | from |
 //! |---|---|---|
@@ -11,6 +11,11 @@
 //! Lines whose first non-blank character is `#` are comments; blank lines are skipped; the first
 //! other line is the header. Every malformed input is a [`CaptureError`] carrying the 1-based
 //! line number of the offending line.
+//!
+//! Impedance analysers' own exports are read too, recognised from their content: the HP/Agilent
+//! 4294A ASCII data file and the Keysight E4990A trace-data CSV (module [`export`], which names
+//! the manual sections it follows). They become admittance points like the bench's own
+//! frequency-domain layouts.
 //!
 //! # Uncertainty of frequency-domain points
 //!
@@ -52,6 +57,8 @@ use pzt_probe::Hz;
 use std::f64::consts::PI;
 use std::fmt;
 
+mod export;
+
 /// Points per local cubic fit of the frequency-domain noise estimate.
 pub const NOISE_WINDOW: usize = 7;
 /// Fewest frequency-domain points the noise estimate needs.
@@ -78,6 +85,10 @@ pub enum Layout {
     Admittance,
     /// `t_s,drive_hz,v_drive_v,i_sense_a`.
     TimeDomain,
+    /// An HP/Agilent 4294A ASCII data file (`"TRACE: A"` blocks).
+    Hp4294a,
+    /// A Keysight E4990A trace-data CSV (`BEGIN CH1_DATA`, `Frequency(Hz), …`).
+    E4990a,
 }
 
 impl Layout {
@@ -87,6 +98,8 @@ impl Layout {
             Layout::Impedance => &["freq_hz", "z_mag_ohm", "z_phase_deg"],
             Layout::Admittance => &["freq_hz", "y_re_s", "y_im_s"],
             Layout::TimeDomain => &["t_s", "drive_hz", "v_drive_v", "i_sense_a"],
+            Layout::Hp4294a => &["Frequency", "Data Trace Real", "Data Trace Imag"],
+            Layout::E4990a => &["Frequency(Hz)", "|Z|(Ohm)-data", "theta-z(deg)-data"],
         }
     }
     /// Short name.
@@ -95,7 +108,13 @@ impl Layout {
             Layout::Impedance => "impedance",
             Layout::Admittance => "admittance",
             Layout::TimeDomain => "time-domain",
+            Layout::Hp4294a => "4294a-ascii",
+            Layout::E4990a => "e4990a-csv",
         }
+    }
+    /// True for an analyser's own export (not one of the bench's CSV layouts).
+    pub const fn is_instrument_export(self) -> bool {
+        matches!(self, Layout::Hp4294a | Layout::E4990a)
     }
 }
 
@@ -205,6 +224,15 @@ pub enum CaptureError {
         /// First row of the window.
         line: usize,
     },
+    /// An analyser's export that cannot be read or does not hold together.
+    Export {
+        /// The line the problem is on (the last line for a truncated file).
+        line: usize,
+        /// The export format ([`Layout::name`]).
+        format: &'static str,
+        /// What is wrong, in one line.
+        reason: String,
+    },
 }
 
 impl CaptureError {
@@ -223,7 +251,8 @@ impl CaptureError {
             | CaptureError::TooFewPoints { line, .. }
             | CaptureError::NonUniformSampling { line, .. }
             | CaptureError::TooCoarse { line, .. }
-            | CaptureError::NoDrive { line } => *line,
+            | CaptureError::NoDrive { line }
+            | CaptureError::Export { line, .. } => *line,
         }
     }
 
@@ -243,6 +272,7 @@ impl CaptureError {
             CaptureError::NonUniformSampling { .. } => "non_uniform_sampling",
             CaptureError::TooCoarse { .. } => "too_coarse",
             CaptureError::NoDrive { .. } => "no_drive",
+            CaptureError::Export { .. } => "bad_export",
         }
     }
 }
@@ -318,6 +348,7 @@ impl fmt::Display for CaptureError {
                 f,
                 "no drive voltage in the demodulation window starting here"
             ),
+            CaptureError::Export { format, reason, .. } => write!(f, "{format} export: {reason}"),
         }
     }
 }
@@ -369,6 +400,8 @@ pub struct Capture {
     pub noise_sigma_s: Option<f64>,
     /// Data rows read.
     pub rows: usize,
+    /// For an analyser's export: which traces and columns were read, for humans.
+    pub source: Option<String>,
 }
 
 /// One parsed data row.
@@ -379,35 +412,38 @@ struct Row {
 
 /// Read a capture from CSV text. `needed` is the fewest points the estimator needs.
 pub fn parse(text: &str, needed: usize, opts: &DemodOptions) -> Result<Capture, CaptureError> {
+    match export::detect(text) {
+        Some(Layout::Hp4294a) => {
+            let r = export::read_4294a(text)?;
+            return frequency_capture(Layout::Hp4294a, r.rows, r.last_line, needed, Some(r.read));
+        }
+        Some(Layout::E4990a) => {
+            let r = export::read_e4990a(text)?;
+            return frequency_capture(Layout::E4990a, r.rows, r.last_line, needed, Some(r.read));
+        }
+        _ => {}
+    }
     let (layout, cols, rows, last_line) = read_table(text)?;
     let pick = |r: &Row, name: &str| -> f64 {
         let k = cols.iter().position(|c| c == name).unwrap_or(0);
         r.v[k]
     };
     match layout {
-        Layout::Impedance | Layout::Admittance => {
-            let needed = needed.max(MIN_POINTS_FOR_NOISE);
-            let mut prev: Option<f64> = None;
+        Layout::TimeDomain => {
+            let t: Vec<f64> = rows.iter().map(|r| pick(r, "t_s")).collect();
+            let f: Vec<f64> = rows.iter().map(|r| pick(r, "drive_hz")).collect();
+            let v: Vec<f64> = rows.iter().map(|r| pick(r, "v_drive_v")).collect();
+            let i: Vec<f64> = rows.iter().map(|r| pick(r, "i_sense_a")).collect();
+            let lines: Vec<usize> = rows.iter().map(|r| r.line).collect();
+            demodulate(&Samples { t, f, v, i, lines }, last_line, needed, opts).map(|mut c| {
+                c.rows = rows.len();
+                c
+            })
+        }
+        _ => {
             let mut fy = Vec::with_capacity(rows.len());
             for r in &rows {
                 let f = pick(r, "freq_hz");
-                if !(f > 0.0) {
-                    return Err(CaptureError::NotPositive {
-                        line: r.line,
-                        column: "freq_hz",
-                    });
-                }
-                if let Some(p) = prev {
-                    if !(f > p) {
-                        return Err(CaptureError::NotIncreasing {
-                            line: r.line,
-                            column: "freq_hz",
-                            value: f,
-                            previous: p,
-                        });
-                    }
-                }
-                prev = Some(f);
                 let (g, b) = if layout == Layout::Impedance {
                     let m = pick(r, "z_mag_ohm");
                     if !(m > 0.0) {
@@ -422,52 +458,84 @@ pub fn parse(text: &str, needed: usize, opts: &DemodOptions) -> Result<Capture, 
                 } else {
                     (pick(r, "y_re_s"), pick(r, "y_im_s"))
                 };
-                fy.push((f, g, b));
+                fy.push((r.line, f, g, b));
             }
-            if fy.len() < needed {
-                return Err(CaptureError::TooFewPoints {
-                    line: last_line,
-                    found: fy.len(),
-                    needed,
-                });
-            }
-            let sigma = noise_sigma(&fy);
-            let points = fy
-                .iter()
-                .map(|&(f, g, b)| SweepPoint {
-                    freq: Hz(f as f32),
-                    g_s: g as f32,
-                    b_s: b as f32,
-                    sigma_s: sigma as f32,
-                    // Unknown drive: the point as if driven at 1 V.
-                    current_a: g.hypot(b) as f32,
-                    drive_v: 1.0,
-                    clip_fraction: 0.0,
-                    residual_a: sigma as f32,
-                })
-                .collect();
-            Ok(Capture {
-                layout,
-                points,
-                sample_rate_hz: None,
-                shape: None,
-                skipped_steps: 0,
-                noise_sigma_s: Some(sigma),
-                rows: rows.len(),
-            })
-        }
-        Layout::TimeDomain => {
-            let t: Vec<f64> = rows.iter().map(|r| pick(r, "t_s")).collect();
-            let f: Vec<f64> = rows.iter().map(|r| pick(r, "drive_hz")).collect();
-            let v: Vec<f64> = rows.iter().map(|r| pick(r, "v_drive_v")).collect();
-            let i: Vec<f64> = rows.iter().map(|r| pick(r, "i_sense_a")).collect();
-            let lines: Vec<usize> = rows.iter().map(|r| r.line).collect();
-            demodulate(&Samples { t, f, v, i, lines }, last_line, needed, opts).map(|mut c| {
-                c.rows = rows.len();
-                c
-            })
+            frequency_capture(layout, fy, last_line, needed, None)
         }
     }
+}
+
+/// A frequency-domain capture from admittance rows `(line, f, G, B)`: frequencies above zero
+/// and increasing, at least `needed` (and [`MIN_POINTS_FOR_NOISE`]) points, the noise estimated
+/// from the data (module docs).
+fn frequency_capture(
+    layout: Layout,
+    rows: Vec<(usize, f64, f64, f64)>,
+    last_line: usize,
+    needed: usize,
+    source: Option<String>,
+) -> Result<Capture, CaptureError> {
+    let needed = needed.max(MIN_POINTS_FOR_NOISE);
+    let mut prev: Option<f64> = None;
+    let mut fy = Vec::with_capacity(rows.len());
+    for &(line, f, g, b) in &rows {
+        if !(f > 0.0) {
+            return Err(CaptureError::NotPositive {
+                line,
+                column: "freq_hz",
+            });
+        }
+        if let Some(p) = prev {
+            if !(f > p) {
+                return Err(CaptureError::NotIncreasing {
+                    line,
+                    column: "freq_hz",
+                    value: f,
+                    previous: p,
+                });
+            }
+        }
+        if !(g.is_finite() && b.is_finite()) {
+            return Err(CaptureError::NotFinite {
+                line,
+                column: "admittance".into(),
+            });
+        }
+        prev = Some(f);
+        fy.push((f, g, b));
+    }
+    if fy.len() < needed {
+        return Err(CaptureError::TooFewPoints {
+            line: last_line,
+            found: fy.len(),
+            needed,
+        });
+    }
+    let sigma = noise_sigma(&fy);
+    let points = fy
+        .iter()
+        .map(|&(f, g, b)| SweepPoint {
+            freq: Hz(f as f32),
+            g_s: g as f32,
+            b_s: b as f32,
+            sigma_s: sigma as f32,
+            // Unknown drive: the point as if driven at 1 V.
+            current_a: g.hypot(b) as f32,
+            drive_v: 1.0,
+            clip_fraction: 0.0,
+            residual_a: sigma as f32,
+        })
+        .collect();
+    Ok(Capture {
+        layout,
+        points,
+        sample_rate_hz: None,
+        shape: None,
+        skipped_steps: 0,
+        noise_sigma_s: Some(sigma),
+        rows: rows.len(),
+        source,
+    })
 }
 
 /// Read a capture file.
@@ -758,6 +826,7 @@ fn demodulate(
         skipped_steps: skipped,
         noise_sigma_s: None,
         rows: n,
+        source: None,
     })
 }
 

@@ -6,7 +6,7 @@ use common::{bin, run_fails_one_line, run_json, run_ok};
 
 use hal_sim::{phantoms, Scene};
 use probe_bench::capture::{self, CaptureError, DemodOptions, Layout, SweepShape};
-use probe_bench::cmd::analyze::{analysis_json, analyze, offline_method, Analysis};
+use probe_bench::cmd::analyze::{analysis_json, analyze, offline_method, Analysis, Unit};
 use probe_bench::gen;
 use pzt_probe::unit::profile::NOMINAL_FORCE;
 use pzt_probe::{Failure, Method, Status};
@@ -22,17 +22,17 @@ fn read(name: &str) -> String {
     std::fs::read_to_string(data(name)).unwrap_or_else(|e| panic!("{name}: {e}"))
 }
 
-/// The simulated unit's profile (air reference, Q model) with paper 003's curve, as
-/// `probe-bench analyze` reads a capture by default.
+/// Paper 003's curve alone (`--calibration paper-experiment` without `--profile`: a modulus,
+/// no Q model, no air reference).
 /// The papers' curve maps the motional resonance; paper's |Z| dip is read with the simulated
 /// unit's own paper calibration (a curve maps only the resonance it was calibrated on).
-fn unit(method: Method) -> pzt_probe::unit::profile::UnitProfile {
+fn unit(method: Method) -> Unit {
     let curve = if method == Method::Paper {
         "unit"
     } else {
         "paper-experiment"
     };
-    probe_bench::cmd::analyze::profile(None, curve, method).expect("unit profile")
+    probe_bench::cmd::analyze::profile(None, Some(curve), method).expect("unit profile")
 }
 
 fn run(name: &str, method: Method) -> Analysis {
@@ -871,4 +871,462 @@ fn heavy_c0_auto_is_within_twice_the_scipy_fit() {
             c.name
         );
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Analysers' own exports: the HP/Agilent 4294A ASCII data file and the Keysight E4990A trace
+// CSV, written here from the closed-form admittance of a Butterworth–Van Dyke resonator with
+// known f0, Q and C0 (`Resonator::admittance`, f64, independent of the code under test), in the
+// layouts the manuals document (bench/src/capture/export.rs names the sections).
+
+/// A resonator: `Y = G0 + jωC0 + 1/(R1 + jωL1 + 1/(jωC1))` with resonance `f0`, quality `q`,
+/// motional peak conductance `g = 1/R1`, static capacitance `c0`.
+struct Resonator {
+    f0: f64,
+    q: f64,
+    g: f64,
+    c0: f64,
+    g0: f64,
+    /// White noise per component of Y, S.
+    noise: f64,
+}
+
+/// Another probe than the simulated unit: a 4 kHz plate with Q 40 and C0 = 2 nF.
+const OTHER_PROBE: Resonator = Resonator {
+    f0: 4000.0,
+    q: 40.0,
+    g: 1.0e-4,
+    c0: 2.0e-9,
+    g0: 2.0e-6,
+    noise: 2.0e-8,
+};
+
+impl Resonator {
+    fn admittance(&self, f: f64) -> (f64, f64) {
+        let w0 = 2.0 * std::f64::consts::PI * self.f0;
+        let r1 = 1.0 / self.g;
+        let l1 = self.q * r1 / w0;
+        let c1 = 1.0 / (w0 * w0 * l1);
+        let w = 2.0 * std::f64::consts::PI * f;
+        let (a, b) = (r1, w * l1 - 1.0 / (w * c1));
+        let d = a * a + b * b;
+        (self.g0 + a / d, w * self.c0 - b / d)
+    }
+    /// `(f, G, B)` from `f_lo` to `f_hi` in `n` points, with seeded noise.
+    fn sweep(&self, f_lo: f64, f_hi: f64, n: usize, seed: u64) -> Vec<(f64, f64, f64)> {
+        let mut rng = Normal(seed);
+        (0..n)
+            .map(|k| {
+                let f = f_lo + (f_hi - f_lo) * k as f64 / (n - 1) as f64;
+                let (g, b) = self.admittance(f);
+                let (ng, nb) = rng.pair();
+                (f, g + self.noise * ng, b + self.noise * nb)
+            })
+            .collect()
+    }
+}
+
+/// `Z = 1/Y` as (R, X), (|Z|, θ deg).
+fn z_of(g: f64, b: f64) -> ((f64, f64), (f64, f64)) {
+    let d = g * g + b * b;
+    let (r, x) = (g / d, -b / d);
+    ((r, x), (r.hypot(x), x.atan2(r).to_degrees()))
+}
+
+/// The 4294A's export parameter.
+#[derive(Clone, Copy)]
+enum Hp {
+    /// `IMPEDANCE MAG PHASE (DEG)`: trace A |Z|, trace B θ (+ an offset, degrees).
+    ZTheta(f64),
+    /// `RESISTANCE REACTANCE`: trace A R, trace B X.
+    Rx,
+    /// The data array (R, X) beside the data trace (|Z|), one trace.
+    DataArray,
+}
+
+/// A 4294A ASCII data file: setup lines, then per trace `"TRACE: x"`, `"FORMAT: …"`, a quoted
+/// tab-separated column row and tab-separated rows.
+fn export_4294a(sweep: &[(f64, f64, f64)], p: Hp) -> String {
+    let param = match p {
+        Hp::ZTheta(_) | Hp::DataArray => "IMPEDANCE MAG PHASE (DEG)",
+        Hp::Rx => "RESISTANCE REACTANCE",
+    };
+    let mut s = format!(
+        "4294A REV1.11\n\"DATE: Jan 25 2018\"\n\n\n\"MEASURE PARAMETER: {param}\"\n\"ADAPTER: NONE\"\n\"SWEEP TYPE: LIN FREQ\"\n\"NUMBER of POINTS: {}\"\n\"OSC LEVEL:  500 mVolt\"\n\"DC BIAS: OFF\"\n\"BW: 5\"\n\n\n",
+        sweep.len()
+    );
+    let traces: &[(&str, usize)] = match p {
+        Hp::DataArray => &[("A", 0)],
+        _ => &[("A", 0), ("B", 1)],
+    };
+    for (k, (name, which)) in traces.iter().enumerate() {
+        if k > 0 {
+            s += "\n\n";
+        }
+        s += &format!("\"TRACE: {name}\"\n\"FORMAT: LOG\"\n\n");
+        match p {
+            Hp::DataArray => {
+                s += "\"Frequency\"\t\"Data Real\"\t\"Data Imag\"\t\"Data Trace Real\"\t\"Data Trace Imag\"\n"
+            }
+            _ => s += "\"Frequency\"\t\"Data Trace Real\"\t\"Data Trace Imag\"\n",
+        }
+        for &(f, g, b) in sweep {
+            let ((r, x), (m, th)) = z_of(g, b);
+            match p {
+                Hp::DataArray => {
+                    s += &format!("{f:.11e}\t{r:.6e}\t{x:.6e}\t{m:.6e}\t0.000000e+00\n")
+                }
+                Hp::ZTheta(off) => {
+                    let v = if *which == 0 { m } else { th + off };
+                    s += &format!("{f:.11e}\t{v:.6e}\t0.000000e+00\n");
+                }
+                Hp::Rx => {
+                    let v = if *which == 0 { r } else { x };
+                    s += &format!("{f:.11e}\t{v:.6e}\t0.000000e+00\n");
+                }
+            }
+        }
+    }
+    s
+}
+
+/// An E4990A trace CSV: `!` lines, then (with `blocks`) `BEGIN CH1_DATA`, title and DC monitor
+/// lines, `Frequency(Hz), …-data, …-mem`, rows, `END`; `polar`: |Z| and theta-z, else
+/// Z-Real and Z-Imag.
+fn export_e4990a(sweep: &[(f64, f64, f64)], polar: bool, blocks: bool) -> String {
+    let mut s = String::from(
+        "!Agilent Technologies,E4990A,MY521012345,A.02.10\n!Date: Fri Apr 03 13:41:16 2015\n",
+    );
+    if blocks {
+        s += "BEGIN CH1_DATA\nTitle label, TEST DATA\nDCV(V), +5.230e-005, DCI(A), +2.335e-005\n";
+    }
+    s += if polar {
+        "Frequency(Hz), |Z|(Ohm)-data, theta-z(deg)-data, theta-z(deg)-mem\n"
+    } else {
+        "Frequency(Hz), Z-Real(Ohm)-data, Z-Imag(Ohm)-data, Y-Real(S)-mem, Y-Imag(S)-mem\n"
+    };
+    for &(f, g, b) in sweep {
+        let ((r, x), (m, th)) = z_of(g, b);
+        if polar {
+            s += &format!("{f:+.11e}, {m:+.11e}, {th:+.11e}, {:+.11e}\n", 0.0);
+        } else {
+            s += &format!("{f:+.11e}, {r:+.11e}, {x:+.11e}, {g:+.11e}, {b:+.11e}\n");
+        }
+    }
+    if blocks {
+        s += "END\n";
+    }
+    s
+}
+
+fn bare(text: &str) -> Analysis {
+    analyze(
+        text,
+        Method::Auto,
+        &Unit::Bare,
+        &DemodOptions::default(),
+        NOMINAL_FORCE,
+    )
+    .unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// The reading is `ok` with the known f0 within 4σ (+ 1e-5 relative) and Q within 3 %, and no
+/// modulus (no profile, no curve).
+fn reads_the_resonator(name: &str, a: &Analysis, r: &Resonator) {
+    let rd = &a.reading;
+    assert_eq!(rd.status, Status::Ok, "{name}: {:?}", a.warnings);
+    let f = rd.resonance.unwrap().0 as f64;
+    let s = rd.resonance_sigma.unwrap().0 as f64;
+    let q = rd.q.unwrap() as f64;
+    eprintln!(
+        "{name}: f0 {f:.4} ± {s:.4} Hz (true {}), Q {q:.3} (true {}), chi2/dof {:?}",
+        r.f0, r.q, a.reduced_chi2
+    );
+    assert!(
+        (f - r.f0).abs() <= 4.0 * s + 1e-5 * r.f0,
+        "{name}: {f} ± {s} vs {}",
+        r.f0
+    );
+    assert!(s > 0.0 && s < r.f0 / r.q / 20.0, "{name}: sigma {s}");
+    assert!((q / r.q - 1.0).abs() < 0.03, "{name}: Q {q} vs {}", r.q);
+    assert!(rd.modulus.is_none(), "{name}");
+    assert_eq!(a.unit, "none");
+}
+
+#[test]
+fn instrument_exports_read_the_known_resonance() {
+    let r = &OTHER_PROBE;
+    let sweep = r.sweep(3700.0, 4300.0, 201, 11);
+    let cases: [(&str, String, Layout); 6] = [
+        (
+            "4294A |Z|-θ",
+            export_4294a(&sweep, Hp::ZTheta(0.0)),
+            Layout::Hp4294a,
+        ),
+        ("4294A R-X", export_4294a(&sweep, Hp::Rx), Layout::Hp4294a),
+        (
+            "4294A data array",
+            export_4294a(&sweep, Hp::DataArray),
+            Layout::Hp4294a,
+        ),
+        (
+            "E4990A |Z|-θ",
+            export_e4990a(&sweep, true, true),
+            Layout::E4990a,
+        ),
+        (
+            "E4990A Z-Real/Imag",
+            export_e4990a(&sweep, false, true),
+            Layout::E4990a,
+        ),
+        (
+            "E4990A without BEGIN/END",
+            export_e4990a(&sweep, true, false),
+            Layout::E4990a,
+        ),
+    ];
+    for (name, text, layout) in &cases {
+        let a = bare(text);
+        assert_eq!(a.capture.layout, *layout, "{name}");
+        assert_eq!(a.capture.points.len(), 201, "{name}");
+        assert!(
+            !a.magnitude_only && a.warnings.is_empty(),
+            "{name}: {:?}",
+            a.warnings
+        );
+        assert_eq!(a.reading.method, Method::Fit, "{name}");
+        reads_the_resonator(name, &a, r);
+        let j = analysis_json(&a, name);
+        assert_eq!(j["layout"], layout.name());
+        assert_eq!(j["unit"], "none");
+        assert!(j["source"].as_str().is_some(), "{name}");
+    }
+}
+
+/// A phase column offset by 180° (Re Z < 0 throughout): never read as if passive; the
+/// magnitude fit finds f0 and Q and says so — in the 4294A file and in the bench's impedance
+/// CSV converted by hand.
+#[test]
+fn phase_offset_by_180_degrees_falls_back_to_the_magnitude() {
+    let r = &OTHER_PROBE;
+    let sweep = r.sweep(3700.0, 4300.0, 201, 12);
+    let mut own = String::from("freq_hz,z_mag_ohm,z_phase_deg\n");
+    for &(f, g, b) in &sweep {
+        let (_, (m, th)) = z_of(g, b);
+        own += &format!("{f},{m:.10e},{:.10}\n", th + 180.0);
+    }
+    for (name, text) in [
+        ("4294A θ + 180°", export_4294a(&sweep, Hp::ZTheta(180.0))),
+        ("impedance CSV θ + 180°", own),
+    ] {
+        let a = bare(&text);
+        assert!(a.magnitude_only, "{name}");
+        assert!(a.warnings.iter().any(|w| w.contains("passive")), "{name}");
+        reads_the_resonator(name, &a, r);
+        let j = analysis_json(&a, name);
+        assert_eq!(j["magnitude_only"], true);
+        assert!(j["warnings"].as_array().is_some_and(|w| !w.is_empty()));
+        // sweep-G asked for: still the magnitude fit, and said so.
+        let s = analyze(
+            &text,
+            Method::SweepG,
+            &Unit::Bare,
+            &DemodOptions::default(),
+            NOMINAL_FORCE,
+        )
+        .unwrap();
+        assert!(s.magnitude_only);
+        assert!(
+            s.warnings.iter().any(|w| w.contains("not sweep-g")),
+            "{:?}",
+            s.warnings
+        );
+    }
+    // On the simulated unit's golden capture the magnitude fit agrees with the complex one.
+    let scene = Scene::on_modulus_kpa(1000.0);
+    let text = read("bvd_1000kpa_z.csv");
+    let flipped: String = text
+        .lines()
+        .map(|l| match l.split(',').collect::<Vec<_>>()[..] {
+            [f, m, p] if f.parse::<f64>().is_ok() => {
+                format!("{f},{m},{}\n", p.parse::<f64>().unwrap() - 180.0)
+            }
+            _ => format!("{l}\n"),
+        })
+        .collect();
+    let a = bare(&flipped);
+    assert!(a.magnitude_only);
+    let f = a.reading.resonance.unwrap().0 as f64;
+    assert!(
+        (f - scene.resonance_hz()).abs() < 0.05,
+        "{f} vs {}",
+        scene.resonance_hz()
+    );
+}
+
+/// The BVD fit's σ grows by sqrt(χ²/dof) when the residuals exceed the noise: a weak second
+/// mode the model lacks, with little noise.
+#[test]
+fn fit_sigma_grows_with_the_misfit() {
+    let r = &OTHER_PROBE;
+    let quiet = Resonator {
+        noise: 2e-9,
+        ..OTHER_PROBE
+    };
+    let second = Resonator {
+        f0: 4150.0,
+        q: 60.0,
+        g: 3.5e-8,
+        c0: 0.0,
+        g0: 0.0,
+        noise: 0.0,
+    };
+    let sweep: Vec<(f64, f64, f64)> = quiet
+        .sweep(3700.0, 4300.0, 201, 13)
+        .into_iter()
+        .map(|(f, g, b)| {
+            let (g2, b2) = second.admittance(f);
+            (f, g + g2, b + b2)
+        })
+        .collect();
+    let text = capture::write_admittance_csv(&[], &sweep);
+    let a = bare(&text);
+    let red = a.reduced_chi2.expect("the fit's chi2");
+    // Above the noise, below the firmware's own gross-misfit scaling (16): there the firmware
+    // leaves σ alone and `analyze` scales it.
+    assert!(red > 1.5 && red < 16.0, "chi2/dof {red}");
+    let plain = Method::Fit.estimate(&a.capture.points).unwrap();
+    let ratio = a.reading.resonance_sigma.unwrap().0 as f64 / plain.sigma.0 as f64;
+    let expect = red.sqrt() / pzt_probe::estimate::gross_scale(red).sqrt();
+    eprintln!("chi2/dof {red:.2}: sigma x {ratio:.3} (expected {expect:.3})");
+    assert!((ratio / expect - 1.0).abs() < 0.02, "{ratio} vs {expect}");
+    let _ = r;
+}
+
+/// Without `--profile` a capture of another probe reads ok (its resonance and Q), never
+/// `bad_contact` against the simulated unit's Q model; a modulus comes only with a profile or a
+/// chosen curve.
+#[test]
+fn no_profile_reads_resonance_and_q_only() {
+    let dir = std::env::temp_dir().join(format!("probe-bench-exports-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let other = dir.join("other.txt");
+    std::fs::write(
+        &other,
+        export_4294a(&OTHER_PROBE.sweep(3700.0, 4300.0, 201, 14), Hp::ZTheta(0.0)),
+    )
+    .unwrap();
+    let j = run_json(bin().args(["analyze", "--json"]).arg(&other));
+    assert_eq!(j["status"], "ok", "{j}");
+    assert_eq!(j["unit"], "none");
+    assert!(j["modulus_kpa"].is_null());
+    assert!((j["resonance_hz"].as_f64().unwrap() - 4000.0).abs() < 0.5);
+    // The simulated unit's own capture with paper 003's curve: a modulus.
+    let j = run_json(
+        bin()
+            .args(["analyze", "--json", "--calibration", "paper-experiment"])
+            .arg(data("bvd_300kpa_y.csv")),
+    );
+    assert_eq!(j["status"], "ok");
+    assert_eq!(j["unit"], "curve");
+    assert!(j["modulus_kpa"].as_f64().is_some());
+    // The text report says what was read and that no unit was applied.
+    let out = run_ok(bin().arg("analyze").arg(&other));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("4294a-ascii") && text.contains("calibration none"),
+        "{text}"
+    );
+    // The 180°-offset file: a warning line.
+    let off = dir.join("offset.txt");
+    std::fs::write(
+        &off,
+        export_4294a(
+            &OTHER_PROBE.sweep(3700.0, 4300.0, 201, 15),
+            Hp::ZTheta(180.0),
+        ),
+    )
+    .unwrap();
+    let out = run_ok(bin().arg("analyze").arg(&off));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("warning: phase inconsistent"), "{text}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Truncated exports and garbage: a one-line error naming its line (never a panic, never a
+/// silent number from a partial file).
+#[test]
+fn truncated_and_garbage_exports_are_one_line_errors() {
+    let sweep = OTHER_PROBE.sweep(3700.0, 4300.0, 41, 16);
+    let check = |text: &str| -> Option<CaptureError> {
+        match capture::parse(text, 3, &DemodOptions::default()) {
+            Ok(_) => None,
+            Err(e) => {
+                let m = e.to_string();
+                assert!(m.starts_with(&format!("line {}: ", e.line())), "{m}");
+                assert!(!m.contains('\n'), "{m}");
+                Some(e)
+            }
+        }
+    };
+    for (name, full) in [
+        ("4294A", export_4294a(&sweep, Hp::ZTheta(0.0))),
+        ("4294A R-X", export_4294a(&sweep, Hp::Rx)),
+        ("E4990A", export_e4990a(&sweep, true, true)),
+        ("E4990A rect", export_e4990a(&sweep, false, true)),
+    ] {
+        assert!(check(&full).is_none(), "{name}");
+        // Cut anywhere before the last data row: always an error.
+        let last_row = full.trim_end().rfind('\n').unwrap();
+        let last_row = if name.starts_with("E4990A") {
+            full.len() - 1 // the END line makes every cut detectable
+        } else {
+            full[..last_row].rfind('\n').unwrap()
+        };
+        for cut in (1..last_row).filter(|c| full.is_char_boundary(*c)) {
+            let e = check(&full[..cut]);
+            assert!(e.is_some(), "{name} cut at {cut} read as a capture");
+        }
+        // Lines dropped from the middle of trace/channel blocks.
+        let lines: Vec<&str> = full.lines().collect();
+        for drop in 0..lines.len() {
+            let t: String = lines
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| *k != drop)
+                .map(|(_, l)| format!("{l}\n"))
+                .collect();
+            let _ = check(&t);
+        }
+    }
+    // Garbage: random bytes, random text from the exports' own characters.
+    const CHARS: &[u8] = b" \t\n,\"!0123456789.e+-TRACE:ABFrequency()|Z";
+    let mut rng = Normal(99);
+    for n in [0usize, 1, 7, 100, 5000] {
+        let bytes: Vec<u8> = (0..n).map(|_| (rng.next_u64() & 0xff) as u8).collect();
+        let _ = check(&String::from_utf8_lossy(&bytes));
+        let text: String = (0..n)
+            .map(|_| CHARS[(rng.next_u64() % CHARS.len() as u64) as usize] as char)
+            .collect();
+        let _ = check(&text);
+        let _ = check(&format!("4294A REV1.11\n{text}"));
+        let _ = check(&format!("!E4990A\nBEGIN CH1_DATA\n{text}"));
+    }
+    let e = check("4294A REV1.11\n\"DATE: x\"\n").expect("no trace");
+    assert_eq!(e.kind(), "bad_export");
+    let e = check("!Agilent Technologies,E4990A,MY1,A.02.10\nBEGIN CH1_DATA\nFrequency(Hz), |Z|(Ohm)-data, theta-z(deg)-data\n1e6, 2, nan\nEND\n")
+        .expect("NaN");
+    assert!(e.to_string().contains("not finite"), "{e}");
+    // On the command line: exit non-zero, one line.
+    let dir = std::env::temp_dir().join(format!("probe-bench-garbage-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let full = export_4294a(&sweep, Hp::ZTheta(0.0));
+    let path = dir.join("truncated.txt");
+    std::fs::write(&path, &full[..full.len() * 3 / 4]).unwrap();
+    let e = run_fails_one_line(bin().arg("analyze").arg(&path));
+    assert!(e.contains("4294a-ascii export"), "{e}");
+    let path = dir.join("garbage.bin");
+    std::fs::write(&path, [0u8, 159, 146, 150, 255, 0, 1, 2]).unwrap();
+    run_fails_one_line(bin().arg("analyze").arg(&path));
+    let _ = std::fs::remove_dir_all(&dir);
 }
