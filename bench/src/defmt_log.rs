@@ -29,9 +29,9 @@ pub const TEMPLATES: &[&str] = &[
     "store error={=str}",
     "settings method={=str} start_hz={=f32} stop_hz={=f32} step_hz={=f32} settle_s={=f32} integrate_s={=f32} drive_v={=f32}",
     "point tag={=u16} f_hz={=f32} g_s={=f32} b_s={=f32} sigma_s={=f32}",
-    "reading status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} e_repeat_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str} force_n={=f32} force_sigma_n={=f32}",
+    "reading status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} e_repeat_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str} force_n={=f32} force_sigma_n={=f32} loss={=f32} loss_sigma={=f32}",
     "loadcell present={=bool} newtons_per_count={=f32} tare={=f32} min_n={=f32} max_n={=f32}",
-    "stream seq={=u32} t_s={=f32} locked={=bool} status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} e_repeat_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str} force_n={=f32} force_sigma_n={=f32}",
+    "stream seq={=u32} t_s={=f32} locked={=bool} status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} e_repeat_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str} force_n={=f32} force_sigma_n={=f32} loss={=f32} loss_sigma={=f32}",
     "stream end start_s={=f32} readings={=u32} ok={=u32} dropped={=u32} plan_work={=u32}",
     "air f_hz={=f32} q={=f32}",
     "reference e_kpa={=f32} f_hz={=f32} f_sigma_hz={=f32} n={=u16}",
@@ -520,6 +520,10 @@ pub struct LoggedReading {
     pub force_n: Option<f32>,
     /// Its standard uncertainty, N.
     pub force_sigma_n: Option<f32>,
+    /// The tissue's loss tangent.
+    pub loss: Option<f32>,
+    /// Its standard uncertainty.
+    pub loss_sigma: Option<f32>,
     /// Index of its sweep, when points were logged.
     pub sweep: Option<usize>,
 }
@@ -657,9 +661,8 @@ impl LoggedReading {
             modulus_sigma: self.e_sigma_kpa.map(KPa),
             modulus_sigma_repeat: self.e_repeat_kpa.map(KPa),
             q: self.q,
-            // The firmware's reading line does not carry the tissue's loss.
-            loss_tangent: None,
-            loss_tangent_sigma: None,
+            loss_tangent: self.loss,
+            loss_tangent_sigma: self.loss_sigma,
             probe_time: Seconds(self.probe_time_s.unwrap_or(f32::NAN)),
             points: self.points.min(u16::MAX as u32) as u16,
             force: self.force_n.map(|f| pzt_probe::loadcell::ContactForce {
@@ -689,6 +692,8 @@ fn reading_of(m: &Message, sweep: Option<usize>) -> LoggedReading {
         method: m.str("method").unwrap_or_default().to_owned(),
         force_n: m.f32("force_n"),
         force_sigma_n: m.f32("force_sigma_n"),
+        loss: m.f32("loss"),
+        loss_sigma: m.f32("loss_sigma"),
         sweep,
     }
 }

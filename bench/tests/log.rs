@@ -15,7 +15,8 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// Every format string passed to `defmt::{trace,debug,info,warn,error}!` in the firmware.
+/// Every format string passed to `defmt::{trace,debug,info,warn,error}!` in the firmware, and
+/// to the log module's `reading_line!` (which hands its format to `defmt::info!`).
 fn firmware_formats() -> BTreeSet<String> {
     // The RTIC application and the instrument layer (its log module) log; the boards' own
     // lines (the QEMU board's watchdog) and the cost image's are not the instrument's log.
@@ -29,8 +30,11 @@ fn firmware_formats() -> BTreeSet<String> {
         .collect::<Vec<_>>()
         .join("\n");
     let mut out = BTreeSet::new();
-    for mac in ["trace!(", "debug!(", "info!(", "warn!(", "error!("] {
-        let pat = format!("defmt::{mac}");
+    let macros = ["trace!(", "debug!(", "info!(", "warn!(", "error!("]
+        .map(|m| format!("defmt::{m}"))
+        .into_iter()
+        .chain(["reading_line!(".to_owned()]);
+    for pat in macros {
         let mut rest = src.as_str();
         while let Some(i) = rest.find(&pat) {
             rest = &rest[i + pat.len()..];
@@ -243,6 +247,8 @@ fn readings_sweeps_and_events_of_a_longer_log() {
             Value::Str("sweep-g".into()),
             Value::F32(0.030),
             Value::F32(1e-5),
+            Value::F32(if status == "ok" { 0.12 } else { f32::NAN }),
+            Value::F32(if status == "ok" { 0.05 } else { f32::NAN }),
         ];
         format!("{t:.6} [INFO ] {}", render(TEMPLATES[7], &v).unwrap())
     };

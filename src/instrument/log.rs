@@ -17,8 +17,8 @@
 //! store error=<str>                                        (error)
 //! settings method=<str> start_hz=<f32> stop_hz=<f32> step_hz=<f32> settle_s=<f32> integrate_s=<f32> drive_v=<f32>
 //! point tag=<u16> f_hz=<f32> g_s=<f32> b_s=<f32> sigma_s=<f32>
-//! reading status=<str> f_hz=<f32> f_sigma_hz=<f32> e_kpa=<f32> e_sigma_kpa=<f32> e_repeat_kpa=<f32> q=<f32> probe_time_s=<f32> points=<u16> method=<str> force_n=<f32> force_sigma_n=<f32>
-//! stream seq=<u32> t_s=<f32> locked=<bool> status=<str> f_hz=<f32> f_sigma_hz=<f32> e_kpa=<f32> e_sigma_kpa=<f32> e_repeat_kpa=<f32> q=<f32> probe_time_s=<f32> points=<u16> method=<str> force_n=<f32> force_sigma_n=<f32>
+//! reading status=<str> f_hz=<f32> f_sigma_hz=<f32> e_kpa=<f32> e_sigma_kpa=<f32> e_repeat_kpa=<f32> q=<f32> probe_time_s=<f32> points=<u16> method=<str> force_n=<f32> force_sigma_n=<f32> loss=<f32> loss_sigma=<f32>
+//! stream seq=<u32> t_s=<f32> locked=<bool> status=<str> f_hz=<f32> f_sigma_hz=<f32> e_kpa=<f32> e_sigma_kpa=<f32> e_repeat_kpa=<f32> q=<f32> probe_time_s=<f32> points=<u16> method=<str> force_n=<f32> force_sigma_n=<f32> loss=<f32> loss_sigma=<f32>
 //! stream end start_s=<f32> readings=<u32> ok=<u32> dropped=<u32> plan_work=<u32>   (after `stream <s>`: the tracker's readings, how many ok, how many dropped for a full report channel; the most work from a window to the next plan, in the counters' unit, 0: not measured)
 //! air f_hz=<f32> q=<f32>
 //! loadcell present=<bool> newtons_per_count=<f32> tare=<f32> min_n=<f32> max_n=<f32>   (after force, weigh, air with a load cell, status)
@@ -54,8 +54,8 @@ use crate::unit::store::{SlotState, StoreError};
 
 /// A `reading` or `stream` line: `$format` (written out whole: a defmt format string is one
 /// literal, and the line is a wire format), the arguments `$pre` its own fields before
-/// `status=` take, then the reading `$r`'s fields from `status=` to `force_sigma_n=`, which
-/// both lines end with.
+/// `status=` take, then the reading `$r`'s fields from `status=` to `loss_sigma=` (the tissue's
+/// loss tangent and its σ), which both lines end with.
 macro_rules! reading_line {
     ($format:tt, $r:expr $(, $pre:expr)*) => {{
         let r = $r;
@@ -73,7 +73,9 @@ macro_rules! reading_line {
             r.points,
             r.method.name(),
             nan_or(r.force.map(|w| w.mean.0)),
-            nan_or(r.force.map(|w| w.sigma.0))
+            nan_or(r.force.map(|w| w.sigma.0)),
+            nan_or(r.loss_tangent),
+            nan_or(r.loss_tangent_sigma)
         )
     }};
 }
@@ -118,11 +120,11 @@ pub fn event(e: Event) {
             point.sigma_s
         ),
         Event::Reading(r) => reading_line!(
-            "reading status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} e_repeat_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str} force_n={=f32} force_sigma_n={=f32}",
+            "reading status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} e_repeat_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str} force_n={=f32} force_sigma_n={=f32} loss={=f32} loss_sigma={=f32}",
             r
         ),
         Event::Stream(x) => reading_line!(
-            "stream seq={=u32} t_s={=f32} locked={=bool} status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} e_repeat_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str} force_n={=f32} force_sigma_n={=f32}",
+            "stream seq={=u32} t_s={=f32} locked={=bool} status={=str} f_hz={=f32} f_sigma_hz={=f32} e_kpa={=f32} e_sigma_kpa={=f32} e_repeat_kpa={=f32} q={=f32} probe_time_s={=f32} points={=u16} method={=str} force_n={=f32} force_sigma_n={=f32} loss={=f32} loss_sigma={=f32}",
             x.reading,
             x.seq,
             x.t_s.0,

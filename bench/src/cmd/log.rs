@@ -144,6 +144,7 @@ fn streams_json(s: &Session) -> Value {
                         "line": r.reading.line, "status": r.reading.status,
                         "resonance_hz": r.reading.f_hz, "modulus_kpa": r.reading.e_kpa,
                         "modulus_sigma_kpa": r.reading.e_sigma_kpa, "q_factor": r.reading.q,
+                        "loss_tangent": r.reading.loss, "loss_tangent_sigma": r.reading.loss_sigma,
                         "force_n": r.reading.force_n,
                     })).collect::<Vec<_>>(),
                 })
@@ -165,6 +166,7 @@ fn session_json(s: &Session) -> Value {
                 "q_factor": r.q, "probe_time_s": r.probe_time_s,
                 "points": r.points, "method": r.method, "sweep": r.sweep,
                 "contact_force_n": r.force_n, "contact_force_sigma_n": r.force_sigma_n,
+                "loss_tangent": r.loss, "loss_tangent_sigma": r.loss_sigma,
             })
         })
         .collect();
