@@ -452,8 +452,9 @@ impl StreamVerdict {
 /// (the figures: no `ok` later than 0.1 s after the tip leaves the tissue, within 3 %
 /// of the new truth 0.25 s after a step or a new contact, ≥ 20 ok readings/s within 1 % RMS).
 pub fn stream_catalogue(noise: NoiseScene) -> Vec<StreamCase> {
-    let ph = |n: &str| phantoms::by_name(n).expect("a phantom A–E");
+    let ph = |n: &str| phantoms::by_name(n).expect("a phantom or a named tissue");
     let c = StreamScene::on(Target::Phantom(ph("C")), noise);
+    let lossy = StreamScene::on(Target::Phantom(ph("carcinoma-like")), noise);
     let steady = Must::Rate {
         min_ok_per_s: 20.0,
         max_rms: 0.01,
@@ -651,6 +652,35 @@ pub fn stream_catalogue(noise: NoiseScene) -> Vec<StreamCase> {
             // As the single-reading `knocks` scene.
             accept: &["interference", "low_snr"],
             accept_from_s: 0.0,
+            accept_to_s: inf,
+        },
+        // Lossy tissue (a tumour-like inclusion, docs/physics.md): followed as steadily, and
+        // left as promptly, as the lossless phantom.
+        StreamCase {
+            name: "lossy-steady",
+            scene: lossy,
+            seconds: 3.0,
+            must: vec![steady],
+            accept: &[],
+            accept_from_s: 0.0,
+            accept_to_s: 0.0,
+        },
+        StreamCase {
+            name: "lossy-lift-off",
+            scene: StreamScene {
+                lift_off: Some(LiftOff {
+                    at_s: 1.5,
+                    ramp_s: 0.0,
+                }),
+                ..lossy
+            },
+            seconds: 2.5,
+            must: vec![Must::NoOk {
+                from_s: 1.6,
+                to_s: inf,
+            }],
+            accept: LIFTED,
+            accept_from_s: 1.5,
             accept_to_s: inf,
         },
     ]

@@ -93,14 +93,14 @@ fn the_command_streams_the_catalogue_scenes_as_the_library_does() {
 
 /// Every continuous scene does what it must (`stability::Must`) in every stream, and no reading
 /// is a silent wrong number: seeds 0–2 with the command's unit, and the stability map's seeds
-/// with the map's unit (hold's column). (Until the knocked-window check,
-/// `interference::window_spike`, seed 5002 of the knocks scene gave one ok reading 10 % off.)
+/// with the map's unit (hold's column); among them the lossy tumour-like tissue, steady and
+/// lifted off.
 #[test]
 fn the_continuous_scenes_do_what_they_must() {
     let command_unit = default_for(METHOD).unwrap();
     let map_unit = calibrated(METHOD, 10).unwrap().profile;
     let cases = stream_catalogue(NoiseScene::Bench);
-    assert_eq!(cases.len(), 8);
+    assert_eq!(cases.len(), 10);
     for (unit, seeds) in [
         (&command_unit, 0..3),
         (&map_unit, FIRST_SEED..FIRST_SEED + 5),

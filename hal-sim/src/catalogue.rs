@@ -66,7 +66,7 @@ fn at(e: f64, noise: NoiseScene) -> Scene {
 }
 
 /// Number of scenes in the catalogue.
-pub const SCENES: usize = 27;
+pub const SCENES: usize = 31;
 
 /// Rate of the thermal drift scenes: the free resonance moves by 3 Hz in 10 s (about one reading
 /// of the paper method, 10.9 s).
@@ -94,6 +94,12 @@ pub fn catalogue(noise: NoiseScene) -> [Case; SCENES] {
     leaky.pzt.leakage_s = 0.3 * g_peak;
     let mut damped_t = Tissue::with_modulus_kpa(NOMINAL_KPA);
     damped_t.loss_tangent = 0.3;
+    // Lossy tissue: a tumour-like inclusion (docs/physics.md, "Named tissues"), stiff and lossy
+    // tissue at the edge of what reads, and lossy tissue with mains hum and with a lift-off.
+    let lossy = |e: f64, tan_d: f64| at(e, noise).with_loss_tangent(tan_d);
+    let tumour = phantoms::by_name("carcinoma-like").map_or(lossy(490.0, 0.3), |p| {
+        Scene::on_phantom(&p).with_noise(noise)
+    });
     let mut clipping = nominal;
     clipping.front_end.tia_ohm *= 5.0;
     let open = Fault::OpenPzt.apply(nominal);
@@ -123,8 +129,9 @@ pub fn catalogue(noise: NoiseScene) -> [Case; SCENES] {
     let mode2 = SecondMode::with_peak_conductance(295.0, 40.0, 0.5 * g_peak);
     const RANGE_LOW: &[&str] = &["below_range", "out_of_band", "no_resonance", "low_snr"];
     const RANGE_HIGH: &[&str] = &["above_range", "out_of_band"];
-    // A much lossier tissue than the references is outside the calibrated contact condition.
-    const OK_OR_WEAK: &[&str] = &["low_snr", "no_resonance", "bad_contact"];
+    // Tissue much lossier than the references reads, or its resonance is too broad to read: a
+    // press inside the force window is never `bad_contact` for a low Q.
+    const OK_OR_WEAK: &[&str] = &["low_snr", "no_resonance", "broad_resonance"];
     const LIFT_OFF: &[&str] = &["contact_lost", "no_contact", "force_unstable", "too_light"];
     // A press outside the force window, or one that changes during the reading: the load cell
     // says so before the resonance is read as a modulus (a unit without one: the Q model).
@@ -194,6 +201,37 @@ pub fn catalogue(noise: NoiseScene) -> [Case; SCENES] {
             scene: Scene::on_tissue(damped_t).with_noise(noise),
             truth_kpa: Some(NOMINAL_KPA),
             accept: OK_OR_WEAK,
+        },
+        Case {
+            name: "lossy-tumour",
+            what: "carcinoma-like tissue: 490 kPa, loss tangent 0.3",
+            scene: tumour,
+            truth_kpa: Some(tumour.tissue.map_or(490.0, |t| t.modulus_pa * 1e-3)),
+            accept: OK_OR_WEAK,
+        },
+        Case {
+            name: "lossy-stiff",
+            what: "2000 kPa with loss tangent 0.5",
+            scene: lossy(2000.0, 0.5),
+            truth_kpa: Some(2000.0),
+            accept: OK_OR_WEAK,
+        },
+        Case {
+            name: "lossy-mains-50",
+            what: "300 kPa with loss tangent 0.3 under the 50 Hz harmonics of mains-50",
+            scene: lossy(NOMINAL_KPA, 0.3).with_mains(Mains {
+                fundamental_hz: 50.0,
+                harmonic_amplitude_a: h50,
+            }),
+            truth_kpa: Some(NOMINAL_KPA),
+            accept: &["interference", "low_snr", "broad_resonance"],
+        },
+        Case {
+            name: "lossy-lift-off-0.4s",
+            what: "300 kPa with loss tangent 0.3, lifted off at 0.4 s",
+            scene: lossy(NOMINAL_KPA, 0.3).with_lift_off(lift(0.4)),
+            truth_kpa: Some(NOMINAL_KPA),
+            accept: LIFT_OFF,
         },
         Case {
             name: "c0-dominant",

@@ -91,6 +91,11 @@ pub fn estimate(points: &[SweepPoint]) -> Result<Estimate, Failure> {
     // is not resolved (out of band, no peak) is no reading either — a |Z| dip without a
     // motional peak under it is the static branch's curvature, not a resonance.
     let peak = super::conductance::estimate(points)?;
+    // Settled points scattering about the resonance beyond their own σ: a tone (mains hum)
+    // that a three-point vertex would follow off the dip ([`super::interference::misfit`],
+    // as the fit method checks its refine points).
+    let q = peak.q.map_or(f64::NAN, f64::from);
+    super::interference::misfit(points, peak.resonance.0 as f64, q)?;
     Ok(Estimate {
         resonance: Hz(f0 as f32),
         sigma: Hz(sigma as f32),
