@@ -41,6 +41,12 @@ pub struct Options {
     pub coverage_moduli: Vec<f64>,
     /// Readings (noise seeds) per modulus and force of the coverage set.
     pub coverage_seeds: usize,
+    /// Moduli of the lossy-tissue set, kPa (at 30 mN).
+    pub loss_moduli: Vec<f64>,
+    /// Loss tangents of the lossy-tissue set.
+    pub loss_tangents: Vec<f64>,
+    /// Readings (noise seeds) per modulus and loss tangent of the lossy-tissue set.
+    pub loss_seeds: usize,
     /// First noise seed (the unit was calibrated on seeds from 1000).
     pub seed0: u64,
 }
@@ -61,6 +67,9 @@ impl Options {
                 180.0, 230.0, 350.0, 500.0, 700.0, 900.0, 1300.0, 1800.0, 2300.0,
             ],
             coverage_seeds: 8,
+            loss_moduli: vec![180.0, 350.0, 700.0, 1300.0, 2300.0],
+            loss_tangents: vec![0.0, 0.1, 0.2, 0.3, 0.4, 0.5],
+            loss_seeds: 6,
             seed0: 50_000,
         }
     }
@@ -78,6 +87,9 @@ impl Options {
             drifts_hz: vec![0.5],
             coverage_moduli: vec![230.0, 500.0, 900.0, 1800.0],
             coverage_seeds: 6,
+            loss_moduli: vec![350.0, 1300.0],
+            loss_tangents: vec![0.0, 0.3, 0.5],
+            loss_seeds: 3,
             seed0: 60_000,
         }
     }
@@ -234,6 +246,27 @@ impl Coverage {
     }
 }
 
+/// Readings on lossy tissue at one loss tangent, over the set's moduli and seeds.
+#[derive(Clone, Debug, Default)]
+pub struct LossRow {
+    /// The tissue's loss tangent.
+    pub tan_d: f64,
+    /// Readings taken, ok, and refused as `broad_resonance`.
+    pub readings: usize,
+    pub ok: usize,
+    pub broad: usize,
+    /// RMS relative error of the modulus, %, and its worst, %.
+    pub rms_modulus_pct: f64,
+    pub worst_modulus_pct: f64,
+    /// Ok readings with the modulus within 3 of its σ.
+    pub modulus_within3: usize,
+    /// RMS error of the loss tangent, RMS of its reported σ.
+    pub rms_loss: f64,
+    pub rms_loss_sigma: f64,
+    /// Ok readings with the loss tangent within 1, 2 and 3 of its σ.
+    pub loss_within: [usize; 3],
+}
+
 /// The whole budget.
 #[derive(Clone, Debug)]
 pub struct Budget {
@@ -248,6 +281,8 @@ pub struct Budget {
     pub coverage: Coverage,
     /// Without drift: the free resonance the air reference's.
     pub clean: Coverage,
+    /// Lossy tissue: modulus and loss tangent against the loss tangent.
+    pub loss: Vec<LossRow>,
 }
 
 /// The scene `probe-bench measure --modulus-kpa e --preload-n f --noise ..` reads.
@@ -440,6 +475,53 @@ pub fn measure(opts: &Options, mut tick: impl FnMut()) -> Result<Budget> {
     // without any drift.
     let coverage = coverage_of(&unit, opts, true, &mut tick)?;
     let clean = coverage_of(&unit, opts, false, &mut || {})?;
+    // (g) lossy tissue: the modulus and the loss tangent a reading reports against the truth.
+    let mut loss = Vec::new();
+    for &t in &opts.loss_tangents {
+        let mut row = LossRow {
+            tan_d: t,
+            ..LossRow::default()
+        };
+        let (mut e2, mut l2, mut s2) = (0.0, 0.0, 0.0);
+        for &e in &opts.loss_moduli {
+            for j in 0..opts.loss_seeds {
+                let seed = opts.seed0 + 20_000 + j as u64;
+                let s = scene(e, 0.030, noise).with_loss_tangent(t);
+                row.readings += 1;
+                let Some(r) = read_auto(&unit, &s, seed) else {
+                    continue;
+                };
+                if r.status == pzt_probe::Status::Failed(pzt_probe::Failure::BroadResonance) {
+                    row.broad += 1;
+                }
+                let (Some(m), Some(sm), Some(l), Some(sl)) = (
+                    r.modulus.filter(|_| r.status.is_ok()),
+                    r.modulus_sigma,
+                    r.loss_tangent,
+                    r.loss_tangent_sigma,
+                ) else {
+                    continue;
+                };
+                row.ok += 1;
+                let err = m.0 as f64 / e - 1.0;
+                e2 += err * err;
+                row.worst_modulus_pct = row.worst_modulus_pct.max(100.0 * err.abs());
+                row.modulus_within3 += usize::from((m.0 as f64 - e).abs() <= 3.0 * sm.0 as f64);
+                let (dl, sl) = (l as f64 - t, sl as f64);
+                l2 += dl * dl;
+                s2 += sl * sl;
+                for (k, w) in row.loss_within.iter_mut().enumerate() {
+                    *w += usize::from(dl.abs() <= (k + 1) as f64 * sl);
+                }
+            }
+        }
+        let k = row.ok.max(1) as f64;
+        row.rms_modulus_pct = 100.0 * (e2 / k).sqrt();
+        row.rms_loss = (l2 / k).sqrt();
+        row.rms_loss_sigma = (s2 / k).sqrt();
+        loss.push(row);
+        tick();
+    }
     Ok(Budget {
         options: opts.clone(),
         noise: noise_rows,
@@ -449,6 +531,7 @@ pub fn measure(opts: &Options, mut tick: impl FnMut()) -> Result<Budget> {
         drift,
         coverage,
         clean,
+        loss,
     })
 }
 
@@ -457,7 +540,8 @@ pub fn work_units(o: &Options) -> u64 {
     (o.noise_methods.len() * o.noise_moduli.len()
         + o.bias_moduli.len() * 3
         + o.preload_moduli.len() * o.forces.len()
-        + o.coverage_moduli.len() * o.forces.len()) as u64
+        + o.coverage_moduli.len() * o.forces.len()
+        + o.loss_tangents.len()) as u64
 }
 
 /// The binomial standard deviation of a fraction `p` over `n` trials.

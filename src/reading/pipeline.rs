@@ -28,10 +28,10 @@ use crate::units::Seconds;
 pub const MAX_RELATIVE_REPEATABILITY: f32 = 0.10;
 
 /// The lowest quality factor a reading is given at (`broad_resonance` below): on tissue so lossy
-/// that the mode's Q falls under it the resonance is wider than a third of its frequency and the
-/// default method's modulus strays beyond 2 % of the truth. Ours: the measured worst case of the
-/// error against Q with a margin (`bench/tests/lossy_tissue.rs` holds it over moduli and loss
-/// tangents).
+/// that the mode's Q falls under it the resonance is wider than a third of its frequency, where
+/// the default method's modulus strayed beyond 2 % of the truth on the simulated probe. Ours,
+/// with a margin; `bench/tests/lossy_tissue.rs` holds the readings above it over moduli and loss
+/// tangents, docs/accuracy.md gives their errors.
 pub const MIN_READABLE_Q: f32 = 3.0;
 
 /// What the load cell says against a reading (with a load cell): no force measured, contact lost
