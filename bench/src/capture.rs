@@ -549,14 +549,7 @@ pub fn load(path: &std::path::Path, needed: usize, opts: &DemodOptions) -> anyho
 fn read_table(text: &str) -> Result<(Layout, Vec<String>, Vec<Row>, usize), CaptureError> {
     let mut header: Option<(usize, Vec<String>, Layout)> = None;
     let mut rows = Vec::new();
-    let mut last_line = 0;
-    for (k, raw) in text.lines().enumerate() {
-        let line = k + 1;
-        last_line = line;
-        let s = raw.trim();
-        if s.is_empty() || s.starts_with('#') {
-            continue;
-        }
+    for (line, s) in content_lines(text, Some('#')) {
         let cells: Vec<&str> = s.split(',').map(str::trim).collect();
         match &header {
             None => {
@@ -593,10 +586,24 @@ fn read_table(text: &str) -> Result<(Layout, Vec<String>, Vec<Row>, usize), Capt
     }
     match header {
         None => Err(CaptureError::NoHeader {
-            line: last_line.max(1),
+            line: last_line(text),
         }),
-        Some((_, cols, layout)) => Ok((layout, cols, rows, last_line.max(1))),
+        Some((_, cols, layout)) => Ok((layout, cols, rows, last_line(text))),
     }
+}
+
+/// The lines of `text` that hold anything but a comment (a line starting with `comment`),
+/// trimmed, with their numbers (from 1).
+fn content_lines(text: &str, comment: Option<char>) -> impl Iterator<Item = (usize, &str)> {
+    text.lines()
+        .enumerate()
+        .map(|(k, raw)| (k + 1, raw.trim()))
+        .filter(move |(_, s)| !(s.is_empty() || comment.is_some_and(|c| s.starts_with(c))))
+}
+
+/// The number of `text`'s last line (1 for an empty text), where what is missing is reported.
+fn last_line(text: &str) -> usize {
+    text.lines().count().max(1)
 }
 
 /// The layout a header names, or why it names none.
