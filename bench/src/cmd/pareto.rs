@@ -6,7 +6,7 @@ use crate::pareto::{
     stream_unit, tau_ms, Cell, Config, StreamCell, STREAM_SECONDS, STREAM_SEGMENTS_S,
     STREAM_SETTLE_S,
 };
-use crate::plot::{draw_legend, err, with_backend, PALETTE};
+use crate::plot::{self, draw_legend, err, with_backend, PALETTE};
 use crate::scene::Target;
 use anyhow::{anyhow, Result};
 use clap::Args;
@@ -532,18 +532,21 @@ where
     DB::ErrorType: 'static,
 {
     root.fill(&WHITE).map_err(err)?;
-    let mut ch = ChartBuilder::on(root)
-        .caption(title, ("sans-serif", 18))
-        .margin(14)
-        .x_label_area_size(45)
-        .y_label_area_size(65)
-        .build_cartesian_2d((10f64..50_000f64).log_scale(), (ymin..ymax).log_scale())
-        .map_err(err)?;
-    ch.configure_mesh()
-        .x_desc("probe time per reading (ms)")
-        .y_desc("RMS modulus error caused by noise (%)")
-        .draw()
-        .map_err(err)?;
+    let mut ch = plot::chart(
+        root,
+        Some((title, 18)),
+        plot::Frame {
+            margin: 14,
+            x_labels: 45,
+            y_labels: 65,
+        },
+        ((10f64..50_000f64).log_scale(), (ymin..ymax).log_scale()),
+        (
+            "probe time per reading (ms)",
+            "RMS modulus error caused by noise (%)",
+        ),
+    )
+    .map_err(err)?;
     ch.draw_series(LineSeries::new(
         front.iter().copied(),
         ShapeStyle::from(&RGBColor(170, 170, 170)).stroke_width(8),

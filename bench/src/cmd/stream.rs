@@ -279,18 +279,18 @@ where
     {
         root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e:?}"))?;
         let (upper, lower) = root.split_vertically(380);
-        let mut c = ChartBuilder::on(&upper)
-            .caption(title, ("sans-serif", 18))
-            .margin(10)
-            .x_label_area_size(30)
-            .y_label_area_size(70)
-            .build_cartesian_2d(0.0..t_end, lo..hi)
-            .map_err(|e| anyhow::anyhow!("{e:?}"))?;
-        c.configure_mesh()
-            .x_desc("probe time, s")
-            .y_desc("modulus, kPa")
-            .draw()
-            .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        let mut c = crate::plot::chart(
+            &upper,
+            Some((title, 18)),
+            crate::plot::Frame {
+                margin: 10,
+                x_labels: 30,
+                y_labels: 70,
+            },
+            (0.0..t_end, lo..hi),
+            ("probe time, s", "modulus, kPa"),
+        )
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
         let col = crate::plot::PALETTE[1];
         let tcol = crate::plot::PALETTE[0];
         // The truth: a step line sampled at the readings' times.
