@@ -312,27 +312,22 @@ pub fn fit_magnitude(pts: &[SweepPoint]) -> Result<MagnitudeFit, Failure> {
     let (jtj, _) = normal(&p);
     let cov = spd_inverse(&jtj).ok_or(Failure::NoResonance)?;
     let red = chi2 / n.saturating_sub(5).max(1) as f64;
-    let sigma_f0 = (cov[3][3] * red.max(1.0)).max(0.0).sqrt();
-    if !p.iter().all(|v| v.is_finite()) || !sigma_f0.is_finite() {
+    let sigma = |k: usize, scale: f64| (cov[k][k] * scale).max(0.0).sqrt();
+    let s = red.max(1.0);
+    let bvd = fit::Bvd::new(
+        &p,
+        f_ref,
+        [sigma(3, s), sigma(4, s), sigma(0, 1.0), sigma(1, 1.0)],
+    );
+    if !p.iter().all(|v| v.is_finite()) || !bvd.sigma_f0.is_finite() {
         return Err(Failure::NoResonance);
     }
     if !(p[3] > fa && p[3] < fb) {
         return Err(Failure::OutOfBand);
     }
-    estimate::resolved(sigma_f0, p[3] / p[4])?;
+    estimate::resolved(bvd.sigma_f0, p[3] / p[4])?;
     Ok(MagnitudeFit {
-        bvd: fit::Bvd {
-            g0: p[0],
-            b0: p[1],
-            f_ref,
-            g: p[2],
-            f0: p[3],
-            q: p[4],
-            sigma_f0,
-            sigma_q: (cov[4][4] * red.max(1.0)).max(0.0).sqrt(),
-            sigma_g0: cov[0][0].max(0.0).sqrt(),
-            sigma_b0: cov[1][1].max(0.0).sqrt(),
-        },
+        bvd,
         reduced_chi2: red,
     })
 }
