@@ -128,6 +128,27 @@ where
     Ok(chart)
 }
 
+/// Draw `points` on `chart` as a line in `style`, shown in the legend as `label` by a 20 px
+/// stroke of the same style.
+pub fn line<'a, DB, CT>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    points: impl IntoIterator<Item = CT::From>,
+    style: impl Into<ShapeStyle>,
+    label: impl Into<String>,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>
+where
+    DB: DrawingBackend + 'a,
+    CT: CoordTranslate,
+    CT::From: Clone + 'static,
+{
+    let style = style.into();
+    chart
+        .draw_series(LineSeries::new(points, style))?
+        .label(label)
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+    Ok(())
+}
+
 /// Draw onto an SVG or a PNG file chosen by the extension of `path` (`.png` → PNG).
 pub fn with_backend(
     path: &Path,
@@ -213,22 +234,14 @@ where
         .iter()
         .map(|p| (p.freq.0 as f64, p.magnitude_s() as f64 * 1e9))
         .collect();
-    chart
-        .draw_series(LineSeries::new(g.clone(), &BLUE))
-        .map_err(err)?
-        .label("conductance G = Re(Y)")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
+    line(&mut chart, g.clone(), &BLUE, "conductance G = Re(Y)").map_err(err)?;
     chart
         .draw_series(
             g.iter()
                 .map(|&(x, y)| Circle::new((x, y), 2, BLUE.filled())),
         )
         .map_err(err)?;
-    chart
-        .draw_series(LineSeries::new(m, &RED))
-        .map_err(err)?
-        .label("|Y| (1/|Z|)")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
+    line(&mut chart, m, &RED, "|Y| (1/|Z|)").map_err(err)?;
     if let Some(fr) = resonance_hz {
         let fr = fr as f64;
         chart

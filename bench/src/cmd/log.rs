@@ -343,11 +343,7 @@ where
             ),
             None => format!("sweep at line {} (no reading)", w.first_line),
         };
-        chart
-            .draw_series(LineSeries::new(line.clone(), c.stroke_width(2)))
-            .map_err(err)?
-            .label(label)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+        plot::line(&mut chart, line.clone(), c.stroke_width(2), label).map_err(err)?;
         chart
             .draw_series(
                 line.iter()

@@ -559,10 +559,13 @@ where
             RGBColor(170, 170, 170).stroke_width(6),
         )
     });
-    ch.draw_series(LineSeries::new(crb.iter().copied(), BLACK.stroke_width(2)))
-        .map_err(err)?
-        .label("Cramér–Rao bound")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2)));
+    plot::line(
+        &mut ch,
+        crb.iter().copied(),
+        BLACK.stroke_width(2),
+        "Cramér–Rao bound",
+    )
+    .map_err(err)?;
     let grey = RGBColor(90, 90, 90);
     ch.draw_series(DashedLineSeries::new(
         steady.iter().copied(),
@@ -581,13 +584,13 @@ where
             continue;
         }
         p.sort_by(|a, b| a.1.total_cmp(&b.1));
-        ch.draw_series(LineSeries::new(
+        plot::line(
+            &mut ch,
             p.iter().map(|q| (q.1, q.2)),
             col.stroke_width(2),
-        ))
-        .map_err(err)?
-        .label(m.name())
-        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(2)));
+            m.name(),
+        )
+        .map_err(err)?;
         ch.draw_series(p.iter().map(|q| {
             let style = if q.3 >= 0.95 {
                 col.filled()
@@ -601,13 +604,13 @@ where
     // The continuous tracker: one reading per segment, so its probe time per reading is the
     // time per ok reading (1 / ok readings per second), segment lengths 35–150 ms.
     let col = RGBColor(200, 0, 120);
-    ch.draw_series(LineSeries::new(
+    plot::line(
+        &mut ch,
         tracker.iter().copied(),
         col.stroke_width(3),
-    ))
-    .map_err(err)?
-    .label("stream (tracker): 1 / (ok readings per s)")
-    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(3)));
+        "stream (tracker): 1 / (ok readings per s)",
+    )
+    .map_err(err)?;
     ch.draw_series(
         tracker
             .iter()
