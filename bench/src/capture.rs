@@ -970,13 +970,18 @@ fn continuous_points(s: &Samples, opts: &DemodOptions) -> Result<Vec<SweepPoint>
     Ok(points)
 }
 
-/// Write admittance points as an `freq_hz,y_re_s,y_im_s` CSV (with `#` comment lines first).
-pub fn write_admittance_csv(comments: &[String], points: &[(f64, f64, f64)]) -> String {
+/// The start of a CSV: each of `comments` as a `#` line, then the `header` row.
+fn csv_head(comments: &[String], header: &str) -> String {
     let mut s = String::new();
     for c in comments {
         s += &format!("# {c}\n");
     }
-    s += "freq_hz,y_re_s,y_im_s\n";
+    s + header + "\n"
+}
+
+/// Write admittance points as an `freq_hz,y_re_s,y_im_s` CSV (with `#` comment lines first).
+pub fn write_admittance_csv(comments: &[String], points: &[(f64, f64, f64)]) -> String {
+    let mut s = csv_head(comments, "freq_hz,y_re_s,y_im_s");
     for (f, g, b) in points {
         s += &format!("{f},{g:.7e},{b:.7e}\n");
     }
@@ -986,11 +991,7 @@ pub fn write_admittance_csv(comments: &[String], points: &[(f64, f64, f64)]) -> 
 /// Write impedance points as an `freq_hz,z_mag_ohm,z_phase_deg` CSV from admittance
 /// `(f, G, B)`.
 pub fn write_impedance_csv(comments: &[String], points: &[(f64, f64, f64)]) -> String {
-    let mut s = String::new();
-    for c in comments {
-        s += &format!("# {c}\n");
-    }
-    s += "freq_hz,z_mag_ohm,z_phase_deg\n";
+    let mut s = csv_head(comments, "freq_hz,z_mag_ohm,z_phase_deg");
     for (f, g, b) in points {
         // Z = 1/Y: |Z| = 1/|Y|, phase(Z) = -phase(Y).
         let mag = 1.0 / g.hypot(*b);

@@ -481,6 +481,26 @@ fn quantity_e4990a(header: &str) -> Option<Quantity> {
     })
 }
 
+/// A test of a column's quantity.
+type QuantityIs = fn(Quantity) -> bool;
+
+/// The pairs of E4990A `-data` columns that give the admittance, in the order they are looked
+/// for: the first column's quantity, the second's, and the pair they make.
+const PAIRS_E4990A: [(QuantityIs, QuantityIs, Pair); 4] = [
+    (|q| q == Quantity::ZRe, |q| q == Quantity::ZIm, Pair::ZRect),
+    (
+        |q| q == Quantity::ZMag,
+        |q| matches!(q, Quantity::ZTheta(_)),
+        Pair::ZPolar(true),
+    ),
+    (|q| q == Quantity::YRe, |q| q == Quantity::YIm, Pair::YRect),
+    (
+        |q| q == Quantity::YMag,
+        |q| matches!(q, Quantity::YTheta(_)),
+        Pair::YPolar(true),
+    ),
+];
+
 /// Read an E4990A trace-data CSV (see the module docs).
 pub(super) fn read_e4990a(text: &str) -> Result<Rows, CaptureError> {
     const L: Layout = Layout::E4990a;
@@ -566,31 +586,9 @@ pub(super) fn read_e4990a(text: &str) -> Result<Rows, CaptureError> {
                 .iter()
                 .position(|h| quantity_e4990a(h).is_some_and(q))
         };
-        let pairs: [(Option<usize>, Option<usize>, Pair); 4] = [
-            (
-                find(|q| q == Quantity::ZRe),
-                find(|q| q == Quantity::ZIm),
-                Pair::ZRect,
-            ),
-            (
-                find(|q| q == Quantity::ZMag),
-                find(|q| matches!(q, Quantity::ZTheta(_))),
-                Pair::ZPolar(true),
-            ),
-            (
-                find(|q| q == Quantity::YRe),
-                find(|q| q == Quantity::YIm),
-                Pair::YRect,
-            ),
-            (
-                find(|q| q == Quantity::YMag),
-                find(|q| matches!(q, Quantity::YTheta(_))),
-                Pair::YPolar(true),
-            ),
-        ];
-        let Some((ia, ib, pair)) = pairs
+        let Some((ia, ib, pair)) = PAIRS_E4990A
             .iter()
-            .find_map(|(a, b, p)| Some((a.as_ref().copied()?, b.as_ref().copied()?, *p)))
+            .find_map(|&(a, b, p)| Some((find(a)?, find(b)?, p)))
         else {
             seen.extend(c.cols.iter().skip(1).cloned());
             continue;
