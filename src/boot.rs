@@ -5,77 +5,45 @@
 //! message ([`crate::instrument::session::Refusal::Boot`]) and shows it in `status`. Portable, so the
 //! session's handling is tested on the host.
 
-/// A bring-up step that failed. The board carries on degraded.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-#[repr(u8)]
-pub enum BootError {
-    /// FLASH_OPTR.DBANK is 0 (single-bank mode, 4 KiB pages): the store's flash driver is not
-    /// created (embassy's `Flash::new_blocking` would panic) and every store access is refused.
-    FlashSingleBank = 1,
-    /// LPUART1 did not take its configuration: no command line.
-    Uart,
-    /// The DAC's circular DMA transfer did not start: the sample stream is not started.
-    DacStart,
-    /// The DAC output buffer calibration found no trim (CAL_FLAG1 never rose): the DAC is not
-    /// trusted with the drive and the sample stream is not started.
-    DacCalibration,
-    /// The boot before did not get through embassy's clock setup (its waits on HSIRDY, PLLRDY,
-    /// the flash latency and the clock switch have no bound; the watchdog ended it): this boot
-    /// runs on HSI16 at 16 MHz without the PLL and does not start the sample stream.
-    ClockHang,
-    /// The boot before did not get through the converters' setup (embassy's ADC calibration and
-    /// ready waits): TIM6, DAC1 and the ADCs are left alone, the stream is not started.
-    ConverterHang,
-    /// The run before hung in a flash erase or program (embassy's waits on FLASH_SR.BSY): the
-    /// store's flash is not used this boot.
-    FlashHang,
-    /// The HSE crystal failed while the image ran: the clock security system switched the core
-    /// to HSI16 and its NMI reset the core; this boot runs from HSI16 through the PLL (170 MHz
-    /// at RC accuracy, about ±1 % over temperature) and does not start the HSE again.
-    HseFailure,
+coded_enum! {
+    /// A bring-up step that failed. The board carries on degraded.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+    #[repr(u8)]
+    pub enum BootError {
+        /// FLASH_OPTR.DBANK is 0 (single-bank mode, 4 KiB pages): the store's flash driver is not
+        /// created (embassy's `Flash::new_blocking` would panic) and every store access is refused.
+        FlashSingleBank = 1: "flash_single_bank" => "boot: flash in single-bank mode (option byte DBANK = 0): calibration store disabled, set DBANK";
+        /// LPUART1 did not take its configuration: no command line.
+        Uart: "uart" => "boot: the host UART refused its configuration";
+        /// The DAC's circular DMA transfer did not start: the sample stream is not started.
+        DacStart: "dac_start" => "boot: the DAC's DMA transfer did not start: no drive, readings impossible; power-cycle";
+        /// The DAC output buffer calibration found no trim (CAL_FLAG1 never rose): the DAC is not
+        /// trusted with the drive and the sample stream is not started.
+        DacCalibration: "dac_calibration" => "boot: DAC output buffer calibration failed: no drive, readings impossible; power-cycle, then service";
+        /// The boot before did not get through embassy's clock setup (its waits on HSIRDY, PLLRDY,
+        /// the flash latency and the clock switch have no bound; the watchdog ended it): this boot
+        /// runs on HSI16 at 16 MHz without the PLL and does not start the sample stream.
+        ClockHang: "clock_hang" => "boot: the clock setup hung on the boot before: running on HSI16 without converters, readings impossible; power-cycle";
+        /// The boot before did not get through the converters' setup (embassy's ADC calibration and
+        /// ready waits): TIM6, DAC1 and the ADCs are left alone, the stream is not started.
+        ConverterHang: "converter_hang" => "boot: the ADC/DAC setup hung on the boot before: converters off, readings impossible; power-cycle";
+        /// The run before hung in a flash erase or program (embassy's waits on FLASH_SR.BSY): the
+        /// store's flash is not used this boot.
+        FlashHang: "flash_hang" => "boot: a flash erase or program hung on the run before: calibration store disabled until reset";
+        /// The HSE crystal failed while the image ran: the clock security system switched the core
+        /// to HSI16 and its NMI reset the core; this boot runs from HSI16 through the PLL (170 MHz
+        /// at RC accuracy, about ±1 % over temperature) and does not start the HSE again.
+        HseFailure: "hse_failure" => "boot: the 24 MHz crystal failed while running (clock security system): running on the internal RC oscillator, frequencies carry its error; check the crystal";
+    }
+    /// Every boot error, in declaration order.
+    const ALL;
+    /// Stable snake_case code for the log and the command line.
+    fn code;
+    /// One line for a human: what failed, what it costs, what to do.
+    fn message;
 }
 
 impl BootError {
-    /// Every boot error, in declaration order.
-    pub const ALL: [BootError; 8] = [
-        BootError::FlashSingleBank,
-        BootError::Uart,
-        BootError::DacStart,
-        BootError::DacCalibration,
-        BootError::ClockHang,
-        BootError::ConverterHang,
-        BootError::FlashHang,
-        BootError::HseFailure,
-    ];
-
-    /// Stable snake_case code for the log and the command line.
-    pub const fn code(self) -> &'static str {
-        match self {
-            BootError::FlashSingleBank => "flash_single_bank",
-            BootError::Uart => "uart",
-            BootError::DacStart => "dac_start",
-            BootError::DacCalibration => "dac_calibration",
-            BootError::ClockHang => "clock_hang",
-            BootError::ConverterHang => "converter_hang",
-            BootError::FlashHang => "flash_hang",
-            BootError::HseFailure => "hse_failure",
-        }
-    }
-
-    /// One line for a human: what failed, what it costs, what to do.
-    pub const fn message(self) -> &'static str {
-        match self {
-            BootError::FlashSingleBank => "boot: flash in single-bank mode (option byte DBANK = 0): calibration store disabled, set DBANK",
-            BootError::Uart => "boot: the host UART refused its configuration",
-            BootError::DacStart => "boot: the DAC's DMA transfer did not start: no drive, readings impossible; power-cycle",
-            BootError::DacCalibration => "boot: DAC output buffer calibration failed: no drive, readings impossible; power-cycle, then service",
-            BootError::ClockHang => "boot: the clock setup hung on the boot before: running on HSI16 without converters, readings impossible; power-cycle",
-            BootError::ConverterHang => "boot: the ADC/DAC setup hung on the boot before: converters off, readings impossible; power-cycle",
-            BootError::FlashHang => "boot: a flash erase or program hung on the run before: calibration store disabled until reset",
-            BootError::HseFailure => "boot: the 24 MHz crystal failed while running (clock security system): running on the internal RC oscillator, frequencies carry its error; check the crystal",
-        }
-    }
-
     /// Whether the failed step leaves the board without its sample stream: every reading (and
     /// the self-test) is impossible and refused with this error.
     pub const fn blocks_readings(self) -> bool {
@@ -86,11 +54,6 @@ impl BootError {
                 | BootError::ClockHang
                 | BootError::ConverterHang
         )
-    }
-
-    /// Parse a [`code`](Self::code).
-    pub fn from_code(s: &str) -> Option<BootError> {
-        Self::ALL.into_iter().find(|e| e.code() == s)
     }
 }
 

@@ -15,6 +15,50 @@
 // `!(x > 0.0)` is deliberate throughout: unlike `x <= 0.0` it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+/// An enum whose variants each have a stable snake_case code and a one-line message, from one
+/// table: the enum, then `ALL` (every variant, in declaration order), `code`, `message` and
+/// `from_code` (the inverse of `code`), each after its own doc comment.
+macro_rules! coded_enum {
+    (
+        $(#[$meta:meta])*
+        pub enum $name:ident {
+            $($(#[$vmeta:meta])* $variant:ident $(= $disc:literal)?: $code:literal => $message:literal;)*
+        }
+        $(#[$all_meta:meta])* const ALL;
+        $(#[$code_meta:meta])* fn code;
+        $(#[$message_meta:meta])* fn message;
+    ) => {
+        $(#[$meta])*
+        pub enum $name {
+            $($(#[$vmeta])* $variant $(= $disc)?,)*
+        }
+
+        impl $name {
+            $(#[$all_meta])*
+            pub const ALL: [$name; [$($code),*].len()] = [$($name::$variant),*];
+
+            $(#[$code_meta])*
+            pub const fn code(self) -> &'static str {
+                match self {
+                    $($name::$variant => $code,)*
+                }
+            }
+
+            $(#[$message_meta])*
+            pub const fn message(self) -> &'static str {
+                match self {
+                    $($name::$variant => $message,)*
+                }
+            }
+
+            /// Parse a [`code`](Self::code).
+            pub fn from_code(s: &str) -> Option<$name> {
+                Self::ALL.into_iter().find(|e| e.code() == s)
+            }
+        }
+    };
+}
+
 // Layers, each importing only from those above it in this list (tests/layers.rs keeps the rule;
 // docs/architecture.md draws it):
 // leaves (units, status, counters, stack, boot, hal, linalg, loadcell, dsp) → engine → estimate

@@ -549,14 +549,7 @@ pub fn load(path: &std::path::Path, needed: usize, opts: &DemodOptions) -> anyho
 fn read_table(text: &str) -> Result<(Layout, Vec<String>, Vec<Row>, usize), CaptureError> {
     let mut header: Option<(usize, Vec<String>, Layout)> = None;
     let mut rows = Vec::new();
-    let mut last_line = 0;
-    for (k, raw) in text.lines().enumerate() {
-        let line = k + 1;
-        last_line = line;
-        let s = raw.trim();
-        if s.is_empty() || s.starts_with('#') {
-            continue;
-        }
+    for (line, s) in content_lines(text, Some('#')) {
         let cells: Vec<&str> = s.split(',').map(str::trim).collect();
         match &header {
             None => {
@@ -593,10 +586,24 @@ fn read_table(text: &str) -> Result<(Layout, Vec<String>, Vec<Row>, usize), Capt
     }
     match header {
         None => Err(CaptureError::NoHeader {
-            line: last_line.max(1),
+            line: last_line(text),
         }),
-        Some((_, cols, layout)) => Ok((layout, cols, rows, last_line.max(1))),
+        Some((_, cols, layout)) => Ok((layout, cols, rows, last_line(text))),
     }
+}
+
+/// The lines of `text` that hold anything but a comment (a line starting with `comment`),
+/// trimmed, with their numbers (from 1).
+fn content_lines(text: &str, comment: Option<char>) -> impl Iterator<Item = (usize, &str)> {
+    text.lines()
+        .enumerate()
+        .map(|(k, raw)| (k + 1, raw.trim()))
+        .filter(move |(_, s)| !(s.is_empty() || comment.is_some_and(|c| s.starts_with(c))))
+}
+
+/// The number of `text`'s last line (1 for an empty text), where what is missing is reported.
+fn last_line(text: &str) -> usize {
+    text.lines().count().max(1)
 }
 
 /// The layout a header names, or why it names none.
@@ -963,13 +970,18 @@ fn continuous_points(s: &Samples, opts: &DemodOptions) -> Result<Vec<SweepPoint>
     Ok(points)
 }
 
-/// Write admittance points as an `freq_hz,y_re_s,y_im_s` CSV (with `#` comment lines first).
-pub fn write_admittance_csv(comments: &[String], points: &[(f64, f64, f64)]) -> String {
+/// The start of a CSV: each of `comments` as a `#` line, then the `header` row.
+fn csv_head(comments: &[String], header: &str) -> String {
     let mut s = String::new();
     for c in comments {
         s += &format!("# {c}\n");
     }
-    s += "freq_hz,y_re_s,y_im_s\n";
+    s + header + "\n"
+}
+
+/// Write admittance points as an `freq_hz,y_re_s,y_im_s` CSV (with `#` comment lines first).
+pub fn write_admittance_csv(comments: &[String], points: &[(f64, f64, f64)]) -> String {
+    let mut s = csv_head(comments, "freq_hz,y_re_s,y_im_s");
     for (f, g, b) in points {
         s += &format!("{f},{g:.7e},{b:.7e}\n");
     }
@@ -979,11 +991,7 @@ pub fn write_admittance_csv(comments: &[String], points: &[(f64, f64, f64)]) -> 
 /// Write impedance points as an `freq_hz,z_mag_ohm,z_phase_deg` CSV from admittance
 /// `(f, G, B)`.
 pub fn write_impedance_csv(comments: &[String], points: &[(f64, f64, f64)]) -> String {
-    let mut s = String::new();
-    for c in comments {
-        s += &format!("# {c}\n");
-    }
-    s += "freq_hz,z_mag_ohm,z_phase_deg\n";
+    let mut s = csv_head(comments, "freq_hz,z_mag_ohm,z_phase_deg");
     for (f, g, b) in points {
         // Z = 1/Y: |Z| = 1/|Y|, phase(Z) = -phase(Y).
         let mag = 1.0 / g.hypot(*b);

@@ -1,7 +1,8 @@
 //! Plots of sweeps.
 
 use anyhow::{anyhow, Result};
-use plotters::coord::CoordTranslate;
+use plotters::coord::ranged1d::{AsRangedCoord, Ranged, ValueFormatter};
+use plotters::coord::{CoordTranslate, Shift};
 use plotters::prelude::*;
 use pzt_probe::engine::sweep::SweepPoint;
 use std::path::Path;
@@ -75,6 +76,79 @@ pub fn draw_legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
         .draw()
 }
 
+/// The margin round a chart and the sizes of its label areas, px.
+#[derive(Clone, Copy, Debug)]
+pub struct Frame {
+    /// Margin on every side.
+    pub margin: u32,
+    /// Height of the x axis' label area.
+    pub x_labels: u32,
+    /// Width of the y axis' label area.
+    pub y_labels: u32,
+}
+
+/// A cartesian chart of `x` × `y` on `root`, as [`chart`] makes it.
+pub type Chart<'a, DB, X, Y> = ChartContext<
+    'a,
+    DB,
+    Cartesian2d<<X as AsRangedCoord>::CoordDescType, <Y as AsRangedCoord>::CoordDescType>,
+>;
+
+/// A cartesian chart of `x` × `y` on `root` in `frame`, under `caption` (its text and its
+/// sans-serif size, px) when there is one, with the mesh drawn and the axes described
+/// `x_desc` and `y_desc`.
+pub fn chart<'a, DB, X, Y>(
+    root: &'a DrawingArea<DB, Shift>,
+    caption: Option<(&str, u32)>,
+    frame: Frame,
+    (x, y): (X, Y),
+    (x_desc, y_desc): (&str, &str),
+) -> Result<Chart<'a, DB, X, Y>, DrawingAreaErrorKind<DB::ErrorType>>
+where
+    DB: DrawingBackend,
+    X: AsRangedCoord,
+    Y: AsRangedCoord,
+    X::CoordDescType: ValueFormatter<<X::CoordDescType as Ranged>::ValueType>,
+    Y::CoordDescType: ValueFormatter<<Y::CoordDescType as Ranged>::ValueType>,
+{
+    let mut builder = ChartBuilder::on(root);
+    if let Some((text, px)) = caption {
+        builder.caption(text, ("sans-serif", px));
+    }
+    let mut chart = builder
+        .margin(frame.margin)
+        .x_label_area_size(frame.x_labels)
+        .y_label_area_size(frame.y_labels)
+        .build_cartesian_2d(x, y)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .draw()?;
+    Ok(chart)
+}
+
+/// Draw `points` on `chart` as a line in `style`, shown in the legend as `label` by a 20 px
+/// stroke of the same style.
+pub fn line<'a, DB, CT>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    points: impl IntoIterator<Item = CT::From>,
+    style: impl Into<ShapeStyle>,
+    label: impl Into<String>,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>
+where
+    DB: DrawingBackend + 'a,
+    CT: CoordTranslate,
+    CT::From: Clone + 'static,
+{
+    let style = style.into();
+    chart
+        .draw_series(LineSeries::new(points, style))?
+        .label(label)
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+    Ok(())
+}
+
 /// Draw onto an SVG or a PNG file chosen by the extension of `path` (`.png` → PNG).
 pub fn with_backend(
     path: &Path,
@@ -139,19 +213,19 @@ where
         .map(|p| p.g_s as f64 * 1e9)
         .fold(0.0, f64::min);
     root.fill(&WHITE).map_err(err)?;
-    let mut chart = ChartBuilder::on(root)
-        .caption(title, ("sans-serif", 20))
-        .margin(12)
-        .x_label_area_size(45)
-        .y_label_area_size(70)
-        .build_cartesian_2d(f0..f1, ymin..ymax)
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("drive frequency (Hz)")
-        .y_desc("admittance (nS)")
-        .draw()
-        .map_err(err)?;
+    let frame = Frame {
+        margin: 12,
+        x_labels: 45,
+        y_labels: 70,
+    };
+    let mut chart = self::chart(
+        root,
+        Some((title, 20)),
+        frame,
+        (f0..f1, ymin..ymax),
+        ("drive frequency (Hz)", "admittance (nS)"),
+    )
+    .map_err(err)?;
     let g: Vec<(f64, f64)> = points
         .iter()
         .map(|p| (p.freq.0 as f64, p.g_s as f64 * 1e9))
@@ -160,22 +234,14 @@ where
         .iter()
         .map(|p| (p.freq.0 as f64, p.magnitude_s() as f64 * 1e9))
         .collect();
-    chart
-        .draw_series(LineSeries::new(g.clone(), &BLUE))
-        .map_err(err)?
-        .label("conductance G = Re(Y)")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
+    line(&mut chart, g.clone(), &BLUE, "conductance G = Re(Y)").map_err(err)?;
     chart
         .draw_series(
             g.iter()
                 .map(|&(x, y)| Circle::new((x, y), 2, BLUE.filled())),
         )
         .map_err(err)?;
-    chart
-        .draw_series(LineSeries::new(m, &RED))
-        .map_err(err)?
-        .label("|Y| (1/|Z|)")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
+    line(&mut chart, m, &RED, "|Y| (1/|Z|)").map_err(err)?;
     if let Some(fr) = resonance_hz {
         let fr = fr as f64;
         chart

@@ -129,7 +129,7 @@ pub fn stream(
         bail!("with --qemu --seconds must be in [0.1, 600]");
     }
     let mut lines = scene_lines(target, &a.scene, noise);
-    lines.push(format!("sim seed {}", a.seed));
+    lines.push(format!("sim seed {}", a.noise.seed));
     if let (Some(p), Some(t)) = (&a.step_to, a.step_at_s) {
         lines.push(format!("sim step {p} {t}"));
     }

@@ -31,6 +31,18 @@ pub fn noise_name(n: NoiseScene) -> String {
     }
 }
 
+/// The simulated front end's noise and the seed of its random numbers: the options `selftest`
+/// and `stream` share.
+#[derive(clap::Args, Clone, Debug)]
+pub struct NoiseArgs {
+    /// Front-end noise: `quiet`, `paper`, `bench`, or a current-noise density in A/sqrt(Hz).
+    #[arg(long, default_value = "bench")]
+    pub noise: String,
+    /// Seed of the simulated noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
 /// What the simulated probe is pressed on, and how hard: the options `measure` and `selftest`
 /// share.
 #[derive(clap::Args, Clone, Debug)]

@@ -729,20 +729,29 @@ impl Normal {
     }
 }
 
+/// The motional branch's admittance `1 / (R1 + jωL1 + 1/(jωC1))` at `f` (G, B), in f64: the
+/// series resonator of resonance `f0`, quality factor `q` and peak conductance `g`.
+fn motional(f0: f64, q: f64, g: f64, f: f64) -> (f64, f64) {
+    let w0 = 2.0 * std::f64::consts::PI * f0;
+    let r1 = 1.0 / g;
+    let l1 = q * r1 / w0;
+    let c1 = 1.0 / (w0 * w0 * l1);
+    let w = 2.0 * std::f64::consts::PI * f;
+    // 1 / (a + jb) = (a - jb) / (a² + b²)
+    let (a, b) = (r1, w * l1 - 1.0 / (w * c1));
+    let d = a * a + b * b;
+    (a / d, -b / d)
+}
+
 impl HeavyC0 {
     /// `Y = G0 + jωC0 + 1 / (R1 + jωL1 + 1/(jωC1))` in f64.
     fn admittance(&self, f: f64) -> (f64, f64) {
         let w0 = 2.0 * std::f64::consts::PI * self.f0;
-        let r1 = 1.0 / self.g;
-        let l1 = self.q * r1 / w0;
-        let c1 = 1.0 / (w0 * w0 * l1);
         let c0 = self.ratio * self.g / w0;
         let g0 = self.g0_rel * self.g;
         let w = 2.0 * std::f64::consts::PI * f;
-        // 1 / (a + jb) = (a - jb) / (a² + b²)
-        let (a, b) = (r1, w * l1 - 1.0 / (w * c1));
-        let d = a * a + b * b;
-        (g0 + a / d, w * c0 - b / d)
+        let (gm, bm) = motional(self.f0, self.q, self.g, f);
+        (g0 + gm, w * c0 + bm)
     }
 
     fn csv(&self) -> String {
@@ -903,14 +912,9 @@ const OTHER_PROBE: Resonator = Resonator {
 
 impl Resonator {
     fn admittance(&self, f: f64) -> (f64, f64) {
-        let w0 = 2.0 * std::f64::consts::PI * self.f0;
-        let r1 = 1.0 / self.g;
-        let l1 = self.q * r1 / w0;
-        let c1 = 1.0 / (w0 * w0 * l1);
         let w = 2.0 * std::f64::consts::PI * f;
-        let (a, b) = (r1, w * l1 - 1.0 / (w * c1));
-        let d = a * a + b * b;
-        (self.g0 + a / d, w * self.c0 - b / d)
+        let (gm, bm) = motional(self.f0, self.q, self.g, f);
+        (self.g0 + gm, w * self.c0 + bm)
     }
     /// `(f, G, B)` from `f_lo` to `f_hi` in `n` points, with seeded noise.
     fn sweep(&self, f_lo: f64, f_hi: f64, n: usize, seed: u64) -> Vec<(f64, f64, f64)> {

@@ -92,69 +92,45 @@ pub fn all() -> [Phantom; 8] {
     [A, B, C, D, E, s[0], s[1], s[2]]
 }
 
-/// Soft tissue of Krouskop et al. 1998 (quasi-static compression of excised tissue): `nu` 0.49
-/// and `rho` 1000 kg/m^3 as [`Tissue::with_modulus_kpa`]; `modulus_kpa` is the paper's mean at
-/// the stated precompression and 1 Hz, `loss_tangent` ours (see [`tissues`]).
-const fn krouskop(
-    name: &'static str,
-    source: &'static str,
-    modulus_kpa: f64,
-    loss_tangent: f64,
-) -> Phantom {
-    Phantom {
-        name,
-        source,
-        modulus_kpa,
-        poisson: 0.49,
-        density_kg_m3: 1000.0,
-        loss_tangent,
-    }
+/// Soft tissue of Krouskop et al. 1998 (quasi-static compression of excised tissue), one line a
+/// tissue: `NAME = "name", "tissue", precompression %, modulus kPa, loss tangent;`. `nu` 0.49 and
+/// `rho` 1000 kg/m^3 as [`Tissue::with_modulus_kpa`]; the modulus is the paper's mean at the
+/// stated precompression and 1 Hz, the loss tangent ours (see [`tissues`]).
+macro_rules! krouskop {
+    ($($(#[$doc:meta])* $id:ident = $name:literal, $tissue:literal, $pre:literal, $kpa:literal, $tan:literal;)*) => {$(
+        $(#[$doc])*
+        pub const $id: Phantom = Phantom {
+            name: $name,
+            source: concat!("Krouskop 1998: ", $tissue, ", ", $pre, " % precompression, 1 Hz (tan d ours)"),
+            modulus_kpa: $kpa,
+            poisson: 0.49,
+            density_kg_m3: 1000.0,
+            loss_tangent: $tan,
+        };
+    )*};
 }
 
-/// Breast fat: Krouskop et al. 1998 (Ultrasonic Imaging 20:260), normal fat, 20 %
-/// precompression, 1 Hz: 20 ± 8 kPa (18 ± 7 kPa at 5 %; fat's modulus does not depend on the
-/// strain). Far below the probe's range: the probe reads it as its softest. Loss tangent 0.20 is
-/// ours (below the 0.40 bound of the same paper; see `docs/physics.md`).
-pub const FAT_LIKE: Phantom = krouskop(
-    "fat-like",
-    "Krouskop 1998: breast fat, 20 % precompression, 1 Hz (tan d ours)",
-    20.0,
-    0.20,
-);
-/// Fibrous breast tissue: Krouskop et al. 1998, normal fibrous tissue, 20 % precompression,
-/// 1 Hz: 233 ± 59 kPa (96–116 kPa at 5 %). Loss tangent 0.15 is ours.
-pub const FIBROUS_BREAST_LIKE: Phantom = krouskop(
-    "fibrous-breast-like",
-    "Krouskop 1998: fibrous breast tissue, 20 % precompression, 1 Hz (tan d ours)",
-    233.0,
-    0.15,
-);
-/// Ductal carcinoma in situ: Krouskop et al. 1998, intraductal (in situ) carcinoma, 20 %
-/// precompression, 1 Hz: 301 ± 58 kPa (like fat at 5 %, 22–28 kPa). Loss tangent 0.25 is ours
-/// (malignant lesions are the more liquid-like, Sinkus et al. 2007).
-pub const DCIS_LIKE: Phantom = krouskop(
-    "dcis-like",
-    "Krouskop 1998: ductal carcinoma in situ, 20 % precompression, 1 Hz (tan d ours)",
-    301.0,
-    0.25,
-);
-/// Invasive ductal carcinoma: Krouskop et al. 1998, infiltrating ductal carcinoma, 20 %
-/// precompression, 1 Hz: 490 ± 112 kPa (460–558 kPa over 0.1–4 Hz), the stiffest breast tissue
-/// of the paper. Loss tangent 0.30 is ours (the most liquid-like, Sinkus et al. 2007).
-pub const CARCINOMA_LIKE: Phantom = krouskop(
-    "carcinoma-like",
-    "Krouskop 1998: invasive ductal carcinoma, 20 % precompression, 1 Hz (tan d ours)",
-    490.0,
-    0.30,
-);
-/// Prostate cancer: Krouskop et al. 1998, prostate cancer, 4 % precompression, 1 Hz:
-/// 230 ± 34 kPa (96–100 kPa at 2 %). Loss tangent 0.25 is ours.
-pub const PROSTATE_CANCER_LIKE: Phantom = krouskop(
-    "prostate-cancer-like",
-    "Krouskop 1998: prostate cancer, 4 % precompression, 1 Hz (tan d ours)",
-    230.0,
-    0.25,
-);
+krouskop! {
+    /// Breast fat: Krouskop et al. 1998 (Ultrasonic Imaging 20:260), normal fat, 20 %
+    /// precompression, 1 Hz: 20 ± 8 kPa (18 ± 7 kPa at 5 %; fat's modulus does not depend on the
+    /// strain). Far below the probe's range: the probe reads it as its softest. Loss tangent 0.20
+    /// is ours (below the 0.40 bound of the same paper; see `docs/physics.md`).
+    FAT_LIKE = "fat-like", "breast fat", 20, 20.0, 0.20;
+    /// Fibrous breast tissue: Krouskop et al. 1998, normal fibrous tissue, 20 % precompression,
+    /// 1 Hz: 233 ± 59 kPa (96–116 kPa at 5 %). Loss tangent 0.15 is ours.
+    FIBROUS_BREAST_LIKE = "fibrous-breast-like", "fibrous breast tissue", 20, 233.0, 0.15;
+    /// Ductal carcinoma in situ: Krouskop et al. 1998, intraductal (in situ) carcinoma, 20 %
+    /// precompression, 1 Hz: 301 ± 58 kPa (like fat at 5 %, 22–28 kPa). Loss tangent 0.25 is
+    /// ours (malignant lesions are the more liquid-like, Sinkus et al. 2007).
+    DCIS_LIKE = "dcis-like", "ductal carcinoma in situ", 20, 301.0, 0.25;
+    /// Invasive ductal carcinoma: Krouskop et al. 1998, infiltrating ductal carcinoma, 20 %
+    /// precompression, 1 Hz: 490 ± 112 kPa (460–558 kPa over 0.1–4 Hz), the stiffest breast
+    /// tissue of the paper. Loss tangent 0.30 is ours (the most liquid-like, Sinkus et al. 2007).
+    CARCINOMA_LIKE = "carcinoma-like", "invasive ductal carcinoma", 20, 490.0, 0.30;
+    /// Prostate cancer: Krouskop et al. 1998, prostate cancer, 4 % precompression, 1 Hz:
+    /// 230 ± 34 kPa (96–100 kPa at 2 %). Loss tangent 0.25 is ours.
+    PROSTATE_CANCER_LIKE = "prostate-cancer-like", "prostate cancer", 4, 230.0, 0.25;
+}
 
 /// Named soft-tissue targets: sourced moduli and a viscoelastic loss.
 ///

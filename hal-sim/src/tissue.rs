@@ -347,22 +347,20 @@ mod tests {
         }
     }
 
-    #[test]
-    fn free_probe_is_232_hz() {
-        // The free probe as the simulator runs it (the exactly discretised 8-state chain of
-        // `SimProbe`, free air, 10 kHz): ring it with a 20 ms burst near resonance, hold the DAC
-        // at mid-scale (0 V) and read the mode's own free decay from its velocity, 30 ms (the
-        // two-pole 1 kHz reconstruction filter has forgotten the burst to 1e-12) to 1 s.
+    /// Ring `scene`'s probe as the simulator runs it with a 20 ms burst of 600 codes at
+    /// `drive_hz`, hold the DAC at mid-scale and read the mode's free decay from its velocity,
+    /// 30 ms to `seconds`, by Prony's method: (natural frequency in Hz, Q).
+    fn ring_down(scene: crate::Scene, drive_hz: f64, seconds: f64) -> (f64, f64) {
         use crate::frontend::MID_CODE;
-        use crate::{AdcPair, Scene, SimProbe};
-        let mut p = SimProbe::new(Scene::free_air(), 1);
+        use crate::{AdcPair, SimProbe};
+        let mut p = SimProbe::new(scene, 1);
         let fs = p.front_end().sample_rate_hz;
         let mut adc = [AdcPair::default()];
         let mut decay = Prony::default();
-        for k in 0..(fs as usize) {
+        for k in 0..(seconds * fs) as usize {
             let t = k as f64 / fs;
             let code = if t < 0.02 {
-                libm::round(MID_CODE as f64 + 600.0 * libm::sin(2.0 * PI * 232.0 * t)) as u16
+                libm::round(MID_CODE as f64 + 600.0 * libm::sin(2.0 * PI * drive_hz * t)) as u16
             } else {
                 MID_CODE
             };
@@ -371,7 +369,16 @@ mod tests {
                 decay.push(p.velocity_m_s());
             }
         }
-        let (f, q) = decay.natural_hz_and_q(fs);
+        decay.natural_hz_and_q(fs)
+    }
+
+    #[test]
+    fn free_probe_is_232_hz() {
+        // The free probe as the simulator runs it (the exactly discretised 8-state chain of
+        // `SimProbe`, free air, 10 kHz): ring it with a 20 ms burst near resonance, hold the DAC
+        // at mid-scale (0 V) and read the mode's own free decay from its velocity, 30 ms (the
+        // two-pole 1 kHz reconstruction filter has forgotten the burst to 1e-12) to 1 s.
+        let (f, q) = ring_down(crate::Scene::free_air(), 232.0, 1.0);
         // Reference 1, paper 003: the prototype's measured free resonance, 232.3 Hz; and the
         // free Q of 40 that docs/physics.md states. On noise-free samples of an exact
         // discretisation Prony's method is exact up to rounding: measured errors 3e-11 Hz
@@ -400,29 +407,12 @@ mod tests {
         // the loaded resonance, hold the DAC at mid-scale and read the free decay of the mode's
         // velocity from 30 ms to 150 ms by Prony's method. The decay's Q is the Kelvin model's
         // closed form `sqrt(k m) / c` with the tissue's loss in `c` (below the lossless Q).
-        use crate::frontend::MID_CODE;
-        use crate::{AdcPair, Scene, SimProbe};
+        use crate::Scene;
         for t in crate::phantoms::tissues() {
             let scene = Scene::on_phantom(&t);
             let k = scene.kelvin();
             let f0 = k.natural_frequency_hz();
-            let mut p = SimProbe::new(scene, 1);
-            let fs = p.front_end().sample_rate_hz;
-            let mut adc = [AdcPair::default()];
-            let mut decay = Prony::default();
-            for n in 0..(0.15 * fs) as usize {
-                let ts = n as f64 / fs;
-                let code = if ts < 0.02 {
-                    libm::round(MID_CODE as f64 + 600.0 * libm::sin(2.0 * PI * f0 * ts)) as u16
-                } else {
-                    MID_CODE
-                };
-                p.exchange(&[code], &mut adc);
-                if ts >= 0.03 {
-                    decay.push(p.velocity_m_s());
-                }
-            }
-            let (f, q) = decay.natural_hz_and_q(fs);
+            let (f, q) = ring_down(scene, f0, 0.15);
             let mut lossless = t.tissue();
             lossless.loss_tangent = 0.0;
             let q_lossless = Scene::on_tissue(lossless).kelvin().q();

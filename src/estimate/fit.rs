@@ -42,6 +42,24 @@ pub struct Bvd {
 }
 
 impl Bvd {
+    /// The parameters `p = [G0, b0, g, f0, Q]` of a fit (`b0` at `f_ref`) with the standard
+    /// uncertainties `[f0, Q, G0, b0]`.
+    pub fn new(p: &[f64; 5], f_ref: f64, sigma: [f64; 4]) -> Self {
+        let [sigma_f0, sigma_q, sigma_g0, sigma_b0] = sigma;
+        Self {
+            g0: p[0],
+            b0: p[1],
+            f_ref,
+            g: p[2],
+            f0: p[3],
+            q: p[4],
+            sigma_f0,
+            sigma_q,
+            sigma_g0,
+            sigma_b0,
+        }
+    }
+
     /// Motional admittance (re, im) at `f`.
     pub fn motional(&self, f: f64) -> (f64, f64) {
         motional(self.g, self.f0, self.q, f)
@@ -150,18 +168,7 @@ pub fn fit_bvd(points: &[SweepPoint], f_start: f64, q_start: f64) -> Result<Bvd,
     if !p.iter().all(|v| v.is_finite()) || !sigma_f0.is_finite() {
         return Err(Failure::NoResonance);
     }
-    Ok(Bvd {
-        g0: p[0],
-        b0: p[1],
-        f_ref,
-        g: p[2],
-        f0: p[3],
-        q: p[4],
-        sigma_f0,
-        sigma_q,
-        sigma_g0,
-        sigma_b0,
-    })
+    Ok(Bvd::new(&p, f_ref, [sigma_f0, sigma_q, sigma_g0, sigma_b0]))
 }
 
 /// Resonance estimate of a BVD fit, checked against the span of the points.

@@ -248,6 +248,26 @@ impl Reading {
         }
     }
 
+    /// The reading of an estimate, before any unit data: `Ok`, the resonance with its
+    /// uncertainty and the Q as estimated, no modulus or loss yet.
+    pub fn estimated(
+        method: Method,
+        est: &Estimate,
+        probe_time: Seconds,
+        points: u16,
+        force: Option<crate::loadcell::ContactForce>,
+    ) -> Self {
+        Self {
+            status: Status::Ok,
+            resonance: Some(est.resonance),
+            resonance_sigma: Some(est.sigma),
+            q: est.q,
+            force,
+            // The rest empty, as on a reading with no estimate (its status replaced above).
+            ..Self::failed(method, Failure::LowSnr, probe_time, points)
+        }
+    }
+
     /// A reading that failed before any estimate.
     pub fn failed(method: Method, failure: Failure, probe_time: Seconds, points: u16) -> Self {
         Self {

@@ -103,21 +103,7 @@ pub fn conclude(
             return fail(verdict.unwrap_or(f));
         }
     };
-    let mut r = Reading {
-        status: Status::Ok,
-        method,
-        resonance: Some(est.resonance),
-        resonance_sigma: Some(est.sigma),
-        modulus: None,
-        modulus_sigma: None,
-        modulus_sigma_repeat: None,
-        q: est.q,
-        loss_tangent: None,
-        loss_tangent_sigma: None,
-        probe_time,
-        points,
-        force,
-    };
+    let mut r = Reading::estimated(method, &est, probe_time, points, force);
     let Some(air) = unit.air else {
         r.status = Status::Failed(Failure::NoAirReference);
         return r;

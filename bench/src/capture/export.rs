@@ -178,17 +178,61 @@ impl Pair {
     }
 }
 
-/// One `"TRACE: x"` block of a 4294A file.
-struct Trace {
+/// One block of columns and rows of numbers: a `"TRACE: x"` block of a 4294A file, a channel
+/// of an E4990A CSV.
+struct Block {
+    /// `trace` or `channel`, for the messages.
+    kind: &'static str,
     name: String,
     line: usize,
     cols: Vec<String>,
     rows: Vec<(usize, Vec<f64>)>,
 }
 
-impl Trace {
+impl Block {
+    /// A block named `name` that starts at `line`, with no columns and no rows yet.
+    fn new(kind: &'static str, name: String, line: usize) -> Self {
+        Self {
+            kind,
+            name,
+            line,
+            cols: Vec::new(),
+            rows: Vec::new(),
+        }
+    }
+
     fn col(&self, name: &str) -> Option<usize> {
         self.cols.iter().position(|c| c.eq_ignore_ascii_case(name))
+    }
+
+    /// Keep row `line` of `layout`'s file, its `cells` each a finite number.
+    fn push(&mut self, layout: Layout, line: usize, cells: &[&str]) -> Result<(), CaptureError> {
+        let v = cells
+            .iter()
+            .map(|c| number(layout, line, c))
+            .collect::<Result<Vec<f64>, _>>()?;
+        self.rows.push((line, v));
+        Ok(())
+    }
+
+    /// The block's rows, or the error of a file truncated after its header (reported at
+    /// `last_line`).
+    fn data_rows(
+        &self,
+        layout: Layout,
+        last_line: usize,
+    ) -> Result<&[(usize, Vec<f64>)], CaptureError> {
+        if self.rows.is_empty() {
+            return Err(err(
+                layout,
+                last_line,
+                format!(
+                    "{} {} (line {}) has no data rows: the file is truncated",
+                    self.kind, self.name, self.line
+                ),
+            ));
+        }
+        Ok(&self.rows)
     }
 }
 
@@ -226,27 +270,16 @@ fn parameter_4294a(p: &str) -> Option<Pair> {
 pub(super) fn read_4294a(text: &str) -> Result<Rows, CaptureError> {
     const L: Layout = Layout::Hp4294a;
     let mut measure: Option<(usize, String)> = None;
-    let mut traces: Vec<Trace> = Vec::new();
-    let mut last_line = 1;
-    for (k, raw) in text.lines().enumerate() {
-        let line = k + 1;
-        last_line = line;
-        let s = raw.trim();
-        if s.is_empty() {
-            continue;
-        }
+    let mut traces: Vec<Block> = Vec::new();
+    let last_line = super::last_line(text);
+    for (line, s) in super::content_lines(text, None) {
         let u = unquote(s);
         if let Some(v) = strip_ci(u, "MEASURE PARAMETER:") {
             measure = Some((line, v.trim().to_owned()));
             continue;
         }
         if let Some(v) = strip_ci(u, "TRACE:") {
-            traces.push(Trace {
-                name: v.trim().to_ascii_uppercase(),
-                line,
-                cols: Vec::new(),
-                rows: Vec::new(),
-            });
+            traces.push(Block::new("trace", v.trim().to_ascii_uppercase(), line));
             continue;
         }
         let Some(t) = traces.last_mut() else {
@@ -294,11 +327,7 @@ pub(super) fn read_4294a(text: &str) -> Result<Rows, CaptureError> {
                 ),
             ));
         }
-        let v = cells
-            .iter()
-            .map(|c| number(L, line, c))
-            .collect::<Result<Vec<f64>, _>>()?;
-        t.rows.push((line, v));
+        t.push(L, line, &cells)?;
     }
     let Some(a) = traces.first() else {
         return Err(err(L, last_line, "no \"TRACE: A\" block".into()));
@@ -314,16 +343,7 @@ pub(super) fn read_4294a(text: &str) -> Result<Rows, CaptureError> {
                 ),
             ));
         }
-        if t.rows.is_empty() {
-            return Err(err(
-                L,
-                last_line,
-                format!(
-                    "trace {} (line {}) has no data rows: the file is truncated",
-                    t.name, t.line
-                ),
-            ));
-        }
+        t.data_rows(L, last_line)?;
     }
     let fcol = a.col("Frequency").unwrap_or(0);
     // The data array holds R and X whatever the measurement parameter ("Data contents saved in
@@ -386,10 +406,10 @@ pub(super) fn read_4294a(text: &str) -> Result<Rows, CaptureError> {
 fn convert(
     layout: Layout,
     pair: Pair,
-    a: &Trace,
+    a: &Block,
     fcol: usize,
     ca: usize,
-    b: &Trace,
+    b: &Block,
     cb: usize,
 ) -> Result<Vec<(usize, f64, f64, f64)>, CaptureError> {
     let fb = b.col("Frequency").unwrap_or(0);
@@ -461,34 +481,35 @@ fn quantity_e4990a(header: &str) -> Option<Quantity> {
     })
 }
 
-/// One channel block of an E4990A CSV.
-struct Channel {
-    name: String,
-    line: usize,
-    cols: Vec<String>,
-    rows: Vec<(usize, Vec<f64>)>,
-}
+/// A test of a column's quantity.
+type QuantityIs = fn(Quantity) -> bool;
+
+/// The pairs of E4990A `-data` columns that give the admittance, in the order they are looked
+/// for: the first column's quantity, the second's, and the pair they make.
+const PAIRS_E4990A: [(QuantityIs, QuantityIs, Pair); 4] = [
+    (|q| q == Quantity::ZRe, |q| q == Quantity::ZIm, Pair::ZRect),
+    (
+        |q| q == Quantity::ZMag,
+        |q| matches!(q, Quantity::ZTheta(_)),
+        Pair::ZPolar(true),
+    ),
+    (|q| q == Quantity::YRe, |q| q == Quantity::YIm, Pair::YRect),
+    (
+        |q| q == Quantity::YMag,
+        |q| matches!(q, Quantity::YTheta(_)),
+        Pair::YPolar(true),
+    ),
+];
 
 /// Read an E4990A trace-data CSV (see the module docs).
 pub(super) fn read_e4990a(text: &str) -> Result<Rows, CaptureError> {
     const L: Layout = Layout::E4990a;
-    let mut chans: Vec<Channel> = Vec::new();
+    let mut chans: Vec<Block> = Vec::new();
     let mut open = false;
-    let mut last_line = 1;
-    for (k, raw) in text.lines().enumerate() {
-        let line = k + 1;
-        last_line = line;
-        let s = raw.trim();
-        if s.is_empty() || s.starts_with('!') {
-            continue;
-        }
+    let last_line = super::last_line(text);
+    for (line, s) in super::content_lines(text, Some('!')) {
         if let Some(v) = strip_ci(s, "BEGIN") {
-            chans.push(Channel {
-                name: v.trim().to_owned(),
-                line,
-                cols: Vec::new(),
-                rows: Vec::new(),
-            });
+            chans.push(Block::new("channel", v.trim().to_owned(), line));
             open = true;
             continue;
         }
@@ -504,12 +525,7 @@ pub(super) fn read_e4990a(text: &str) -> Result<Rows, CaptureError> {
         if starts_ci(first, "Frequency") {
             if !open {
                 // The file without BEGIN/END: one implicit channel.
-                chans.push(Channel {
-                    name: "CH1".into(),
-                    line,
-                    cols: Vec::new(),
-                    rows: Vec::new(),
-                });
+                chans.push(Block::new("channel", "CH1".into(), line));
                 open = true;
             }
             let Some(c) = chans.last_mut() else { continue };
@@ -551,11 +567,7 @@ pub(super) fn read_e4990a(text: &str) -> Result<Rows, CaptureError> {
                 format!("expected {} values, found {}", c.cols.len(), cells.len()),
             ));
         }
-        let v = cells
-            .iter()
-            .map(|x| number(L, line, x))
-            .collect::<Result<Vec<f64>, _>>()?;
-        c.rows.push((line, v));
+        c.push(L, line, &cells)?;
     }
     if chans.is_empty() {
         return Err(err(L, last_line, "no `Frequency(Hz), …` header".into()));
@@ -574,31 +586,9 @@ pub(super) fn read_e4990a(text: &str) -> Result<Rows, CaptureError> {
                 .iter()
                 .position(|h| quantity_e4990a(h).is_some_and(q))
         };
-        let pairs: [(Option<usize>, Option<usize>, Pair); 4] = [
-            (
-                find(|q| q == Quantity::ZRe),
-                find(|q| q == Quantity::ZIm),
-                Pair::ZRect,
-            ),
-            (
-                find(|q| q == Quantity::ZMag),
-                find(|q| matches!(q, Quantity::ZTheta(_))),
-                Pair::ZPolar(true),
-            ),
-            (
-                find(|q| q == Quantity::YRe),
-                find(|q| q == Quantity::YIm),
-                Pair::YRect,
-            ),
-            (
-                find(|q| q == Quantity::YMag),
-                find(|q| matches!(q, Quantity::YTheta(_))),
-                Pair::YPolar(true),
-            ),
-        ];
-        let Some((ia, ib, pair)) = pairs
+        let Some((ia, ib, pair)) = PAIRS_E4990A
             .iter()
-            .find_map(|(a, b, p)| Some((a.as_ref().copied()?, b.as_ref().copied()?, *p)))
+            .find_map(|&(a, b, p)| Some((find(a)?, find(b)?, p)))
         else {
             seen.extend(c.cols.iter().skip(1).cloned());
             continue;
@@ -609,18 +599,9 @@ pub(super) fn read_e4990a(text: &str) -> Result<Rows, CaptureError> {
             (Pair::YPolar(_), Some(Quantity::YTheta(d))) => Pair::YPolar(d),
             (p, _) => p,
         };
-        if c.rows.is_empty() {
-            return Err(err(
-                L,
-                last_line,
-                format!(
-                    "channel {} (line {}) has no data rows: the file is truncated",
-                    c.name, c.line
-                ),
-            ));
-        }
-        let mut rows = Vec::with_capacity(c.rows.len());
-        for (line, v) in &c.rows {
+        let c_rows = c.data_rows(L, last_line)?;
+        let mut rows = Vec::with_capacity(c_rows.len());
+        for (line, v) in c_rows {
             let (g, b) = pair
                 .admittance(v[ia], v[ib])
                 .map_err(|why| err(L, *line, why.into()))?;

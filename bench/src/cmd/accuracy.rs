@@ -3,7 +3,7 @@
 
 use super::progress;
 use crate::accuracy::{binomial_sd, measure, work_units, Budget, Options};
-use crate::plot::{draw_legend, err, padded_range, with_backend, PALETTE};
+use crate::plot::{self, draw_legend, err, padded_range, with_backend, PALETTE};
 use anyhow::Result;
 use clap::Args;
 use plotters::prelude::*;
@@ -377,27 +377,24 @@ where
         .map(|p| p.2.abs())
         .fold(2.5 * smax, f64::max)
         .max(1e-3);
-    let mut chart = ChartBuilder::on(root)
-        .caption(
-            format!(
+    let caption = format!(
                 "error against reported σ: auto, bench noise, {} ok readings ({:.0} % within 1σ, {:.0} % within 2σ)",
                 b.coverage.ok,
                 100.0 * b.coverage.frac1(),
                 100.0 * b.coverage.frac2()
-            ),
-            ("sans-serif", 16),
-        )
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0.0..smax, -emax..emax)
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("reported σ, % of the reading")
-        .y_desc("error against the truth, %")
-        .draw()
-        .map_err(err)?;
+            );
+    let mut chart = plot::chart(
+        root,
+        Some((&caption, 16)),
+        plot::Frame {
+            margin: 12,
+            x_labels: 40,
+            y_labels: 60,
+        },
+        (0.0..smax, -emax..emax),
+        ("reported σ, % of the reading", "error against the truth, %"),
+    )
+    .map_err(err)?;
     for (k, lbl) in [(1.0, "±1σ"), (2.0, "±2σ")] {
         let col = PALETTE[7].mix(if k == 1.0 { 0.9 } else { 0.5 });
         for sgn in [1.0, -1.0] {

@@ -194,23 +194,13 @@ pub fn misfit_scaled(e: Estimate, pts: &[SweepPoint]) -> Result<(Estimate, f64),
     ))
 }
 
-/// A Butterworth–Van Dyke fit of the admittance's magnitude alone (the phase is not used).
+/// A Butterworth–Van Dyke fit of the admittance's magnitude alone (the phase is not used): the
+/// model's parameters as the complex fit gives them ([`fit::Bvd`]; the uncertainties of `f0` and
+/// `Q` scaled by `sqrt(χ²/dof)` when that exceeds 1, those of `G0` and `b0` from the noise alone).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MagnitudeFit {
-    /// Parallel conductance, S.
-    pub g0: f64,
-    /// Static susceptance at `f_ref`, S.
-    pub b0: f64,
-    /// Reference frequency of `b0`, Hz.
-    pub f_ref: f64,
-    /// Motional peak conductance, S.
-    pub g: f64,
-    /// Resonance, Hz.
-    pub f0: f64,
-    /// Quality factor.
-    pub q: f64,
-    /// Standard uncertainty of `f0`, Hz (scaled by `sqrt(χ²/dof)` when that exceeds 1).
-    pub sigma_f0: f64,
+    /// The fitted parameters.
+    pub bvd: fit::Bvd,
     /// χ²/dof.
     pub reduced_chi2: f64,
 }
@@ -322,22 +312,22 @@ pub fn fit_magnitude(pts: &[SweepPoint]) -> Result<MagnitudeFit, Failure> {
     let (jtj, _) = normal(&p);
     let cov = spd_inverse(&jtj).ok_or(Failure::NoResonance)?;
     let red = chi2 / n.saturating_sub(5).max(1) as f64;
-    let sigma_f0 = (cov[3][3] * red.max(1.0)).max(0.0).sqrt();
-    if !p.iter().all(|v| v.is_finite()) || !sigma_f0.is_finite() {
+    let sigma = |k: usize, scale: f64| (cov[k][k] * scale).max(0.0).sqrt();
+    let s = red.max(1.0);
+    let bvd = fit::Bvd::new(
+        &p,
+        f_ref,
+        [sigma(3, s), sigma(4, s), sigma(0, 1.0), sigma(1, 1.0)],
+    );
+    if !p.iter().all(|v| v.is_finite()) || !bvd.sigma_f0.is_finite() {
         return Err(Failure::NoResonance);
     }
     if !(p[3] > fa && p[3] < fb) {
         return Err(Failure::OutOfBand);
     }
-    estimate::resolved(sigma_f0, p[3] / p[4])?;
+    estimate::resolved(bvd.sigma_f0, p[3] / p[4])?;
     Ok(MagnitudeFit {
-        g0: p[0],
-        b0: p[1],
-        f_ref,
-        g: p[2],
-        f0: p[3],
-        q: p[4],
-        sigma_f0,
+        bvd,
         reduced_chi2: red,
     })
 }
@@ -442,9 +432,9 @@ pub fn analyze(
                 Ok(m) => (
                     Method::Fit,
                     Ok(Estimate {
-                        resonance: Hz(m.f0 as f32),
-                        sigma: Hz(m.sigma_f0 as f32),
-                        q: Some(m.q as f32),
+                        resonance: Hz(m.bvd.f0 as f32),
+                        sigma: Hz(m.bvd.sigma_f0 as f32),
+                        q: Some(m.bvd.q as f32),
                         q_sigma: None,
                         points_used: pts.len().min(u16::MAX as usize) as u16,
                     }),
@@ -504,21 +494,7 @@ fn conclude_without_unit(
         Ok(e) => e,
         Err(f) => return Reading::failed(method, f, probe_time, points),
     };
-    let mut r = Reading {
-        status: Status::Ok,
-        method,
-        resonance: Some(est.resonance),
-        resonance_sigma: Some(est.sigma),
-        modulus: None,
-        modulus_sigma: None,
-        modulus_sigma_repeat: None,
-        q: est.q,
-        loss_tangent: None,
-        loss_tangent_sigma: None,
-        probe_time,
-        points,
-        force: None,
-    };
+    let mut r = Reading::estimated(method, &est, probe_time, points, None);
     if est.q.is_some_and(|q| q < pipeline::MIN_READABLE_Q) {
         r.status = Status::Failed(Failure::BroadResonance);
         return r;

@@ -1,13 +1,20 @@
 //! `probe-bench log`: the readings and sweeps in a decoded defmt log of the firmware.
 
 use crate::defmt_log::{self, Level, LoggedReading, Session};
-use crate::plot::{draw_legend, err, padded_range, with_backend, PALETTE};
+use crate::plot::{self, draw_legend, err, padded_range, with_backend, PALETTE};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use plotters::prelude::*;
 use serde_json::{json, Value};
 use std::io::Read;
 use std::path::{Path, PathBuf};
+
+/// The frame of this command's charts.
+const FRAME: plot::Frame = plot::Frame {
+    margin: 10,
+    x_labels: 40,
+    y_labels: 60,
+};
 
 #[derive(Args)]
 pub struct LogArgs {
@@ -311,19 +318,14 @@ where
         (f0, f1) = (0.0, 1.0);
     }
     let g1 = if g1 > g0 { g1 * 1.05 } else { g0 + 1.0 };
-    let mut chart = ChartBuilder::on(&top)
-        .caption("logged sweeps: conductance", ("sans-serif", 16))
-        .margin(10)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(f0..f1, g0..g1)
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("drive frequency (Hz)")
-        .y_desc("G = Re(Y) (nS)")
-        .draw()
-        .map_err(err)?;
+    let mut chart = plot::chart(
+        &top,
+        Some(("logged sweeps: conductance", 16)),
+        FRAME,
+        (f0..f1, g0..g1),
+        ("drive frequency (Hz)", "G = Re(Y) (nS)"),
+    )
+    .map_err(err)?;
     for (k, w) in s.sweeps.iter().enumerate() {
         let c = PALETTE[k % PALETTE.len()];
         let line: Vec<(f64, f64)> = w
@@ -341,11 +343,7 @@ where
             ),
             None => format!("sweep at line {} (no reading)", w.first_line),
         };
-        chart
-            .draw_series(LineSeries::new(line.clone(), c.stroke_width(2)))
-            .map_err(err)?
-            .label(label)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+        plot::line(&mut chart, line.clone(), c.stroke_width(2), label).map_err(err)?;
         chart
             .draw_series(
                 line.iter()
@@ -382,21 +380,17 @@ where
         0.15,
         (200.0, 260.0),
     );
-    let mut hist = ChartBuilder::on(&bottom)
-        .caption(
+    let mut hist = plot::chart(
+        &bottom,
+        Some((
             "reading history: resonance ± standard uncertainty (ok: blue, failed: red)",
-            ("sans-serif", 16),
-        )
-        .margin(10)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(x0..x1, y0..y1)
-        .map_err(err)?;
-    hist.configure_mesh()
-        .x_desc(if timed { "time (s)" } else { "reading" })
-        .y_desc("resonance (Hz)")
-        .draw()
-        .map_err(err)?;
+            16,
+        )),
+        FRAME,
+        (x0..x1, y0..y1),
+        (if timed { "time (s)" } else { "reading" }, "resonance (Hz)"),
+    )
+    .map_err(err)?;
     for (x, r) in &rs {
         let Some(f) = r.f_hz else { continue };
         let f = f as f64;

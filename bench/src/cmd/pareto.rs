@@ -6,7 +6,7 @@ use crate::pareto::{
     stream_unit, tau_ms, Cell, Config, StreamCell, STREAM_SECONDS, STREAM_SEGMENTS_S,
     STREAM_SETTLE_S,
 };
-use crate::plot::{draw_legend, err, with_backend, PALETTE};
+use crate::plot::{self, draw_legend, err, with_backend, PALETTE};
 use crate::scene::Target;
 use anyhow::{anyhow, Result};
 use clap::Args;
@@ -532,18 +532,21 @@ where
     DB::ErrorType: 'static,
 {
     root.fill(&WHITE).map_err(err)?;
-    let mut ch = ChartBuilder::on(root)
-        .caption(title, ("sans-serif", 18))
-        .margin(14)
-        .x_label_area_size(45)
-        .y_label_area_size(65)
-        .build_cartesian_2d((10f64..50_000f64).log_scale(), (ymin..ymax).log_scale())
-        .map_err(err)?;
-    ch.configure_mesh()
-        .x_desc("probe time per reading (ms)")
-        .y_desc("RMS modulus error caused by noise (%)")
-        .draw()
-        .map_err(err)?;
+    let mut ch = plot::chart(
+        root,
+        Some((title, 18)),
+        plot::Frame {
+            margin: 14,
+            x_labels: 45,
+            y_labels: 65,
+        },
+        ((10f64..50_000f64).log_scale(), (ymin..ymax).log_scale()),
+        (
+            "probe time per reading (ms)",
+            "RMS modulus error caused by noise (%)",
+        ),
+    )
+    .map_err(err)?;
     ch.draw_series(LineSeries::new(
         front.iter().copied(),
         ShapeStyle::from(&RGBColor(170, 170, 170)).stroke_width(8),
@@ -556,10 +559,13 @@ where
             RGBColor(170, 170, 170).stroke_width(6),
         )
     });
-    ch.draw_series(LineSeries::new(crb.iter().copied(), BLACK.stroke_width(2)))
-        .map_err(err)?
-        .label("Cramér–Rao bound")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2)));
+    plot::line(
+        &mut ch,
+        crb.iter().copied(),
+        BLACK.stroke_width(2),
+        "Cramér–Rao bound",
+    )
+    .map_err(err)?;
     let grey = RGBColor(90, 90, 90);
     ch.draw_series(DashedLineSeries::new(
         steady.iter().copied(),
@@ -578,13 +584,13 @@ where
             continue;
         }
         p.sort_by(|a, b| a.1.total_cmp(&b.1));
-        ch.draw_series(LineSeries::new(
+        plot::line(
+            &mut ch,
             p.iter().map(|q| (q.1, q.2)),
             col.stroke_width(2),
-        ))
-        .map_err(err)?
-        .label(m.name())
-        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(2)));
+            m.name(),
+        )
+        .map_err(err)?;
         ch.draw_series(p.iter().map(|q| {
             let style = if q.3 >= 0.95 {
                 col.filled()
@@ -598,13 +604,13 @@ where
     // The continuous tracker: one reading per segment, so its probe time per reading is the
     // time per ok reading (1 / ok readings per second), segment lengths 35–150 ms.
     let col = RGBColor(200, 0, 120);
-    ch.draw_series(LineSeries::new(
+    plot::line(
+        &mut ch,
         tracker.iter().copied(),
         col.stroke_width(3),
-    ))
-    .map_err(err)?
-    .label("stream (tracker): 1 / (ok readings per s)")
-    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(3)));
+        "stream (tracker): 1 / (ok readings per s)",
+    )
+    .map_err(err)?;
     ch.draw_series(
         tracker
             .iter()

@@ -12,7 +12,7 @@
 
 use super::progress;
 use crate::calfile;
-use crate::plot::{draw_legend, err, padded_range, with_backend};
+use crate::plot::{self, draw_legend, err, padded_range, with_backend};
 use crate::scene::parse_noise;
 use anyhow::{anyhow, bail, Result};
 use clap::{Args, ValueEnum};
@@ -704,14 +704,13 @@ where
         )
         .map_err(err)?;
     if let Some(r) = spec.phantom.outline_radius_m {
-        chart
-            .draw_series(LineSeries::new(
-                circle(0.0, 0.0, r * 1e3),
-                BLACK.stroke_width(2),
-            ))
-            .map_err(err)?
-            .label("phantom outline")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2)));
+        plot::line(
+            &mut chart,
+            circle(0.0, 0.0, r * 1e3),
+            BLACK.stroke_width(2),
+            "phantom outline",
+        )
+        .map_err(err)?;
     }
     chart
         .draw_series(LineSeries::new(circle(tx, ty, tr), WHITE.stroke_width(1)))
@@ -719,14 +718,13 @@ where
         .label("true inclusion outline")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RGBColor(150, 150, 150)));
     if let Some(l) = &res.lump {
-        chart
-            .draw_series(LineSeries::new(
-                circle(l.x_mm, l.y_mm, 0.5 * l.diameter_mm),
-                RED.stroke_width(3),
-            ))
-            .map_err(err)?
-            .label("lump found (half-height region, equal-area disc)")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(3)));
+        plot::line(
+            &mut chart,
+            circle(l.x_mm, l.y_mm, 0.5 * l.diameter_mm),
+            RED.stroke_width(3),
+            "lump found (half-height region, equal-area disc)",
+        )
+        .map_err(err)?;
         chart
             .draw_series(std::iter::once(Cross::new(
                 (l.x_mm, l.y_mm),

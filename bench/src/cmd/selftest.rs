@@ -3,7 +3,7 @@
 //! asked: what the firmware would log, as text or JSON. A failed self-test exits non-zero.
 
 use crate::calfile;
-use crate::scene::{noise_name, parse_noise, SceneArgs};
+use crate::scene::{noise_name, parse_noise, NoiseArgs, SceneArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use hal_sim::{Fault, SimProbe};
@@ -23,12 +23,9 @@ pub struct SelftestArgs {
     /// What the probe is on (default: free air), and the preload.
     #[command(flatten)]
     pub scene: SceneArgs,
-    /// Front-end noise: `quiet`, `paper`, `bench`, or a current-noise density in A/sqrt(Hz).
-    #[arg(long, default_value = "bench")]
-    pub noise: String,
-    /// Seed of the simulated noise.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
+    /// The front end's noise and its seed.
+    #[command(flatten)]
+    pub noise: NoiseArgs,
     /// Unit profile file (`probe-bench calibrate --out`); default: the simulated unit's
     /// factory profile (src/board/sim_factory.rs), whose air reference gives C0.
     #[arg(long)]
@@ -43,7 +40,7 @@ pub struct SelftestArgs {
 
 /// Run the subcommand.
 pub fn run(a: SelftestArgs) -> Result<()> {
-    let noise = parse_noise(&a.noise)?;
+    let noise = parse_noise(&a.noise.noise)?;
     let (target, mut scene) = a.scene.scene(noise, true)?;
     let fault = match a.fault.as_deref() {
         None | Some("none") => None,
@@ -62,7 +59,7 @@ pub fn run(a: SelftestArgs) -> Result<()> {
     if let Some(f) = fault {
         scene = f.apply(scene);
     }
-    let mut board = SimBoard::new(SimProbe::new(scene, a.seed));
+    let mut board = SimBoard::new(SimProbe::new(scene, a.noise.seed));
     let mut engine = SampleEngine::new();
     let mut src = SyncSource::new(&mut board, &mut engine);
     let r = block_on(selftest::run(&mut src, &unit, |_| {}));

@@ -12,7 +12,7 @@
 //! interpolated, its centre their midpoint, its contrast the ratio of the two levels. The
 //! truth is the same rule on the phantom's closed-form apparent modulus along the same line.
 
-use crate::plot::{draw_legend, padded_range, with_backend, PALETTE};
+use crate::plot::{self, draw_legend, padded_range, with_backend, PALETTE};
 use anyhow::{anyhow, bail, Result};
 use hal_sim::lump::LumpPhantom;
 use hal_sim::Scene;
@@ -22,6 +22,13 @@ use pzt_probe::instrument::continuous::{StreamReading, TrackerConfig};
 use pzt_probe::{Status, UnitProfile};
 use serde_json::{json, Value};
 use std::path::Path;
+
+/// The frame of this command's charts.
+const FRAME: plot::Frame = plot::Frame {
+    margin: 10,
+    x_labels: 35,
+    y_labels: 70,
+};
 
 /// Probe time spent acquiring at the start of the path before the tip moves, s.
 pub const ACQUIRE_S: f64 = 0.5;
@@ -269,18 +276,14 @@ where
         "sliding scan of the {} phantom at {} mm/s (y = {} mm)",
         s.phantom.name, s.speed_mm_s, s.y_mm
     );
-    let mut c = ChartBuilder::on(root)
-        .caption(title, ("sans-serif", 18))
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(70)
-        .build_cartesian_2d(lo..hi, elo..ehi)
-        .map_err(err)?;
-    c.configure_mesh()
-        .x_desc("tip position x, mm")
-        .y_desc("modulus, kPa")
-        .draw()
-        .map_err(err)?;
+    let mut c = plot::chart(
+        root,
+        Some((&title, 18)),
+        FRAME,
+        (lo..hi, elo..ehi),
+        ("tip position x, mm", "modulus, kPa"),
+    )
+    .map_err(err)?;
     let (tc, rc) = (PALETTE[0], PALETTE[1]);
     c.draw_series(LineSeries::new(truth, tc.stroke_width(2)))
         .map_err(err)?
@@ -329,21 +332,17 @@ where
         .filter_map(|r| Some((r.slide.speed_mm_s, r.centre_error_mm()?)))
         .collect();
     let (lo, hi) = padded_range(errs.iter().map(|p| p.1).chain([0.0]), 0.2, (-1.0, 1.0));
-    let mut c = ChartBuilder::on(&upper)
-        .caption(
+    let mut c = plot::chart(
+        &upper,
+        Some((
             "sliding scan: the lump's centre and contrast against speed",
-            ("sans-serif", 18),
-        )
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(70)
-        .build_cartesian_2d(0.0..vmax, lo..hi)
-        .map_err(err)?;
-    c.configure_mesh()
-        .x_desc("sliding speed, mm/s")
-        .y_desc("centre error, mm")
-        .draw()
-        .map_err(err)?;
+            18,
+        )),
+        FRAME,
+        (0.0..vmax, lo..hi),
+        ("sliding speed, mm/s", "centre error, mm"),
+    )
+    .map_err(err)?;
     let col = PALETTE[1];
     c.draw_series(LineSeries::new(errs.clone(), col.stroke_width(2)))
         .map_err(err)?;
@@ -362,17 +361,14 @@ where
         0.2,
         (1.0, 2.0),
     );
-    let mut l = ChartBuilder::on(&lower)
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(70)
-        .build_cartesian_2d(0.0..vmax, clo..chi)
-        .map_err(err)?;
-    l.configure_mesh()
-        .x_desc("sliding speed, mm/s")
-        .y_desc("contrast (lump / background)")
-        .draw()
-        .map_err(err)?;
+    let mut l = plot::chart(
+        &lower,
+        None,
+        FRAME,
+        (0.0..vmax, clo..chi),
+        ("sliding speed, mm/s", "contrast (lump / background)"),
+    )
+    .map_err(err)?;
     let tc = PALETTE[0];
     l.draw_series(LineSeries::new(truth, tc.stroke_width(2)))
         .map_err(err)?

@@ -2,7 +2,7 @@
 //! `pzt_probe::instrument::continuous`), with a step in stiffness, a lift-off and a new contact on the way.
 
 use crate::report;
-use crate::scene::{parse_noise, print_scene_header, SceneArgs};
+use crate::scene::{parse_noise, print_scene_header, NoiseArgs, SceneArgs};
 use crate::stream::{self, settled_after, summarize, StreamScene, Truth};
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -61,12 +61,9 @@ pub struct StreamArgs {
     /// Relative standard uncertainty of the previous segment's Q as the next fit's prior.
     #[arg(long, default_value_t = TrackerConfig::DEFAULT.q_prior as f64)]
     pub q_prior: f64,
-    /// Front-end noise: `quiet`, `paper`, `bench`, or a current-noise density in A/sqrt(Hz).
-    #[arg(long, default_value = "bench")]
-    pub noise: String,
-    /// Seed of the simulated noise.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
+    /// The front end's noise and its seed.
+    #[command(flatten)]
+    pub noise: NoiseArgs,
     /// One JSON object per reading on stdout (seq, t_s, status, resonance_hz, modulus_kpa,
     /// modulus_sigma_kpa, locked, ...), nothing else.
     #[arg(long)]
@@ -84,7 +81,7 @@ pub struct StreamArgs {
 
 /// Run the subcommand.
 pub fn run(a: StreamArgs) -> Result<()> {
-    let noise = parse_noise(&a.noise)?;
+    let noise = parse_noise(&a.noise.noise)?;
     let (target, _) = a.scene.scene(noise, false)?;
     let step = match (&a.step_to, a.step_at_s) {
         (Some(p), Some(at)) => Some((
@@ -164,7 +161,7 @@ pub fn run(a: StreamArgs) -> Result<()> {
         v.iter().for_each(&mut each);
         v
     } else {
-        stream::run(&stream_scene, &config, &unit, a.seed, a.seconds, each)?.readings
+        stream::run(&stream_scene, &config, &unit, a.noise.seed, a.seconds, each)?.readings
     };
     if let Some(e) = write_err {
         return Err(e.into());
@@ -279,18 +276,18 @@ where
     {
         root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e:?}"))?;
         let (upper, lower) = root.split_vertically(380);
-        let mut c = ChartBuilder::on(&upper)
-            .caption(title, ("sans-serif", 18))
-            .margin(10)
-            .x_label_area_size(30)
-            .y_label_area_size(70)
-            .build_cartesian_2d(0.0..t_end, lo..hi)
-            .map_err(|e| anyhow::anyhow!("{e:?}"))?;
-        c.configure_mesh()
-            .x_desc("probe time, s")
-            .y_desc("modulus, kPa")
-            .draw()
-            .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        let mut c = crate::plot::chart(
+            &upper,
+            Some((title, 18)),
+            crate::plot::Frame {
+                margin: 10,
+                x_labels: 30,
+                y_labels: 70,
+            },
+            (0.0..t_end, lo..hi),
+            ("probe time, s", "modulus, kPa"),
+        )
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
         let col = crate::plot::PALETTE[1];
         let tcol = crate::plot::PALETTE[0];
         // The truth: a step line sampled at the readings' times.
