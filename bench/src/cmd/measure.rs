@@ -164,7 +164,7 @@ pub fn describe_settings(s: &Settings) -> String {
             let (coarse, refine) = (s.coarse_points, s.refine_points);
             let (settle, int) = (ms(s.coarse_settle), ms(s.integrate));
             let (span, tau) = (s.refine_span, s.settle_tau);
-            format!("band {f0}–{f1} Hz, {coarse} coarse points (settle {settle} ms), {refine} refine points/steps (span {span} linewidths, settle {tau} tau), integrate {int} ms, drive {drive} V")
+            format!("band {f0}–{f1} Hz, {coarse} coarse points (settle {settle} ms), {refine} refine points (span {span} linewidths, settle {tau} tau), integrate {int} ms, drive {drive} V")
         }
         Settings::Hold(s) => {
             let (f0, f1, seed, drive) = (s.band_start.0, s.band_stop.0, s.seed.0, s.drive.0);
