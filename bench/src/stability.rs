@@ -455,6 +455,14 @@ pub fn stream_catalogue(noise: NoiseScene) -> Vec<StreamCase> {
     let ph = |n: &str| phantoms::by_name(n).expect("a phantom or a named tissue");
     let c = StreamScene::on(Target::Phantom(ph("C")), noise);
     let lossy = StreamScene::on(Target::Phantom(ph("carcinoma-like")), noise);
+    // Lifted off at 1.5 s at once.
+    let lifted = |s: StreamScene| StreamScene {
+        lift_off: Some(LiftOff {
+            at_s: 1.5,
+            ramp_s: 0.0,
+        }),
+        ..s
+    };
     let steady = Must::Rate {
         min_ok_per_s: 20.0,
         max_rms: 0.01,
@@ -496,13 +504,7 @@ pub fn stream_catalogue(noise: NoiseScene) -> Vec<StreamCase> {
         },
         StreamCase {
             name: "lift-off",
-            scene: StreamScene {
-                lift_off: Some(LiftOff {
-                    at_s: 1.5,
-                    ramp_s: 0.0,
-                }),
-                ..c
-            },
+            scene: lifted(c),
             seconds: 2.5,
             must: vec![
                 Must::NoOk {
@@ -667,13 +669,7 @@ pub fn stream_catalogue(noise: NoiseScene) -> Vec<StreamCase> {
         },
         StreamCase {
             name: "lossy-lift-off",
-            scene: StreamScene {
-                lift_off: Some(LiftOff {
-                    at_s: 1.5,
-                    ramp_s: 0.0,
-                }),
-                ..lossy
-            },
+            scene: lifted(lossy),
             seconds: 2.5,
             must: vec![Must::NoOk {
                 from_s: 1.6,
