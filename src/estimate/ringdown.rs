@@ -251,6 +251,12 @@ impl<const W: usize> Ringdown<W> {
         self.phase == Phase::Done
     }
 
+    /// True when the ring's last windows hold a steady tone ([`tail_holds_a_tone`]): what a
+    /// seed that did not ring heard instead of noise.
+    pub fn heard_a_tone(&self) -> bool {
+        tail_holds_a_tone(&self.windows)
+    }
+
     /// The estimate of the last stage.
     pub fn estimate(&self) -> Result<Estimate, Failure> {
         let e = self.last.unwrap_or(Err(Failure::NoResonance))?;
@@ -266,6 +272,22 @@ fn noise_variance(w: &[Window]) -> f64 {
     let n = w.len();
     let tail = &w[n - (n / 3).max(1)..];
     tail.iter().map(|x| x.var).sum::<f64>() / tail.len() as f64
+}
+
+/// True when the last third of the windows holds a tone that does not decay rather than noise
+/// alone: white noise gives each phasor `|a|²/σ²` a χ² of two degrees of freedom, and their mean
+/// stands beyond what it exceeds once in ten thousand
+/// ([`super::interference::chi2_limit_per_dof`]); mains hum near the ring's frequency does.
+fn tail_holds_a_tone(w: &[Window]) -> bool {
+    let n = w.len();
+    let tail = &w[n - (n / 3).max(1)..];
+    let (mut sum, mut k) = (0.0, 0usize);
+    for x in tail.iter().filter(|x| x.var > 0.0) {
+        sum += (x.re * x.re + x.im * x.im) / x.var;
+        k += 1;
+    }
+    let dof = 2.0 * k as f64;
+    k > 0 && sum / dof > super::interference::chi2_limit_per_dof(dof)
 }
 
 fn fit(w: &[Window], f_ref: f64) -> Result<Estimate, Failure> {
@@ -339,6 +361,36 @@ fn fit(w: &[Window], f_ref: f64) -> Result<Estimate, Failure> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A ring that never rose above the noise is `no_resonance`; its tail holds no tone when its
+    /// windows hold white noise
+    /// of their stated variance (from `probe_rng`), and a tone when a steady one of three σ
+    /// in magnitude sits in every window (`|a|²/σ²` about 11 a window against white noise's 2),
+    /// both below the fit's 5 σ threshold.
+    #[test]
+    fn a_ring_that_did_not_rise_tells_a_steady_tone_from_noise() {
+        let mut rng = probe_rng::Rng::new(11);
+        let var = 4.0;
+        let mut noise = heapless::Vec::<Window, 64>::new();
+        let mut tone = heapless::Vec::<Window, 64>::new();
+        for k in 0..24 {
+            let t = 0.002 * k as f64;
+            let (re, im) = (2.0 * rng.normal(), 2.0 * rng.normal());
+            noise.push(Window { t, re, im, var }).unwrap();
+            let (c, s) = (libm::cos(7.0 * t), libm::sin(7.0 * t));
+            tone.push(Window {
+                t,
+                re: re + 6.0 * c,
+                im: im + 6.0 * s,
+                var,
+            })
+            .unwrap();
+        }
+        assert_eq!(fit(&noise, 230.0), Err(Failure::NoResonance));
+        assert_eq!(fit(&tone, 230.0), Err(Failure::NoResonance));
+        assert!(!tail_holds_a_tone(&noise));
+        assert!(tail_holds_a_tone(&tone));
+    }
 
     /// Synthetic window phasors of a known damped sinusoid.
     #[test]

@@ -130,6 +130,8 @@ pub struct Hold {
     n_windows: u16,
     segment: u8,
     seeds_tried: u8,
+    /// Seeds that did not ring and heard a steady tone instead of noise.
+    seed_tones: u8,
     monitor: (ChannelSums, ReferenceSums),
     windows: heapless::Vec<HoldWindow, MAX_WINDOWS>,
     clipped: bool,
@@ -339,6 +341,9 @@ impl Hold {
             return;
         };
         let result = seed.estimate();
+        if result == Err(Failure::NoResonance) {
+            self.seed_tones += u8::from(seed.heard_a_tone());
+        }
         if matches!(result, Err(Failure::NoResonance | Failure::LowSnr)) && self.seeds_tried < 3 {
             // Nothing rang: the resonance is far from the seed. Try a quarter band below, then a
             // quarter band above (a burst excites a resonance within about a quarter band).
@@ -373,6 +378,11 @@ impl Hold {
                 self.windows.clear();
                 self.phase = Phase::Hold;
                 self.pending = false;
+            }
+            // No seed rang, and every one heard a steady tone where noise was due: hum, not an
+            // absent resonance.
+            Err(Failure::NoResonance) if self.seed_tones >= self.seeds_tried => {
+                self.finish(Err(Failure::Interference))
             }
             Err(f) => self.finish(Err(f)),
         }

@@ -178,6 +178,7 @@ impl HoldSettings {
             n_windows: 0,
             segment: 0,
             seeds_tried: 1,
+            seed_tones: 0,
             monitor: Default::default(),
             windows: heapless::Vec::new(),
             clipped: false,
