@@ -43,6 +43,13 @@ pub fn run(a: AccuracyArgs) -> Result<()> {
             |root: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>| draw(root, &b),
             |root: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>| draw(root, &b),
         )?;
+        let path = a.out_dir.join(format!("accuracy-loss.{ext}"));
+        with_backend(
+            &path,
+            (900, 480),
+            |root: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>| draw_loss(root, &b),
+            |root: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>| draw_loss(root, &b),
+        )?;
     }
     let md = markdown(&b, &a);
     print!("{md}");
@@ -317,7 +324,7 @@ pub fn markdown(b: &Budget, a: &AccuracyArgs) -> String {
          (`UnitProfile::tissue_loss`: the mode's `1/Q` above the calibrated contact's over the \
          tissue's share of the mode's loss), or `broad_resonance` where Q falls under 3. \
          Coverage of the loss's σ over all of them: {} of {} ok readings within 1 σ ({}), {} \
-         within 2 σ ({}), {} within 3 σ ({}).\n\n\
+         within 2 σ ({}), {} within 3 σ ({}). Chart: `docs/accuracy-loss.{{svg,png}}`.\n\n\
          | tan δ | ok | broad_resonance | modulus RMS % | worst % | within 3σ | loss RMS error | loss σ RMS | loss within 1σ / 2σ |\n\
          |---|---|---|---|---|---|---|---|---|",
         list(&o.loss_moduli, 0),
@@ -360,6 +367,72 @@ fn list(v: &[f64], digits: usize) -> String {
 
 fn pct(k: usize, n: usize) -> String {
     format!("{:.0} %", 100.0 * k as f64 / n.max(1) as f64)
+}
+
+/// The lossy-tissue set: the modulus's RMS error (%) and the loss tangent's RMS error and
+/// reported σ (in hundredths) against the tissue's loss tangent.
+fn draw_loss<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    b: &Budget,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(err)?;
+    let rows = &b.loss;
+    let xmax = rows.iter().map(|r| r.tan_d).fold(0.1, f64::max);
+    let ymax = rows
+        .iter()
+        .flat_map(|r| {
+            [
+                r.rms_modulus_pct,
+                100.0 * r.rms_loss,
+                100.0 * r.rms_loss_sigma,
+            ]
+        })
+        .fold(0.1, f64::max)
+        * 1.2;
+    let caption = format!(
+        "lossy tissue ({} kPa, 30 mN, auto, bench noise): errors against the loss tangent",
+        b.options
+            .loss_moduli
+            .iter()
+            .map(|e| format!("{e:.0}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let mut chart = plot::chart(
+        root,
+        Some((&caption, 15)),
+        plot::Frame {
+            margin: 12,
+            x_labels: 40,
+            y_labels: 60,
+        },
+        (0.0..xmax * 1.05, 0.0..ymax),
+        ("the tissue's loss tangent tan δ", "RMS error"),
+    )
+    .map_err(err)?;
+    type Value = fn(&crate::accuracy::LossRow) -> f64;
+    let series: [(&str, Value, RGBColor); 3] = [
+        ("modulus, % of the truth", |r| r.rms_modulus_pct, PALETTE[0]),
+        ("loss tangent, ×0.01", |r| 100.0 * r.rms_loss, PALETTE[1]),
+        (
+            "loss tangent's reported σ (RMS), ×0.01",
+            |r| 100.0 * r.rms_loss_sigma,
+            PALETTE[2],
+        ),
+    ];
+    for (label, value, colour) in series {
+        let pts: Vec<(f64, f64)> = rows.iter().map(|r| (r.tan_d, value(r))).collect();
+        plot::line(&mut chart, pts.clone(), colour.stroke_width(2), label).map_err(err)?;
+        chart
+            .draw_series(pts.iter().map(|&p| Circle::new(p, 3, colour.filled())))
+            .map_err(err)?;
+    }
+    draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 0.9).map_err(err)?;
+    root.present().map_err(err)?;
+    Ok(())
 }
 
 fn draw<DB: DrawingBackend>(
