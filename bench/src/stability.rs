@@ -492,16 +492,18 @@ pub fn stream_catalogue(noise: NoiseScene) -> Vec<StreamCase> {
         "not_locked",
     ];
     let inf = f64::INFINITY;
+    // Streamed 3 s with nothing happening: the steady rate and accuracy, no failure accepted.
+    let held_steady = |name, scene| StreamCase {
+        name,
+        scene,
+        seconds: 3.0,
+        must: vec![steady],
+        accept: &[],
+        accept_from_s: 0.0,
+        accept_to_s: 0.0,
+    };
     vec![
-        StreamCase {
-            name: "steady",
-            scene: c,
-            seconds: 3.0,
-            must: vec![steady],
-            accept: &[],
-            accept_from_s: 0.0,
-            accept_to_s: 0.0,
-        },
+        held_steady("steady", c),
         StreamCase {
             name: "lift-off",
             scene: lifted(c),
@@ -658,15 +660,7 @@ pub fn stream_catalogue(noise: NoiseScene) -> Vec<StreamCase> {
         },
         // Lossy tissue (a tumour-like inclusion, docs/physics.md): followed as steadily, and
         // left as promptly, as the lossless phantom.
-        StreamCase {
-            name: "lossy-steady",
-            scene: lossy,
-            seconds: 3.0,
-            must: vec![steady],
-            accept: &[],
-            accept_from_s: 0.0,
-            accept_to_s: 0.0,
-        },
+        held_steady("lossy-steady", lossy),
         StreamCase {
             name: "lossy-lift-off",
             scene: lifted(lossy),
