@@ -1,0 +1,18 @@
+//! # stm32-emu: an emulated NUCLEO-G474RE at register level
+//!
+//! Runs the unmodified STM32 image (`cargo fw`) from its reset vector on unicorn's Cortex-M4 CPU,
+//! with the system control space ([`cortex`]) and the peripherals ([`periph`]) modelled from
+//! RM0440 and the register definitions stm32-metapac is generated from; the defmt log is read
+//! from the image's RTT up-buffer in emulated RAM ([`rtt`]), as probe-rs reads it.
+//!
+//! This crate links unicorn (GPL-2.0) and is GPL-2.0-or-later, unlike the rest of the
+//! workspace: it is a program of its own that the tests and the bench run as a subprocess;
+//! nothing in the firmware or the bench links it (README.md).
+
+pub mod cortex;
+pub mod elf;
+pub mod machine;
+pub mod periph;
+pub mod rtt;
+
+pub use machine::{Exit, Machine};

@@ -1,0 +1,821 @@
+//! The emulated STM32G474RE: unicorn's Cortex-M4 CPU, the memory map of RM0440 2.2 ("Memory
+//! organization", Figure 3 and Table 3), the system control space ([`crate::cortex`]), the
+//! peripherals ([`crate::periph`]), exception entry and return, and the time base.
+//!
+//! # Time
+//! Time is the core clock: one executed instruction is one HCLK cycle (an approximation: the
+//! Cortex-M4 takes 1 cycle for most data-processing instructions, 2+ for loads, stores,
+//! branches, divisions and flash wait states the ART accelerator does not hide; real code runs at
+//! roughly 1.2–1.6 cycles per instruction, so emulated durations of busy code are short by that
+//! factor). Cycles spent asleep in WFI are added up to the next event. The count is exact and
+//! deterministic: the same image and inputs give the same cycle of every event.
+//!
+//! # Exceptions
+//! unicorn 2.1.5 models the M-profile CPU's registers (BASEPRI, PRIMASK, CONTROL, MSP/PSP,
+//! IPSR) but no NVIC: entry is done here (ARMv7-M B1.5.6 "Exception entry behavior": the basic
+//! or, with CONTROL.FPCA, extended frame on the stack in use, 8-byte aligned with xPSR bit 9,
+//! EXC_RETURN in LR, IPSR, the vector from VTOR); unicorn detects a branch to an EXC_RETURN value
+//! in handler mode and raises EXCP_EXCEPTION_EXIT (8), which its interrupt hook hands here, where
+//! the frame is popped (B1.5.8 "Exception return behavior"). The FP frame is stacked eagerly
+//! (lazy stacking's reserved space is written at once: the same values, different timing).
+//! Exceptions are taken between instructions, never inside an IT block.
+
+use std::fmt;
+
+use unicorn_engine::{Arch, ArmCpuModel, HookType, MemType, Mode, Prot, RegisterARM, Unicorn};
+
+use crate::cortex::{self, Scs, EXC_HARDFAULT, EXC_IRQ0};
+use crate::elf::Elf;
+use crate::periph::{Mem, Peripherals, SysClock};
+
+/// Flash: 512 KiB at 0x0800_0000 (RM0440 3.3.1, two banks of 256 KiB in dual-bank mode).
+pub const FLASH_BASE: u32 = 0x0800_0000;
+/// Flash size.
+pub const FLASH_SIZE: usize = 512 * 1024;
+/// SRAM1 (80 KiB) and SRAM2 (16 KiB), contiguous at 0x2000_0000 (RM0440 2.4).
+pub const SRAM_BASE: u32 = 0x2000_0000;
+/// SRAM1 + SRAM2 size.
+pub const SRAM_SIZE: usize = 96 * 1024;
+/// CCM SRAM: 32 KiB at 0x1000_0000 (I-code/D-code) and aliased right after SRAM2 at
+/// 0x2001_8000 (RM0440 2.4 "CCM SRAM").
+pub const CCM_BASE: u32 = 0x1000_0000;
+/// The CCM SRAM's alias on the system bus.
+pub const CCM_ALIAS: u32 = 0x2001_8000;
+/// CCM SRAM size.
+pub const CCM_SIZE: usize = 32 * 1024;
+
+/// Why a run stopped for good.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Exit {
+    /// The cycle limit of the run was reached.
+    Limit,
+    /// The CPU ran into something the emulator does not model or the image cannot survive.
+    Fault(String),
+}
+
+/// A failure to set the machine up.
+#[derive(Debug)]
+pub struct SetupError(pub String);
+
+impl fmt::Display for SetupError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.0)
+    }
+}
+
+impl std::error::Error for SetupError {}
+
+impl From<unicorn_engine::uc_error> for SetupError {
+    fn from(e: unicorn_engine::uc_error) -> Self {
+        SetupError(format!("unicorn: {e:?}"))
+    }
+}
+
+/// Everything the CPU's hooks reach: memory, the SCS, the peripherals, the clock.
+pub struct Board {
+    /// Core (HCLK) cycles since power-on.
+    pub now: u64,
+    /// The code hook stops the CPU at this cycle.
+    deadline: u64,
+    /// A stop requested by a hook (deadline, an exception to take, a fault).
+    stopped: bool,
+    /// Set when the exception state changed (pend, enable, priority, return): the code hook
+    /// checks the masks before the next instruction.
+    pub irq_dirty: bool,
+    /// Some pending, enabled exception could preempt if the masks allow it: the code hook
+    /// reads BASEPRI/PRIMASK before each instruction.
+    irq_armed: bool,
+    /// Addresses of the last instructions (for the IT-block check at exception entry).
+    recent: [u32; 4],
+    /// A fault the hooks found (an unmodelled register, a bad exception return).
+    pub fault: Option<String>,
+    /// The system control space.
+    pub scs: Scs,
+    /// The STM32 peripherals.
+    pub periph: Peripherals,
+    /// Flash contents (bank 1 and 2): mapped read/execute into the CPU, programmed by the
+    /// flash interface model.
+    pub flash: Box<[u8]>,
+    /// SRAM1+SRAM2.
+    pub sram: Box<[u8]>,
+    /// CCM SRAM.
+    pub ccm: Box<[u8]>,
+    /// Cycles executed (instructions) as opposed to slept in WFI.
+    pub executed: u64,
+}
+
+impl Board {
+    fn new() -> Board {
+        Board {
+            now: 0,
+            deadline: u64::MAX,
+            stopped: false,
+            irq_dirty: true,
+            irq_armed: false,
+            recent: [0; 4],
+            fault: None,
+            scs: Scs::default(),
+            periph: Peripherals::default(),
+            flash: vec![0xFF; FLASH_SIZE].into_boxed_slice(),
+            sram: vec![0; SRAM_SIZE].into_boxed_slice(),
+            ccm: vec![0; CCM_SIZE].into_boxed_slice(),
+            executed: 0,
+        }
+    }
+
+    /// Read a 32-bit word of RAM or flash as the bus masters other than the CPU (DMA) see it.
+    pub fn mem_read(&self, addr: u32, size: usize) -> Option<u32> {
+        let (buf, off) = self.memory(addr)?;
+        let b = buf.get(off..off + size)?;
+        let mut w = [0u8; 4];
+        w[..size].copy_from_slice(b);
+        Some(u32::from_le_bytes(w))
+    }
+
+    /// Write RAM as a DMA does; flash is not writable this way (false).
+    pub fn mem_write(&mut self, addr: u32, size: usize, v: u32) -> bool {
+        let in_flash = (FLASH_BASE..FLASH_BASE + FLASH_SIZE as u32).contains(&addr);
+        if in_flash {
+            return false;
+        }
+        let Some((_, off)) = self.memory(addr) else {
+            return false;
+        };
+        let buf: &mut [u8] = if (SRAM_BASE..SRAM_BASE + SRAM_SIZE as u32).contains(&addr) {
+            &mut self.sram
+        } else {
+            &mut self.ccm
+        };
+        match buf.get_mut(off..off + size) {
+            Some(b) => {
+                b.copy_from_slice(&v.to_le_bytes()[..size]);
+                true
+            }
+            None => false,
+        }
+    }
+
+    fn memory(&self, addr: u32) -> Option<(&[u8], usize)> {
+        let a = addr as usize;
+        let within = |base: u32, len: usize| a >= base as usize && a < base as usize + len;
+        if within(FLASH_BASE, FLASH_SIZE) {
+            Some((&self.flash, a - FLASH_BASE as usize))
+        } else if within(SRAM_BASE, SRAM_SIZE) {
+            Some((&self.sram, a - SRAM_BASE as usize))
+        } else if within(CCM_ALIAS, CCM_SIZE) {
+            Some((&self.ccm, a - CCM_ALIAS as usize))
+        } else if within(CCM_BASE, CCM_SIZE) {
+            Some((&self.ccm, a - CCM_BASE as usize))
+        } else {
+            None
+        }
+    }
+
+    /// Pend the external interrupts whose lines are asserted (level-sensitive: a line still
+    /// asserted when its handler returns pends it again; ARMv7-M B3.4.1).
+    pub fn update_irqs(&mut self) {
+        for irq in self.periph.irq_lines() {
+            let exc = EXC_IRQ0 + irq;
+            if !self.scs.nvic.is_active(exc) && !self.scs.nvic.is_pending(exc) {
+                self.scs.nvic.pend_irq(irq);
+                self.irq_dirty = true;
+            }
+        }
+    }
+
+    /// The core clock now, Hz (HCLK, from the RCC model).
+    pub fn hclk(&self) -> SysClock {
+        self.periph.rcc.hclk()
+    }
+
+    /// Seconds since power-on at core cycle `now` (integrating the clock's changes).
+    pub fn seconds(&self) -> f64 {
+        self.periph.clock_seconds(self.now)
+    }
+}
+
+/// The emulated board with the CPU.
+pub struct Machine {
+    uc: Unicorn<'static, Board>,
+    /// Number of resets (power-on not counted).
+    pub resets: u32,
+}
+
+fn reg<R: Into<i32>>(uc: &Unicorn<'_, Board>, r: R) -> u32 {
+    uc.reg_read(r).unwrap_or(0) as u32
+}
+
+fn set<R: Into<i32>>(uc: &mut Unicorn<'_, Board>, r: R, v: u32) {
+    uc.reg_write(r, v as u64).expect("register write");
+}
+
+/// Rebuild unicorn's cached translation flags after a change of IPSR or CONTROL (writing the
+/// APSR flags is the one register write that calls `arm_rebuild_hflags`): the translator must
+/// know handler mode to detect EXC_RETURN branches.
+fn rebuild_hflags(uc: &mut Unicorn<'_, Board>) {
+    let nzcv = reg(uc, RegisterARM::APSR_NZCV);
+    set(uc, RegisterARM::APSR_NZCV, nzcv);
+}
+
+const FP_FRAME_WORDS: u32 = 26;
+const BASIC_FRAME_WORDS: u32 = 8;
+
+impl Machine {
+    /// A board with `elf` programmed into its flash, powered on (reset, not yet run).
+    pub fn new(elf: &Elf) -> Result<Machine, SetupError> {
+        let mut board = Board::new();
+        for s in &elf.segments {
+            let start = s.paddr.wrapping_sub(FLASH_BASE) as usize;
+            let end = start + s.data.len();
+            if end > FLASH_SIZE {
+                return Err(SetupError(format!(
+                    "segment at {:#010x} ({} B) is not in flash: a flash programmer writes only flash",
+                    s.paddr,
+                    s.data.len()
+                )));
+            }
+            board.flash[start..end].copy_from_slice(&s.data);
+        }
+        Self::with_board(board)
+    }
+
+    fn with_board(board: Board) -> Result<Machine, SetupError> {
+        let mut uc = Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, board)?;
+        uc.ctl_set_cpu_model(ArmCpuModel::CORTEX_M4 as i32)?;
+        // Memory: the board's buffers, mapped in place (the flash model and the DMA write
+        // them directly). The Box contents never move.
+        let (flash, sram, ccm) = {
+            let b = uc.get_data_mut();
+            (
+                b.flash.as_mut_ptr(),
+                b.sram.as_mut_ptr(),
+                b.ccm.as_mut_ptr(),
+            )
+        };
+        // SAFETY: the buffers live in the Board, which unicorn owns for its whole life, and are
+        // never reallocated.
+        unsafe {
+            uc.mem_map_ptr(
+                FLASH_BASE as u64,
+                FLASH_SIZE as u64,
+                Prot::READ | Prot::EXEC,
+                flash.cast(),
+            )?;
+            // Boot from main flash (BOOT0 = 0, nBOOT1 = 1): flash is aliased at 0 (RM0440 2.6
+            // "Boot configuration"), where VTOR's reset value points.
+            uc.mem_map_ptr(0, FLASH_SIZE as u64, Prot::READ | Prot::EXEC, flash.cast())?;
+            uc.mem_map_ptr(SRAM_BASE as u64, SRAM_SIZE as u64, Prot::ALL, sram.cast())?;
+            uc.mem_map_ptr(CCM_ALIAS as u64, CCM_SIZE as u64, Prot::ALL, ccm.cast())?;
+            uc.mem_map_ptr(CCM_BASE as u64, CCM_SIZE as u64, Prot::ALL, ccm.cast())?;
+        }
+        // Writes to flash: the flash interface model decides (programming) and restores the
+        // array; unicorn's protection fault is handled here.
+        uc.add_mem_hook(
+            HookType::MEM_WRITE_PROT,
+            FLASH_BASE as u64,
+            (FLASH_BASE as usize + FLASH_SIZE - 1) as u64,
+            |uc, _t: MemType, addr, size, value| {
+                let b = uc.get_data_mut();
+                let now = b.now;
+                let (periph, flash) = (&mut b.periph, &mut b.flash);
+                periph.flash_write(flash, addr as u32, size, value as u64, now);
+                // Handled: unicorn then stores the value into the read-only page's backing array
+                // too; the restore below puts the flash model's contents back before the next
+                // instruction.
+                b.periph.flash_restore_pending = true;
+                true
+            },
+        )?;
+        // Peripherals and the system control space as MMIO windows (4 KiB granules).
+        for (base, size) in [
+            (0x4000_0000u64, 0x0003_0000u64), // APB1, APB2, AHB1
+            (0x4800_0000, 0x0000_2000),       // GPIOA..G (AHB2)
+            (0x5000_0000, 0x0000_2000),       // ADC1..5, DAC1..4 (AHB2)
+            (0x1FFF_7000, 0x0000_1000),       // OTP, UID, flash size (system memory)
+            (0xE000_0000, 0x0010_0000),       // PPB: SCS, DWT, DBGMCU
+        ] {
+            uc.mmio_map(
+                base,
+                size,
+                Some(move |uc: &mut Unicorn<'_, Board>, off: u64, sz: usize| {
+                    let addr = (base + off) as u32;
+                    Self::bus_read(uc, addr, sz) as u64
+                }),
+                Some(
+                    move |uc: &mut Unicorn<'_, Board>, off: u64, sz: usize, v: u64| {
+                        let addr = (base + off) as u32;
+                        Self::bus_write(uc, addr, sz, v as u32);
+                    },
+                ),
+            )?;
+        }
+        // Time and exception checks: every instruction.
+        uc.add_code_hook(0, u32::MAX as u64, |uc, addr, _size| {
+            let b = uc.get_data_mut();
+            if b.periph.flash_restore_pending {
+                b.periph.flash_restore_pending = false;
+                let (periph, flash) = (&mut b.periph, &mut b.flash);
+                periph.flash_restore(flash);
+            }
+            if b.now >= b.deadline {
+                b.stopped = true;
+                uc.emu_stop().ok();
+                return;
+            }
+            b.recent.rotate_left(1);
+            b.recent[3] = addr as u32;
+            b.now += 1;
+            b.executed += 1;
+            if b.irq_dirty {
+                b.irq_dirty = false;
+                b.irq_armed = b.scs.nvic.highest_pending().is_some_and(|(_, p)| {
+                    p < b
+                        .scs
+                        .nvic
+                        .execution_priority(0, false, false, b.scs.scb.prigroup)
+                });
+            }
+            if b.irq_armed {
+                let basepri = reg(uc, RegisterARM::BASEPRI) as u8;
+                let primask = reg(uc, RegisterARM::PRIMASK) & 1 != 0;
+                let faultmask = reg(uc, RegisterARM::FAULTMASK) & 1 != 0;
+                let b = uc.get_data_mut();
+                if b.scs
+                    .nvic
+                    .takable(basepri, primask, faultmask, b.scs.scb.prigroup)
+                    .is_some()
+                {
+                    // Not executed: stop before it and take the exception.
+                    b.now -= 1;
+                    b.executed -= 1;
+                    b.recent.rotate_right(1);
+                    b.stopped = true;
+                    uc.emu_stop().ok();
+                }
+            }
+        })?;
+        // Exception return (EXCP_EXCEPTION_EXIT = 8) and the rest of the CPU's exceptions.
+        uc.add_intr_hook(|uc, intno| {
+            const EXCP_EXCEPTION_EXIT: u32 = 8;
+            if intno == EXCP_EXCEPTION_EXIT {
+                if let Err(e) = Self::exception_return(uc) {
+                    uc.get_data_mut().fault = Some(e);
+                    uc.emu_stop().ok();
+                }
+            } else {
+                let pc = reg(uc, RegisterARM::PC);
+                uc.get_data_mut().fault = Some(format!("CPU exception {intno} at {pc:#010x}"));
+                uc.emu_stop().ok();
+            }
+        })?;
+        let mut m = Machine { uc, resets: 0 };
+        m.reset_cpu()?;
+        Ok(m)
+    }
+
+    /// The board.
+    pub fn board(&self) -> &Board {
+        self.uc.get_data()
+    }
+
+    /// The board, mutable.
+    pub fn board_mut(&mut self) -> &mut Board {
+        self.uc.get_data_mut()
+    }
+
+    /// Read `len` bytes of emulated memory (any mapped address).
+    pub fn read_memory(&self, addr: u32, len: usize) -> Option<Vec<u8>> {
+        self.uc.mem_read_as_vec(addr as u64, len).ok()
+    }
+
+    /// A CPU register.
+    pub fn register(&self, r: RegisterARM) -> u32 {
+        reg(&self.uc, r)
+    }
+
+    /// The CPU's reset (ARMv7-M B1.5.5): MSP and PC from the vector table at 0 — flash, as
+    /// BOOT0 = 0 with nBOOT1 = 1 maps it (RM0440 2.6 "Boot configuration") — thread mode,
+    /// privileged, masks clear, FPU context inactive. The SCS is reset too.
+    fn reset_cpu(&mut self) -> Result<(), SetupError> {
+        let (sp, pc) = {
+            let b = self.uc.get_data();
+            let w = |o: usize| u32::from_le_bytes(b.flash[o..o + 4].try_into().unwrap());
+            (w(0), w(4))
+        };
+        let b = self.uc.get_data_mut();
+        b.scs = Scs::default();
+        b.irq_dirty = true;
+        set(&mut self.uc, RegisterARM::IPSR, 0);
+        set(&mut self.uc, RegisterARM::CONTROL, 0);
+        set(&mut self.uc, RegisterARM::PRIMASK, 0);
+        set(&mut self.uc, RegisterARM::BASEPRI, 0);
+        set(&mut self.uc, RegisterARM::FAULTMASK, 0);
+        set(&mut self.uc, RegisterARM::MSP, sp & !3);
+        set(&mut self.uc, RegisterARM::PSP, 0);
+        set(&mut self.uc, RegisterARM::SP, sp & !3);
+        set(&mut self.uc, RegisterARM::LR, 0xFFFF_FFFF);
+        set(&mut self.uc, RegisterARM::XPSR_NZCVQG, 1 << 24);
+        rebuild_hflags(&mut self.uc);
+        set(&mut self.uc, RegisterARM::PC, pc | 1);
+        if pc & 1 == 0 {
+            return Err(SetupError(format!(
+                "reset vector {pc:#010x} is not a Thumb address"
+            )));
+        }
+        Ok(())
+    }
+
+    /// A system reset (AIRCR.SYSRESETREQ, the IWDG): CPU, SCS and peripherals reset; SRAM and
+    /// flash keep their contents (RM0440 7.1.2 "System reset": SRAM is not erased); the RCC's
+    /// reset flags record `cause`.
+    pub fn system_reset(&mut self, cause: crate::periph::ResetCause) -> Result<(), SetupError> {
+        self.resets += 1;
+        let b = self.uc.get_data_mut();
+        let now = b.now;
+        b.periph.reset(cause, now);
+        self.reset_cpu()
+    }
+
+    fn bus_read(uc: &mut Unicorn<'_, Board>, addr: u32, size: usize) -> u32 {
+        let b = uc.get_data_mut();
+        let now = b.now;
+        let r = if addr >= 0xE000_0000 && !(0xE004_2000..0xE004_3000).contains(&addr) {
+            b.scs
+                .read(addr, size, now)
+                .map_err(|u| format!("unmodelled system register {:#010x}", u.0))
+        } else {
+            let pc_dummy = 0;
+            let _ = pc_dummy;
+            b.periph.read(addr, size, now)
+        };
+        uc.get_data_mut().update_irqs();
+        match r {
+            Ok(v) => {
+                let mask = if size >= 4 {
+                    u32::MAX
+                } else {
+                    (1u32 << (8 * size)) - 1
+                };
+                v & mask
+            }
+            Err(e) => {
+                let pc = reg(uc, RegisterARM::PC);
+                let b = uc.get_data_mut();
+                b.fault.get_or_insert(format!(
+                    "read of {addr:#010x} ({size} B) at pc {pc:#010x}: {e}"
+                ));
+                // Stop before the next instruction (stopping inside the access would leave
+                // the PC on this instruction and run it again).
+                b.deadline = b.now;
+                0
+            }
+        }
+    }
+
+    fn bus_write(uc: &mut Unicorn<'_, Board>, addr: u32, size: usize, v: u32) {
+        let b = uc.get_data_mut();
+        let now = b.now;
+        let r = if addr >= 0xE000_0000 && !(0xE004_2000..0xE004_3000).contains(&addr) {
+            b.scs
+                .write(addr, size, v, now)
+                .map_err(|u| format!("unmodelled system register {:#010x}", u.0))
+        } else {
+            b.periph.write(addr, size, v, now)
+        };
+        let b = uc.get_data_mut();
+        // Any write may pend, enable or re-prioritise an exception, or change a deadline.
+        b.irq_dirty = true;
+        b.update_irqs();
+        // Events the write started (a reset request, a DMA channel enabled with a request
+        // waiting, a TRGO) are handled before the next instruction.
+        if b.scs.scb.reset_requested || b.periph.wants_stop() {
+            b.deadline = b.now;
+        }
+        if let Err(e) = r {
+            let pc = reg(uc, RegisterARM::PC);
+            let b = uc.get_data_mut();
+            b.fault.get_or_insert(format!(
+                "write of {v:#x} to {addr:#010x} ({size} B) at pc {pc:#010x}: {e}"
+            ));
+            b.deadline = b.now;
+        }
+    }
+
+    /// Is `pc` inside an IT block begun by one of the last instructions? (An IT instruction
+    /// `0xBFxy` with a non-zero mask `y` covers the next 4 − trailing-zeros(y) instructions.)
+    fn in_it_block(&self, pc: u32) -> bool {
+        let b = self.board();
+        let recent = b.recent;
+        for (k, &a) in recent.iter().enumerate().rev() {
+            if a == 0 {
+                continue;
+            }
+            let Some(h) = b.mem_read(a, 2) else { continue };
+            if h & 0xFF00 == 0xBF00 && h & 0xF != 0 {
+                let len = 4 - (h & 0xF).trailing_zeros() as usize;
+                // Instructions executed after the IT: recent[k+1..=3], then `pc` is next.
+                let after = 3 - k;
+                let _ = pc;
+                return after < len;
+            }
+        }
+        false
+    }
+
+    /// Take exception `exc` (B1.5.6): push the frame, set LR to EXC_RETURN, enter handler mode
+    /// at the vector.
+    fn exception_entry(&mut self, exc: usize) -> Result<(), String> {
+        let uc = &mut self.uc;
+        let ipsr = reg(uc, RegisterARM::IPSR) & 0x1FF;
+        let control = reg(uc, RegisterARM::CONTROL);
+        let thread = ipsr == 0;
+        let psp = thread && control & 2 != 0;
+        let fpca = control & 4 != 0;
+        let sp = if psp {
+            reg(uc, RegisterARM::PSP)
+        } else {
+            reg(uc, RegisterARM::MSP)
+        };
+        let words = if fpca {
+            FP_FRAME_WORDS
+        } else {
+            BASIC_FRAME_WORDS
+        };
+        let unaligned = sp.wrapping_sub(words * 4);
+        let frame = unaligned & !7;
+        let realigned = (unaligned & 4 != 0) as u32;
+        let pc = reg(uc, RegisterARM::PC);
+        let xpsr = reg(uc, RegisterARM::XPSR);
+        let mut w = vec![
+            reg(uc, RegisterARM::R0),
+            reg(uc, RegisterARM::R1),
+            reg(uc, RegisterARM::R2),
+            reg(uc, RegisterARM::R3),
+            reg(uc, RegisterARM::R12),
+            reg(uc, RegisterARM::LR),
+            pc & !1,
+            (xpsr & !(1 << 9)) | realigned << 9 | 1 << 24,
+        ];
+        if fpca {
+            for i in 0..16 {
+                w.push(reg(uc, RegisterARM::S0 as i32 + i));
+            }
+            w.push(reg(uc, RegisterARM::FPSCR));
+            w.push(0);
+        }
+        let bytes: Vec<u8> = w.iter().flat_map(|v| v.to_le_bytes()).collect();
+        uc.mem_write(frame as u64, &bytes).map_err(|e| {
+            format!("exception {exc}: stacking at {frame:#010x} failed ({e:?}): stack overflow?")
+        })?;
+        if psp {
+            set(uc, RegisterARM::PSP, frame);
+        } else {
+            set(uc, RegisterARM::MSP, frame);
+        }
+        let exc_return =
+            0xFFFF_FFE1 | (thread as u32) << 3 | (psp as u32) << 2 | (!fpca as u32) << 4;
+        let vtor = uc.get_data().scs.scb.vtor;
+        let mut vec = [0u8; 4];
+        uc.mem_read(vtor as u64 + 4 * exc as u64, &mut vec)
+            .map_err(|e| {
+                format!(
+                    "exception {exc}: vector fetch at {:#010x} failed ({e:?})",
+                    vtor + 4 * exc as u32
+                )
+            })?;
+        let handler = u32::from_le_bytes(vec);
+        // Handler mode: MSP, FPCA clear.
+        set(uc, RegisterARM::CONTROL, control & !(4 | 2));
+        set(
+            uc,
+            RegisterARM::SP,
+            if psp {
+                reg(uc, RegisterARM::MSP)
+            } else {
+                frame
+            },
+        );
+        set(uc, RegisterARM::IPSR, exc as u32);
+        set(uc, RegisterARM::LR, exc_return);
+        rebuild_hflags(uc);
+        set(uc, RegisterARM::PC, handler | 1);
+        let b = uc.get_data_mut();
+        b.scs.nvic.activate(exc);
+        b.scs.ipsr = exc;
+        b.irq_dirty = true;
+        Ok(())
+    }
+
+    /// EXC_RETURN reached (B1.5.8): pop the frame, restore xPSR (with IPSR) and CONTROL.
+    fn exception_return(uc: &mut Unicorn<'_, Board>) -> Result<(), String> {
+        let excret = reg(uc, RegisterARM::PC) | 1;
+        let ipsr = reg(uc, RegisterARM::IPSR) as usize & 0x1FF;
+        if excret & 0xFFFF_FF00 != 0xFFFF_FF00 {
+            return Err(format!("EXC_RETURN {excret:#010x} with zero high bits"));
+        }
+        let (thread, psp) = match excret & 0xF {
+            0x1 => (false, false),
+            0x9 => (true, false),
+            0xD => (true, true),
+            _ => {
+                return Err(format!(
+                    "invalid EXC_RETURN {excret:#010x} (INVPC UsageFault)"
+                ))
+            }
+        };
+        let fp = excret & 0x10 == 0;
+        {
+            let b = uc.get_data_mut();
+            if ipsr == 0 || !b.scs.nvic.is_active(ipsr) {
+                return Err(format!(
+                    "EXC_RETURN {excret:#010x} from exception {ipsr}, which is not active"
+                ));
+            }
+            b.scs.nvic.deactivate(ipsr);
+            let nested = b.scs.nvic.active_count();
+            if thread && nested != 0 {
+                return Err(format!(
+                    "EXC_RETURN to thread mode with {nested} exception(s) still active (CCR.NONBASETHRDENA clear)"
+                ));
+            }
+        }
+        let frame = if psp {
+            reg(uc, RegisterARM::PSP)
+        } else {
+            reg(uc, RegisterARM::MSP)
+        };
+        let words = if fp {
+            FP_FRAME_WORDS
+        } else {
+            BASIC_FRAME_WORDS
+        };
+        let bytes = uc
+            .mem_read_as_vec(frame as u64, words as usize * 4)
+            .map_err(|e| format!("unstacking at {frame:#010x} failed ({e:?})"))?;
+        let w = |i: usize| u32::from_le_bytes(bytes[4 * i..4 * i + 4].try_into().unwrap());
+        let xpsr = w(7);
+        let sp = frame + words * 4 + if xpsr & (1 << 9) != 0 { 4 } else { 0 };
+        for (i, r) in [
+            RegisterARM::R0,
+            RegisterARM::R1,
+            RegisterARM::R2,
+            RegisterARM::R3,
+            RegisterARM::R12,
+            RegisterARM::LR,
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            set(uc, r, w(i));
+        }
+        if fp {
+            for i in 0..16 {
+                set(uc, RegisterARM::S0 as i32 + i as i32, w(8 + i));
+            }
+            set(uc, RegisterARM::FPSCR, w(24));
+        }
+        let control = reg(uc, RegisterARM::CONTROL) & !(4 | 2);
+        let control = control | (fp as u32) << 2 | ((thread && psp) as u32) << 1;
+        // The stacked xPSR's IPSR is the interrupted context's exception number.
+        set(uc, RegisterARM::XPSR_NZCVQG, xpsr & !(1 << 9));
+        set(uc, RegisterARM::CONTROL, control);
+        if psp {
+            set(uc, RegisterARM::PSP, sp);
+        } else {
+            set(uc, RegisterARM::MSP, sp);
+        }
+        set(uc, RegisterARM::SP, sp);
+        rebuild_hflags(uc);
+        set(uc, RegisterARM::PC, w(6) | 1);
+        let b = uc.get_data_mut();
+        b.scs.ipsr = (xpsr & 0x1FF) as usize;
+        b.irq_dirty = true;
+        b.update_irqs();
+        Ok(())
+    }
+
+    /// Run until core cycle `until` (or a fault). Handles events, exceptions, WFI, resets.
+    pub fn run_until(&mut self, until: u64) -> Exit {
+        loop {
+            let b = self.uc.get_data_mut();
+            if let Some(f) = b.fault.take() {
+                return Exit::Fault(f);
+            }
+            let now = b.now;
+            // Peripherals' and SysTick's events due by now.
+            let mut mem = Mem {
+                flash: &mut b.flash,
+                sram: &mut b.sram,
+                ccm: &mut b.ccm,
+            };
+            b.periph.advance(now, &mut mem);
+            b.update_irqs();
+            if b.scs.systick.advance(now) {
+                b.scs.nvic.pend(cortex::EXC_SYSTICK);
+            }
+            if let Some(cause) = b.periph.reset_cause_pending() {
+                if let Err(e) = self.system_reset(cause) {
+                    return Exit::Fault(e.0);
+                }
+                continue;
+            }
+            if b.scs.scb.reset_requested {
+                if let Err(e) = self.system_reset(crate::periph::ResetCause::Software) {
+                    return Exit::Fault(e.0);
+                }
+                continue;
+            }
+            if now >= until {
+                return Exit::Limit;
+            }
+            let basepri = reg(&self.uc, RegisterARM::BASEPRI) as u8;
+            let primask = reg(&self.uc, RegisterARM::PRIMASK) & 1 != 0;
+            let faultmask = reg(&self.uc, RegisterARM::FAULTMASK) & 1 != 0;
+            let b = self.uc.get_data_mut();
+            let next_event = b
+                .periph
+                .next_event(now)
+                .into_iter()
+                .chain(b.scs.systick.next_event())
+                .min();
+            let pc = reg(&self.uc, RegisterARM::PC);
+            let b = self.uc.get_data();
+            let takable = b
+                .scs
+                .nvic
+                .takable(basepri, primask, faultmask, b.scs.scb.prigroup);
+            let mut deadline = next_event.unwrap_or(u64::MAX).min(until);
+            if let Some(exc) = takable {
+                if self.in_it_block(pc) {
+                    deadline = deadline.min(now + 1);
+                } else {
+                    if let Err(e) = self.exception_entry(exc) {
+                        return Exit::Fault(e);
+                    }
+                    continue;
+                }
+            }
+            let b = self.uc.get_data_mut();
+            b.deadline = deadline;
+            b.stopped = false;
+            b.irq_dirty = true;
+            let start = reg(&self.uc, RegisterARM::PC) | 1;
+            let r = self.uc.emu_start(start as u64, 0, 0, 0);
+            let b = self.uc.get_data_mut();
+            if let Some(f) = b.fault.take() {
+                return Exit::Fault(f);
+            }
+            match r {
+                Ok(()) if b.stopped => {}
+                Ok(()) => {
+                    // WFI (unicorn halts the CPU): sleep to the next event, or to the limit.
+                    let pc = reg(&self.uc, RegisterARM::PC);
+                    let b = self.uc.get_data_mut();
+                    let wfi = b.mem_read(pc.wrapping_sub(2), 2) == Some(0xBF30);
+                    if !wfi {
+                        return Exit::Fault(format!(
+                            "CPU stopped at {pc:#010x} without a known cause"
+                        ));
+                    }
+                    let wake = next_event.unwrap_or(until).min(until).max(b.now);
+                    b.now = wake;
+                }
+                Err(e) => {
+                    let pc = reg(&self.uc, RegisterARM::PC);
+                    use unicorn_engine::uc_error;
+                    if e == uc_error::INSN_INVALID || e == uc_error::EXCEPTION {
+                        // UDF (panic-probe's `udf`), an undefined instruction: UsageFault,
+                        // escalated to HardFault (SHCSR.USGFAULTENA clear; B1.5.14).
+                        let b = self.uc.get_data_mut();
+                        b.scs.scb.cfsr |= 1 << 16; // UNDEFINSTR
+                        b.scs.scb.hfsr |= 1 << 30; // FORCED
+                        b.scs.nvic.pend(EXC_HARDFAULT);
+                        if b.scs.nvic.is_active(EXC_HARDFAULT) {
+                            return Exit::Fault(format!(
+                                "lockup: fault in the HardFault handler at {pc:#010x}"
+                            ));
+                        }
+                        if let Err(e) = self.exception_entry(EXC_HARDFAULT) {
+                            return Exit::Fault(e);
+                        }
+                        continue;
+                    }
+                    return Exit::Fault(format!("CPU error {e:?} at pc {pc:#010x}"));
+                }
+            }
+        }
+    }
+
+    /// Seconds of emulated time since power-on.
+    pub fn seconds(&self) -> f64 {
+        self.board().seconds()
+    }
+
+    /// Core cycles since power-on.
+    pub fn cycles(&self) -> u64 {
+        self.board().now
+    }
+}
+
+/// The first external interrupt's exception number, re-exported for the tests.
+pub const IRQ0: usize = EXC_IRQ0;

@@ -1,0 +1,464 @@
+//! DMA1 (RM0440 "Direct memory access controller (DMA)"; stm32-metapac `bdma_v1`), DMAMUX1
+//! (RM0440 "DMA request multiplexer (DMAMUX)"; `dmamux_v1`) and LPUART1 (RM0440 "Low-power
+//! universal asynchronous receiver transmitter (LPUART)"; `usart_v4` LPUART).
+//!
+//! DMA1 covers: 8 channels with EN, DIR, CIRC, PINC/MINC, PSIZE/MSIZE (zero-extension or
+//! truncation between sizes, RM0440 DMA "Programmable data width, data alignment and
+//! endianness"), CNDTR with reload in circular mode, HT/TC/TE flags and their interrupts, GIF,
+//! IFCR; a transfer error (an address no memory or register answers, or flash as destination)
+//! sets TEIF and disables the channel. Each request is served at once (one transfer per
+//! request): the bus arbitration, the channel priorities and the transfer's few bus cycles of
+//! latency are left out, as are memory-to-memory transfers.
+//! DMAMUX1 covers the request routing: DMA1 channel n takes the request DMAREQ_ID of DMAMUX
+//! channel n − 1 (RM0440 DMAMUX: DMA1 channels 1..8 on DMAMUX channels 0..7). Request IDs from
+//! the device data: ADC1 5, DAC1 CH1 6, ADC2 36, LPUART1 RX 34, LPUART1 TX 35. Leaves out
+//! synchronisation, event generation and the request generators (stored only).
+//!
+//! LPUART1 covers: UE/RE/TE with REACK/TEACK, BRR (baud = 256 × f_ck / BRR, f_ck = PCLK1),
+//! RX bytes from the harness at one frame time each (10 bits, 8N1), RDR/RXNE, ORE on a byte
+//! arriving with RXNE set (unless OVRDIS), IDLE one frame after the last byte, the RX DMA
+//! request (CR3.DMAR), the interrupt (RXNEIE, IDLEIE, EIE with ORE); TX bytes captured (TXE and TC
+//! always set). Leaves out: FIFO mode, parity, 9-bit and 7-bit words, stop bits other than
+//! one, noise/framing errors, auto baud, wake-up, the prescaler (PRESC stored, taken as 1), the
+//! TX timing.
+
+/// DMAMUX request IDs (device data `request:`).
+pub mod req {
+    /// ADC1.
+    pub const ADC1: u32 = 5;
+    /// DAC1 channel 1.
+    pub const DAC1_CH1: u32 = 6;
+    /// LPUART1 RX.
+    pub const LPUART1_RX: u32 = 34;
+    /// LPUART1 TX.
+    pub const LPUART1_TX: u32 = 35;
+    /// ADC2.
+    pub const ADC2: u32 = 36;
+}
+
+/// NVIC positions of DMA1 channels 1..8 (RM0440 vector table; device data `DMA1_CHANNELx`).
+pub const DMA1_IRQ: [usize; 8] = [11, 12, 13, 14, 15, 16, 17, 96];
+
+/// One DMA channel.
+#[derive(Clone, Debug, Default)]
+pub struct Channel {
+    /// CCR.
+    pub ccr: u32,
+    /// CNDTR (remaining).
+    pub ndtr: u32,
+    /// CNDTR as programmed (for circular reload and HT).
+    pub ndtr0: u32,
+    /// CPAR.
+    pub par: u32,
+    /// CMAR.
+    pub mar: u32,
+    /// Transfers done in the current cycle (offset of the pointers).
+    pub done: u32,
+}
+
+/// DMA1 with DMAMUX1's channel routing.
+#[derive(Clone, Debug, Default)]
+pub struct Dma {
+    /// Channels 1..8.
+    pub ch: [Channel; 8],
+    /// ISR flags (4 bits per channel).
+    pub isr: u32,
+    /// DMAMUX1 CxCR (16).
+    pub mux: [u32; 16],
+    mux_other: [u32; 8],
+}
+
+/// One transfer a request asks for: read `src` (size), write `dst` (size).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Transfer {
+    /// Channel index 0..8.
+    pub ch: usize,
+    /// Source address and access size in bytes.
+    pub src: (u32, usize),
+    /// Destination address and size.
+    pub dst: (u32, usize),
+}
+
+impl Dma {
+    /// The enabled channel that serves request `id`, if any.
+    pub fn channel_for(&self, id: u32) -> Option<usize> {
+        (0..8).find(|&n| self.mux[n] & 0xFF == id && self.ch[n].ccr & 1 != 0)
+    }
+
+    /// The next transfer of channel `n` (addresses and sizes from CCR, CPAR/CMAR, the
+    /// transfers done so far).
+    pub fn next_transfer(&self, n: usize) -> Transfer {
+        let c = &self.ch[n];
+        let size = |code: u32| 1usize << code.min(2);
+        let psize = size((c.ccr >> 8) & 3);
+        let msize = size((c.ccr >> 10) & 3);
+        let pinc = c.ccr & (1 << 6) != 0;
+        let minc = c.ccr & (1 << 7) != 0;
+        let pa = c.par + if pinc { c.done * psize as u32 } else { 0 };
+        let ma = c.mar + if minc { c.done * msize as u32 } else { 0 };
+        if c.ccr & (1 << 4) != 0 {
+            Transfer {
+                ch: n,
+                src: (ma, msize),
+                dst: (pa, psize),
+            }
+        } else {
+            Transfer {
+                ch: n,
+                src: (pa, psize),
+                dst: (ma, msize),
+            }
+        }
+    }
+
+    /// Account for a completed transfer of channel `n` (flags, counts, circular reload).
+    pub fn complete(&mut self, n: usize) {
+        let c = &mut self.ch[n];
+        c.done += 1;
+        c.ndtr = c.ndtr.saturating_sub(1);
+        let shift = 4 * n;
+        if c.ndtr == c.ndtr0 / 2 {
+            self.isr |= (1 << 2 | 1) << shift;
+        }
+        if c.ndtr == 0 {
+            self.isr |= (1 << 1 | 1) << shift;
+            if c.ccr & (1 << 5) != 0 {
+                c.ndtr = c.ndtr0;
+                c.done = 0;
+            } else {
+                // Normal mode: the channel stops requesting (EN stays set, CNDTR 0).
+            }
+        }
+    }
+
+    /// A transfer error on channel `n`: TEIF, the channel disabled.
+    pub fn error(&mut self, n: usize) {
+        self.isr |= (1 << 3 | 1) << (4 * n);
+        self.ch[n].ccr &= !1;
+    }
+
+    /// Can channel `n` transfer (enabled with transfers left)?
+    pub fn ready(&self, n: usize) -> bool {
+        self.ch[n].ccr & 1 != 0 && self.ch[n].ndtr != 0
+    }
+
+    /// Interrupt lines asserted (NVIC positions).
+    pub fn irqs(&self) -> impl Iterator<Item = usize> + '_ {
+        (0..8).filter_map(move |n| {
+            let flags = (self.isr >> (4 * n)) & 0xE;
+            let ie = self.ch[n].ccr & 0xE;
+            (flags & ie != 0).then_some(DMA1_IRQ[n])
+        })
+    }
+
+    /// DMA1 register read.
+    pub fn read(&self, off: u32) -> Option<u32> {
+        Some(match off {
+            0x00 => self.isr,
+            0x04 => 0,
+            0x08..=0xA4 => {
+                let n = ((off - 0x08) / 20) as usize;
+                let c = &self.ch[n];
+                match (off - 0x08) % 20 {
+                    0 => c.ccr,
+                    4 => c.ndtr,
+                    8 => c.par,
+                    12 => c.mar,
+                    _ => 0,
+                }
+            }
+            _ => return None,
+        })
+    }
+
+    /// DMA1 register write; returns a rule violation, if any.
+    pub fn write(&mut self, off: u32, v: u32) -> Option<Option<String>> {
+        match off {
+            0x00 => {}
+            0x04 => {
+                // IFCR: CGIFx clears all four flags of the channel.
+                for n in 0..8 {
+                    let bits = (v >> (4 * n)) & 0xF;
+                    let clear = if bits & 1 != 0 { 0xF } else { bits };
+                    self.isr &= !(clear << (4 * n));
+                }
+            }
+            0x08..=0xA4 => {
+                let n = ((off - 0x08) / 20) as usize;
+                let reg = (off - 0x08) % 20;
+                let c = &mut self.ch[n];
+                let enabled = c.ccr & 1 != 0;
+                let name = ["CCR", "CNDTR", "CPAR", "CMAR", "?"][(reg / 4) as usize];
+                let changed = match reg {
+                    0 => (c.ccr ^ v) & 0x7FFE != 0,
+                    4 => c.ndtr != v & 0xFFFF,
+                    8 => c.par != v,
+                    12 => c.mar != v,
+                    _ => false,
+                };
+                let violation = (enabled && changed).then(|| {
+                    format!(
+                        "DMA1 channel {} {name} changed while the channel is enabled (RM0440 DMA: configured only with EN = 0)",
+                        n + 1
+                    )
+                });
+                match reg {
+                    0 => {
+                        if v & 1 != 0 && !enabled {
+                            c.done = 0;
+                        }
+                        if violation.is_none() || reg != 0 {
+                            c.ccr = v & 0x7FFF;
+                        } else {
+                            // Only EN (and the interrupt enables) take effect while enabled.
+                            c.ccr = (c.ccr & !0xF) | (v & 0xF);
+                        }
+                    }
+                    4 if !enabled => {
+                        c.ndtr = v & 0xFFFF;
+                        c.ndtr0 = c.ndtr;
+                    }
+                    8 if !enabled => c.par = v,
+                    12 if !enabled => c.mar = v,
+                    _ => {}
+                }
+                return Some(violation);
+            }
+            _ => return None,
+        }
+        Some(None)
+    }
+
+    /// DMAMUX1 register read.
+    pub fn mux_read(&self, off: u32) -> Option<u32> {
+        Some(match off {
+            0x00..=0x3C => self.mux[(off / 4) as usize],
+            0x80 | 0x84 | 0x140 | 0x144 => 0,
+            0x100..=0x10C => self.mux_other[((off - 0x100) / 4) as usize],
+            _ => return None,
+        })
+    }
+
+    /// DMAMUX1 register write.
+    pub fn mux_write(&mut self, off: u32, v: u32) -> Option<Option<String>> {
+        match off {
+            0x00..=0x3C => {
+                let n = (off / 4) as usize;
+                let violation = (n < 8 && self.ch[n].ccr & 1 != 0 && (self.mux[n] ^ v) & 0xFF != 0).then(|| {
+                    format!("DMAMUX1 channel {n} request changed while DMA1 channel {} is enabled (RM0440 DMAMUX)", n + 1)
+                });
+                self.mux[n] = v;
+                Some(violation)
+            }
+            0x84 | 0x144 => Some(None),
+            0x100..=0x10C => {
+                self.mux_other[((off - 0x100) / 4) as usize] = v;
+                Some(None)
+            }
+            _ => None,
+        }
+    }
+}
+
+/// LPUART1.
+#[derive(Clone, Debug, Default)]
+pub struct Lpuart {
+    cr1: u32,
+    cr2: u32,
+    /// CR3.
+    pub cr3: u32,
+    brr: u32,
+    presc: u32,
+    /// ISR flags (RXNE 5, IDLE 4, ORE 3).
+    isr: u32,
+    rdr: u32,
+    /// Bytes to receive, each with its arrival time (s).
+    pub rx: std::collections::VecDeque<(f64, u8)>,
+    /// When IDLE rises (s), after the last byte.
+    idle_at: Option<f64>,
+    /// A DMA request for the byte in RDR, not yet served.
+    pub dma_pending: bool,
+    /// Bytes the image transmitted.
+    pub tx: Vec<u8>,
+}
+
+impl Lpuart {
+    /// Enabled receiver?
+    pub fn receiving(&self) -> bool {
+        self.cr1 & 0b101 == 0b101
+    }
+
+    /// The frame time at `pclk1` Hz, s (10 bits).
+    pub fn frame_s(&self, pclk1: f64) -> f64 {
+        if self.brr == 0 {
+            return f64::INFINITY;
+        }
+        let baud = 256.0 * pclk1 / self.brr as f64;
+        10.0 / baud
+    }
+
+    /// Queue `bytes` arriving back to back from time `t0` at the present baud rate.
+    pub fn send(&mut self, t0: f64, bytes: &[u8], pclk1: f64) {
+        let frame = self.frame_s(pclk1);
+        let mut t = self.rx.back().map_or(t0, |(last, _)| last.max(t0));
+        for &b in bytes {
+            t += frame;
+            self.rx.push_back((t, b));
+        }
+    }
+
+    /// The next event: a byte arriving or the idle line, s.
+    pub fn next_event(&self) -> Option<f64> {
+        if !self.receiving() {
+            return None;
+        }
+        [self.rx.front().map(|r| r.0), self.idle_at]
+            .into_iter()
+            .flatten()
+            .reduce(f64::min)
+    }
+
+    /// Take the byte arriving by `t` into RDR; returns true if a DMA request is raised.
+    pub fn advance(&mut self, t: f64, pclk1: f64) -> bool {
+        let mut request = false;
+        if let Some(&(at, b)) = self.rx.front() {
+            if at <= t && self.receiving() {
+                self.rx.pop_front();
+                if self.isr & (1 << 5) != 0 && self.cr3 & (1 << 12) == 0 {
+                    self.isr |= 1 << 3; // ORE: the new byte is lost
+                } else {
+                    self.rdr = b as u32;
+                    self.isr |= 1 << 5;
+                    if self.cr3 & (1 << 6) != 0 {
+                        self.dma_pending = true;
+                        request = true;
+                    }
+                }
+                self.idle_at = Some(at + self.frame_s(pclk1));
+            }
+        }
+        if let Some(at) = self.idle_at {
+            if at <= t && self.rx.front().is_none_or(|r| r.0 > at) {
+                self.idle_at = None;
+                self.isr |= 1 << 4;
+            }
+        }
+        request
+    }
+
+    /// The DMA read RDR.
+    pub fn dma_served(&mut self) {
+        self.dma_pending = false;
+        self.isr &= !(1 << 5);
+    }
+
+    /// The LPUART1 interrupt line.
+    pub fn irq(&self) -> bool {
+        (self.cr1 & (1 << 5) != 0 && self.isr & (1 << 5 | 1 << 3) != 0)
+            || (self.cr1 & (1 << 4) != 0 && self.isr & (1 << 4) != 0)
+            || (self.cr3 & 1 != 0 && self.isr & (1 << 3) != 0)
+    }
+
+    /// Register read (RDR clears RXNE).
+    pub fn read(&mut self, off: u32) -> Option<u32> {
+        Some(match off {
+            0x00 => self.cr1,
+            0x04 => self.cr2,
+            0x08 => self.cr3,
+            0x0C => self.brr,
+            0x10 | 0x14 | 0x18 | 0x20 => 0,
+            0x1C => {
+                let ue = self.cr1 & 1 != 0;
+                self.isr
+                    | (1 << 7) // TXE
+                    | (1 << 6) // TC
+                    | ((ue && self.cr1 & 8 != 0) as u32) << 21
+                    | ((ue && self.cr1 & 4 != 0) as u32) << 22
+            }
+            0x24 => {
+                self.isr &= !(1 << 5);
+                self.rdr
+            }
+            0x28 => 0,
+            0x2C => self.presc,
+            _ => return None,
+        })
+    }
+
+    /// Register write.
+    pub fn write(&mut self, off: u32, v: u32) -> Option<()> {
+        match off {
+            0x00 => self.cr1 = v,
+            0x04 => self.cr2 = v,
+            0x08 => self.cr3 = v,
+            0x0C => self.brr = v & 0xF_FFFF,
+            0x10 | 0x14 => {}
+            0x18 => {
+                if v & (1 << 3) != 0 {
+                    self.isr &= !(1 << 5); // RXFRQ: flush RDR
+                }
+            }
+            0x20 => self.isr &= !(v & ((1 << 3) | (1 << 4) | 0b111)),
+            0x28 => self.tx.push(v as u8),
+            0x2C => self.presc = v & 0xF,
+            _ => return None,
+        }
+        Some(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn circular_channel_reloads_and_flags_half_and_full() {
+        // RM0440 DMA: in circular mode CNDTR reloads at 0; HTIF at half, TCIF at the end.
+        let mut d = Dma::default();
+        d.mux_write(0, req::ADC1).unwrap();
+        d.write(0x08 + 4, 4).unwrap();
+        d.write(0x08 + 8, 0x5000_0040).unwrap();
+        d.write(0x08 + 12, 0x2000_0100).unwrap();
+        // MINC, CIRC, PSIZE 16, MSIZE 16, HTIE, TCIE, EN.
+        d.write(0x08, (1 << 7) | (1 << 5) | (1 << 8) | (1 << 10) | 0b111)
+            .unwrap();
+        assert_eq!(d.channel_for(req::ADC1), Some(0));
+        assert_eq!(d.channel_for(req::ADC2), None);
+        let t = d.next_transfer(0);
+        assert_eq!((t.src, t.dst), ((0x5000_0040, 2), (0x2000_0100, 2)));
+        d.complete(0);
+        assert_eq!(d.isr & 0xF, 0);
+        d.complete(0);
+        assert_eq!(d.isr & 0xF, 0b0101, "GIF | HTIF");
+        assert_eq!(d.irqs().collect::<Vec<_>>(), vec![11]);
+        d.complete(0);
+        d.complete(0);
+        assert_eq!(d.isr & 0xF, 0b0111, "TCIF too");
+        assert_eq!(d.ch[0].ndtr, 4, "reloaded");
+        assert_eq!(d.next_transfer(0).dst.0, 0x2000_0100, "back to the start");
+        // Reconfiguring while enabled breaks the rule and is ignored.
+        assert!(d.write(0x08 + 12, 0x2000_0200).unwrap().is_some());
+        assert_eq!(d.ch[0].mar, 0x2000_0100);
+        // IFCR CGIF1 clears all four.
+        d.write(0x04, 1).unwrap();
+        assert_eq!(d.isr & 0xF, 0);
+    }
+
+    #[test]
+    fn lpuart_bytes_arrive_a_frame_apart_then_idle() {
+        let mut u = Lpuart::default();
+        u.write(0x0C, 0x369).unwrap(); // BRR for 115 200 Bd at ~42.5 MHz? any value
+        u.write(0x08, 1 << 6).unwrap();
+        u.write(0x00, 0b101 | (1 << 4)).unwrap();
+        let pclk = 170e6;
+        let frame = u.frame_s(pclk);
+        u.send(0.0, b"ab", pclk);
+        assert!((u.next_event().unwrap() - frame).abs() < 1e-15);
+        assert!(u.advance(frame, pclk));
+        u.dma_served();
+        assert!(u.advance(2.0 * frame, pclk));
+        assert!(!u.irq(), "no idle yet");
+        assert!(!u.advance(3.0 * frame, pclk));
+        assert!(u.irq(), "IDLE with IDLEIE");
+    }
+}
