@@ -114,6 +114,14 @@ impl Elf {
         Ok(Elf { segments, symbols })
     }
 
+    /// An image of raw segments (no symbols): hand-made test programs.
+    pub fn from_segments(segments: Vec<Segment>) -> Elf {
+        Elf {
+            segments,
+            symbols: Vec::new(),
+        }
+    }
+
     /// The address of symbol `name`, if the file has one.
     pub fn symbol(&self, name: &str) -> Option<u32> {
         self.symbols

@@ -13,6 +13,7 @@ pub mod cortex;
 pub mod elf;
 pub mod machine;
 pub mod periph;
+pub mod probe;
 pub mod rtt;
 
 pub use machine::{Exit, Machine};

@@ -600,6 +600,9 @@ impl Machine {
         rebuild_hflags(uc);
         set(uc, RegisterARM::PC, handler | 1);
         let b = uc.get_data_mut();
+        if std::env::var_os("STM32_EMU_TRACE_EXC").is_some() {
+            eprintln!("exc {exc} at cycle {} from pc {pc:#010x}", b.now);
+        }
         b.scs.nvic.activate(exc);
         b.scs.ipsr = exc;
         b.irq_dirty = true;
@@ -806,6 +809,14 @@ impl Machine {
         }
     }
 
+    /// Put `bytes` on LPUART1's RX line now, back to back at the receiver's baud rate.
+    pub fn uart_send(&mut self, bytes: &[u8]) {
+        let b = self.board_mut();
+        let t = b.seconds();
+        let pclk1 = b.periph.rcc.pclk1();
+        b.periph.lpuart.send(t, bytes, pclk1);
+    }
+
     /// Seconds of emulated time since power-on.
     pub fn seconds(&self) -> f64 {
         self.board().seconds()
@@ -819,3 +830,73 @@ impl Machine {
 
 /// The first external interrupt's exception number, re-exported for the tests.
 pub const IRQ0: usize = EXC_IRQ0;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::elf::Segment;
+
+    /// Hand-assembled (llvm-mc, thumbv7em) at 0x0800_0200:
+    ///
+    /// ```text
+    /// reset: IPR[0] = 0x40; ISER0 = 1; BASEPRI = 0x20; vmov.f32 s0, #1.0
+    ///        r2 = 7; STIR = 0 (IRQ0 pending, masked); r2 += 1
+    ///        [0x2000_0004] = [0x2000_0000]   (handler count before unmasking)
+    ///        BASEPRI = 0                      (IRQ0 taken here)
+    ///        r2 += 1; r6 = s0; loop: wfi; b loop
+    /// handler: r2 = 99; s0 = 2.0; [0x2000_0000] += 1; r7 = lr; bx lr
+    /// ```
+    const PROGRAM: [u8; 88] = [
+        0x12, 0x48, 0x40, 0x21, 0x01, 0x70, 0x12, 0x48, 0x01, 0x21, 0x01, 0x60, 0x20, 0x21, 0x81,
+        0xf3, 0x11, 0x88, 0xb7, 0xee, 0x00, 0x0a, 0x0f, 0x48, 0x00, 0x21, 0x07, 0x22, 0x01, 0x60,
+        0x52, 0x1c, 0x4f, 0xf0, 0x00, 0x53, 0x1d, 0x68, 0x5d, 0x60, 0x00, 0x21, 0x81, 0xf3, 0x11,
+        0x88, 0x52, 0x1c, 0x10, 0xee, 0x10, 0x6a, 0x30, 0xbf, 0xfd, 0xe7, 0x63, 0x22, 0xb0, 0xee,
+        0x00, 0x0a, 0x4f, 0xf0, 0x00, 0x53, 0x1d, 0x68, 0x01, 0x35, 0x1d, 0x60, 0x77, 0x46, 0x70,
+        0x47, 0x00, 0xe4, 0x00, 0xe0, 0x00, 0xe1, 0x00, 0xe0, 0x00, 0xef, 0x00, 0xe0,
+    ];
+    const SP0: u32 = 0x2000_8000;
+
+    fn machine() -> Machine {
+        let mut vt = vec![0u8; 0x200];
+        let mut put = |i: usize, v: u32| vt[4 * i..4 * i + 4].copy_from_slice(&v.to_le_bytes());
+        put(0, SP0);
+        put(1, 0x0800_0201);
+        put(16, 0x0800_0239);
+        vt.extend_from_slice(&PROGRAM);
+        let elf = Elf::from_segments(vec![Segment {
+            paddr: FLASH_BASE,
+            data: vt,
+        }]);
+        Machine::new(&elf).unwrap()
+    }
+
+    fn word(m: &Machine, a: u32) -> u32 {
+        u32::from_le_bytes(m.read_memory(a, 4).unwrap().try_into().unwrap())
+    }
+
+    #[test]
+    fn basepri_defers_the_interrupt_and_return_restores_the_frame() {
+        let mut m = machine();
+        assert_eq!(m.run_until(1_000), Exit::Limit);
+        // ARMv7-M B1.5.4: pending at priority 0x40 under BASEPRI 0x20: not taken until BASEPRI
+        // is lowered; then taken before the next instruction.
+        assert_eq!(word(&m, 0x2000_0004), 0, "handler ran while masked");
+        assert_eq!(word(&m, 0x2000_0000), 1, "handler ran once");
+        // B1.5.8: the frame restored the caller-saved r2 (7 + 1 + 1), the handler's 99 is gone.
+        assert_eq!(m.register(RegisterARM::R2), 9);
+        // The extended frame (CONTROL.FPCA set by the thread's FP instruction) restored s0.
+        assert_eq!(m.register(RegisterARM::R6), 1.0f32.to_bits());
+        // EXC_RETURN: thread, MSP, FP frame = 0xFFFF_FFE9 (B1.5.8 Table B1-8).
+        assert_eq!(m.register(RegisterARM::R7), 0xFFFF_FFE9);
+        // Back in thread mode with the stack as before, asleep in WFI; nothing active.
+        assert_eq!(m.register(RegisterARM::IPSR), 0);
+        assert_eq!(m.register(RegisterARM::SP), SP0);
+        assert_eq!(m.board().scs.nvic.active_count(), 0);
+        assert!(
+            m.board().executed < 100,
+            "WFI slept the rest: {}",
+            m.board().executed
+        );
+        assert_eq!(m.cycles(), 1_000);
+    }
+}

@@ -1,6 +1,11 @@
-//! `stm32-emu <elf> [--seconds S]`: run the STM32 image on the emulated NUCLEO-G474RE and write
-//! its defmt log (the raw RTT bytes) to stdout, for `defmt-print -e <elf>`. A run ends after
-//! `S` emulated seconds (default 2), or at a fault, which is printed to stderr (exit 2).
+//! `stm32-emu <elf> [--seconds S] [--phantom NAME] [--send T TEXT]...`: run the STM32 image on
+//! the emulated NUCLEO-G474RE and write its defmt log (the raw RTT bytes) to stdout, for
+//! `defmt-print -e <elf>`. With `--phantom` (a name of hal-sim's phantoms, e.g. `B`) the probe
+//! front end is hal-sim's, pressed on that phantom at 30 mN with the bench noise, seed 1 (the
+//! QEMU board's power-on scene); without it nothing is wired to the analog pins. `--send T TEXT`
+//! puts TEXT and a newline on LPUART1 RX at T emulated seconds (115 200 Bd, back to back), as
+//! the ST-LINK virtual COM port delivers a typed line. A run ends after `S` emulated seconds
+//! (default 2), or at a fault, which is printed to stderr (exit 2).
 //! The documented rules the image broke are printed to stderr at the end (exit 3 if any).
 
 use std::io::Write;
@@ -13,6 +18,8 @@ fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().collect();
     let mut elf_path = None;
     let mut seconds = 2.0f64;
+    let mut phantom: Option<String> = None;
+    let mut sends: Vec<(f64, String)> = Vec::new();
     let mut i = 1;
     while i < args.len() {
         match args[i].as_str() {
@@ -22,6 +29,19 @@ fn main() -> ExitCode {
                     .get(i)
                     .and_then(|s| s.parse().ok())
                     .unwrap_or_else(|| usage());
+            }
+            "--phantom" => {
+                i += 1;
+                phantom = Some(args.get(i).cloned().unwrap_or_else(|| usage()));
+            }
+            "--send" => {
+                let t = args
+                    .get(i + 1)
+                    .and_then(|s| s.parse().ok())
+                    .unwrap_or_else(|| usage());
+                let text = args.get(i + 2).cloned().unwrap_or_else(|| usage());
+                sends.push((t, text));
+                i += 2;
             }
             s if !s.starts_with('-') && elf_path.is_none() => elf_path = Some(s.to_string()),
             _ => usage(),
@@ -45,12 +65,28 @@ fn main() -> ExitCode {
         eprintln!("stm32-emu: {e}");
         std::process::exit(1)
     });
+    if let Some(name) = phantom {
+        let Some(p) = hal_sim::phantoms::by_name(&name) else {
+            eprintln!("stm32-emu: no phantom {name}");
+            return ExitCode::from(1);
+        };
+        m.board_mut().periph.analog = Box::new(stm32_emu::probe::HalSimProbe::bench(&p));
+    }
+    sends.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut sends = sends.into_iter().peekable();
     let wall = std::time::Instant::now();
     let mut out = std::io::stdout().lock();
     let mut code = ExitCode::SUCCESS;
     // Drain RTT every emulated millisecond at 170 MHz (the buffer is 1 KiB).
     let slice = 170_000u64;
     loop {
+        while let Some((t, _)) = sends.peek() {
+            if *t > m.seconds() {
+                break;
+            }
+            let (_, text) = sends.next().unwrap();
+            m.uart_send(format!("{text}\n").as_bytes());
+        }
         let until = m.cycles() + slice;
         let exit = m.run_until(until);
         if std::env::var_os("STM32_EMU_DEBUG").is_some() {
@@ -101,6 +137,6 @@ fn main() -> ExitCode {
 }
 
 fn usage() -> ! {
-    eprintln!("usage: stm32-emu <elf> [--seconds S]");
+    eprintln!("usage: stm32-emu <elf> [--seconds S] [--phantom NAME] [--send T TEXT]...");
     std::process::exit(1)
 }
