@@ -216,7 +216,8 @@ impl Stream {
             // as `stalled` rather than run on with a dead drive or stale samples.
             Some(hw) if self.fault_seen => hw.tim.stop(),
             Some(hw) => {
-                if !(fill(&mut hw.adc1, &mut self.current) && fill(&mut hw.adc2, &mut self.monitor))
+                if !(fill(&mut hw.adc1, &mut self.current, || {})
+                    && fill(&mut hw.adc2, &mut self.monitor, sync_adc2_dma))
                 {
                     self.late_seen = true;
                 }
@@ -250,15 +251,42 @@ impl Stream {
 
 /// Read the newest [`BATCH`] samples of `adc`'s ring into `out`, waiting a bounded time for the
 /// last ones (the second ADC's DMA may trail the first's interrupt by a few bus cycles).
+/// `sync` runs before each poll: for ADC2's ring, embassy's handler of its DMA channel.
+///
+/// Why: embassy's ring buffer counts the DMA's completed cycles only in the channel's
+/// interrupt handler, and a write position that went back (NDTR reloaded at the end of the
+/// ring) without a counted completion is clamped to the ring's last sample
+/// (`DmaIndex::dma_sync`). ADC2's channel (DMA1 CH2) interrupts at the sample task's own
+/// priority, so its handler cannot run while the task reads: at every full-ring batch the
+/// read found 24 of 25 samples, waited out [`ADC_PAIR_TIMEOUT`], and left the batch's last
+/// drive-monitor sample stale (the batch counted late) — every other batch, found by the
+/// emulated board (emu/tests/image.rs), which models the DMA interrupts' timing.
 fn fill<T: embassy_stm32::adc::Instance>(
     adc: &mut RingBufferedAdc<'static, T>,
     out: &mut [u16; BATCH],
+    mut sync: impl FnMut(),
 ) -> bool {
     let mut got = 0;
     spin_until(ADC_PAIR_TIMEOUT, || {
+        sync();
         got += adc.read_latest(&mut out[got..]);
         got == BATCH
     })
+}
+
+/// embassy's handler for ADC2's DMA channel (DMA1 CH2), run from the sample task before it
+/// reads that ring ([`fill`]): it acknowledges the half or full transfer and counts the
+/// completed cycle, as the channel's own interrupt would (which then finds nothing to do).
+/// Transfer errors are counted first ([`DmaFaults`]), as on the vector.
+fn sync_adc2_dma() {
+    // SAFETY: the same handlers the DMA1_CHANNEL2 vector runs (`Irqs`); that vector has the
+    // sample task's priority, so the two never interleave.
+    unsafe {
+        <DmaFaults as Handler<interrupt::typelevel::DMA1_CHANNEL2>>::on_interrupt();
+        <dma::InterruptHandler<peripherals::DMA1_CH2> as Handler<
+            interrupt::typelevel::DMA1_CHANNEL2,
+        >>::on_interrupt();
+    }
 }
 
 /// is to be checked), at 170 MHz.
