@@ -85,8 +85,8 @@ pub struct Board {
     /// Some pending, enabled exception could preempt if the masks allow it: the code hook
     /// reads BASEPRI/PRIMASK before each instruction.
     irq_armed: bool,
-    /// Addresses of the last instructions (for the IT-block check at exception entry).
-    recent: [u32; 4],
+    /// Instructions per translated block, by (start address, size in bytes).
+    blocks: std::collections::HashMap<(u32, u32), u64>,
     /// A fault the hooks found (an unmodelled register, a bad exception return).
     pub fault: Option<String>,
     /// The system control space.
@@ -112,7 +112,7 @@ impl Board {
             stopped: false,
             irq_dirty: true,
             irq_armed: false,
-            recent: [0; 4],
+            blocks: std::collections::HashMap::new(),
             fault: None,
             scs: Scs::default(),
             periph: Peripherals::default(),
@@ -169,6 +169,25 @@ impl Board {
         } else {
             None
         }
+    }
+
+    /// The number of Thumb instructions in the block of `size` bytes at `addr` (a halfword
+    /// whose top five bits are 0b11101, 0b11110 or 0b11111 starts a 32-bit instruction;
+    /// ARMv7-M A5.1).
+    fn block_instructions(&mut self, addr: u32, size: u32) -> u64 {
+        if let Some(&n) = self.blocks.get(&(addr, size)) {
+            return n;
+        }
+        let mut n = 0;
+        let mut a = addr;
+        while a < addr + size {
+            let h = self.mem_read(a, 2).unwrap_or(0);
+            a += if h >> 11 >= 0b11101 { 4 } else { 2 };
+            n += 1;
+        }
+        let n = n.max(1);
+        self.blocks.insert((addr, size), n);
+        n
     }
 
     /// Pend the external interrupts whose lines are asserted (level-sensitive: a line still
@@ -310,22 +329,22 @@ impl Machine {
             )?;
         }
         // Time and exception checks: every instruction.
-        uc.add_code_hook(0, u32::MAX as u64, |uc, addr, _size| {
+        // Time and exception checks: at the start of every translated block (a few
+        // instructions; the CPU's own exits end a block: branches, MSR to the masks, WFI,
+        // exception returns). The block's instructions are counted when it starts.
+        uc.add_block_hook(0, u32::MAX as u64, |uc, addr, size| {
             let b = uc.get_data_mut();
             if b.periph.flash_restore_pending {
                 b.periph.flash_restore_pending = false;
                 let (periph, flash) = (&mut b.periph, &mut b.flash);
                 periph.flash_restore(flash);
             }
+            let n = b.block_instructions(addr as u32, size);
             if b.now >= b.deadline {
                 b.stopped = true;
                 uc.emu_stop().ok();
                 return;
             }
-            b.recent.rotate_left(1);
-            b.recent[3] = addr as u32;
-            b.now += 1;
-            b.executed += 1;
             if b.irq_dirty {
                 b.irq_dirty = false;
                 b.irq_armed = b.scs.nvic.highest_pending().is_some_and(|(_, p)| {
@@ -345,14 +364,15 @@ impl Machine {
                     .takable(basepri, primask, faultmask, b.scs.scb.prigroup)
                     .is_some()
                 {
-                    // Not executed: stop before it and take the exception.
-                    b.now -= 1;
-                    b.executed -= 1;
-                    b.recent.rotate_right(1);
+                    // Not executed: stop before the block and take the exception.
                     b.stopped = true;
                     uc.emu_stop().ok();
+                    return;
                 }
             }
+            let b = uc.get_data_mut();
+            b.now += n;
+            b.executed += n;
         })?;
         // Exception return (EXCP_EXCEPTION_EXIT = 8) and the rest of the CPU's exceptions.
         uc.add_intr_hook(|uc, intno| {
@@ -501,25 +521,10 @@ impl Machine {
         }
     }
 
-    /// Is `pc` inside an IT block begun by one of the last instructions? (An IT instruction
-    /// `0xBFxy` with a non-zero mask `y` covers the next 4 − trailing-zeros(y) instructions.)
-    fn in_it_block(&self, pc: u32) -> bool {
-        let b = self.board();
-        let recent = b.recent;
-        for (k, &a) in recent.iter().enumerate().rev() {
-            if a == 0 {
-                continue;
-            }
-            let Some(h) = b.mem_read(a, 2) else { continue };
-            if h & 0xFF00 == 0xBF00 && h & 0xF != 0 {
-                let len = 4 - (h & 0xF).trailing_zeros() as usize;
-                // Instructions executed after the IT: recent[k+1..=3], then `pc` is next.
-                let after = 3 - k;
-                let _ = pc;
-                return after < len;
-            }
-        }
-        false
+    /// Is the CPU inside an IT block (EPSR.IT non-zero, ARMv7-M A7.3)? An exception is not
+    /// taken there by this model (the hardware may; the IT state would be stacked).
+    fn in_it_block(&self) -> bool {
+        reg(&self.uc, RegisterARM::XPSR) & 0x0600_FC00 != 0
     }
 
     /// Take exception `exc` (B1.5.6): push the frame, set LR to EXC_RETURN, enter handler mode
@@ -741,7 +746,6 @@ impl Machine {
                 .into_iter()
                 .chain(b.scs.systick.next_event())
                 .min();
-            let pc = reg(&self.uc, RegisterARM::PC);
             let b = self.uc.get_data();
             let takable = b
                 .scs
@@ -749,7 +753,7 @@ impl Machine {
                 .takable(basepri, primask, faultmask, b.scs.scb.prigroup);
             let mut deadline = next_event.unwrap_or(u64::MAX).min(until);
             if let Some(exc) = takable {
-                if self.in_it_block(pc) {
+                if self.in_it_block() {
                     deadline = deadline.min(now + 1);
                 } else {
                     if let Err(e) = self.exception_entry(exc) {

@@ -5,13 +5,15 @@
 //! QEMU board's power-on scene); without it nothing is wired to the analog pins. `--send T TEXT`
 //! puts TEXT and a newline on LPUART1 RX at T emulated seconds (115 200 Bd, back to back), as
 //! the ST-LINK virtual COM port delivers a typed line. A run ends after `S` emulated seconds
-//! (default 2), or at a fault, which is printed to stderr (exit 2).
+//! (default 2), or at a fault, which is printed to stderr (exit 2). `--scene T NAME|free-air`
+//! moves the probe at T s; `--reset T` pulls NRST at T s (a pin reset: RAM and flash kept).
 //! The documented rules the image broke are printed to stderr at the end (exit 3 if any).
 
 use std::io::Write;
 use std::process::ExitCode;
 
 use stm32_emu::elf::Elf;
+use stm32_emu::probe::HalSimProbe;
 use stm32_emu::{rtt, Exit, Machine};
 
 fn main() -> ExitCode {
@@ -20,6 +22,8 @@ fn main() -> ExitCode {
     let mut seconds = 2.0f64;
     let mut phantom: Option<String> = None;
     let mut sends: Vec<(f64, String)> = Vec::new();
+    let mut scenes: Vec<(f64, String)> = Vec::new();
+    let mut resets: Vec<f64> = Vec::new();
     let mut i = 1;
     while i < args.len() {
         match args[i].as_str() {
@@ -33,6 +37,23 @@ fn main() -> ExitCode {
             "--phantom" => {
                 i += 1;
                 phantom = Some(args.get(i).cloned().unwrap_or_else(|| usage()));
+            }
+            "--scene" => {
+                let t = args
+                    .get(i + 1)
+                    .and_then(|s| s.parse().ok())
+                    .unwrap_or_else(|| usage());
+                let name = args.get(i + 2).cloned().unwrap_or_else(|| usage());
+                scenes.push((t, name));
+                i += 2;
+            }
+            "--reset" => {
+                i += 1;
+                resets.push(
+                    args.get(i)
+                        .and_then(|s| s.parse().ok())
+                        .unwrap_or_else(|| usage()),
+                );
             }
             "--send" => {
                 let t = args
@@ -65,15 +86,24 @@ fn main() -> ExitCode {
         eprintln!("stm32-emu: {e}");
         std::process::exit(1)
     });
+    let scene_of = |name: &str| -> Option<hal_sim::Scene> {
+        if name == "free-air" {
+            return Some(HalSimProbe::bench_scene(None));
+        }
+        hal_sim::phantoms::by_name(name).map(|p| HalSimProbe::bench_scene(Some(&p)))
+    };
     if let Some(name) = phantom {
-        let Some(p) = hal_sim::phantoms::by_name(&name) else {
+        let Some(scene) = scene_of(&name) else {
             eprintln!("stm32-emu: no phantom {name}");
             return ExitCode::from(1);
         };
-        m.board_mut().periph.analog = Box::new(stm32_emu::probe::HalSimProbe::bench(&p));
+        m.board_mut().periph.analog = Box::new(HalSimProbe::new(scene, 1));
     }
+    resets.sort_by(f64::total_cmp);
     sends.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut sends = sends.into_iter().peekable();
+    scenes.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut scenes = scenes.into_iter().peekable();
     let wall = std::time::Instant::now();
     let mut out = std::io::stdout().lock();
     let mut code = ExitCode::SUCCESS;
@@ -86,6 +116,31 @@ fn main() -> ExitCode {
             }
             let (_, text) = sends.next().unwrap();
             m.uart_send(format!("{text}\n").as_bytes());
+        }
+        while let Some((t, _)) = scenes.peek() {
+            if *t > m.seconds() {
+                break;
+            }
+            let (_, name) = scenes.next().unwrap();
+            let Some(scene) = scene_of(&name) else {
+                eprintln!("stm32-emu: no scene {name}");
+                return ExitCode::from(1);
+            };
+            let any: &mut dyn std::any::Any = m.board_mut().periph.analog.as_mut();
+            match any.downcast_mut::<HalSimProbe>() {
+                Some(p) => p.set_scene(scene),
+                None => {
+                    eprintln!("stm32-emu: --scene needs --phantom (the probe at the pins)");
+                    return ExitCode::from(1);
+                }
+            }
+        }
+        if resets.first().is_some_and(|t| *t <= m.seconds()) {
+            resets.remove(0);
+            if let Err(e) = m.system_reset(stm32_emu::periph::ResetCause::Pin) {
+                eprintln!("stm32-emu: reset: {e}");
+                return ExitCode::from(2);
+            }
         }
         let until = m.cycles() + slice;
         let exit = m.run_until(until);
@@ -137,6 +192,6 @@ fn main() -> ExitCode {
 }
 
 fn usage() -> ! {
-    eprintln!("usage: stm32-emu <elf> [--seconds S] [--phantom NAME] [--send T TEXT]...");
+    eprintln!("usage: stm32-emu <elf> [--seconds S] [--phantom NAME] [--scene T NAME|free-air]... [--send T TEXT]... [--reset T]...");
     std::process::exit(1)
 }

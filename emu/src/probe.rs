@@ -40,12 +40,26 @@ impl HalSimProbe {
         }
     }
 
-    /// The QEMU board's power-on scene on phantom `p`: pressed at 30 mN, bench noise, seed 1.
-    pub fn bench(p: &hal_sim::Phantom) -> HalSimProbe {
-        let scene = Scene::on_phantom(p)
-            .with_noise(hal_sim::NoiseScene::Bench)
-            .with_preload_n(0.03);
-        HalSimProbe::new(scene, 1)
+    /// The QEMU board's power-on scene on phantom `p` (`None`: free air): pressed at 30 mN,
+    /// bench noise, seed 1.
+    pub fn bench(p: Option<&hal_sim::Phantom>) -> HalSimProbe {
+        HalSimProbe::new(Self::bench_scene(p), 1)
+    }
+
+    /// The bench scene on phantom `p` (`None`: the probe lifted into free air).
+    pub fn bench_scene(p: Option<&hal_sim::Phantom>) -> Scene {
+        let s = match p {
+            Some(p) => Scene::on_phantom(p),
+            None => Scene::free_air(),
+        };
+        s.with_noise(hal_sim::NoiseScene::Bench)
+            .with_preload_n(0.03)
+    }
+
+    /// Move the probe to `scene` (the plant's state carries over, as when the user lifts or
+    /// presses it).
+    pub fn set_scene(&mut self, scene: Scene) {
+        self.probe.set_scene(scene);
     }
 
     /// The simulated probe.

@@ -85,7 +85,7 @@ fn run(elf: &Path, seconds: f64, lines: &[(f64, &str)]) -> Vec<String> {
     let image = Elf::parse(&bytes).unwrap();
     let cb = image.symbol("_SEGGER_RTT").expect("_SEGGER_RTT");
     let mut m = Machine::new(&image).unwrap();
-    m.board_mut().periph.analog = Box::new(HalSimProbe::bench(&hal_sim::phantoms::B));
+    m.board_mut().periph.analog = Box::new(HalSimProbe::bench(Some(&hal_sim::phantoms::B)));
     let wall = std::time::Instant::now();
     let mut log = Vec::new();
     let mut pending = lines.to_vec();

@@ -58,6 +58,7 @@ enum Dev {
     Adc(usize),
     AdcCommon,
     Dac1,
+    Syscfg,
 }
 
 /// A clock gate: the enable register's offset in RCC and the bit.
@@ -67,6 +68,7 @@ fn route(addr: u32) -> Option<(Dev, u32, Gate)> {
     use rcc::{AHB1ENR, AHB2ENR, APB1ENR1, APB1ENR2};
     let (dev, base, gate) = match addr {
         0x4000_1000..=0x4000_13FF => (Dev::Tim6, 0x4000_1000, Some((APB1ENR1, 4))),
+        0x4001_0000..=0x4001_002F => (Dev::Syscfg, 0x4001_0000, Some((rcc::APB2ENR, 0))),
         0x4000_8000..=0x4000_83FF => (Dev::Lpuart1, 0x4000_8000, Some((APB1ENR2, 0))),
         0x4002_0000..=0x4002_03FF => (Dev::Dma1, 0x4002_0000, Some((AHB1ENR, 0))),
         0x4002_0800..=0x4002_0BFF => (Dev::Dmamux1, 0x4002_0800, Some((AHB1ENR, 2))),
@@ -114,7 +116,7 @@ pub enum Pin {
 pub const VREF: f64 = 3.3;
 
 /// What is wired to the analog pins: DAC1 OUT1 (PA4) drives it, the ADCs sample it.
-pub trait Analog {
+pub trait Analog: std::any::Any {
     /// DAC1 channel 1's output became `volts` at time `t` (s).
     fn dac_output(&mut self, t: f64, volts: f64);
     /// The voltage on `pin` at time `t` (s).
@@ -205,6 +207,10 @@ pub struct Peripherals {
     pub dma: dma::Dma,
     /// LPUART1.
     pub lpuart: dma::Lpuart,
+    /// SYSCFG's registers (stored; MEMRMP reads the boot mapping: main flash, banks not
+    /// swapped). Leaves out: the memory remap's effect, bank swap, CCM SRAM protection and
+    /// erase, EXTI line routing (EXTICR stored), the FPU interrupt enables.
+    pub syscfg: [u32; 10],
     /// The analog world at the pins.
     pub analog: Box<dyn Analog>,
     /// The documented rules the image broke.
@@ -238,6 +244,7 @@ impl Default for Peripherals {
             adc_common: analog::AdcCommon::default(),
             dma: dma::Dma::default(),
             lpuart: dma::Lpuart::default(),
+            syscfg: [0; 10],
             analog: Box::new(Unconnected),
             violations: Vec::new(),
             flash_restore_pending: false,
@@ -380,24 +387,26 @@ impl Peripherals {
         }
         self.serve_pending(now, mem);
         loop {
-            let t_of = |p: &Self, s: Option<f64>| s.map(|s| p.cycle_at(s, 0));
+            // Events in seconds (other clock domains) are processed at their own time, so that
+            // their `until <= t` tests hold however the cycle they fall in rounds.
+            let t_of = |p: &Self, s: Option<f64>| s.map(|s| (p.cycle_at(s, 0), Some(s)));
             let candidates = [
-                (0, self.tim6.next_event()),
+                (0, self.tim6.next_event().map(|c| (c, None))),
                 (1, t_of(self, self.adc[0].next_event())),
                 (2, t_of(self, self.adc[1].next_event())),
                 (3, t_of(self, self.lpuart.next_event())),
                 (4, t_of(self, self.flash.next_event())),
                 (5, t_of(self, self.iwdg.next_event())),
             ];
-            let Some((which, at)) = candidates
+            let Some((which, (at, secs))) = candidates
                 .into_iter()
                 .filter_map(|(w, c)| c.map(|c| (w, c)))
-                .filter(|&(_, c)| c <= now)
-                .min_by_key(|&(w, c)| (c, w))
+                .filter(|&(_, (c, _))| c <= now)
+                .min_by_key(|&(w, (c, _))| (c, w))
             else {
                 break;
             };
-            let t = self.clock_seconds(at).min(self.clock_seconds(now));
+            let t = secs.unwrap_or_else(|| self.clock_seconds(at));
             match which {
                 0 => {
                     if self.tim6.overflow(at) {
@@ -644,6 +653,7 @@ impl Peripherals {
                 _ => None,
             },
             Dev::Dac1 => self.dac1.read(word, t),
+            Dev::Syscfg => self.syscfg.get((word / 4) as usize).copied(),
         }
     }
 
@@ -739,6 +749,16 @@ impl Peripherals {
                     Some(())
                 }
                 0x0 | 0xC | 0x10 => Some(()),
+                _ => None,
+            },
+            Dev::Syscfg => match word {
+                // MEMRMP: MEM_MODE and FB_MODE are kept as the boot set them (remap and bank
+                // swap not modelled: a change is refused as unmodelled).
+                0x00 if full & 0x107 != self.syscfg[0] & 0x107 => None,
+                0x00..=0x24 => {
+                    self.syscfg[(word / 4) as usize] = full;
+                    Some(())
+                }
                 _ => None,
             },
             Dev::Dac1 => self.dac1.write(word, size, full, t).map(|w| {
