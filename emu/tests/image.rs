@@ -78,26 +78,57 @@ fn num(m: &HashMap<String, String>, k: &str) -> f64 {
         .unwrap()
 }
 
-/// Run `elf` for `seconds` of emulated time with `setup` applied to the machine, sending
-/// `lines` (time s, text) on LPUART1; the decoded log.
-fn run(elf: &Path, seconds: f64, lines: &[(f64, &str)]) -> Vec<String> {
+/// What happens to the board at a time: a line typed on the virtual COM port, the probe moved
+/// (onto a phantom, or `None`: lifted into free air), the reset button.
+#[derive(Clone, Copy, Debug)]
+enum Event {
+    Send(&'static str),
+    Scene(Option<&'static str>),
+    Reset,
+}
+
+/// Run `elf` for `seconds` of emulated time with the probe on phantom B, sending `lines`
+/// (time s, text) on LPUART1; the decoded log.
+fn run(elf: &Path, seconds: f64, lines: &[(f64, &'static str)]) -> Vec<String> {
+    let events: Vec<_> = lines.iter().map(|&(t, l)| (t, Event::Send(l))).collect();
+    run_events(elf, seconds, Some("B"), &events)
+}
+
+/// Run `elf` for `seconds` with the probe first on `phantom` (`None`: free air) and `events`
+/// (time s, event) applied in order; the decoded log.
+fn run_events(
+    elf: &Path,
+    seconds: f64,
+    phantom: Option<&str>,
+    events: &[(f64, Event)],
+) -> Vec<String> {
     let bytes = std::fs::read(elf).unwrap();
     let image = Elf::parse(&bytes).unwrap();
     let cb = image.symbol("_SEGGER_RTT").expect("_SEGGER_RTT");
     let mut m = Machine::new(&image).unwrap();
-    m.board_mut().periph.analog = Box::new(HalSimProbe::bench(Some(&hal_sim::phantoms::B)));
+    let scene = |name: Option<&str>| {
+        HalSimProbe::bench_scene(
+            name.map(|n| hal_sim::phantoms::by_name(n).unwrap())
+                .as_ref(),
+        )
+    };
+    m.board_mut().periph.analog = Box::new(HalSimProbe::new(scene(phantom), 1));
     let wall = std::time::Instant::now();
     let mut log = Vec::new();
-    let mut pending = lines.to_vec();
+    let mut pending = events.to_vec();
     while m.seconds() < seconds {
-        pending.retain(|(t, text)| {
-            if *t <= m.seconds() {
-                m.uart_send(format!("{text}\n").as_bytes());
-                false
-            } else {
-                true
+        while pending.first().is_some_and(|(t, _)| *t <= m.seconds()) {
+            match pending.remove(0).1 {
+                Event::Send(text) => m.uart_send(format!("{text}\n").as_bytes()),
+                Event::Scene(name) => {
+                    let any: &mut dyn std::any::Any = m.board_mut().periph.analog.as_mut();
+                    any.downcast_mut::<HalSimProbe>()
+                        .unwrap()
+                        .set_scene(scene(name));
+                }
+                Event::Reset => m.system_reset(stm32_emu::periph::ResetCause::Pin).unwrap(),
             }
-        });
+        }
         let exit = m.run_until(m.cycles() + 170_000);
         log.extend(rtt::drain(&mut m, cb).unwrap_or_default());
         if let Exit::Fault(f) = exit {
@@ -171,4 +202,89 @@ fn stm32_image_boots_and_passes_its_self_test_on_phantom_b() {
     for k in ["late", "ring", "dropped"] {
         assert_eq!(num(counters, k), 0.0, "{k}: {counters:?}");
     }
+}
+
+/// The user's path of the done-when: the air reference in free air, a calibration on
+/// phantoms A–E, `calibrate fit`, `store`, the reset button, and the stored unit reads phantom
+/// B. References: the phantoms' moduli (paper 003) the calibration was given, and hal-sim's
+/// closed-form resonances of the scenes; the store must be the one read back after the reset.
+#[test]
+fn stm32_image_calibrates_stores_survives_a_reset_and_reads_phantom_b() {
+    use Event::*;
+    let elf = build_image();
+    let events = [
+        (1.0, Send("air")),
+        (13.0, Scene(Some("A"))),
+        (13.5, Send("calibrate add 157.5")),
+        (15.0, Scene(Some("B"))),
+        (15.5, Send("calibrate add 279")),
+        (17.0, Scene(Some("C"))),
+        (17.5, Send("calibrate add 414")),
+        (19.0, Scene(Some("D"))),
+        (19.5, Send("calibrate add 1146")),
+        (21.0, Scene(Some("E"))),
+        (21.5, Send("calibrate add 2465")),
+        (23.0, Send("calibrate fit")),
+        (26.0, Send("store")),
+        (28.0, Scene(Some("B"))),
+        (29.0, Reset),
+        (33.0, Send("measure")),
+    ];
+    let lines = run_events(&elf, 36.0, None, &events);
+    let parsed: Vec<_> = lines.iter().filter_map(|l| fields(l)).collect();
+    let named = |n: &str| {
+        parsed
+            .iter()
+            .filter(|(k, _)| k == n)
+            .map(|(_, m)| m)
+            .collect::<Vec<_>>()
+    };
+
+    // The air reference: the free probe's resonance (closed form) within 0.1 Hz. The air
+    // sweep's fit reads a little above the undamped natural frequency on the host too
+    // (`probe-bench measure` on the same scene: air 232.353 Hz against 232.300 Hz).
+    let air = named("air");
+    assert_eq!(air.len(), 1, "{air:?}");
+    let f_air = HalSimProbe::bench_scene(None).resonance_hz();
+    assert!(
+        (num(air[0], "f_hz") - f_air).abs() < 0.1,
+        "air {air:?}, closed form {f_air} Hz"
+    );
+    // Five references, a fitted curve, stored.
+    assert_eq!(named("reference").len(), 5);
+    assert_eq!(named("calibration").last().unwrap()["source"], "fitted");
+    let saved = named("store");
+    assert!(
+        saved
+            .iter()
+            .any(|m| m.contains_key("seq") && m.get("slot").is_some()),
+        "{saved:?}"
+    );
+    // Two boots; the second loads the stored unit from bank 2.
+    assert_eq!(named("boot").len(), 2);
+    assert!(
+        lines
+            .iter()
+            .any(|l| l.contains("store loaded slot=0 seq=1")),
+        "the store did not survive the reset"
+    );
+    // The reading of B after the reset: ok, its resonance at the closed form, its modulus
+    // within 1 % of the phantom's 279 kPa.
+    let r = named("reading");
+    let r = r.last().expect("a reading");
+    assert_eq!(r["status"], "ok", "{r:?}");
+    let f_b = HalSimProbe::bench_scene(Some(&hal_sim::phantoms::B)).resonance_hz();
+    let tol = 5.0 * num(r, "f_sigma_hz") + 0.01;
+    assert!(
+        (num(r, "f_hz") - f_b).abs() <= tol,
+        "f {} Hz vs closed form {f_b} Hz ± {tol}",
+        num(r, "f_hz")
+    );
+    let e = num(r, "e_kpa");
+    assert!(
+        (e / 279.0 - 1.0).abs() < 0.01,
+        "B read {e} kPa, phantom 279 kPa"
+    );
+    let counters = named("counters");
+    assert_eq!(num(counters.last().unwrap(), "late"), 0.0);
 }
