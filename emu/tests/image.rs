@@ -288,3 +288,42 @@ fn stm32_image_calibrates_stores_survives_a_reset_and_reads_phantom_b() {
     let counters = named("counters");
     assert_eq!(num(counters.last().unwrap(), "late"), 0.0);
 }
+
+/// A fault the bring-up must survive (issue 26, point 6): ADC1 never becomes ready. embassy's
+/// `Adc::new` waits for ADRDY without a bound; the independent watchdog (500 ms) resets the core
+/// and the next boot, finding the boot-step marker in RAM a reset keeps, names the step and
+/// runs without converters — no hang, no reset loop (`docs/firmware.md`, "Boot").
+#[test]
+fn stm32_image_survives_an_adc_that_never_becomes_ready() {
+    let elf = build_image();
+    let bytes = std::fs::read(&elf).unwrap();
+    let image = Elf::parse(&bytes).unwrap();
+    let cb = image.symbol("_SEGGER_RTT").unwrap();
+    let mut m = Machine::new(&image).unwrap();
+    m.board_mut().periph.analog = Box::new(HalSimProbe::bench(Some(&hal_sim::phantoms::B)));
+    m.board_mut().periph.adc[0].never_ready = true;
+    let mut log = Vec::new();
+    while m.seconds() < 2.0 {
+        if let Exit::Fault(f) = m.run_until(m.cycles() + 170_000) {
+            panic!("the emulated board stopped: {f}");
+        }
+        log.extend(rtt::drain(&mut m, cb).unwrap_or_default());
+    }
+    let lines = decode(&elf, &log);
+    for l in &lines {
+        println!("{l}");
+    }
+    assert_eq!(m.resets, 1, "one watchdog reset, no loop");
+    // (RCC_CSR's IWDGRSTF is not looked at here: the image reads and clears it with RMVF.)
+    let boots: Vec<_> = lines
+        .iter()
+        .filter_map(|l| fields(l))
+        .filter(|(n, _)| n == "boot")
+        .collect();
+    assert!(
+        boots
+            .iter()
+            .any(|(_, f)| f.get("fault").map(String::as_str) == Some("converter_hang")),
+        "{lines:?}"
+    );
+}

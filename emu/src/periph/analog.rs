@@ -430,6 +430,8 @@ pub struct Adc {
     pub converting: Option<(f64, f64)>,
     /// A DMA request raised and not yet served.
     pub dma_pending: bool,
+    /// Fault injection: ADRDY never rises after ADEN (a broken ADC or its supply).
+    pub never_ready: bool,
 }
 
 impl Default for Adc {
@@ -456,6 +458,7 @@ impl Default for Adc {
             cal_done_at: None,
             converting: None,
             dma_pending: false,
+            never_ready: false,
         }
     }
 }
@@ -655,7 +658,9 @@ impl Adc {
                     }
                     if cr & (1 << 28) != 0 && cr & (1 << 31) == 0 {
                         cr |= 1;
-                        self.isr |= 1; // ADRDY
+                        if !self.never_ready {
+                            self.isr |= 1; // ADRDY
+                        }
                     }
                 }
                 if old & 1 != 0 {

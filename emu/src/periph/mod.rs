@@ -281,6 +281,7 @@ impl Peripherals {
         let rx = std::mem::take(&mut self.lpuart.rx);
         let tx = std::mem::take(&mut self.lpuart.tx);
         let trace = std::mem::take(&mut self.dac_trace);
+        let adc_faults = self.adc.each_ref().map(|a| a.never_ready);
         *self = Peripherals {
             flash,
             violations,
@@ -291,6 +292,8 @@ impl Peripherals {
         self.lpuart.rx = rx;
         self.lpuart.tx = tx;
         self.rcc.hse_present = hse_present;
+        self.adc[0].never_ready = adc_faults[0];
+        self.adc[1].never_ready = adc_faults[1];
         let flag = match cause {
             ResetCause::Software => 1 << 28,
             ResetCause::Watchdog => 1 << 29,
@@ -847,7 +850,10 @@ impl Peripherals {
                     }
                 }
                 if bits & (1 << 13) != 0 {
+                    let faults = self.adc.each_ref().map(|a| a.never_ready);
                     self.adc = [analog::Adc::default(), analog::Adc::default()];
+                    self.adc[0].never_ready = faults[0];
+                    self.adc[1].never_ready = faults[1];
                     self.adc_common = analog::AdcCommon::default();
                 }
                 if bits & (1 << 16) != 0 {
@@ -875,5 +881,49 @@ impl Peripherals {
             }
             _ => {}
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_peripheral_with_its_clock_off_ignores_writes_reads_zero_and_is_flagged() {
+        // RM0440 RCC: APB1ENR1.PWREN (bit 28) clear after reset: PWR_CR1 is out of reach.
+        let mut p = Peripherals::default();
+        assert_eq!(p.read(0x4000_7000, 4, 10).unwrap(), 0);
+        p.write(0x4000_7000, 4, 0x200, 11).unwrap();
+        assert_eq!(p.violations.len(), 2);
+        assert!(
+            p.violations[0].rule.contains("clock off"),
+            "{:?}",
+            p.violations
+        );
+        // Clock on: the register reads its reset value (VOS = range 1) and takes writes.
+        p.write(0x4002_1058, 4, 1 << 28, 12).unwrap();
+        assert_eq!(p.read(0x4000_7000, 4, 13).unwrap(), 1 << 9);
+        assert_eq!(p.violations.len(), 2, "no new violation");
+        // FLASHEN is set at reset (AHB1ENR reset value 0x100): FLASH_ACR is reachable.
+        assert_eq!(p.read(0x4002_2000, 4, 14).unwrap(), 0x600);
+    }
+
+    #[test]
+    fn the_watchdog_resets_after_its_timeout_in_lsi_time() {
+        // IWDG at reset: PR /4, RLR 0xFFF → 4096 × 4 / 32 kHz = 0.512 s, on HSI16 at 16 MHz.
+        let mut p = Peripherals::default();
+        let (mut f, mut s, mut c) = (vec![0u8; 16], vec![0u8; 16], vec![0u8; 16]);
+        p.write(0x4000_3000, 4, 0xCCCC, 0).unwrap();
+        let due = p.next_event(0).unwrap();
+        assert_eq!(due, (0.512 * 16e6) as u64);
+        let mut mem = Mem {
+            flash: &mut f,
+            sram: &mut s,
+            ccm: &mut c,
+        };
+        p.advance(due - 1, &mut mem);
+        assert_eq!(p.reset_cause_pending(), None);
+        p.advance(due, &mut mem);
+        assert_eq!(p.reset_cause_pending(), Some(ResetCause::Watchdog));
     }
 }
