@@ -89,19 +89,19 @@ enum Event {
 
 /// Run `elf` for `seconds` of emulated time with the probe on phantom B, sending `lines`
 /// (time s, text) on LPUART1; the decoded log.
-fn run(elf: &Path, seconds: f64, lines: &[(f64, &'static str)]) -> Vec<String> {
+fn run(elf: &Path, seconds: f64, lines: &[(f64, &'static str)]) -> (Vec<String>, Vec<String>) {
     let events: Vec<_> = lines.iter().map(|&(t, l)| (t, Event::Send(l))).collect();
     run_events(elf, seconds, Some("B"), &events)
 }
 
 /// Run `elf` for `seconds` with the probe first on `phantom` (`None`: free air) and `events`
-/// (time s, event) applied in order; the decoded log.
+/// (time s, event) applied in order; the decoded log and the RM0440 rules the image broke.
 fn run_events(
     elf: &Path,
     seconds: f64,
     phantom: Option<&str>,
     events: &[(f64, Event)],
-) -> Vec<String> {
+) -> (Vec<String>, Vec<String>) {
     let bytes = std::fs::read(elf).unwrap();
     let image = Elf::parse(&bytes).unwrap();
     let cb = image.symbol("_SEGGER_RTT").expect("_SEGGER_RTT");
@@ -146,13 +146,29 @@ fn run_events(
     for l in lines.iter().filter(|l| !l.contains(" point ")) {
         println!("{l}");
     }
-    lines
+    let rules = m
+        .board()
+        .periph
+        .violations
+        .iter()
+        .map(|v| v.rule.clone())
+        .collect();
+    (lines, rules)
 }
 
 #[test]
 fn stm32_image_boots_and_passes_its_self_test_on_phantom_b() {
     let elf = build_image();
-    let lines = run(&elf, 3.0, &[(1.0, "measure")]);
+    let (lines, rules) = run(&elf, 3.0, &[(1.0, "measure")]);
+    // RM0440's sequences (the emulator's rule checks): none broken but the clock switch inside
+    // embassy-stm32 0.6's `rcc::init` (docs/firmware.md: not fixed, a change of the bring-up),
+    // which breaks once per boot.
+    let others: Vec<_> = rules
+        .iter()
+        .filter(|r| !r.starts_with("SYSCLK switched to the PLL"))
+        .collect();
+    assert!(others.is_empty(), "rules broken: {others:?}");
+    assert!(rules.len() <= 1, "{rules:?}");
     let parsed: Vec<_> = lines.iter().filter_map(|l| fields(l)).collect();
     let boot = &parsed
         .iter()
@@ -230,7 +246,13 @@ fn stm32_image_calibrates_stores_survives_a_reset_and_reads_phantom_b() {
         (29.0, Reset),
         (33.0, Send("measure")),
     ];
-    let lines = run_events(&elf, 36.0, None, &events);
+    let (lines, rules) = run_events(&elf, 36.0, None, &events);
+    assert!(
+        rules
+            .iter()
+            .all(|r| r.starts_with("SYSCLK switched to the PLL")),
+        "rules broken: {rules:?}"
+    );
     let parsed: Vec<_> = lines.iter().filter_map(|l| fields(l)).collect();
     let named = |n: &str| {
         parsed

@@ -170,6 +170,12 @@ impl Stream {
         // plays one DAC code and converts one sample on each ADC.
         hw.adc1.start();
         hw.adc2.start();
+        // Gap: the DMA writes DHR12R1 only after the first trigger's request, so the first
+        // trigger would move DHR's reset value 0 — a full-scale negative drive sample — to the
+        // output (RM0440 22, DAC: with TEN1, DHR goes to DOR at the trigger; found by the
+        // emulated board's rule check, emu/). RAW 13/13: DAC_DHR12R1 = mid-scale (no drive)
+        // before the timer runs, a word write as the DAC requires.
+        pac::DAC1.dhr12r(0).write(|w| w.set_dhr(DacCode::MID.0));
         hw.tim.start();
     }
 
@@ -295,7 +301,7 @@ const DAC_TRIM_CYCLES: u32 = SYSCLK_HZ / 20_000;
 /// DAC_SR (RM0440 22, DAC: DAC_SR): CAL_FLAG1 for the calibration, DMAUDR1 for the
 /// stream. Gap: embassy-stm32 0.6's DAC driver reads neither.
 fn dac_sr() -> pac::dac::regs::Sr {
-    // RAW 9/12: DAC_SR read.
+    // RAW 9/13: DAC_SR read.
     pac::DAC1.sr().read()
 }
 
@@ -303,7 +309,7 @@ fn dac_sr() -> pac::dac::regs::Sr {
 /// 0.6 sets DMAEN1 only inside `DacChannel::write`, whose 16-bit DMA the G4's DAC refuses, and
 /// has no calibration.
 fn dac_cr(f: impl FnOnce(&mut pac::dac::regs::Cr)) {
-    // RAW 10/12: DAC_CR modify.
+    // RAW 10/13: DAC_CR modify.
     pac::DAC1.cr().modify(f);
 }
 
@@ -317,7 +323,7 @@ fn calibrate_dac() -> bool {
     dac_cr(|w| w.set_cen(0, true));
     let mut found = false;
     for trim in 0..32 {
-        // RAW 11/12: DAC_CCR.OTRIM1 (RM0440 22, DAC: DAC_CCR); OTRIM2 (channel 2, unused)
+        // RAW 11/13: DAC_CCR.OTRIM1 (RM0440 22, DAC: DAC_CCR); OTRIM2 (channel 2, unused)
         // written 0.
         pac::DAC1.ccr().write(|w| w.set_otrim(0, trim));
         cortex_m::asm::delay(DAC_TRIM_CYCLES);
@@ -352,7 +358,7 @@ pub(super) fn converters(p: ConverterPins) -> Converters {
     // TIM6: 10 kHz update, its update event as TRGO, not yet running.
     let tim = Timer::new(p.tim6);
     tim.set_frequency(Hertz(SAMPLE_RATE_HZ), RoundTo::Faster);
-    // Gap: embassy 0.6's low-level timer has no master-mode setter. RAW 7/12: TIM6_CR2.MMS =
+    // Gap: embassy 0.6's low-level timer has no master-mode setter. RAW 7/13: TIM6_CR2.MMS =
     // update → TRGO (RM0440 "Basic timers (TIM6/TIM7)" chapter, TIMx_CR2;
     // its number unverified: docs/firmware.md).
     tim.regs_basic()

@@ -88,7 +88,7 @@ pub(super) fn choose(safe: bool, hse_failed: bool) -> ClockSource {
 pub(super) fn start(clock: ClockSource) -> embassy_stm32::Peripherals {
     let p = during(Step::Clock, || embassy_stm32::init(embassy_config(clock)));
 
-    // Gap: embassy 0.6 never sets FLASH_ACR.PRFTEN. RAW 5/12: prefetch on (RM0440 3.3.4
+    // Gap: embassy 0.6 never sets FLASH_ACR.PRFTEN. RAW 5/13: prefetch on (RM0440 3.3.4
     // ART accelerator / prefetch; FLASH_ACR), after embassy set the wait states.
     pac::FLASH.acr().modify(|w| w.set_prften(true));
     p
@@ -98,7 +98,7 @@ pub(super) fn start(clock: ClockSource) -> embassy_stm32::Peripherals {
 /// `rcc::init` (g4.rs) sets HSEON and then spins on HSERDY without a bound: it is given the HSE
 /// only once it runs. embassy 0.6 has no CSS for the G4.
 fn hse_starts() -> bool {
-    // RAW 3/12: RCC_CR.HSEON and CSSON in one read-modify-write (RM0440 7.4.1 RCC_CR; 7.2
+    // RAW 3/13: RCC_CR.HSEON and CSSON in one read-modify-write (RM0440 7.4.1 RCC_CR; 7.2
     // "HSE clock", "Clock security system (CSS)"). HSEBYP stays 0 (crystal). The clock detector
     // turns itself on once the HSE is ready and off when it is stopped: if the crystal does not
     // start, embassy's init (`hse: None`) clears HSEON again and the CSS never arms. A failure
@@ -108,7 +108,7 @@ fn hse_starts() -> bool {
         w.set_hseon(true);
         w.set_csson(true);
     });
-    // RAW 4/12: RCC_CR.HSERDY, polled with a bound (RM0440 7.4.1 RCC_CR).
+    // RAW 4/13: RCC_CR.HSERDY, polled with a bound (RM0440 7.4.1 RCC_CR).
     spin_until(HSE_TIMEOUT, || pac::RCC.cr().read().hserdy())
 }
 
