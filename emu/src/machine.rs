@@ -18,7 +18,13 @@
 //! in handler mode and raises EXCP_EXCEPTION_EXIT (8), which its interrupt hook hands here, where
 //! the frame is popped (B1.5.8 "Exception return behavior"). The FP frame is stacked eagerly
 //! (lazy stacking's reserved space is written at once: the same values, different timing).
-//! Exceptions are taken between instructions, never inside an IT block.
+//! Exceptions are taken at the start of a translated block (the CPU's own exits end blocks:
+//! branches, MSR to the masks, WFI, exception returns), never inside an IT block.
+//!
+//! Leaves out: WFI's wake-up on an exception that PRIMASK masks (the CPU sleeps to the next
+//! event instead), WFE/SEV, sleep-on-exit, MemManage/BusFault/UsageFault as separate handlers
+//! (faults escalate to HardFault; an access to an address nothing answers stops the run, as a
+//! missing model more likely than a bus error the image expects), lockup, debug halting.
 
 use std::fmt;
 
