@@ -392,3 +392,55 @@ fn stm32_image_runs_from_hsi16_when_the_hse_never_starts() {
         .1;
     assert_eq!(t["result"], "passed", "{t:?}");
 }
+
+/// A fault the bring-up must survive: a DMA transfer error on ADC1's channel (DMA1 CH1) while
+/// the stream runs. RM0440 DMA: TEIF set, the channel disabled by the hardware. The image counts
+/// it before embassy's handler (which would panic), stops TIM6, and a reading then ends as
+/// `stalled` — no panic, no hang.
+#[test]
+fn stm32_image_survives_a_dma_transfer_error() {
+    let elf = build_image();
+    let bytes = std::fs::read(&elf).unwrap();
+    let image = Elf::parse(&bytes).unwrap();
+    let cb = image.symbol("_SEGGER_RTT").unwrap();
+    let mut m = Machine::new(&image).unwrap();
+    m.board_mut().periph.analog = Box::new(HalSimProbe::bench(Some(&hal_sim::phantoms::B)));
+    let mut log = Vec::new();
+    let (mut injected, mut sent) = (false, false);
+    while m.seconds() < 3.0 {
+        if !injected && m.seconds() >= 1.0 {
+            m.board_mut().periph.dma.error(0);
+            injected = true;
+        }
+        if !sent && m.seconds() >= 1.2 {
+            m.uart_send(b"measure\n");
+            sent = true;
+        }
+        if let Exit::Fault(f) = m.run_until(m.cycles() + 170_000) {
+            panic!("the emulated board stopped: {f}");
+        }
+        log.extend(rtt::drain(&mut m, cb).unwrap_or_default());
+    }
+    let lines = decode(&elf, &log);
+    for l in lines.iter().filter(|l| !l.contains(" point ")) {
+        println!("{l}");
+    }
+    assert_eq!(m.resets, 0, "no panic, no watchdog reset");
+    // The channel is off (the hardware disabled it) and TIM6 stopped by the image.
+    assert_eq!(m.board().periph.dma.ch[0].ccr & 1, 0);
+    assert!(
+        m.board().periph.tim6.next_event().is_none(),
+        "TIM6 still running"
+    );
+    let parsed: Vec<_> = lines.iter().filter_map(|l| fields(l)).collect();
+    let r = &parsed
+        .iter()
+        .find(|(n, _)| n == "reading")
+        .expect("a reading line")
+        .1;
+    assert_ne!(r["status"], "ok", "{r:?}");
+    assert!(
+        lines.iter().any(|l| l.contains("stalled")),
+        "no stalled line"
+    );
+}
