@@ -444,3 +444,46 @@ fn stm32_image_survives_a_dma_transfer_error() {
         "no stalled line"
     );
 }
+
+/// A fault the bring-up must survive: the flash stuck busy (BSY never clears) while the store
+/// erases. embassy's blocking erase waits without a bound; the measurement task breaks its
+/// liveness promise, the guard stops feeding the watchdog, the IWDG resets the core, and the
+/// next boot names the step (`flash_hang`) and refuses the store instead of hanging again.
+#[test]
+fn stm32_image_survives_a_flash_stuck_busy() {
+    let elf = build_image();
+    let bytes = std::fs::read(&elf).unwrap();
+    let image = Elf::parse(&bytes).unwrap();
+    let cb = image.symbol("_SEGGER_RTT").unwrap();
+    let mut m = Machine::new(&image).unwrap();
+    m.board_mut().periph.analog = Box::new(HalSimProbe::bench(Some(&hal_sim::phantoms::B)));
+    m.board_mut().periph.flash.stuck_busy = true;
+    let mut log = Vec::new();
+    let mut sent = false;
+    while m.seconds() < 6.0 {
+        if !sent && m.seconds() >= 1.0 {
+            m.uart_send(b"store\n");
+            sent = true;
+        }
+        if let Exit::Fault(f) = m.run_until(m.cycles() + 170_000) {
+            panic!("the emulated board stopped: {f}");
+        }
+        log.extend(rtt::drain(&mut m, cb).unwrap_or_default());
+    }
+    let lines = decode(&elf, &log);
+    for l in lines.iter().filter(|l| !l.contains(" point ")) {
+        println!("{l}");
+    }
+    assert_eq!(m.resets, 1, "one watchdog reset, no loop");
+    let boots: Vec<_> = lines
+        .iter()
+        .filter_map(|l| fields(l))
+        .filter(|(n, _)| n == "boot")
+        .collect();
+    assert!(
+        boots
+            .iter()
+            .any(|(_, f)| f.get("fault").map(String::as_str) == Some("flash_hang")),
+        "{lines:?}"
+    );
+}
