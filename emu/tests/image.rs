@@ -487,3 +487,60 @@ fn stm32_image_survives_a_flash_stuck_busy() {
         "{lines:?}"
     );
 }
+
+/// Probe faults at power-on (hal-sim's fault scenes, as tests/qemu_selftest.rs runs them on the
+/// QEMU image): each ends in its typed self-test fault on the emulated STM32 board, and a
+/// reading is refused — the open PZT among them. The codes are the firmware's own
+/// (`SelfTestFault` in src/instrument/selftest.rs), matched by name to hal-sim's faults.
+#[test]
+fn stm32_image_names_each_probe_fault_in_its_self_test() {
+    let elf = build_image();
+    let bytes = std::fs::read(&elf).unwrap();
+    let image = Elf::parse(&bytes).unwrap();
+    let cb = image.symbol("_SEGGER_RTT").unwrap();
+    for (fault, code) in [
+        (hal_sim::Fault::OpenPzt, "open_pzt"),
+        (hal_sim::Fault::ShortedPzt, "shorted_pzt"),
+        (hal_sim::Fault::StuckDac, "no_drive"),
+        (hal_sim::Fault::AdcRail, "adc_rail_current"),
+    ] {
+        let mut m = Machine::new(&image).unwrap();
+        let scene = fault.apply(HalSimProbe::bench_scene(Some(&hal_sim::phantoms::B)));
+        m.board_mut().periph.analog = Box::new(HalSimProbe::new(scene, 1));
+        let mut log = Vec::new();
+        let mut sent = false;
+        while m.seconds() < 2.5 {
+            if !sent && m.seconds() >= 1.5 {
+                m.uart_send(b"measure\n");
+                sent = true;
+            }
+            if let Exit::Fault(f) = m.run_until(m.cycles() + 170_000) {
+                panic!("{}: the emulated board stopped: {f}", fault.name());
+            }
+            log.extend(rtt::drain(&mut m, cb).unwrap_or_default());
+        }
+        let lines = decode(&elf, &log);
+        let parsed: Vec<_> = lines.iter().filter_map(|l| fields(l)).collect();
+        let t = &parsed
+            .iter()
+            .find(|(n, _)| n == "selftest")
+            .expect("a selftest line")
+            .1;
+        println!("{}: selftest {}", fault.name(), t["result"]);
+        assert_eq!(t["result"], code, "{}: {lines:?}", fault.name());
+        assert!(
+            !parsed
+                .iter()
+                .any(|(n, r)| n == "reading" && r["status"] == "ok"),
+            "{}: a reading was taken on a faulty probe",
+            fault.name()
+        );
+        assert!(
+            lines
+                .iter()
+                .any(|l| l.contains("refused") || l.contains(code)),
+            "{}",
+            fault.name()
+        );
+    }
+}
