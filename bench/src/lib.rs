@@ -15,5 +15,6 @@ pub mod qemu;
 pub mod report;
 pub mod scene;
 pub mod stability;
+pub mod stm32;
 pub mod stream;
 pub mod unit;

@@ -46,6 +46,12 @@ pub struct MeasureArgs {
     /// and the thumbv7em-none-eabihf target.
     #[arg(long)]
     pub qemu: bool,
+    /// Take the readings with the STM32 image (`cargo fw`) on the emulated NUCLEO-G474RE
+    /// (`emu/`, run as a subprocess): the unit takes its air reference, is calibrated on A–E
+    /// with its default method, then reads the phantom. Needs the thumbv7em-none-eabihf
+    /// target, flip-link, defmt-print, cmake and libclang (scripts/setup).
+    #[arg(long, conflicts_with = "qemu")]
+    pub stm32: bool,
 }
 
 /// Run the subcommand.
@@ -63,6 +69,9 @@ pub fn run(a: MeasureArgs) -> Result<()> {
         .map_err(|e| anyhow::anyhow!("bad settings: {e}"))?;
     if a.qemu {
         return crate::qemu::measure(&a, &target, method, &settings, noise);
+    }
+    if a.stm32 {
+        return crate::stm32::measure(&a, &target, method, &settings, noise);
     }
     // The simulated unit's profile is made as a unit's profile is made once: with the
     // method's own default settings at bench noise, whatever this reading's settings and noise
