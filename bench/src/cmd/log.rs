@@ -1,7 +1,7 @@
 //! `probe-bench log`: the readings and sweeps in a decoded defmt log of the firmware.
 
 use crate::defmt_log::{self, Level, LoggedReading, Session};
-use crate::plot::{self, draw_legend, err, padded_range, with_backend, PALETTE};
+use crate::plot::{self, draw_legend, draw_to, err, padded_range, Area, Backend, PALETTE};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use plotters::prelude::*;
@@ -282,22 +282,10 @@ fn read_stdin() -> Result<String> {
 
 /// Sweeps (top) and reading history (bottom) to .svg or .png.
 pub fn write_plot(path: &Path, title: &str, s: &Session) -> Result<()> {
-    with_backend(
-        path,
-        (960, 900),
-        |root| draw(root, title, s),
-        |root| draw(root, title, s),
-    )
+    draw_to!(path, (960, 900), |root| draw(root, title, s))
 }
 
-fn draw<DB: DrawingBackend>(
-    root: &DrawingArea<DB, plotters::coord::Shift>,
-    title: &str,
-    s: &Session,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
+fn draw<DB: Backend>(root: &Area<DB>, title: &str, s: &Session) -> Result<()> {
     root.fill(&WHITE).map_err(err)?;
     let root = root
         .titled(&format!("defmt log: {title}"), ("sans-serif", 20))

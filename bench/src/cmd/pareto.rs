@@ -6,7 +6,7 @@ use crate::pareto::{
     stream_unit, tau_ms, Cell, Config, StreamCell, STREAM_SECONDS, STREAM_SEGMENTS_S,
     STREAM_SETTLE_S,
 };
-use crate::plot::{self, draw_legend, err, with_backend, PALETTE};
+use crate::plot::{self, draw_legend, draw_to, err, Area, Backend, PALETTE};
 use crate::scene::Target;
 use anyhow::{anyhow, Result};
 use clap::Args;
@@ -499,25 +499,14 @@ fn chart(
             .collect::<Vec<_>>()
             .join(", ")
     );
-    with_backend(
-        path,
-        (1000, 680),
-        |root: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>| {
-            draw_chart(
-                root, &title, cfgs, &pts, &front, &crb, &tracker, &steady, ymin, ymax,
-            )
-        },
-        |root: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>| {
-            draw_chart(
-                root, &title, cfgs, &pts, &front, &crb, &tracker, &steady, ymin, ymax,
-            )
-        },
-    )
+    draw_to!(path, (1000, 680), |root| draw_chart(
+        root, &title, cfgs, &pts, &front, &crb, &tracker, &steady, ymin, ymax,
+    ))
 }
 
 #[allow(clippy::too_many_arguments)]
-fn draw_chart<DB: DrawingBackend>(
-    root: &DrawingArea<DB, plotters::coord::Shift>,
+fn draw_chart<DB: Backend>(
+    root: &Area<DB>,
     title: &str,
     cfgs: &[Config],
     pts: &[(usize, f64, f64, f64)],
@@ -527,10 +516,7 @@ fn draw_chart<DB: DrawingBackend>(
     steady: &[(f64, f64)],
     ymin: f64,
     ymax: f64,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
+) -> Result<()> {
     root.fill(&WHITE).map_err(err)?;
     let mut ch = plot::chart(
         root,

@@ -12,7 +12,7 @@
 
 use super::progress;
 use crate::calfile;
-use crate::plot::{self, draw_legend, err, padded_range, with_backend};
+use crate::plot::{self, draw_legend, draw_to, err, padded_range, Area, Backend};
 use crate::scene::parse_noise;
 use anyhow::{anyhow, bail, Result};
 use clap::{Args, ValueEnum};
@@ -619,12 +619,7 @@ fn colour(t: f64) -> RGBColor {
 /// Write the stiffness map (resonance per grid point, colour bar in Hz and kPa by the scan's
 /// calibration, phantom outline, true inclusion outline, the lump found).
 pub fn write_map(path: &Path, spec: &ScanSpec, res: &ScanResult) -> Result<()> {
-    with_backend(
-        path,
-        (980, 820),
-        |root| draw_map(root, spec, res),
-        |root| draw_map(root, spec, res),
-    )
+    draw_to!(path, (980, 820), |root| draw_map(root, spec, res))
 }
 
 fn circle(cx: f64, cy: f64, r: f64) -> Vec<(f64, f64)> {
@@ -636,14 +631,7 @@ fn circle(cx: f64, cy: f64, r: f64) -> Vec<(f64, f64)> {
         .collect()
 }
 
-fn draw_map<DB: DrawingBackend>(
-    root: &DrawingArea<DB, plotters::coord::Shift>,
-    spec: &ScanSpec,
-    res: &ScanResult,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
+fn draw_map<DB: Backend>(root: &Area<DB>, spec: &ScanSpec, res: &ScanResult) -> Result<()> {
     root.fill(&WHITE).map_err(err)?;
     let (fmin, fmax) = resonance_span(res);
     let s = spec.step_mm;
@@ -771,15 +759,12 @@ fn map_title(spec: &ScanSpec, res: &ScanResult) -> String {
 }
 
 /// The colour bar beside the map: resonance in Hz, with the calibrated modulus at its ends.
-fn draw_colour_bar<DB: DrawingBackend>(
-    bar_area: &DrawingArea<DB, plotters::coord::Shift>,
+fn draw_colour_bar<DB: Backend>(
+    bar_area: &Area<DB>,
     spec: &ScanSpec,
     fmin: f64,
     fmax: f64,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
+) -> Result<()> {
     let mut bar = ChartBuilder::on(bar_area)
         .margin_top(40)
         .margin_bottom(50)

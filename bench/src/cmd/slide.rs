@@ -12,7 +12,7 @@
 //! interpolated, its centre their midpoint, its contrast the ratio of the two levels. The
 //! truth is the same rule on the phantom's closed-form apparent modulus along the same line.
 
-use crate::plot::{self, draw_legend, padded_range, with_backend, PALETTE};
+use crate::plot::{self, draw_legend, draw_to, padded_range, Area, Backend, PALETTE};
 use anyhow::{anyhow, bail, Result};
 use hal_sim::lump::LumpPhantom;
 use hal_sim::Scene;
@@ -237,18 +237,8 @@ pub fn summary(r: &SlideResult) -> String {
 /// the centre's error and the contrast against speed.
 pub fn plot(path: &Path, results: &[SlideResult]) -> Result<()> {
     match results {
-        [one] => with_backend(
-            path,
-            (900, 480),
-            |r| draw_profile(r, one),
-            |r| draw_profile(r, one),
-        ),
-        many => with_backend(
-            path,
-            (900, 620),
-            |r| draw_speeds(r, many),
-            |r| draw_speeds(r, many),
-        ),
+        [one] => draw_to!(path, (900, 480), |r| draw_profile(r, one)),
+        many => draw_to!(path, (900, 620), |r| draw_speeds(r, many)),
     }
 }
 
@@ -256,13 +246,7 @@ fn err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
     anyhow!("{e:?}")
 }
 
-fn draw_profile<DB: DrawingBackend>(
-    root: &DrawingArea<DB, plotters::coord::Shift>,
-    r: &SlideResult,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
+fn draw_profile<DB: Backend>(root: &Area<DB>, r: &SlideResult) -> Result<()> {
     root.fill(&WHITE).map_err(err)?;
     let s = &r.slide;
     let (lo, hi) = (s.x_mm.0.min(s.x_mm.1), s.x_mm.0.max(s.x_mm.1));
@@ -313,13 +297,7 @@ where
     Ok(())
 }
 
-fn draw_speeds<DB: DrawingBackend>(
-    root: &DrawingArea<DB, plotters::coord::Shift>,
-    results: &[SlideResult],
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
+fn draw_speeds<DB: Backend>(root: &Area<DB>, results: &[SlideResult]) -> Result<()> {
     root.fill(&WHITE).map_err(err)?;
     let (upper, lower) = root.split_vertically(310);
     let vmax = results

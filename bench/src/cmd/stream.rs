@@ -1,6 +1,7 @@
 //! `probe-bench stream`: continuous reading on the simulated probe (the core's tracker,
 //! `pzt_probe::instrument::continuous`), with a step in stiffness, a lift-off and a new contact on the way.
 
+use crate::plot::{Area, Backend};
 use crate::report;
 use crate::scene::{parse_noise, print_scene_header, NoiseArgs, SceneArgs};
 use crate::stream::{self, settled_after, summarize, StreamScene, Truth};
@@ -255,7 +256,7 @@ fn plot(path: &Path, title: &str, readings: &[StreamReading], truth: &Truth) -> 
         t_end,
         range: (lo, hi),
     };
-    crate::plot::with_backend(path, (900, 560), |r| draw(r, &p), |r| draw(r, &p))
+    crate::plot::draw_to!(path, (900, 560), |r| draw(r, &p))
 }
 
 struct Plot<'a> {
@@ -267,10 +268,7 @@ struct Plot<'a> {
     range: (f64, f64),
 }
 
-fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, plotters::coord::Shift>, p: &Plot) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
+fn draw<DB: Backend>(root: &Area<DB>, p: &Plot) -> Result<()> {
     let (title, readings, truth, pts, t_end) = (p.title, p.readings, p.truth, p.pts, p.t_end);
     let (lo, hi) = p.range;
     {
