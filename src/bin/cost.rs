@@ -74,7 +74,7 @@ mod harness {
     use pzt_probe::engine::{PointPlan, PointRaw, Points, SampleEngine};
     use pzt_probe::hal::{FrontEndScale, StreamError};
     use pzt_probe::loadcell::{ForceLog, RawForce};
-    use pzt_probe::reading::driver::{block_on, drive, BatchSource, PointSource, Wanted};
+    use pzt_probe::reading::driver::{block_on, drive, BatchSource, Plans, PointSource, Wanted};
     use pzt_probe::reading::{Measurement, Procedure};
     use pzt_probe::unit::profile::UnitProfile;
     use pzt_probe::{Failure, Method, Reading, Seconds, Status};
@@ -107,11 +107,11 @@ mod harness {
     pub enum Call {
         /// `Procedure::new`.
         New,
-        /// `Measurement::next_plan`.
+        /// `Plans::next_plan`.
         NextPlan,
-        /// `Measurement::accept`.
+        /// `Plans::accept`.
         Accept,
-        /// `Measurement::is_complete`.
+        /// `Plans::is_complete`.
         IsComplete,
         /// `Measurement::finish`.
         Finish,
@@ -289,7 +289,7 @@ mod harness {
         cost: &'a RefCell<Cost>,
     }
 
-    impl<M: Measurement> Measurement for Counted<'_, M> {
+    impl<M: Measurement> Plans for Counted<'_, M> {
         fn next_plan(&mut self) -> Option<PointPlan> {
             let m = &mut self.m;
             self.cost
@@ -305,6 +305,9 @@ mod harness {
                 .borrow_mut()
                 .call(Call::IsComplete, || self.m.is_complete())
         }
+    }
+
+    impl<M: Measurement> Measurement for Counted<'_, M> {
         fn finish(&self, unit: &UnitProfile, force: Option<RawForce>) -> Reading {
             self.cost
                 .borrow_mut()

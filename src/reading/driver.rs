@@ -108,18 +108,6 @@ pub trait Plans {
     fn is_complete(&self) -> bool;
 }
 
-impl<M: Measurement> Plans for M {
-    fn next_plan(&mut self) -> Option<PointPlan> {
-        Measurement::next_plan(self)
-    }
-    fn accept(&mut self, raw: &PointRaw) -> Option<SweepPoint> {
-        Measurement::accept(self, raw)
-    }
-    fn is_complete(&self) -> bool {
-        Measurement::is_complete(self)
-    }
-}
-
 /// The plan loop under the one stall rule: `m`'s plans handed to `src` one by one, every
 /// window of a plan waited for within [`window_budget_samples`], each accepted by `m`; the
 /// admittance points go to `on_point` and to the source's own sink ([`PointSource::point`]).
