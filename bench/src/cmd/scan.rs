@@ -295,8 +295,9 @@ pub const MIN_LOSS_CONTRAST: f64 = 0.03;
 /// phantoms (`UnitProfile::tissue_loss`), a bias that follows the modulus read rather than
 /// noise: a lump of its background's loss tangent still moves the loss read over it by as much
 /// as the bias differs between the two moduli — at most the bias's spread over the calibrated
-/// range, 2.0 of the smallest σ there (`docs/bench.md`, "Loss map"). Three σ leave that out with
-/// a margin of half as much again; white noise on the loss, a few hundredths of σ, adds nothing.
+/// range, 2.1 of the smallest σ there (sweep-G; `docs/bench.md`, "Loss map"). Three σ leave that
+/// out with a margin of almost half as much again; white noise on the loss, a few hundredths of
+/// σ, adds nothing.
 pub const LOSS_CONTRAST_SIGMAS: f64 = 3.0;
 
 /// Run the scan; `tick` is called after every grid point.
