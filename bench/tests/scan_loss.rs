@@ -242,3 +242,61 @@ fn cli_maps_the_loss_and_refuses_a_lossy_rigid_lump() {
     ]));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `scan --continuous` on lossy tissue: sliding at 2 mm/s over the line through the lump
+/// (y = −1 mm), every ok stream reading reports a loss tangent; the lossier lump's loss is
+/// found within 0.5 mm of where the same rule puts it on the closed form's loss tangent (the
+/// tolerance of the modulus's slide test, bench/tests/scan.rs), and the closed form's own centre
+/// is the lump's within 0.1 mm; a lump of the background's loss shows no loss lump on the
+/// stream or on the closed form. Measured at 2 mm/s, seeds 40–43: 0.01–0.07 mm. Faster, the
+/// tracker's Q lags the tissue at the lump's trailing edge: up to 0.46 mm at 5 mm/s, 0.61 mm at
+/// 10 mm/s, where one seed of four found no loss lump (docs/bench.md, "Loss map").
+#[test]
+fn a_slide_carries_the_loss_and_finds_only_the_lossier_lump() {
+    use probe_bench::cmd::slide::{slide, Slide};
+    let unit =
+        probe_bench::unit::default_for(pzt_probe::instrument::continuous::METHOD).expect("unit");
+    let config = pzt_probe::instrument::continuous::TrackerConfig::DEFAULT;
+    let lossier = LumpMaterial::Tissue {
+        modulus_pa: LUMP_KPA * 1e3,
+        loss_tangent: 1.0,
+    };
+    let same = LumpMaterial::Tissue {
+        modulus_pa: LUMP_KPA * 1e3,
+        loss_tangent: BACKGROUND_TAN_D,
+    };
+    for (material, has_loss_lump) in [(lossier, true), (same, false)] {
+        let s = Slide {
+            phantom: lossy_coin(material, 0.3, 0).phantom,
+            y_mm: -1.0,
+            x_mm: (-13.5, 13.5),
+            speed_mm_s: 2.0,
+            base: Scene::free_air().with_noise(NoiseScene::Bench),
+            seed: 40,
+        };
+        let r = slide(&s, &config, &unit).expect("a slide");
+        eprintln!(
+            "{material:?}: bar {:?}; stream {:?}; closed form {:?}; modulus centre error {:?}",
+            r.loss_bar,
+            r.loss_found,
+            r.loss_truth,
+            r.centre_error_mm()
+        );
+        assert!(r.profile.len() >= 100, "{} ok", r.profile.len());
+        assert_eq!(r.loss_profile.len(), r.profile.len());
+        let found = r.found.expect("the modulus's lump");
+        assert!((found.centre_mm - 1.5).abs() <= 0.5, "{found:?}");
+        if has_loss_lump {
+            let (f, t) = (
+                r.loss_found.expect("the loss lump"),
+                r.loss_truth.expect("on the closed form"),
+            );
+            assert!((t.centre_mm - 1.5).abs() < 0.1, "{t:?}");
+            assert!((f.centre_mm - t.centre_mm).abs() <= 0.5, "{f:?} vs {t:?}");
+            assert!(f.level > f.background, "{f:?}");
+        } else {
+            assert!(r.loss_found.is_none(), "{:?}", r.loss_found);
+            assert!(r.loss_truth.is_none(), "{:?}", r.loss_truth);
+        }
+    }
+}

@@ -279,6 +279,15 @@ impl LumpPhantom {
         }
     }
 
+    /// True when the matrix or the inclusion has any loss.
+    pub fn is_lossy(&self) -> bool {
+        let lump = match self.material {
+            LumpMaterial::Rigid => 0.0,
+            LumpMaterial::Tissue { loss_tangent, .. } => loss_tangent,
+        };
+        self.matrix.loss_tangent > 0.0 || lump > 0.0
+    }
+
     /// The phantom with its matrix's loss tangent set to `loss_tangent`.
     pub fn with_matrix_loss(mut self, loss_tangent: f64) -> Self {
         self.matrix.loss_tangent = loss_tangent;

@@ -750,11 +750,7 @@ fn lossy_phantom(a: &ScanArgs, phantom: LumpPhantom) -> Result<LumpPhantom> {
 
 /// True when the scan's phantom has any loss (the scan then maps it).
 pub fn is_lossy(spec: &ScanSpec) -> bool {
-    let lump_loss = match spec.phantom.material {
-        LumpMaterial::Rigid => 0.0,
-        LumpMaterial::Tissue { loss_tangent, .. } => loss_tangent,
-    };
-    spec.phantom.matrix.loss_tangent > 0.0 || lump_loss > 0.0
+    spec.phantom.is_lossy()
 }
 
 /// Mean and count of the loss tangents read where `keep(distance from the inclusion's centre,
@@ -933,9 +929,15 @@ fn print_summary(a: &ScanArgs, spec: &ScanSpec, res: &ScanResult) {
 /// [`MIN_LOSS_CONTRAST`] or [`LOSS_CONTRAST_SIGMAS`] median reported σ of the loss, the larger
 /// (`None` without any σ).
 pub fn loss_min_contrast(points: &[ScanPoint]) -> Option<f64> {
-    let mut s: Vec<f64> = points
-        .iter()
-        .filter_map(|p| p.reading.loss_tangent_sigma.map(f64::from))
+    loss_bar(points.iter().map(|p| &p.reading))
+}
+
+/// The least departure from its background a loss lump needs among `readings`:
+/// [`MIN_LOSS_CONTRAST`] or [`LOSS_CONTRAST_SIGMAS`] times their median reported σ of the
+/// loss, the larger (`None` without any σ).
+pub fn loss_bar<'a>(readings: impl Iterator<Item = &'a Reading>) -> Option<f64> {
+    let mut s: Vec<f64> = readings
+        .filter_map(|r| r.loss_tangent_sigma.map(f64::from))
         .filter(|s| s.is_finite())
         .collect();
     s.sort_by(f64::total_cmp);
