@@ -249,10 +249,6 @@ mod harness {
         fn scale(&self) -> FrontEndScale {
             self.stream.scale()
         }
-        /// As the firmware's interrupt: a plan applies from the next batch.
-        fn latency_batches(&self) -> usize {
-            pzt_probe::engine::PIPELINE_BATCHES
-        }
         fn now_sample(&self) -> u64 {
             self.engine.samples()
         }

@@ -19,8 +19,13 @@ use crate::units::{DacCode, Seconds};
 pub trait PointSource {
     /// The converters' scale (sample rate, volts and amps per code).
     fn scale(&self) -> FrontEndScale;
-    /// Batches between a DAC batch and the ADC batch that sees it.
-    fn latency_batches(&self) -> usize;
+    /// Batches between a DAC batch and the ADC batch that sees it. The default is every
+    /// board's pipeline, [`PIPELINE_BATCHES`](crate::engine::PIPELINE_BATCHES) (the DAC's two
+    /// half-buffers); a source over a [`SampleStream`] of its own latency (a test stream) gives
+    /// the stream's.
+    fn latency_batches(&self) -> usize {
+        crate::engine::PIPELINE_BATCHES
+    }
     /// The engine's sample count now (the reading's time base).
     fn now_sample(&self) -> u64;
     /// Hand `plan` to the engine; false when the engine can no longer be reached.
