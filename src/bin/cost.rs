@@ -265,14 +265,7 @@ mod harness {
         }
         async fn idle(&mut self, samples: u64) {
             self.engine.stop();
-            let mut done = 0u64;
-            while done < samples {
-                let (adc, dac) = self.stream.capture();
-                let _ = self.engine.demodulate(adc);
-                self.engine.generate(dac);
-                done += BATCH as u64;
-            }
-            self.held = None;
+            self.pass(samples);
         }
         fn contact_force(&mut self, from: u64, to: u64) -> Option<RawForce> {
             self.forces.over(from, to, self.scale().sample_rate.0)
