@@ -65,21 +65,6 @@ pub struct AirFile {
     pub static_conductance_s: f32,
 }
 
-/// The on-disk form of the contact condition `Q = q0 + q1 ln(E / kPa) + q2 ln(F / N)`.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct QModelFile {
-    /// Intercept.
-    pub q0: f64,
-    /// Slope per unit of `ln(E / kPa)`.
-    pub q1: f64,
-    /// Slope per unit of `ln(F / N)` (0: no force term).
-    #[serde(default)]
-    pub q2: f64,
-    /// Relative scatter of the references' Q about the curve (0: not known).
-    #[serde(default)]
-    pub sigma_rel: f64,
-}
-
 /// The on-disk form of the load cell's calibration and the force window.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct LoadCellFile {
@@ -107,8 +92,9 @@ pub struct ProfileFile {
     /// (paper's |Z| dip).
     #[serde(default = "motional")]
     pub resonance: String,
-    /// Contact condition of the calibration.
-    pub q_model: Option<QModelFile>,
+    /// Contact condition of the calibration, `Q = q0 + q1 ln(E / kPa) + q2 ln(F / N)` (the
+    /// core's `serde` form: `q0`, `q1`, `q2`, `sigma_rel`).
+    pub q_model: Option<QModel>,
     /// Air reference.
     pub air: Option<AirFile>,
     /// The contact law, when the calibration chose it (readings invert through it), as
@@ -134,12 +120,7 @@ impl ProfileFile {
         Self {
             calibration: CalFile::from_law(&p.calibration, method),
             resonance: p.resonance.name().to_owned(),
-            q_model: p.q_model.map(|m| QModelFile {
-                q0: m.q0,
-                q1: m.q1,
-                q2: m.q2,
-                sigma_rel: m.sigma_rel,
-            }),
+            q_model: p.q_model,
             air: p.air.map(|a| AirFile {
                 free_resonance_hz: a.free_resonance.0,
                 free_q: a.free_q,
@@ -169,12 +150,7 @@ impl ProfileFile {
         let p = UnitProfile {
             calibration: self.calibration.to_law()?,
             resonance,
-            q_model: self.q_model.as_ref().map(|m| QModel {
-                q0: m.q0,
-                q1: m.q1,
-                q2: m.q2,
-                sigma_rel: m.sigma_rel,
-            }),
+            q_model: self.q_model,
             air: self.air.as_ref().map(|a| AirReference {
                 free_resonance: Hz(a.free_resonance_hz),
                 free_q: a.free_q,
@@ -343,6 +319,18 @@ mod tests {
         assert_eq!(f.law.source, pzt_probe::unit::calibration::Source::Fitted);
         assert_eq!(f.method.as_deref(), Some("auto"));
         assert_eq!(serde_json::to_string_pretty(&f).unwrap(), CAL);
+    }
+
+    #[test]
+    fn q_model_reads_and_writes_the_same_json() {
+        let text =
+            "{\n  \"q0\": 2.5,\n  \"q1\": 1.25,\n  \"q2\": -4.5,\n  \"sigma_rel\": 0.0375\n}";
+        let m: QModel = serde_json::from_str(text).unwrap();
+        assert_eq!(m.q2, -4.5);
+        assert_eq!(serde_json::to_string_pretty(&m).unwrap(), text);
+        // Without a force term or a scatter: both 0.
+        let m: QModel = serde_json::from_str(r#"{"q0": 2.5, "q1": 1.25}"#).unwrap();
+        assert_eq!((m.q2, m.sigma_rel), (0.0, 0.0));
     }
 
     #[test]
