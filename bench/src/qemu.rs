@@ -147,7 +147,7 @@ pub fn stream(
         }
     }
     lines.push(format!("stream {}", a.seconds));
-    let (log, session) = run_lines("stream", target, &lines, a.json)?;
+    let (log, session) = run_lines("stream", target, &lines, a.out.json)?;
     let [x] = session.streams.as_slice() else {
         bail!(
             "the image logged {} streams, not one:\n{log}",
@@ -159,7 +159,7 @@ pub fn stream(
         .as_ref()
         .context("the image's stream has no end line")?;
     let start = end.start_s.unwrap_or(0.0);
-    if !a.json {
+    if !a.out.json {
         println!(
             "  the firmware: {} readings, {} ok, {} dropped (report channel full), most work from a window to the next plan {} instructions",
             end.readings, end.ok, end.dropped, end.plan_work
@@ -189,7 +189,7 @@ pub fn measure(
     settings: &Settings,
     noise: NoiseScene,
 ) -> Result<()> {
-    if a.plot.is_some() {
+    if a.out.plot.is_some() {
         bail!("--plot is not available with --qemu (use probe-bench log --plot on the log)");
     }
     if a.profile.is_some() || a.calibration != "unit" {
@@ -212,7 +212,7 @@ pub fn measure(
         lines.push(format!("sim seed {}", a.seed + k as u64));
         lines.push("measure".to_owned());
     }
-    let (log, session) = run_lines("measure", target, &lines, a.json)?;
+    let (log, session) = run_lines("measure", target, &lines, a.out.json)?;
     if session.readings.len() != a.repeat as usize {
         bail!(
             "the image logged {} readings of {}:\n{log}",
@@ -224,7 +224,7 @@ pub fn measure(
         let r = r
             .to_reading()
             .with_context(|| format!("unknown status or method in {r:?}"))?;
-        if a.json {
+        if a.out.json {
             println!("{}", report::reading_json(&r));
         } else {
             println!("{}", report::reading_line(&r));

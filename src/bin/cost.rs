@@ -249,10 +249,6 @@ mod harness {
         fn scale(&self) -> FrontEndScale {
             self.stream.scale()
         }
-        /// As the firmware's interrupt: a plan applies from the next batch.
-        fn latency_batches(&self) -> usize {
-            pzt_probe::engine::PIPELINE_BATCHES
-        }
         fn now_sample(&self) -> u64 {
             self.engine.samples()
         }
@@ -269,14 +265,7 @@ mod harness {
         }
         async fn idle(&mut self, samples: u64) {
             self.engine.stop();
-            let mut done = 0u64;
-            while done < samples {
-                let (adc, dac) = self.stream.capture();
-                let _ = self.engine.demodulate(adc);
-                self.engine.generate(dac);
-                done += BATCH as u64;
-            }
-            self.held = None;
+            self.pass(samples);
         }
         fn contact_force(&mut self, from: u64, to: u64) -> Option<RawForce> {
             self.forces.over(from, to, self.scale().sample_rate.0)

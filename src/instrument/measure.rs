@@ -10,7 +10,7 @@
 
 use crate::boot::BootError;
 use crate::engine::sweep::SweepPoint;
-use crate::engine::{PointPlan, PointRaw, PIPELINE_BATCHES};
+use crate::engine::{PointPlan, PointRaw};
 use crate::hal::FrontEndScale;
 use crate::instrument::command::Command;
 use crate::instrument::session::{Event, Io, Session};
@@ -152,10 +152,6 @@ impl<'a, L: Link, F: NorFlash> FwIo<'a, L, F> {
 impl<L: Link, F: NorFlash> PointSource for FwIo<'_, L, F> {
     fn scale(&self) -> FrontEndScale {
         self.scale
-    }
-    /// The interrupt's double buffer: a plan applies from the batch after the one playing.
-    fn latency_batches(&self) -> usize {
-        PIPELINE_BATCHES
     }
     fn now_sample(&self) -> u64 {
         self.link.now_sample()

@@ -19,8 +19,13 @@ use crate::units::{DacCode, Seconds};
 pub trait PointSource {
     /// The converters' scale (sample rate, volts and amps per code).
     fn scale(&self) -> FrontEndScale;
-    /// Batches between a DAC batch and the ADC batch that sees it.
-    fn latency_batches(&self) -> usize;
+    /// Batches between a DAC batch and the ADC batch that sees it. The default is every
+    /// board's pipeline, [`PIPELINE_BATCHES`](crate::engine::PIPELINE_BATCHES) (the DAC's two
+    /// half-buffers); a source over a [`SampleStream`] of its own latency (a test stream) gives
+    /// the stream's.
+    fn latency_batches(&self) -> usize {
+        crate::engine::PIPELINE_BATCHES
+    }
     /// The engine's sample count now (the reading's time base).
     fn now_sample(&self) -> u64;
     /// Hand `plan` to the engine; false when the engine can no longer be reached.
@@ -190,7 +195,8 @@ pub fn block_on<F: core::future::Future>(f: F) -> F::Output {
 }
 
 /// A source that runs the engine batch by batch itself ([`SyncSource`], the QEMU cost image's):
-/// its [`PointSource::next`] is [`next_window`](Self::next_window).
+/// its [`PointSource::next`] is [`next_window`](Self::next_window), its [`PointSource::idle`]
+/// the engine stopped and then [`pass`](Self::pass).
 pub trait BatchSource {
     /// One batch of the engine against the stream: the windows it closed, `Ok(None)` while the
     /// stream's pipeline is still filling, an error when the stream failed.
@@ -222,6 +228,21 @@ pub trait BatchSource {
             }
         }
         None
+    }
+
+    /// Let `samples` of the engine's samples pass, one batch after another (an error ends the
+    /// wait); a window kept in [`held`](Self::held) is dropped once a batch has played.
+    fn pass(&mut self, samples: u64) {
+        let mut done = 0u64;
+        while done < samples {
+            let Ok(played) = self.batch() else {
+                return;
+            };
+            done += BATCH as u64;
+            if played.is_some() {
+                *self.held() = None;
+            }
+        }
     }
 }
 
@@ -310,16 +331,7 @@ impl<S: SampleStream + ForceSource> PointSource for SyncSource<'_, S> {
     }
     async fn idle(&mut self, samples: u64) {
         self.engine.stop();
-        let mut done = 0u64;
-        while done < samples {
-            let Ok(played) = self.batch() else {
-                return;
-            };
-            done += BATCH as u64;
-            if played.is_some() {
-                self.held = None;
-            }
-        }
+        self.pass(samples);
     }
     fn contact_force(&mut self, from: u64, to: u64) -> Option<RawForce> {
         self.stream.contact_force(from, to)

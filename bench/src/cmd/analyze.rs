@@ -2,6 +2,7 @@
 //! firmware's own estimator and calibration.
 #![allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > y)` also rejects NaN, deliberately
 
+use super::OutputArgs;
 use crate::calfile;
 use crate::capture::{self, Capture, CaptureError, DemodOptions, Layout, SweepShape};
 use crate::{plot, report};
@@ -45,12 +46,10 @@ pub struct AnalyzeArgs {
     /// a probe's unit data is applied.
     #[arg(long)]
     pub profile: Option<PathBuf>,
-    /// Print one JSON object instead of the report.
-    #[arg(long)]
-    pub json: bool,
-    /// Plot the admittance with the estimate marked (.svg or .png).
-    #[arg(long)]
-    pub plot: Option<PathBuf>,
+    /// JSON (one object: the capture, the estimate, the reading) and the plot (the admittance
+    /// with the estimate marked).
+    #[command(flatten)]
+    pub out: OutputArgs,
     /// Time-domain stepped sweeps: settling time discarded at the start of each step, s
     /// (default: the first half of each step).
     #[arg(long)]
@@ -629,7 +628,7 @@ pub fn run(a: AnalyzeArgs) -> Result<()> {
     )
     .map_err(|e| anyhow::anyhow!("{}: {e}", a.file.display()))?;
     let c = &an.capture;
-    if a.json {
+    if a.out.json {
         println!("{}", analysis_json(&an, &a.file.display().to_string()));
     } else {
         println!(
@@ -694,7 +693,7 @@ pub fn run(a: AnalyzeArgs) -> Result<()> {
         }
         println!("{}", report::reading_line(&an.reading));
     }
-    if let Some(path) = &a.plot {
+    a.out.plot_with(|path| {
         let title = format!(
             "{} — {} ({})",
             a.file
@@ -707,10 +706,6 @@ pub fn run(a: AnalyzeArgs) -> Result<()> {
                 Status::Failed(f) => f.code().to_owned(),
             }
         );
-        plot::sweep_svg(path, &title, &c.points, an.reading.resonance.map(|f| f.0))?;
-        if !a.json {
-            println!("  plot: {}", path.display());
-        }
-    }
-    Ok(())
+        plot::sweep_svg(path, &title, &c.points, an.reading.resonance.map(|f| f.0))
+    })
 }

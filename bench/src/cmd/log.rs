@@ -21,13 +21,11 @@ pub struct LogArgs {
     /// Decoded defmt log (from `probe-rs run`, `defmt-print`, `scripts/qemu-run` or a saved
     /// file); `-` or nothing reads stdin.
     pub file: Option<PathBuf>,
-    /// Plot the logged admittance sweeps (conductance in nS against Hz) and the reading history
-    /// (resonance in Hz with its standard uncertainty) to .svg or .png.
-    #[arg(long)]
-    pub plot: Option<PathBuf>,
-    /// Print one JSON object (readings, sweeps, events) instead of the table.
-    #[arg(long)]
-    pub json: bool,
+    /// JSON (one object: readings, streams, sweeps, events) and the plot (the logged admittance
+    /// sweeps, conductance in nS against Hz, and the reading history, resonance in Hz with its
+    /// standard uncertainty).
+    #[command(flatten)]
+    pub out: super::OutputArgs,
 }
 
 fn fmt_opt(v: Option<f32>, digits: usize) -> String {
@@ -226,7 +224,7 @@ pub fn run(a: LogArgs) -> Result<()> {
     for e in &s.errors {
         eprintln!("probe-bench log: {name}: skipped {e}");
     }
-    if a.json {
+    if a.out.json {
         println!("{}", session_json(&s));
     } else {
         println!(
@@ -260,16 +258,12 @@ pub fn run(a: LogArgs) -> Result<()> {
             }
         }
     }
-    if let Some(path) = &a.plot {
+    a.out.plot_with(|path| {
         if s.sweeps.is_empty() && s.readings.is_empty() {
             bail!("{name}: nothing to plot (no sweeps or readings in the log)");
         }
-        write_plot(path, &name, &s)?;
-        if !a.json {
-            println!("  plot: {}", path.display());
-        }
-    }
-    Ok(())
+        write_plot(path, &name, &s)
+    })
 }
 
 fn read_stdin() -> Result<String> {

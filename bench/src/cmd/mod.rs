@@ -20,6 +20,36 @@ use indicatif::{ProgressBar, ProgressStyle};
 use pzt_probe::engine::sweep::SweepSettings;
 use pzt_probe::reading::Settings;
 use pzt_probe::{Hz, Method, Seconds, Volts};
+use std::path::{Path, PathBuf};
+
+/// The output options of the commands that report a result (`measure`, `stream`, `analyze`,
+/// `log`): JSON for a program in place of the report for a person, and a plot.
+#[derive(Args, Clone, Debug, Default)]
+pub struct OutputArgs {
+    /// Print JSON on stdout instead of the report (one object per reading for measure and
+    /// stream, one object for analyze and log), nothing else.
+    #[arg(long)]
+    pub json: bool,
+    /// Write the command's plot to this file (SVG, or PNG when it ends in `.png`): measure and
+    /// analyze the admittance sweep with the estimate marked, stream modulus and lock against
+    /// time, log the logged sweeps and the reading history.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+}
+
+impl OutputArgs {
+    /// With `--plot`: `draw` the plot to its file, then name the file in the report (not in
+    /// JSON).
+    pub fn plot_with(&self, draw: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+        if let Some(path) = &self.plot {
+            draw(path)?;
+            if !self.json {
+                println!("  plot: {}", path.display());
+            }
+        }
+        Ok(())
+    }
+}
 
 #[derive(Args, Clone)]
 pub struct MethodArgs {
