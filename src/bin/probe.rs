@@ -67,6 +67,7 @@ mod app {
     use pzt_probe::engine::{PointRaw, SampleEngine, BATCH};
     use pzt_probe::hal::FrontEndScale;
     use pzt_probe::instrument::command::Command;
+    use pzt_probe::instrument::link::LinkEvent;
     use pzt_probe::instrument::measure::{FwIo, Link, Recv};
     use pzt_probe::instrument::session::Event;
     use pzt_probe::instrument::watchdog::{self, Millis, FEED};
@@ -86,8 +87,9 @@ mod app {
     /// channel full is dropped and counted, never waited for).
     const REPORT_CAP: usize = 11;
     const DONE_CAP: usize = 1;
-    /// Received bytes buffered between the UART interrupt and the command task (STM32).
+    /// Received bytes buffered between the UART interrupt and the command task.
     const RX_CAP: usize = 64;
+
     /// The load-cell task looks for a conversion this often (ms): above the HX711's 80 a
     /// second, so each is read before the next overwrites it.
     const LOAD_CELL_POLL_MS: u32 = 5;
@@ -301,6 +303,9 @@ mod app {
         async fn counters(&mut self) {
             let _ = self.reports.send(Report::Counters).await;
         }
+        async fn served(&mut self, ok: bool) {
+            let _ = self.reports.send(Report::Link(LinkEvent::Served(ok))).await;
+        }
         fn try_report(&mut self, e: Event) -> bool {
             self.reports.try_send(Report::Event(e)).is_ok()
         }
@@ -403,6 +408,11 @@ mod app {
                     Action::Reject(message) => {
                         let _ = reports.send(Report::Rejected(message)).await;
                     }
+                    Action::Serve => {
+                        drop(done);
+                        serve_link(rx, requests, reports, scale).await;
+                        return;
+                    }
                 }
             }
             let ok = run.ok() && !Overruns::now().any();
@@ -431,11 +441,60 @@ mod app {
         }
     }
 
-    /// The report task: the only task that logs. Formats are listed in the crate docs.
+    /// The host link's receive side (QEMU after the script's `serve`): bytes → frames →
+    /// commands for the measurement task, each answered (`docs/protocol.md`). A command that
+    /// finds the request queue full is rejected (`busy`), so the byte path never waits on a
+    /// command in service; a frame that is no message is answered with its error.
+    #[cfg(feature = "qemu")]
+    async fn serve_link(
+        mut rx: Receiver<'static, u8, RX_CAP>,
+        mut requests: Sender<'static, Command, REQUEST_CAP>,
+        mut reports: Sender<'static, Report, REPORT_CAP>,
+        scale: pzt_probe::hal::FrontEndScale,
+    ) {
+        use pzt_probe::instrument::link::{HostLink, Incoming};
+        let mut link = HostLink::new();
+        while let Ok(b) = rx.recv().await {
+            let report = match link.push(b, &scale) {
+                None => continue,
+                Some(Incoming::Hello) => LinkEvent::Hello,
+                Some(Incoming::Error(e)) => LinkEvent::FrameError(e),
+                Some(Incoming::Command {
+                    id,
+                    parsed: Err(error),
+                }) => LinkEvent::Rejected { id, error },
+                Some(Incoming::Command { id, parsed: Ok(c) }) if !requests.is_full() => {
+                    // Queued before it is handed on: the reply's id waits in the report task
+                    // before any event of the command reaches it. This task alone sends
+                    // requests, so the room seen stays.
+                    let _ = reports.send(Report::Link(LinkEvent::Queued(id))).await;
+                    let _ = requests.try_send(c);
+                    continue;
+                }
+                Some(Incoming::Command { id, .. }) => LinkEvent::Busy(id),
+            };
+            let _ = reports.send(Report::Link(report)).await;
+        }
+    }
+
+    /// The report task: the only task that logs, and (QEMU) the host link's transmit side:
+    /// each report also as frames into the transmit queue ([`pzt_probe::instrument::link`]).
+    /// Formats are listed in the crate docs.
     #[task(priority = 1)]
     async fn report(_cx: report::Context, mut rx: Receiver<'static, Report, REPORT_CAP>) {
         let mut seen = Overruns::default();
+        #[cfg(feature = "qemu")]
+        let (mut out, mut frame) = (
+            pzt_probe::instrument::link::Outgoing::new(
+                board::NAME,
+                board::ELAPSED_UNIT,
+                board::boot_error(),
+            ),
+            [0u8; probe_proto::MAX_DEVICE_FRAME + 1],
+        );
         while let Ok(r) = rx.recv().await {
+            #[cfg(feature = "qemu")]
+            out.report(&r, &mut frame, board::link_send);
             #[allow(unused_variables)] // the exit status ends only the QEMU image
             if let Some(ok) = pzt_probe::instrument::log::report(r, board::ELAPSED_UNIT, &mut seen)
             {
