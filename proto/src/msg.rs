@@ -78,7 +78,8 @@ pub enum DeviceMsg<'a> {
     Stream {
         /// The stream's reading number from 0; a gap is a reading the probe could not queue.
         stream_seq: u32,
-        /// Probe time since the stream's start when the reading ended, s.
+        /// Probe time (the sample clock since power-on) when the reading ended, s; the
+        /// stream started at [`DeviceMsg::StreamEnd`]'s `start_s`.
         t_s: f32,
         /// The tracker held the resonance.
         locked: bool,

@@ -86,7 +86,9 @@ mod app {
     /// 55 KiB, scripts/ci-firmware, keeps the stack 41 KiB; a stream's reading that finds the
     /// channel full is dropped and counted, never waited for).
     const REPORT_CAP: usize = 11;
-    const DONE_CAP: usize = 1;
+    /// Completions: every request queued and the one in service, so none is lost while the
+    /// host link's receive side reads bytes.
+    const DONE_CAP: usize = REQUEST_CAP + 1;
     /// Received bytes buffered between the UART interrupt and the command task.
     const RX_CAP: usize = 64;
 
@@ -409,8 +411,8 @@ mod app {
                         let _ = reports.send(Report::Rejected(message)).await;
                     }
                     Action::Serve => {
-                        drop(done);
-                        serve_link(rx, requests, reports, scale).await;
+                        let sim = *run.sim();
+                        serve_link(rx, requests, reports, done, scale, sim).await;
                         return;
                     }
                 }
@@ -444,31 +446,58 @@ mod app {
     /// The host link's receive side (QEMU after the script's `serve`): bytes → frames →
     /// commands for the measurement task, each answered (`docs/protocol.md`). A command that
     /// finds the request queue full is rejected (`busy`), so the byte path never waits on a
-    /// command in service; a frame that is no message is answered with its error.
+    /// command in service; a frame that is no message is answered with its error. `sim` lines
+    /// (`src/board/sim_script.rs`) move the simulated probe from the scene `sim` once every
+    /// command before them has been served, then wait `SCENE_SETTLE_MS` as the script does.
     #[cfg(feature = "qemu")]
     async fn serve_link(
         mut rx: Receiver<'static, u8, RX_CAP>,
         mut requests: Sender<'static, Command, REQUEST_CAP>,
         mut reports: Sender<'static, Report, REPORT_CAP>,
+        mut done: Receiver<'static, bool, DONE_CAP>,
         scale: pzt_probe::hal::FrontEndScale,
+        mut sim: pzt_probe::board::sim_script::SimState,
     ) {
+        use pzt_probe::board::sim_script::{apply, SCENE_SETTLE_MS};
         use pzt_probe::instrument::link::{HostLink, Incoming};
         let mut link = HostLink::new();
+        // Requests queued and not yet served.
+        let mut outstanding = 0u32;
         while let Ok(b) = rx.recv().await {
+            while done.try_recv().is_ok() {
+                outstanding = outstanding.saturating_sub(1);
+            }
             let report = match link.push(b, &scale) {
                 None => continue,
                 Some(Incoming::Hello) => LinkEvent::Hello,
                 Some(Incoming::Error(e)) => LinkEvent::FrameError(e),
+                Some(Incoming::Command { id, line, .. }) if line.starts_with("sim ") => {
+                    while outstanding > 0 && done.recv().await.is_ok() {
+                        outstanding -= 1;
+                    }
+                    let error = match apply(&line, &mut sim) {
+                        Ok(_) => {
+                            board::set_scene(sim.scene(), sim.seed);
+                            Mono::delay(SCENE_SETTLE_MS.millis()).await;
+                            None
+                        }
+                        Err(e) => Some(e.message()),
+                    };
+                    LinkEvent::BoardLine { id, error }
+                }
                 Some(Incoming::Command {
                     id,
                     parsed: Err(error),
+                    ..
                 }) => LinkEvent::Rejected { id, error },
-                Some(Incoming::Command { id, parsed: Ok(c) }) if !requests.is_full() => {
+                Some(Incoming::Command {
+                    id, parsed: Ok(c), ..
+                }) if !requests.is_full() => {
                     // Queued before it is handed on: the reply's id waits in the report task
                     // before any event of the command reaches it. This task alone sends
                     // requests, so the room seen stays.
                     let _ = reports.send(Report::Link(LinkEvent::Queued(id))).await;
-                    let _ = requests.try_send(c);
+                    outstanding += requests.try_send(c).is_ok() as u32;
                     continue;
                 }
                 Some(Incoming::Command { id, .. }) => LinkEvent::Busy(id),

@@ -25,14 +25,17 @@ use probe_proto::{
 };
 
 /// What the link's receive side made of a frame.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum Incoming {
     /// The host's handshake, of this version.
     Hello,
-    /// A command line: its id and what the parser made of it.
+    /// A command line: its id, the line, and what the parser made of it.
     Command {
         /// The host's number for it.
         id: u32,
+        /// The line as received (a board may serve lines of its own, as the QEMU image's
+        /// `sim` lines).
+        line: heapless::String<MAX_LINE>,
         /// The command, or why the line is none.
         parsed: Result<Command, CommandError>,
     },
@@ -69,6 +72,7 @@ impl HostLink {
             Ok(HostMsg::Command { id, line }) => Incoming::Command {
                 id,
                 parsed: parse(line.as_bytes(), scale),
+                line,
             },
             Err(e) => Incoming::Error(e),
         })
@@ -93,6 +97,14 @@ pub enum LinkEvent {
     Queued(u32),
     /// Command `id` found the request queue full: refused, not run.
     Busy(u32),
+    /// Board line `id` (the QEMU image's `sim` lines) was served by the command task itself:
+    /// accepted, or refused with this message.
+    BoardLine {
+        /// The line's id.
+        id: u32,
+        /// Why it was refused.
+        error: Option<&'static str>,
+    },
     /// The measurement task served the oldest queued command (`ok`: as it returned).
     Served(bool),
 }
@@ -216,6 +228,20 @@ impl Outgoing {
                             code: "busy",
                             cause: None,
                             message: "command queue full: wait for a reply before sending more",
+                        },
+                    },
+                ),
+                LinkEvent::BoardLine { id, error } => out(
+                    self,
+                    DeviceMsg::Reply {
+                        id,
+                        outcome: match error {
+                            None => Outcome::Accepted,
+                            Some(message) => Outcome::Rejected {
+                                code: "sim",
+                                cause: None,
+                                message,
+                            },
                         },
                     },
                 ),
@@ -650,6 +676,7 @@ mod tests {
             feed(&cmd(3, "measure", &mut buf)),
             [Incoming::Command {
                 id: 3,
+                line: heapless::String::try_from("measure").unwrap(),
                 parsed: Ok(Command::Measure)
             }]
         );
@@ -657,6 +684,7 @@ mod tests {
             feed(&cmd(4, "stream 0.01", &mut buf)),
             [Incoming::Command {
                 id: 4,
+                line: heapless::String::try_from("stream 0.01").unwrap(),
                 parsed: Err(CommandError::OutOfRange)
             }]
         );

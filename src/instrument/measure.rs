@@ -148,8 +148,8 @@ impl<'a, L: Link, F: NorFlash> FwIo<'a, L, F> {
             };
             self.promise(watchdog::before(&req, session.references()));
             let ok = session.handle(req, self).await;
-            self.link.done(ok);
             self.link.served(ok).await;
+            self.link.done(ok);
         }
     }
 }
