@@ -280,6 +280,7 @@ impl QemuProbe {
 /// A link to a probe: bytes out, decoded frames in (from a reader thread).
 pub struct Link {
     writer: Box<dyn Write + Send>,
+    tcp: Option<TcpStream>,
     rx: mpsc::Receiver<Received>,
     /// Ids of commands sent so far (the next one's).
     pub next_id: u32,
@@ -318,9 +319,27 @@ impl Link {
         });
         Self {
             writer,
+            tcp: None,
             rx,
             next_id: 1,
             _qemu: qemu,
+        }
+    }
+
+    /// A link over TCP connection `s` (the QEMU image's serial port); `qemu` is kept alive
+    /// with it.
+    pub fn tcp(s: TcpStream, qemu: Option<QemuProbe>) -> Result<Self> {
+        let r = s.try_clone()?;
+        let w = s.try_clone()?;
+        let mut link = Self::new(Box::new(r), Box::new(w), qemu);
+        link.tcp = Some(s);
+        Ok(link)
+    }
+
+    /// Close a TCP link at once, as a host that vanishes (nothing more is read or sent).
+    pub fn vanish(&self) {
+        if let Some(s) = &self.tcp {
+            let _ = s.shutdown(std::net::Shutdown::Both);
         }
     }
 
@@ -332,8 +351,7 @@ impl Link {
     ) -> Result<Self> {
         let mut q = QemuProbe::start(elf, scene, defmt_log)?;
         let s = q.connect(Duration::from_secs(20))?;
-        let r = s.try_clone()?;
-        Ok(Self::new(Box::new(r), Box::new(s), Some(q)))
+        Self::tcp(s, Some(q))
     }
 
     /// A real probe on serial port `path` at [`BAUD`].

@@ -236,13 +236,28 @@ mod app {
             .batch(board::elapsed(t0), engine.overruns(), stream.late());
     }
 
-    /// Host bytes from the UART into the command task's channel.
+    /// Host bytes from the UART into the command task's channel while it has room; then the
+    /// board holds the rest (`Uart::hold`: QEMU keeps the host's stream back in its receive
+    /// register; the STM32 drops what its DMA ring holds, the line then fails to parse and is
+    /// reported), and the command task pends this interrupt after each byte it takes
+    /// ([`rx_taken`]).
     #[task(binds = LPUART1, priority = 2, local = [uart, rx_tx])]
     fn uart_rx(cx: uart_rx::Context) {
-        while let Some(b) = cx.local.uart.read_byte() {
-            // A full channel drops the byte; the line then fails to parse and is reported.
+        loop {
+            if cx.local.rx_tx.is_full() {
+                cx.local.uart.hold();
+                break;
+            }
+            let Some(b) = cx.local.uart.read_byte() else {
+                break;
+            };
             let _ = cx.local.rx_tx.try_send(b);
         }
+    }
+
+    /// The command task took a byte: let `uart_rx` move the next ones in.
+    fn rx_taken() {
+        rtic::pend(board::device::interrupt::LPUART1);
     }
 
     /// The engine's sample count now: the time base of readings and of the force log.
@@ -425,6 +440,7 @@ mod app {
         let (mut rx, mut lines) = (rx, pzt_probe::instrument::command::LineBuffer::new());
         #[cfg(not(feature = "qemu"))]
         while let Ok(b) = rx.recv().await {
+            rx_taken();
             // A stale completion from an earlier request is of no interest here.
             let _ = done.try_recv();
             // A parse error is reported and the line dropped.
@@ -464,6 +480,7 @@ mod app {
         // Requests queued and not yet served.
         let mut outstanding = 0u32;
         while let Ok(b) = rx.recv().await {
+            rx_taken();
             while done.try_recv().is_ok() {
                 outstanding = outstanding.saturating_sub(1);
             }

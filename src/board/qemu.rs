@@ -474,6 +474,14 @@ impl Uart {
         Self(())
     }
 
+    /// Leave the received byte in the receive register (STATE.RXFULL: QEMU then takes no
+    /// more from the host) and acknowledge its interrupt; the next [`read_byte`](Self::read_byte)
+    /// takes it.
+    pub fn hold(&mut self) {
+        // SAFETY: write-one-to-clear of UART0's receive interrupt.
+        unsafe { write_volatile(addr_of_mut!((*UART0).intclear), CmsdkUart::INT_RX) };
+    }
+
     /// The next received byte, if any (acknowledges the receive interrupt).
     pub fn read_byte(&mut self) -> Option<u8> {
         // SAFETY: CMSDK UART0 registers; reading DATA pops the received byte.
