@@ -108,7 +108,7 @@ fn every_bad_frame_gets_a_typed_error_and_the_next_good_frame_is_served() {
             x ^= x >> 7;
             x ^= x << 17;
             // One byte in 40 a delimiter.
-            if x % 40 == 0 {
+            if x.is_multiple_of(40) {
                 0
             } else {
                 (x >> 24) as u8
