@@ -47,8 +47,8 @@ pub fn scene_lines(target: &Target, scene: &SceneArgs, noise: NoiseScene) -> Vec
     lines
 }
 
-/// Build the QEMU image and run `script` on it; the decoded log.
-pub fn run_script(script: &str) -> Result<String> {
+/// Build the QEMU image (`cargo qemu-build`): its path.
+pub fn build_image() -> Result<PathBuf> {
     let status = Command::new(env!("CARGO"))
         .current_dir(root())
         .args(["qemu-build", "-q"])
@@ -60,7 +60,12 @@ pub fn run_script(script: &str) -> Result<String> {
     let target_dir = std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| root().join("target"));
-    let elf = target_dir.join("thumbv7em-none-eabihf/fw/probe");
+    Ok(target_dir.join("thumbv7em-none-eabihf/fw/probe"))
+}
+
+/// Build the QEMU image and run `script` on it; the decoded log.
+pub fn run_script(script: &str) -> Result<String> {
+    let elf = build_image()?;
     let out = Command::new(root().join("scripts/qemu-run"))
         .arg(&elf)
         .env("QEMU_SCRIPT", script)

@@ -67,6 +67,7 @@ mod app {
     use pzt_probe::engine::{PointRaw, SampleEngine, BATCH};
     use pzt_probe::hal::FrontEndScale;
     use pzt_probe::instrument::command::Command;
+    use pzt_probe::instrument::link::LinkEvent;
     use pzt_probe::instrument::measure::{FwIo, Link, Recv};
     use pzt_probe::instrument::session::Event;
     use pzt_probe::instrument::watchdog::{self, Millis, FEED};
@@ -85,9 +86,12 @@ mod app {
     /// 55 KiB, scripts/ci-firmware, keeps the stack 41 KiB; a stream's reading that finds the
     /// channel full is dropped and counted, never waited for).
     const REPORT_CAP: usize = 11;
-    const DONE_CAP: usize = 1;
-    /// Received bytes buffered between the UART interrupt and the command task (STM32).
+    /// Completions: every request queued and the one in service, so none is lost while the
+    /// host link's receive side reads bytes.
+    const DONE_CAP: usize = REQUEST_CAP + 1;
+    /// Received bytes buffered between the UART interrupt and the command task.
     const RX_CAP: usize = 64;
+
     /// The load-cell task looks for a conversion this often (ms): above the HX711's 80 a
     /// second, so each is read before the next overwrites it.
     const LOAD_CELL_POLL_MS: u32 = 5;
@@ -232,13 +236,28 @@ mod app {
             .batch(board::elapsed(t0), engine.overruns(), stream.late());
     }
 
-    /// Host bytes from the UART into the command task's channel.
+    /// Host bytes from the UART into the command task's channel while it has room; then the
+    /// board holds the rest (`Uart::hold`: QEMU keeps the host's stream back in its receive
+    /// register; the STM32 drops what its DMA ring holds, the line then fails to parse and is
+    /// reported), and the command task pends this interrupt after each byte it takes
+    /// ([`rx_taken`]).
     #[task(binds = LPUART1, priority = 2, local = [uart, rx_tx])]
     fn uart_rx(cx: uart_rx::Context) {
-        while let Some(b) = cx.local.uart.read_byte() {
-            // A full channel drops the byte; the line then fails to parse and is reported.
+        loop {
+            if cx.local.rx_tx.is_full() {
+                cx.local.uart.hold();
+                break;
+            }
+            let Some(b) = cx.local.uart.read_byte() else {
+                break;
+            };
             let _ = cx.local.rx_tx.try_send(b);
         }
+    }
+
+    /// The command task took a byte: let `uart_rx` move the next ones in.
+    fn rx_taken() {
+        rtic::pend(board::device::interrupt::LPUART1);
     }
 
     /// The engine's sample count now: the time base of readings and of the force log.
@@ -300,6 +319,9 @@ mod app {
         }
         async fn counters(&mut self) {
             let _ = self.reports.send(Report::Counters).await;
+        }
+        async fn served(&mut self, ok: bool) {
+            let _ = self.reports.send(Report::Link(LinkEvent::Served(ok))).await;
         }
         fn try_report(&mut self, e: Event) -> bool {
             self.reports.try_send(Report::Event(e)).is_ok()
@@ -403,6 +425,11 @@ mod app {
                     Action::Reject(message) => {
                         let _ = reports.send(Report::Rejected(message)).await;
                     }
+                    Action::Serve => {
+                        let sim = *run.sim();
+                        serve_link(rx, requests, reports, done, scale, sim).await;
+                        return;
+                    }
                 }
             }
             let ok = run.ok() && !Overruns::now().any();
@@ -413,6 +440,7 @@ mod app {
         let (mut rx, mut lines) = (rx, pzt_probe::instrument::command::LineBuffer::new());
         #[cfg(not(feature = "qemu"))]
         while let Ok(b) = rx.recv().await {
+            rx_taken();
             // A stale completion from an earlier request is of no interest here.
             let _ = done.try_recv();
             // A parse error is reported and the line dropped.
@@ -431,11 +459,88 @@ mod app {
         }
     }
 
-    /// The report task: the only task that logs. Formats are listed in the crate docs.
+    /// The host link's receive side (QEMU after the script's `serve`): bytes → frames →
+    /// commands for the measurement task, each answered (`docs/protocol.md`). A command that
+    /// finds the request queue full is rejected (`busy`), so the byte path never waits on a
+    /// command in service; a frame that is no message is answered with its error. `sim` lines
+    /// (`src/board/sim_script.rs`) move the simulated probe from the scene `sim` once every
+    /// command before them has been served, then wait `SCENE_SETTLE_MS` as the script does.
+    #[cfg(feature = "qemu")]
+    async fn serve_link(
+        mut rx: Receiver<'static, u8, RX_CAP>,
+        mut requests: Sender<'static, Command, REQUEST_CAP>,
+        mut reports: Sender<'static, Report, REPORT_CAP>,
+        mut done: Receiver<'static, bool, DONE_CAP>,
+        scale: pzt_probe::hal::FrontEndScale,
+        mut sim: pzt_probe::board::sim_script::SimState,
+    ) {
+        use pzt_probe::board::sim_script::{apply, SCENE_SETTLE_MS};
+        use pzt_probe::instrument::link::{HostLink, Incoming};
+        let mut link = HostLink::new();
+        // Requests queued and not yet served.
+        let mut outstanding = 0u32;
+        while let Ok(b) = rx.recv().await {
+            rx_taken();
+            while done.try_recv().is_ok() {
+                outstanding = outstanding.saturating_sub(1);
+            }
+            let report = match link.push(b, &scale) {
+                None => continue,
+                Some(Incoming::Hello) => LinkEvent::Hello,
+                Some(Incoming::Error(e)) => LinkEvent::FrameError(e),
+                Some(Incoming::Command { id, line, .. }) if line.starts_with("sim ") => {
+                    while outstanding > 0 && done.recv().await.is_ok() {
+                        outstanding -= 1;
+                    }
+                    let error = match apply(&line, &mut sim) {
+                        Ok(_) => {
+                            board::set_scene(sim.scene(), sim.seed);
+                            Mono::delay(SCENE_SETTLE_MS.millis()).await;
+                            None
+                        }
+                        Err(e) => Some(e.message()),
+                    };
+                    LinkEvent::BoardLine { id, error }
+                }
+                Some(Incoming::Command {
+                    id,
+                    parsed: Err(error),
+                    ..
+                }) => LinkEvent::Rejected { id, error },
+                Some(Incoming::Command {
+                    id, parsed: Ok(c), ..
+                }) if !requests.is_full() => {
+                    // Queued before it is handed on: the reply's id waits in the report task
+                    // before any event of the command reaches it. This task alone sends
+                    // requests, so the room seen stays.
+                    let _ = reports.send(Report::Link(LinkEvent::Queued(id))).await;
+                    outstanding += requests.try_send(c).is_ok() as u32;
+                    continue;
+                }
+                Some(Incoming::Command { id, .. }) => LinkEvent::Busy(id),
+            };
+            let _ = reports.send(Report::Link(report)).await;
+        }
+    }
+
+    /// The report task: the only task that logs, and (QEMU) the host link's transmit side:
+    /// each report also as frames into the transmit queue ([`pzt_probe::instrument::link`]).
+    /// Formats are listed in the crate docs.
     #[task(priority = 1)]
     async fn report(_cx: report::Context, mut rx: Receiver<'static, Report, REPORT_CAP>) {
         let mut seen = Overruns::default();
+        #[cfg(feature = "qemu")]
+        let (mut out, mut frame) = (
+            pzt_probe::instrument::link::Outgoing::new(
+                board::NAME,
+                board::ELAPSED_UNIT,
+                board::boot_error(),
+            ),
+            [0u8; probe_proto::MAX_DEVICE_FRAME + 1],
+        );
         while let Ok(r) = rx.recv().await {
+            #[cfg(feature = "qemu")]
+            out.report(&r, &mut frame, board::link_send);
             #[allow(unused_variables)] // the exit status ends only the QEMU image
             if let Some(ok) = pzt_probe::instrument::log::report(r, board::ELAPSED_UNIT, &mut seen)
             {

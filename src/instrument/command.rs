@@ -128,6 +128,23 @@ pub enum CommandError {
 }
 
 impl CommandError {
+    /// Stable snake_case code (the host link's `Rejected` cause, `docs/protocol.md`).
+    pub const fn code(self) -> &'static str {
+        match self {
+            CommandError::Empty => "empty",
+            CommandError::Oversized => "oversized",
+            CommandError::NotUtf8 => "not_utf8",
+            CommandError::UnknownCommand => "unknown_command",
+            CommandError::MissingArgument => "missing_argument",
+            CommandError::TooManyArguments => "too_many_arguments",
+            CommandError::BadNumber => "bad_number",
+            CommandError::UnknownMethod => "unknown_method",
+            CommandError::UnknownSubcommand => "unknown_subcommand",
+            CommandError::OutOfRange => "out_of_range",
+            CommandError::Settings(_) => "settings",
+        }
+    }
+
     /// One line for a human.
     pub const fn message(self) -> &'static str {
         match self {

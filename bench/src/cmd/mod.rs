@@ -3,6 +3,7 @@
 pub mod accuracy;
 pub mod analyze;
 pub mod calibrate;
+pub mod connect;
 pub mod generate;
 pub mod log;
 pub mod measure;

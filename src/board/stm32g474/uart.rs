@@ -23,6 +23,13 @@ const UART_RING: usize = 64;
 pub struct Uart(Option<RingBufferedUartRx<'static>>);
 
 impl Uart {
+    /// No room for more bytes: drop what the ring holds (reading clears the idle and error
+    /// flags, which would otherwise raise the interrupt again at once); the line they belonged
+    /// to then fails to parse and is reported.
+    pub fn hold(&mut self) {
+        while self.read_byte().is_some() {}
+    }
+
     /// The next received byte, if any (reading clears the receive interrupt). A receive error
     /// (overrun, noise, framing) is dropped and the read retried once: the lost byte shows up
     /// as a malformed line, which the parser reports.
