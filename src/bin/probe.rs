@@ -89,6 +89,9 @@ mod app {
     /// Completions: every request queued and the one in service, so none is lost while the
     /// host link's receive side reads bytes.
     const DONE_CAP: usize = REQUEST_CAP + 1;
+    // The host link keeps the id of every command queued, in service, or whose completion
+    // waits in the report channel.
+    const _: () = assert!(pzt_probe::instrument::link::PENDING >= REQUEST_CAP + 1 + REPORT_CAP);
     /// Received bytes buffered between the UART interrupt and the command task.
     const RX_CAP: usize = 64;
 
