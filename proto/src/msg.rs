@@ -285,8 +285,9 @@ pub enum Outcome<'a> {
     Accepted,
     /// Not served.
     Rejected {
-        /// Why, as a code: `parse` (the line is no command), `settings`, `selftest`, `boot`,
-        /// `air`, `no_resonance`, `bad_reference`, `weigh`, `references_full`, `fit`, `store`.
+        /// Why, as a code: `busy` (the command queue is full), `parse` (the line is no
+        /// command), `sim` (QEMU: a bad `sim` line), `settings`, `selftest`, `boot`, `air`,
+        /// `no_resonance`, `bad_reference`, `weigh`, `references_full`, `fit`, `store`.
         code: &'a str,
         /// The detail's code: the parse error, the self-test fault, the reading failure, …
         /// (`None` when the code says it all).

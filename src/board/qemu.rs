@@ -227,7 +227,7 @@ pub fn scale() -> FrontEndScale {
 }
 
 /// The board's parts, as the application takes them over (the watchdog a stand-in).
-pub type Parts = super::Parts<Stream, Watchdog, StoreFlash, Uart, LoadCell>;
+pub type Parts = super::Parts<Stream, Watchdog, StoreFlash, Uart, LinkTx, LoadCell>;
 
 /// Set the board up: the simulated probe on [`boot_state`]'s scene, and its flash as the
 /// factory left it —
@@ -263,6 +263,7 @@ pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
         watchdog: Watchdog { last: None },
         flash,
         uart: Uart::new(),
+        link_tx: LinkTx,
         load_cell: load_cell(),
     }
 }
@@ -520,6 +521,23 @@ pub fn link_send(frame: &[u8]) -> bool {
         cortex_m::peripheral::NVIC::pend(device::Interrupt::UART0TX);
     }
     queued
+}
+
+/// The host link's transmit side as the task `link_tx` sees it: nothing to drive here (UART0's
+/// transmit interrupt, [`UART0TX`], sends what [`link_send`] queued), so the task ends at once.
+pub struct LinkTx;
+
+impl LinkTx {
+    /// The task `link_tx` has work on this board.
+    pub const BY_TASK: bool = false;
+
+    /// Bytes the task should send next: none (the interrupt sends them).
+    pub fn take(_buf: &mut [u8]) -> usize {
+        0
+    }
+
+    /// Send `bytes` (never called: [`Self::BY_TASK`] is false).
+    pub async fn write(&mut self, _bytes: &[u8]) {}
 }
 
 /// CMSDK UART0's transmit interrupt (line 1; not an RTIC task, at the lowest priority, set by

@@ -345,6 +345,19 @@ mod tests {
     }
 
     #[test]
+    fn serve_ends_the_script_and_hands_over_to_the_link() {
+        let scale = FrontEndScale::PROBE;
+        let run = Runner::new(lines("sim phantom B; serve; measure"), start(), scale);
+        let actions: Vec<Action> = run.collect();
+        assert_eq!(actions[..2], [Action::Sim, Action::Serve]);
+        assert_eq!(
+            step(" serve", &mut start(), &scale),
+            Step::BadCommand(CommandError::UnknownCommand)
+        );
+        assert_eq!(step("serve", &mut start(), &scale), Step::Serve);
+    }
+
+    #[test]
     fn event_lines_set_the_scene_events_and_a_new_scene_clears_them() {
         let mut s = start();
         assert_eq!(apply("sim phantom C", &mut s), Ok(true));

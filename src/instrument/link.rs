@@ -109,9 +109,10 @@ pub enum LinkEvent {
     Served(bool),
 }
 
-/// Commands queued and not yet served that the link keeps ids of: the request channel's
-/// capacity and the one being served, with room.
-pub const PENDING: usize = 8;
+/// Ids the link keeps of commands not yet answered: each is queued or in service (at most the
+/// request channel's 4 and one) or its [`LinkEvent::Served`] waits in the report channel (at
+/// most its 11): 16 bound them all (`src/bin/probe.rs`).
+pub const PENDING: usize = 16;
 
 /// The rejection's message of a failed `store` (the store's error code is its cause).
 const STORE_FAILED: &str = "storing the profile in flash failed";
