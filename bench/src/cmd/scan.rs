@@ -19,10 +19,10 @@
 //! loss read (see the constant).
 #![allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > y)` also rejects NaN, deliberately
 
-use super::progress;
+use super::{progress, CalibrationArgs};
 use crate::calfile;
 use crate::plot::{self, draw_legend, draw_to, err, padded_range, Area, Backend};
-use crate::scene::parse_noise;
+use crate::scene::{parse_noise, NoiseArgs};
 use anyhow::{anyhow, bail, Result};
 use clap::{Args, ValueEnum};
 use hal_sim::lump::{self, Inclusion, LumpMaterial, LumpPhantom};
@@ -92,21 +92,13 @@ pub struct ScanArgs {
     /// Resonance method (one that sweeps: `sweep-g`, `paper`, ...).
     #[arg(long, default_value = "sweep-g")]
     pub method: String,
-    /// Front-end noise: `quiet`, `paper`, `bench`, or a current-noise density in A/sqrt(Hz).
-    #[arg(long, default_value = "bench")]
-    pub noise: String,
-    /// Calibration curve from resonance (Hz) to modulus (kPa): `paper-experiment` (eq. 5, by
-    /// which paper 003 mapped its coin sample), `paper-simulation` (eq. 4) or `unit` (the
-    /// profile's own curve). Default: `paper-experiment`; `unit` on a lossy phantom, whose loss
-    /// tangent is read through the unit's contact law, which the papers' curves do not have.
-    #[arg(long)]
-    pub calibration: Option<String>,
-    /// Unit profile file (`probe-bench calibrate --out`). Default: the simulated unit's.
-    #[arg(long)]
-    pub profile: Option<PathBuf>,
-    /// Seed of the simulated noise (grid point k uses seed + k).
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
+    /// The front end's noise and its seed (grid point k uses seed + k, the k-th slide of
+    /// `--continuous` seed + k).
+    #[command(flatten)]
+    pub noise: NoiseArgs,
+    /// The calibration and the unit profile.
+    #[command(flatten)]
+    pub cal: CalibrationArgs,
     /// Stiffness map to write (.svg or .png).
     #[arg(long, default_value = "scan.svg")]
     pub plot: PathBuf,
@@ -598,7 +590,7 @@ fn run_continuous(a: &ScanArgs) -> Result<()> {
             x_mm: x,
             speed_mm_s: v,
             base: spec.base,
-            seed: a.seed + k as u64,
+            seed: a.noise.seed + k as u64,
         };
         let r = super::slide::slide(&s, &config, &unit)?;
         let line = if a.json {
@@ -629,7 +621,7 @@ fn spec_of(a: &ScanArgs) -> Result<ScanSpec> {
     if !(a.preload_n.is_finite() && a.preload_n > 0.0 && a.preload_n <= 1.0) {
         bail!("preload {} N is out of range (0 to 1 N)", a.preload_n);
     }
-    let noise = parse_noise(&a.noise)?;
+    let noise = parse_noise(&a.noise.noise)?;
     let base = Scene::free_air()
         .with_noise(noise)
         .with_preload_n(a.preload_n);
@@ -657,10 +649,11 @@ fn spec_of(a: &ScanArgs) -> Result<ScanSpec> {
     spec.settings = method.default_sweep();
     let lossy = is_lossy(&spec);
     let calibration =
-        a.calibration
+        a.cal
+            .calibration
             .as_deref()
             .unwrap_or(if lossy { "unit" } else { "paper-experiment" });
-    spec.unit = calfile::resolve(a.profile.as_deref(), calibration, || {
+    spec.unit = calfile::resolve(a.cal.profile.as_deref(), calibration, || {
         own_unit(method, noise)
     })?;
     if lossy && spec.unit.contact.is_none() {
@@ -669,7 +662,7 @@ fn spec_of(a: &ScanArgs) -> Result<ScanSpec> {
              not have: scan lossy tissue with --calibration unit (its default) or a profile file"
         );
     }
-    spec.seed = a.seed;
+    spec.seed = a.noise.seed;
     Ok(spec)
 }
 
@@ -873,7 +866,7 @@ fn print_summary(a: &ScanArgs, spec: &ScanSpec, res: &ScanResult) {
         res.points.len(),
         spec.step_mm,
         a.preload_n * 1e3,
-        a.noise,
+        a.noise.noise,
         spec.method.name(),
         ok
     );
