@@ -2,7 +2,7 @@
 //! centre is found within one grid step, for paper 003's coin and paper 002's ball.
 
 mod common;
-use common::{bin, run_fails_one_line, run_json};
+use common::{bin, run_fails_one_line, run_json, Scratch};
 
 use hal_sim::lump::Inclusion;
 use hal_sim::{NoiseScene, Scene};
@@ -124,8 +124,7 @@ fn no_lump_where_there_is_none() {
 
 #[test]
 fn cli_writes_the_map() {
-    let dir = std::env::temp_dir().join(format!("probe-bench-scan-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("scan");
     let png = dir.join("scan.png");
     let j = run_json(bin().args(["scan", "--json", "--plot"]).arg(&png));
     assert_eq!(j["scene"], "coin");
@@ -151,7 +150,6 @@ fn cli_writes_the_map() {
     assert_eq!(j["true_centre_mm"][0].as_f64(), Some(-3.0));
     // Bad input: one line, non-zero exit.
     run_fails_one_line(bin().args(["scan", "--scene", "ball", "--ball-d-mm", "25"]));
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// `scan --continuous` (issue #14): sliding across the coin at 1–20 mm/s the stream finds the

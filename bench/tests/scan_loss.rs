@@ -9,7 +9,7 @@
 //! the silicone given tan δ 0.3, bench noise, sweep-G, the simulated unit's own calibration.
 
 mod common;
-use common::{bin, run_fails_one_line, run_json};
+use common::{bin, run_fails_one_line, run_json, Scratch};
 
 use hal_sim::lump::{Inclusion, LumpMaterial};
 use hal_sim::{NoiseScene, Scene};
@@ -194,8 +194,7 @@ fn the_loss_locator_finds_a_dip_and_ignores_a_flat_map() {
 
 #[test]
 fn cli_maps_the_loss_and_refuses_a_lossy_rigid_lump() {
-    let dir = std::env::temp_dir().join(format!("probe-bench-scan-loss-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("scan-loss");
     let svg = dir.join("scan-loss.svg");
     let j = run_json(
         bin()
@@ -240,7 +239,6 @@ fn cli_maps_the_loss_and_refuses_a_lossy_rigid_lump() {
         "--calibration",
         "paper-experiment",
     ]));
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// `scan --continuous` on lossy tissue: sliding at 2 mm/s over the line through the lump
