@@ -19,6 +19,7 @@
 //! loss read (see the constant).
 #![allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > y)` also rejects NaN, deliberately
 
+use super::slide::{slide, Slide, SlideResult};
 use super::{progress, CalibrationArgs};
 use crate::calfile;
 use crate::plot::{self, draw_legend, draw_to, err, padded_range, Area, Backend};
@@ -576,23 +577,10 @@ pub fn run(a: ScanArgs) -> Result<()> {
 /// simulated unit's profile for the tracker's method ([`super::slide`]).
 fn run_continuous(a: &ScanArgs) -> Result<()> {
     let spec = spec_of(a)?;
-    let (y, x) = match a.scene {
-        ScanScene::Coin => (a.coin_at_mm[1], (-13.5, 13.5)),
-        ScanScene::Ball => (0.0, (-4.0, 24.0)),
-    };
-    let unit = crate::unit::default_for(pzt_probe::instrument::continuous::METHOD)?;
-    let config = pzt_probe::instrument::continuous::TrackerConfig::DEFAULT;
+    let line = slide_line(a.scene, a.coin_at_mm[1]);
     let mut results = Vec::new();
     for (k, &v) in a.speed_mm_s.iter().enumerate() {
-        let s = super::slide::Slide {
-            phantom: spec.phantom,
-            y_mm: y,
-            x_mm: x,
-            speed_mm_s: v,
-            base: spec.base,
-            seed: a.noise.seed + k as u64,
-        };
-        let r = super::slide::slide(&s, &config, &unit)?;
+        let r = slide_over(spec.phantom, spec.base, line, v, a.noise.seed + k as u64)?;
         let line = if a.json {
             super::slide::slide_json(&r).to_string()
         } else {
@@ -606,6 +594,39 @@ fn run_continuous(a: &ScanArgs) -> Result<()> {
         writeln!(std::io::stdout(), "plot written to {}", a.plot.display())?;
     }
     Ok(())
+}
+
+/// The line `--continuous` slides along through `scene`'s lump: its `y` and where the tip
+/// starts and ends in `x`, mm. The coin: its row `coin_y_mm` across the disc, 1.5 mm clear of
+/// the rim; the ball: paper 002's path, 4 mm past either end.
+pub fn slide_line(scene: ScanScene, coin_y_mm: f64) -> (f64, (f64, f64)) {
+    match scene {
+        ScanScene::Coin => (coin_y_mm, (-13.5, 13.5)),
+        ScanScene::Ball => (0.0, (-4.0, 24.0)),
+    }
+}
+
+/// One slide of `--continuous` over `phantom` on `base` (probe, front end, noise, preload)
+/// along `line` ([`slide_line`]) at `speed_mm_s`, noise stream `seed`: the continuous
+/// tracker's default configuration and the simulated unit's profile for its method.
+pub fn slide_over(
+    phantom: LumpPhantom,
+    base: Scene,
+    (y_mm, x_mm): (f64, (f64, f64)),
+    speed_mm_s: f64,
+    seed: u64,
+) -> Result<SlideResult> {
+    let unit = crate::unit::default_for(pzt_probe::instrument::continuous::METHOD)?;
+    let config = pzt_probe::instrument::continuous::TrackerConfig::DEFAULT;
+    let s = Slide {
+        phantom,
+        y_mm,
+        x_mm,
+        speed_mm_s,
+        base,
+        seed,
+    };
+    slide(&s, &config, &unit)
 }
 
 /// The scan the arguments ask for: method, preload, noise, scene and the unit's profile.

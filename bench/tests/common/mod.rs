@@ -1,6 +1,9 @@
 //! What the CLI tests of `probe-bench` share: running the binary and checking its two kinds of
-//! outcome (success with output, or a one-line error and a non-zero exit).
+//! outcome (success with output, or a one-line error and a non-zero exit), a scratch directory;
+//! and, in [`scan`], what the scan tests share.
 #![allow(dead_code)] // each test file uses its own subset
+
+pub mod scan;
 
 use std::path::PathBuf;
 use std::process::{Command, Output};
