@@ -2,8 +2,8 @@
 //! centre is found within one grid step, for paper 003's coin and paper 002's ball.
 
 mod common;
-use common::scan::{bench_scene, centre_error};
-use common::{bin, run_fails_one_line, run_json, Scratch};
+use common::scan::{bench_scene, centre_error, scan_json};
+use common::{bin, run_fails_one_line, Scratch};
 
 use hal_sim::lump::Inclusion;
 use probe_bench::cmd::scan::{
@@ -118,26 +118,16 @@ fn no_lump_where_there_is_none() {
 fn cli_writes_the_map() {
     let dir = Scratch::new("scan");
     let png = dir.join("scan.png");
-    let j = run_json(bin().args(["scan", "--json", "--plot"]).arg(&png));
+    let j = scan_json(&[], &png);
     assert_eq!(j["scene"], "coin");
     let over = j["over_mean_hz"].as_f64().unwrap();
     assert!((over - PAPER_OVER_HZ).abs() <= 3.0);
     assert!(j["lump"]["x_mm"].as_f64().is_some());
     assert_eq!(&std::fs::read(&png).unwrap()[1..4], b"PNG");
     // Negative coordinates are numbers, not options.
-    let j = run_json(
-        bin()
-            .args([
-                "scan",
-                "--json",
-                "--step-mm",
-                "3",
-                "--coin-at-mm",
-                "-3",
-                "2",
-                "--plot",
-            ])
-            .arg(dir.join("neg.svg")),
+    let j = scan_json(
+        &["--step-mm", "3", "--coin-at-mm", "-3", "2"],
+        &dir.join("neg.svg"),
     );
     assert_eq!(j["true_centre_mm"][0].as_f64(), Some(-3.0));
     // Bad input: one line, non-zero exit.

@@ -9,10 +9,10 @@
 //! the silicone given tan δ 0.3, bench noise, sweep-G, the simulated unit's own calibration.
 
 mod common;
-use common::scan::{bench_scene, centre_error};
-use common::{bin, run_fails_one_line, run_json, Scratch};
+use common::scan::{bench_scene, centre_error, scan_json};
+use common::{bin, run_fails_one_line, Scratch};
 
-use hal_sim::lump::{Inclusion, LumpMaterial};
+use hal_sim::lump::LumpMaterial;
 use hal_sim::NoiseScene;
 use probe_bench::cmd::scan::{
     away_radius_mm, locate_loss, loss_min_contrast, mean_loss, over_radius_mm, own_unit, scan,
@@ -38,9 +38,7 @@ fn lossy_coin(material: LumpMaterial, depth_mm: f64, seed: u64) -> ScanSpec {
         .phantom
         .with_matrix_loss(BACKGROUND_TAN_D)
         .with_material(material);
-    if let Inclusion::Disc { depth_m, .. } = &mut spec.phantom.inclusion {
-        *depth_m = depth_mm * 1e-3;
-    }
+    spec.phantom.inclusion = spec.phantom.inclusion.with_depth_m(depth_mm * 1e-3);
     spec.unit = own_unit(Method::SweepG, NoiseScene::Bench).unwrap();
     spec.seed = seed;
     spec
@@ -186,24 +184,20 @@ fn the_loss_locator_finds_a_dip_and_ignores_a_flat_map() {
 fn cli_maps_the_loss_and_refuses_a_lossy_rigid_lump() {
     let dir = Scratch::new("scan-loss");
     let svg = dir.join("scan-loss.svg");
-    let j = run_json(
-        bin()
-            .args([
-                "scan",
-                "--json",
-                "--step-mm",
-                "3",
-                "--loss-tangent",
-                "0.3",
-                "--lump-modulus-kpa",
-                "455.4",
-                "--lump-loss-tangent",
-                "1.0",
-                "--lump-depth-mm",
-                "0.3",
-                "--plot",
-            ])
-            .arg(&svg),
+    let j = scan_json(
+        &[
+            "--step-mm",
+            "3",
+            "--loss-tangent",
+            "0.3",
+            "--lump-modulus-kpa",
+            "455.4",
+            "--lump-loss-tangent",
+            "1.0",
+            "--lump-depth-mm",
+            "0.3",
+        ],
+        &svg,
     );
     assert_eq!(j["matrix_loss_tangent"].as_f64(), Some(0.3));
     assert_eq!(j["lump_material"]["loss_tangent"].as_f64(), Some(1.0));

@@ -740,24 +740,7 @@ fn lossy_phantom(a: &ScanArgs, phantom: LumpPhantom) -> Result<LumpPhantom> {
                 p.thickness_m * 1e3
             );
         }
-        p.inclusion = match p.inclusion {
-            Inclusion::Disc {
-                x_m, y_m, radius_m, ..
-            } => Inclusion::Disc {
-                x_m,
-                y_m,
-                radius_m,
-                depth_m: d_m,
-            },
-            Inclusion::Sphere {
-                x_m, y_m, radius_m, ..
-            } => Inclusion::Sphere {
-                x_m,
-                y_m,
-                radius_m,
-                depth_m: d_m,
-            },
-        };
+        p.inclusion = p.inclusion.with_depth_m(d_m);
     }
     Ok(p)
 }
@@ -874,9 +857,7 @@ fn print_summary(a: &ScanArgs, spec: &ScanSpec, res: &ScanResult) {
                 modulus_pa / 1e3
             ),
         };
-        let depth = match spec.phantom.inclusion {
-            Inclusion::Disc { depth_m, .. } | Inclusion::Sphere { depth_m, .. } => depth_m * 1e3,
-        };
+        let depth = spec.phantom.inclusion.depth_m() * 1e3;
         println!(
             "  as scanned: the soft material's tan d {:.2}; the inclusion {material}, its top {depth:.2} mm under the surface",
             spec.phantom.matrix.loss_tangent
