@@ -9,13 +9,14 @@
 //! the silicone given tan δ 0.3, bench noise, sweep-G, the simulated unit's own calibration.
 
 mod common;
-use common::{bin, run_fails_one_line, run_json};
+use common::scan::{bench_scene, centre_error, scan_json};
+use common::{bin, run_fails_one_line, Scratch};
 
-use hal_sim::lump::{Inclusion, LumpMaterial};
-use hal_sim::{NoiseScene, Scene};
+use hal_sim::lump::LumpMaterial;
+use hal_sim::NoiseScene;
 use probe_bench::cmd::scan::{
     away_radius_mm, locate_loss, loss_min_contrast, mean_loss, over_radius_mm, own_unit, scan,
-    ScanResult, ScanSpec,
+    slide_line, slide_over, ScanResult, ScanScene, ScanSpec,
 };
 use pzt_probe::{Method, Status};
 
@@ -32,28 +33,15 @@ const LUMP_KPA: f64 = 455.4;
 const BIAS_SPREAD: f64 = 0.136;
 
 fn lossy_coin(material: LumpMaterial, depth_mm: f64, seed: u64) -> ScanSpec {
-    let mut spec = ScanSpec::coin(
-        1.5,
-        -1.0,
-        2.0,
-        Scene::free_air().with_noise(NoiseScene::Bench),
-    )
-    .unwrap();
+    let mut spec = ScanSpec::coin(1.5, -1.0, 2.0, bench_scene()).unwrap();
     spec.phantom = spec
         .phantom
         .with_matrix_loss(BACKGROUND_TAN_D)
         .with_material(material);
-    if let Inclusion::Disc { depth_m, .. } = &mut spec.phantom.inclusion {
-        *depth_m = depth_mm * 1e-3;
-    }
+    spec.phantom.inclusion = spec.phantom.inclusion.with_depth_m(depth_mm * 1e-3);
     spec.unit = own_unit(Method::SweepG, NoiseScene::Bench).unwrap();
     spec.seed = seed;
     spec
-}
-
-fn centre_error(spec: &ScanSpec, x: f64, y: f64) -> f64 {
-    let (tx, ty) = spec.phantom.inclusion.centre_m();
-    (x - tx * 1e3).hypot(y - ty * 1e3)
 }
 
 /// Mean loss tangent read and mean truth over the lump and away from it.
@@ -194,27 +182,22 @@ fn the_loss_locator_finds_a_dip_and_ignores_a_flat_map() {
 
 #[test]
 fn cli_maps_the_loss_and_refuses_a_lossy_rigid_lump() {
-    let dir = std::env::temp_dir().join(format!("probe-bench-scan-loss-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("scan-loss");
     let svg = dir.join("scan-loss.svg");
-    let j = run_json(
-        bin()
-            .args([
-                "scan",
-                "--json",
-                "--step-mm",
-                "3",
-                "--loss-tangent",
-                "0.3",
-                "--lump-modulus-kpa",
-                "455.4",
-                "--lump-loss-tangent",
-                "1.0",
-                "--lump-depth-mm",
-                "0.3",
-                "--plot",
-            ])
-            .arg(&svg),
+    let j = scan_json(
+        &[
+            "--step-mm",
+            "3",
+            "--loss-tangent",
+            "0.3",
+            "--lump-modulus-kpa",
+            "455.4",
+            "--lump-loss-tangent",
+            "1.0",
+            "--lump-depth-mm",
+            "0.3",
+        ],
+        &svg,
     );
     assert_eq!(j["matrix_loss_tangent"].as_f64(), Some(0.3));
     assert_eq!(j["lump_material"]["loss_tangent"].as_f64(), Some(1.0));
@@ -240,7 +223,6 @@ fn cli_maps_the_loss_and_refuses_a_lossy_rigid_lump() {
         "--calibration",
         "paper-experiment",
     ]));
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// `scan --continuous` on lossy tissue: sliding at 2 mm/s over the line through the lump
@@ -253,10 +235,6 @@ fn cli_maps_the_loss_and_refuses_a_lossy_rigid_lump() {
 /// 10 mm/s, where one seed of four found no loss lump (docs/bench.md, "Loss map").
 #[test]
 fn a_slide_carries_the_loss_and_finds_only_the_lossier_lump() {
-    use probe_bench::cmd::slide::{slide, Slide};
-    let unit =
-        probe_bench::unit::default_for(pzt_probe::instrument::continuous::METHOD).expect("unit");
-    let config = pzt_probe::instrument::continuous::TrackerConfig::DEFAULT;
     let lossier = LumpMaterial::Tissue {
         modulus_pa: LUMP_KPA * 1e3,
         loss_tangent: 1.0,
@@ -266,15 +244,9 @@ fn a_slide_carries_the_loss_and_finds_only_the_lossier_lump() {
         loss_tangent: BACKGROUND_TAN_D,
     };
     for (material, has_loss_lump) in [(lossier, true), (same, false)] {
-        let s = Slide {
-            phantom: lossy_coin(material, 0.3, 0).phantom,
-            y_mm: -1.0,
-            x_mm: (-13.5, 13.5),
-            speed_mm_s: 2.0,
-            base: Scene::free_air().with_noise(NoiseScene::Bench),
-            seed: 40,
-        };
-        let r = slide(&s, &config, &unit).expect("a slide");
+        let phantom = lossy_coin(material, 0.3, 0).phantom;
+        let line = slide_line(ScanScene::Coin, -1.0);
+        let r = slide_over(phantom, bench_scene(), line, 2.0, 40).expect("a slide");
         eprintln!(
             "{material:?}: bar {:?}; stream {:?}; closed form {:?}; modulus centre error {:?}",
             r.loss_bar,

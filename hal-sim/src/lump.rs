@@ -140,6 +140,21 @@ impl Inclusion {
             Inclusion::Disc { radius_m, .. } | Inclusion::Sphere { radius_m, .. } => radius_m,
         }
     }
+    /// Depth of its top under the surface, m.
+    pub fn depth_m(&self) -> f64 {
+        match *self {
+            Inclusion::Disc { depth_m, .. } | Inclusion::Sphere { depth_m, .. } => depth_m,
+        }
+    }
+    /// The same inclusion with its top `depth_m` under the surface, m.
+    pub fn with_depth_m(mut self, depth_m: f64) -> Self {
+        match &mut self {
+            Inclusion::Disc { depth_m: d, .. } | Inclusion::Sphere { depth_m: d, .. } => {
+                *d = depth_m
+            }
+        }
+        self
+    }
 
     /// `(w, h)` at surface point `(x, y)`: the load share the inclusion carries and the layer
     /// thickness between the contact and its nearest point.

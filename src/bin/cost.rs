@@ -74,7 +74,7 @@ mod harness {
     use pzt_probe::engine::{PointPlan, PointRaw, Points, SampleEngine};
     use pzt_probe::hal::{FrontEndScale, StreamError};
     use pzt_probe::loadcell::{ForceLog, RawForce};
-    use pzt_probe::reading::driver::{block_on, drive, BatchSource, Plans, PointSource, Wanted};
+    use pzt_probe::reading::driver::{block_on, drive, BatchSource, Plans, PointSource};
     use pzt_probe::reading::{Measurement, Procedure};
     use pzt_probe::unit::profile::UnitProfile;
     use pzt_probe::{Failure, Method, Reading, Seconds, Status};
@@ -256,17 +256,8 @@ mod harness {
             self.intake = Some(plan);
             true
         }
-        /// The driver's window wait over the counted batches.
-        async fn next(&mut self, wanted: &Wanted, budget: u64) -> Option<PointRaw> {
-            self.next_window(wanted, budget)
-        }
-        async fn stop(&mut self) {
-            self.engine.stop();
-        }
-        async fn idle(&mut self, samples: u64) {
-            self.engine.stop();
-            self.pass(samples);
-        }
+        // The driver's window wait, stop and idle over the counted batches.
+        pzt_probe::batch_source_waits!(engine);
         fn contact_force(&mut self, from: u64, to: u64) -> Option<RawForce> {
             self.forces.over(from, to, self.scale().sample_rate.0)
         }

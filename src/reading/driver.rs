@@ -246,6 +246,31 @@ pub trait BatchSource {
     }
 }
 
+/// The [`PointSource`] methods of a [`BatchSource`] whose [`SampleEngine`] is its field
+/// `$engine`, expanded inside its `impl PointSource`: `next` is the window wait
+/// ([`BatchSource::next_window`]), `stop` stops the engine, `idle` stops it and lets the
+/// samples [`pass`](BatchSource::pass). The host's [`SyncSource`] and the QEMU cost image's
+/// source use it.
+#[macro_export]
+macro_rules! batch_source_waits {
+    ($engine:ident) => {
+        async fn next(
+            &mut self,
+            wanted: &$crate::reading::driver::Wanted,
+            budget: u64,
+        ) -> Option<$crate::engine::PointRaw> {
+            $crate::reading::driver::BatchSource::next_window(self, wanted, budget)
+        }
+        async fn stop(&mut self) {
+            self.$engine.stop();
+        }
+        async fn idle(&mut self, samples: u64) {
+            self.$engine.stop();
+            $crate::reading::driver::BatchSource::pass(self, samples);
+        }
+    };
+}
+
 /// A [`PointSource`] that runs the engine and a [`SampleStream`] in one loop: batch by batch,
 /// generate, exchange, demodulate.
 pub struct SyncSource<'a, S> {
@@ -323,16 +348,7 @@ impl<S: SampleStream + ForceSource> PointSource for SyncSource<'_, S> {
         self.engine.load(plan);
         self.error.is_none()
     }
-    async fn next(&mut self, wanted: &Wanted, budget: u64) -> Option<PointRaw> {
-        self.next_window(wanted, budget)
-    }
-    async fn stop(&mut self) {
-        self.engine.stop();
-    }
-    async fn idle(&mut self, samples: u64) {
-        self.engine.stop();
-        self.pass(samples);
-    }
+    crate::batch_source_waits!(engine);
     fn contact_force(&mut self, from: u64, to: u64) -> Option<RawForce> {
         self.stream.contact_force(from, to)
     }

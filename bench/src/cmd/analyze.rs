@@ -2,7 +2,7 @@
 //! firmware's own estimator and calibration.
 #![allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > y)` also rejects NaN, deliberately
 
-use super::OutputArgs;
+use super::{CalibrationArgs, OutputArgs};
 use crate::calfile;
 use crate::capture::{self, Capture, CaptureError, DemodOptions, Layout, SweepShape};
 use crate::{plot, report};
@@ -34,18 +34,9 @@ pub struct AnalyzeArgs {
     /// drive while measuring (hold) are refused.
     #[arg(long, default_value = "auto")]
     pub method: String,
-    /// Calibration curve from resonance (Hz) to modulus (kPa): `paper-experiment` (paper 003
-    /// eq. 5), `paper-simulation` (eq. 4), `unit` (the profile's own curve; without
-    /// `--profile` the simulated unit's), or a profile file. Without `--profile` only the curve
-    /// is used (no Q model, no air reference). Default: with `--profile`, `paper-experiment`;
-    /// without, none — the reading is the capture's resonance and Q, no modulus.
-    #[arg(long)]
-    pub calibration: Option<String>,
-    /// Unit profile of the probe that made the capture (`probe-bench calibrate --out`): its
-    /// air reference and contact condition check the reading. Without it no check that needs
-    /// a probe's unit data is applied.
-    #[arg(long)]
-    pub profile: Option<PathBuf>,
+    /// The calibration and the probe's unit profile.
+    #[command(flatten)]
+    pub cal: CalibrationArgs,
     /// JSON (one object: the capture, the estimate, the reading) and the plot (the admittance
     /// with the estimate marked).
     #[command(flatten)]
@@ -601,7 +592,11 @@ pub fn analysis_json(a: &Analysis, file: &str) -> Value {
 /// Run the subcommand.
 pub fn run(a: AnalyzeArgs) -> Result<()> {
     let method = offline_method(&a.method)?;
-    let unit = profile(a.profile.as_deref(), a.calibration.as_deref(), method)?;
+    let unit = profile(
+        a.cal.profile.as_deref(),
+        a.cal.calibration.as_deref(),
+        method,
+    )?;
     if a.cycles_per_window == 0 || a.cycles_per_window > 1000 {
         bail!("--cycles-per-window must be 1 to 1000");
     }

@@ -52,6 +52,26 @@ impl OutputArgs {
     }
 }
 
+/// The calibration a command reads with, where it is chosen by options that default in the
+/// command (`scan`, `analyze`): a built-in curve or a unit profile file.
+#[derive(Args, Clone, Debug, Default)]
+pub struct CalibrationArgs {
+    /// Calibration curve from resonance (Hz) to modulus (kPa): `paper-experiment` (paper 003
+    /// eq. 5), `paper-simulation` (eq. 4), `unit` (the profile's own curve; without `--profile`
+    /// the simulated unit's), or a profile file. Default: scan `paper-experiment`, and `unit` on
+    /// lossy tissue, whose loss tangent is read through the unit's contact law, which the
+    /// papers' curves do not have; analyze with `--profile` `paper-experiment`, without it none
+    /// (the reading is the capture's resonance and Q, no modulus; the curve alone: no Q model,
+    /// no air reference).
+    #[arg(long)]
+    pub calibration: Option<String>,
+    /// Unit profile file (`probe-bench calibrate --out`): calibration, Q model, air reference.
+    /// Default: scan the simulated unit's; analyze none, so no check that needs a probe's unit
+    /// data (its air reference and contact condition) is applied.
+    #[arg(long)]
+    pub profile: Option<PathBuf>,
+}
+
 #[derive(Args, Clone)]
 pub struct MethodArgs {
     /// Resonance method: `auto` (the default, as in the firmware: hold, falling back to fit,

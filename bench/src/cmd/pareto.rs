@@ -543,6 +543,109 @@ impl Panel {
         let ymax = self.pts.iter().map(|p| p.2).fold(0.0, f64::max).max(1.0) * 2.0;
         (ymin, ymax)
     }
+
+    /// Draw the panel on `root`, its errors on the axis from `ymin` to `ymax`.
+    fn draw<DB: Backend>(
+        &self,
+        root: &Area<DB>,
+        cfgs: &[Config],
+        ymin: f64,
+        ymax: f64,
+    ) -> Result<()> {
+        let mut ch = plot::chart(
+            root,
+            Some((self.title.as_str(), 18)),
+            plot::Frame {
+                margin: 14,
+                x_labels: 45,
+                y_labels: 65,
+            },
+            ((10f64..50_000f64).log_scale(), (ymin..ymax).log_scale()),
+            (
+                "probe time per reading (ms)",
+                "RMS modulus error caused by noise (%)",
+            ),
+        )
+        .map_err(err)?;
+        ch.draw_series(LineSeries::new(
+            self.front.iter().copied(),
+            ShapeStyle::from(&RGBColor(170, 170, 170)).stroke_width(8),
+        ))
+        .map_err(err)?
+        .label("Pareto front")
+        .legend(|(x, y)| {
+            PathElement::new(
+                vec![(x, y), (x + 20, y)],
+                RGBColor(170, 170, 170).stroke_width(6),
+            )
+        });
+        plot::line(
+            &mut ch,
+            self.crb.iter().copied(),
+            BLACK.stroke_width(2),
+            "Cramér–Rao bound",
+        )
+        .map_err(err)?;
+        let grey = RGBColor(90, 90, 90);
+        if !self.steady.is_empty() {
+            ch.draw_series(DashedLineSeries::new(
+                self.steady.iter().copied(),
+                6,
+                4,
+                grey.stroke_width(2),
+            ))
+            .map_err(err)?
+            .label("Cramér–Rao bound, steady state (the tracker's)")
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], grey.stroke_width(1))
+            });
+        }
+        for (mi, m) in pzt_probe::Method::ALL.iter().enumerate() {
+            let col = PALETTE[mi % PALETTE.len()];
+            let mut p: Vec<&(usize, f64, f64, f64)> =
+                self.pts.iter().filter(|p| cfgs[p.0].method == *m).collect();
+            if p.is_empty() {
+                continue;
+            }
+            p.sort_by(|a, b| a.1.total_cmp(&b.1));
+            plot::line(
+                &mut ch,
+                p.iter().map(|q| (q.1, q.2)),
+                col.stroke_width(2),
+                m.name(),
+            )
+            .map_err(err)?;
+            ch.draw_series(p.iter().map(|q| {
+                let style = if q.3 >= 0.95 {
+                    col.filled()
+                } else {
+                    col.stroke_width(1)
+                };
+                Circle::new((q.1, q.2), 4, style)
+            }))
+            .map_err(err)?;
+        }
+        // The continuous tracker: one reading per segment, so its probe time per reading is the
+        // time per ok reading (1 / ok readings per second), segment lengths 35–150 ms.
+        if !self.tracker.is_empty() {
+            let col = RGBColor(200, 0, 120);
+            plot::line(
+                &mut ch,
+                self.tracker.iter().copied(),
+                col.stroke_width(3),
+                "stream (tracker): 1 / (ok readings per s)",
+            )
+            .map_err(err)?;
+            ch.draw_series(
+                self.tracker
+                    .iter()
+                    .map(|q| TriangleMarker::new(*q, 6, col.filled())),
+            )
+            .map_err(err)?;
+        }
+        draw_legend(&mut ch, SeriesLabelPosition::UpperRight, 0.85).map_err(err)?;
+        Ok(())
+    }
 }
 
 /// Probe times the bounds are drawn at, ms: 10 ms to 40 s.
@@ -646,7 +749,7 @@ fn chart(
     ) -> Result<()> {
         root.fill(&WHITE).map_err(err)?;
         for (area, p) in root.split_evenly((panels.len(), 1)).iter().zip(panels) {
-            draw_chart(area, cfgs, p, y.0, y.1)?;
+            p.draw(area, cfgs, y.0, y.1)?;
         }
         Ok(())
     }
@@ -656,114 +759,6 @@ fn chart(
         &panels,
         (ymin, ymax)
     ))
-}
-
-fn draw_chart<DB: Backend>(
-    root: &Area<DB>,
-    cfgs: &[Config],
-    panel: &Panel,
-    ymin: f64,
-    ymax: f64,
-) -> Result<()> {
-    let Panel {
-        title,
-        pts,
-        front,
-        crb,
-        tracker,
-        steady,
-    } = panel;
-    let mut ch = plot::chart(
-        root,
-        Some((title.as_str(), 18)),
-        plot::Frame {
-            margin: 14,
-            x_labels: 45,
-            y_labels: 65,
-        },
-        ((10f64..50_000f64).log_scale(), (ymin..ymax).log_scale()),
-        (
-            "probe time per reading (ms)",
-            "RMS modulus error caused by noise (%)",
-        ),
-    )
-    .map_err(err)?;
-    ch.draw_series(LineSeries::new(
-        front.iter().copied(),
-        ShapeStyle::from(&RGBColor(170, 170, 170)).stroke_width(8),
-    ))
-    .map_err(err)?
-    .label("Pareto front")
-    .legend(|(x, y)| {
-        PathElement::new(
-            vec![(x, y), (x + 20, y)],
-            RGBColor(170, 170, 170).stroke_width(6),
-        )
-    });
-    plot::line(
-        &mut ch,
-        crb.iter().copied(),
-        BLACK.stroke_width(2),
-        "Cramér–Rao bound",
-    )
-    .map_err(err)?;
-    let grey = RGBColor(90, 90, 90);
-    if !steady.is_empty() {
-        ch.draw_series(DashedLineSeries::new(
-            steady.iter().copied(),
-            6,
-            4,
-            grey.stroke_width(2),
-        ))
-        .map_err(err)?
-        .label("Cramér–Rao bound, steady state (the tracker's)")
-        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], grey.stroke_width(1)));
-    }
-    for (mi, m) in pzt_probe::Method::ALL.iter().enumerate() {
-        let col = PALETTE[mi % PALETTE.len()];
-        let mut p: Vec<&(usize, f64, f64, f64)> =
-            pts.iter().filter(|p| cfgs[p.0].method == *m).collect();
-        if p.is_empty() {
-            continue;
-        }
-        p.sort_by(|a, b| a.1.total_cmp(&b.1));
-        plot::line(
-            &mut ch,
-            p.iter().map(|q| (q.1, q.2)),
-            col.stroke_width(2),
-            m.name(),
-        )
-        .map_err(err)?;
-        ch.draw_series(p.iter().map(|q| {
-            let style = if q.3 >= 0.95 {
-                col.filled()
-            } else {
-                col.stroke_width(1)
-            };
-            Circle::new((q.1, q.2), 4, style)
-        }))
-        .map_err(err)?;
-    }
-    // The continuous tracker: one reading per segment, so its probe time per reading is the
-    // time per ok reading (1 / ok readings per second), segment lengths 35–150 ms.
-    if !tracker.is_empty() {
-        let col = RGBColor(200, 0, 120);
-        plot::line(
-            &mut ch,
-            tracker.iter().copied(),
-            col.stroke_width(3),
-            "stream (tracker): 1 / (ok readings per s)",
-        )
-        .map_err(err)?;
-        ch.draw_series(
-            tracker
-                .iter()
-                .map(|q| TriangleMarker::new(*q, 6, col.filled())),
-        )
-        .map_err(err)?;
-    }
-    draw_legend(&mut ch, SeriesLabelPosition::UpperRight, 0.85).map_err(err)?;
-    Ok(())
 }
 
 fn summary(cfgs: &[Config], rows: &[Row], cals: &[Option<UnitProfile>]) -> String {

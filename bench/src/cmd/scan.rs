@@ -19,10 +19,11 @@
 //! loss read (see the constant).
 #![allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > y)` also rejects NaN, deliberately
 
-use super::progress;
+use super::slide::{slide, Slide, SlideResult};
+use super::{progress, CalibrationArgs};
 use crate::calfile;
 use crate::plot::{self, draw_legend, draw_to, err, padded_range, Area, Backend};
-use crate::scene::parse_noise;
+use crate::scene::{parse_noise, NoiseArgs};
 use anyhow::{anyhow, bail, Result};
 use clap::{Args, ValueEnum};
 use hal_sim::lump::{self, Inclusion, LumpMaterial, LumpPhantom};
@@ -92,21 +93,13 @@ pub struct ScanArgs {
     /// Resonance method (one that sweeps: `sweep-g`, `paper`, ...).
     #[arg(long, default_value = "sweep-g")]
     pub method: String,
-    /// Front-end noise: `quiet`, `paper`, `bench`, or a current-noise density in A/sqrt(Hz).
-    #[arg(long, default_value = "bench")]
-    pub noise: String,
-    /// Calibration curve from resonance (Hz) to modulus (kPa): `paper-experiment` (eq. 5, by
-    /// which paper 003 mapped its coin sample), `paper-simulation` (eq. 4) or `unit` (the
-    /// profile's own curve). Default: `paper-experiment`; `unit` on a lossy phantom, whose loss
-    /// tangent is read through the unit's contact law, which the papers' curves do not have.
-    #[arg(long)]
-    pub calibration: Option<String>,
-    /// Unit profile file (`probe-bench calibrate --out`). Default: the simulated unit's.
-    #[arg(long)]
-    pub profile: Option<PathBuf>,
-    /// Seed of the simulated noise (grid point k uses seed + k).
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
+    /// The front end's noise and its seed (grid point k uses seed + k, the k-th slide of
+    /// `--continuous` seed + k).
+    #[command(flatten)]
+    pub noise: NoiseArgs,
+    /// The calibration and the unit profile.
+    #[command(flatten)]
+    pub cal: CalibrationArgs,
     /// Stiffness map to write (.svg or .png).
     #[arg(long, default_value = "scan.svg")]
     pub plot: PathBuf,
@@ -584,23 +577,10 @@ pub fn run(a: ScanArgs) -> Result<()> {
 /// simulated unit's profile for the tracker's method ([`super::slide`]).
 fn run_continuous(a: &ScanArgs) -> Result<()> {
     let spec = spec_of(a)?;
-    let (y, x) = match a.scene {
-        ScanScene::Coin => (a.coin_at_mm[1], (-13.5, 13.5)),
-        ScanScene::Ball => (0.0, (-4.0, 24.0)),
-    };
-    let unit = crate::unit::default_for(pzt_probe::instrument::continuous::METHOD)?;
-    let config = pzt_probe::instrument::continuous::TrackerConfig::DEFAULT;
+    let line = slide_line(a.scene, a.coin_at_mm[1]);
     let mut results = Vec::new();
     for (k, &v) in a.speed_mm_s.iter().enumerate() {
-        let s = super::slide::Slide {
-            phantom: spec.phantom,
-            y_mm: y,
-            x_mm: x,
-            speed_mm_s: v,
-            base: spec.base,
-            seed: a.seed + k as u64,
-        };
-        let r = super::slide::slide(&s, &config, &unit)?;
+        let r = slide_over(spec.phantom, spec.base, line, v, a.noise.seed + k as u64)?;
         let line = if a.json {
             super::slide::slide_json(&r).to_string()
         } else {
@@ -616,6 +596,39 @@ fn run_continuous(a: &ScanArgs) -> Result<()> {
     Ok(())
 }
 
+/// The line `--continuous` slides along through `scene`'s lump: its `y` and where the tip
+/// starts and ends in `x`, mm. The coin: its row `coin_y_mm` across the disc, 1.5 mm clear of
+/// the rim; the ball: paper 002's path, 4 mm past either end.
+pub fn slide_line(scene: ScanScene, coin_y_mm: f64) -> (f64, (f64, f64)) {
+    match scene {
+        ScanScene::Coin => (coin_y_mm, (-13.5, 13.5)),
+        ScanScene::Ball => (0.0, (-4.0, 24.0)),
+    }
+}
+
+/// One slide of `--continuous` over `phantom` on `base` (probe, front end, noise, preload)
+/// along `line` ([`slide_line`]) at `speed_mm_s`, noise stream `seed`: the continuous
+/// tracker's default configuration and the simulated unit's profile for its method.
+pub fn slide_over(
+    phantom: LumpPhantom,
+    base: Scene,
+    (y_mm, x_mm): (f64, (f64, f64)),
+    speed_mm_s: f64,
+    seed: u64,
+) -> Result<SlideResult> {
+    let unit = crate::unit::default_for(pzt_probe::instrument::continuous::METHOD)?;
+    let config = pzt_probe::instrument::continuous::TrackerConfig::DEFAULT;
+    let s = Slide {
+        phantom,
+        y_mm,
+        x_mm,
+        speed_mm_s,
+        base,
+        seed,
+    };
+    slide(&s, &config, &unit)
+}
+
 /// The scan the arguments ask for: method, preload, noise, scene and the unit's profile.
 fn spec_of(a: &ScanArgs) -> Result<ScanSpec> {
     let method = Method::from_name(&a.method)
@@ -629,7 +642,7 @@ fn spec_of(a: &ScanArgs) -> Result<ScanSpec> {
     if !(a.preload_n.is_finite() && a.preload_n > 0.0 && a.preload_n <= 1.0) {
         bail!("preload {} N is out of range (0 to 1 N)", a.preload_n);
     }
-    let noise = parse_noise(&a.noise)?;
+    let noise = parse_noise(&a.noise.noise)?;
     let base = Scene::free_air()
         .with_noise(noise)
         .with_preload_n(a.preload_n);
@@ -657,10 +670,11 @@ fn spec_of(a: &ScanArgs) -> Result<ScanSpec> {
     spec.settings = method.default_sweep();
     let lossy = is_lossy(&spec);
     let calibration =
-        a.calibration
+        a.cal
+            .calibration
             .as_deref()
             .unwrap_or(if lossy { "unit" } else { "paper-experiment" });
-    spec.unit = calfile::resolve(a.profile.as_deref(), calibration, || {
+    spec.unit = calfile::resolve(a.cal.profile.as_deref(), calibration, || {
         own_unit(method, noise)
     })?;
     if lossy && spec.unit.contact.is_none() {
@@ -669,7 +683,7 @@ fn spec_of(a: &ScanArgs) -> Result<ScanSpec> {
              not have: scan lossy tissue with --calibration unit (its default) or a profile file"
         );
     }
-    spec.seed = a.seed;
+    spec.seed = a.noise.seed;
     Ok(spec)
 }
 
@@ -726,24 +740,7 @@ fn lossy_phantom(a: &ScanArgs, phantom: LumpPhantom) -> Result<LumpPhantom> {
                 p.thickness_m * 1e3
             );
         }
-        p.inclusion = match p.inclusion {
-            Inclusion::Disc {
-                x_m, y_m, radius_m, ..
-            } => Inclusion::Disc {
-                x_m,
-                y_m,
-                radius_m,
-                depth_m: d_m,
-            },
-            Inclusion::Sphere {
-                x_m, y_m, radius_m, ..
-            } => Inclusion::Sphere {
-                x_m,
-                y_m,
-                radius_m,
-                depth_m: d_m,
-            },
-        };
+        p.inclusion = p.inclusion.with_depth_m(d_m);
     }
     Ok(p)
 }
@@ -860,9 +857,7 @@ fn print_summary(a: &ScanArgs, spec: &ScanSpec, res: &ScanResult) {
                 modulus_pa / 1e3
             ),
         };
-        let depth = match spec.phantom.inclusion {
-            Inclusion::Disc { depth_m, .. } | Inclusion::Sphere { depth_m, .. } => depth_m * 1e3,
-        };
+        let depth = spec.phantom.inclusion.depth_m() * 1e3;
         println!(
             "  as scanned: the soft material's tan d {:.2}; the inclusion {material}, its top {depth:.2} mm under the surface",
             spec.phantom.matrix.loss_tangent
@@ -873,7 +868,7 @@ fn print_summary(a: &ScanArgs, spec: &ScanSpec, res: &ScanResult) {
         res.points.len(),
         spec.step_mm,
         a.preload_n * 1e3,
-        a.noise,
+        a.noise.noise,
         spec.method.name(),
         ok
     );
