@@ -61,15 +61,13 @@ impl BootError {
 mod tests {
     use super::*;
 
+    /// Beyond the `coded_enum!` table's own test: every message names the boot, and the
+    /// discriminants count from 1.
     #[test]
-    fn codes_round_trip_are_unique_and_say_boot() {
+    fn messages_say_boot_and_zero_is_no_error() {
         for (i, a) in BootError::ALL.iter().enumerate() {
-            assert_eq!(BootError::from_code(a.code()), Some(*a));
             assert!(a.message().starts_with("boot: "), "{a:?}");
             assert_eq!(*a as u8, i as u8 + 1, "0 stays 'no error' on the board");
-            for b in &BootError::ALL[i + 1..] {
-                assert_ne!(a.code(), b.code());
-            }
         }
         assert_eq!(BootError::from_code("none"), None);
     }

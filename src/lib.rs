@@ -17,7 +17,8 @@
 
 /// An enum whose variants each have a stable snake_case code and a one-line message, from one
 /// table: the enum, then `ALL` (every variant, in declaration order), `code`, `message` and
-/// `from_code` (the inverse of `code`), each after its own doc comment.
+/// `from_code` (the inverse of `code`), each after its own doc comment; and a test that the
+/// codes round-trip and are unique.
 macro_rules! coded_enum {
     (
         $(#[$meta:meta])*
@@ -54,6 +55,26 @@ macro_rules! coded_enum {
             /// Parse a [`code`](Self::code).
             pub fn from_code(s: &str) -> Option<$name> {
                 Self::ALL.into_iter().find(|e| e.code() == s)
+            }
+        }
+
+        // The table's own test (one coded enum per module): every code parses back to its
+        // variant and no two are the same, every message says something, and what is not a
+        // code parses to nothing.
+        #[cfg(test)]
+        mod coded_enum_tests {
+            use super::$name;
+
+            #[test]
+            fn codes_round_trip_and_are_unique() {
+                for (i, a) in $name::ALL.iter().enumerate() {
+                    assert_eq!($name::from_code(a.code()), Some(*a));
+                    assert!(!a.message().is_empty(), "{a:?}");
+                    for b in &$name::ALL[i + 1..] {
+                        assert_ne!(a.code(), b.code());
+                    }
+                }
+                assert_eq!($name::from_code("not a code"), None);
             }
         }
     };

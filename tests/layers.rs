@@ -197,3 +197,26 @@ fn every_top_level_module_of_lib_rs_has_a_layer() {
         assert!(layer(m).is_some(), "`{m}` has no layer in tests/layers.rs");
     }
 }
+
+#[test]
+fn the_protocol_crate_is_a_leaf() {
+    // `proto/` depends on no crate of this workspace (the firmware, the simulator and the bench
+    // use it, never the other way), so a client in any language needs only docs/protocol.md.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let manifest =
+        std::fs::read_to_string(root.join("proto/Cargo.toml")).expect("proto/Cargo.toml");
+    assert!(
+        !manifest.contains("{ path ="),
+        "proto/Cargo.toml names a path dependency"
+    );
+    let mut files = Vec::new();
+    for e in std::fs::read_dir(root.join("proto/src")).expect("proto/src") {
+        files.push(e.expect("dir entry").path());
+    }
+    for f in files {
+        let text = std::fs::read_to_string(&f).expect("read");
+        for krate in ["pzt_probe", "hal_sim", "probe_bench", "probe_rng"] {
+            assert!(!text.contains(krate), "{} names {krate}", f.display());
+        }
+    }
+}

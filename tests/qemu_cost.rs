@@ -25,12 +25,11 @@ const CORE_HZ: f64 = 170e6;
 /// ... at the firmware's sample rate (`SAMPLE_RATE_HZ` of `src/board/stm32g474/mod.rs`; the
 /// simulated front end of the QEMU image runs at the same rate).
 const FIRMWARE_FS_HZ: f64 = 10_000.0;
-/// Samples per batch (`pzt_probe::engine::BATCH`).
-const BATCH: f64 = 25.0;
+/// Samples per batch.
+const BATCH: f64 = pzt_probe::engine::BATCH as f64;
 /// The largest single measurement call must leave the measurement task free to feed the
-/// watchdog at its 100 ms interval (`FEED` in `src/instrument/watchdog.rs`; the STM32's
-/// independent watchdog bites after 500 ms).
-const CALL_MAX_US: f64 = 100_000.0;
+/// watchdog at its interval, µs (the STM32's independent watchdog bites after 500 ms).
+const CALL_MAX_US: f64 = pzt_probe::instrument::watchdog::FEED.0 as f64 * 1e3;
 /// Fewest moduli every method must have been measured at.
 const MIN_MODULI: usize = 3;
 

@@ -70,9 +70,6 @@ impl PointSource for SimIo {
     fn scale(&self) -> FrontEndScale {
         self.board.scale()
     }
-    fn latency_batches(&self) -> usize {
-        self.board.latency_batches()
-    }
     fn now_sample(&self) -> u64 {
         self.engine.samples()
     }

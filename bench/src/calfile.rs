@@ -5,7 +5,7 @@
 use anyhow::{bail, Context, Result};
 use pzt_probe::estimate::Resonance;
 use pzt_probe::loadcell::{ForceWindow, LoadCellCal, LoadCellCounts};
-use pzt_probe::unit::calibration::{PowerLaw, Source};
+use pzt_probe::unit::calibration::PowerLaw;
 use pzt_probe::unit::contact_law::{self, ContactLaw};
 use pzt_probe::unit::profile::{AirReference, UnitProfile};
 use pzt_probe::unit::q_model::QModel;
@@ -17,25 +17,14 @@ use pzt_probe::{Farads, Hz, Newtons, Siemens};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
-/// The on-disk form of a calibration.
+/// The on-disk form of a calibration: the power law's fields (`a`, `b`, `c`, `cov`,
+/// `model_sigma_hz`, `min_kpa`, `max_kpa`, `source` by name; the core's `serde` form), and the
+/// method the reference readings were taken with.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct CalFile {
-    /// Asymptote `a`, Hz.
-    pub a: f64,
-    /// Scale `b`, Hz/kPa^c.
-    pub b: f64,
-    /// Exponent `c`.
-    pub c: f64,
-    /// Covariance of `(a, b, c)`.
-    pub cov: [[f64; 3]; 3],
-    /// Curve misfit, Hz.
-    pub model_sigma_hz: f64,
-    /// Lowest modulus vouched for, kPa.
-    pub min_kpa: f64,
-    /// Highest modulus vouched for, kPa.
-    pub max_kpa: f64,
-    /// `fitted`, `paper-experiment` or `paper-simulation`.
-    pub source: String,
+    /// The curve.
+    #[serde(flatten)]
+    pub law: PowerLaw,
     /// Method the reference readings were taken with (informational).
     #[serde(default)]
     pub method: Option<String>,
@@ -45,36 +34,14 @@ impl CalFile {
     /// From a power law.
     pub fn from_law(p: &PowerLaw, method: Option<&str>) -> Self {
         Self {
-            a: p.a,
-            b: p.b,
-            c: p.c,
-            cov: p.cov,
-            model_sigma_hz: p.model_sigma_hz,
-            min_kpa: p.min_kpa,
-            max_kpa: p.max_kpa,
-            source: p.source.name().into(),
+            law: *p,
             method: method.map(str::to_owned),
         }
     }
 
     /// To a power law, validated.
     pub fn to_law(&self) -> Result<PowerLaw> {
-        let source = match self.source.as_str() {
-            "fitted" => Source::Fitted,
-            "paper-experiment" => Source::PaperExperiment,
-            "paper-simulation" => Source::PaperSimulation,
-            s => bail!("unknown calibration source `{s}`"),
-        };
-        let p = PowerLaw {
-            a: self.a,
-            b: self.b,
-            c: self.c,
-            cov: self.cov,
-            model_sigma_hz: self.model_sigma_hz,
-            min_kpa: self.min_kpa,
-            max_kpa: self.max_kpa,
-            source,
-        };
+        let p = self.law;
         if !p.is_valid()
             || !(p.model_sigma_hz >= 0.0)
             || p.cov.iter().flatten().any(|v| !v.is_finite())
@@ -96,21 +63,6 @@ pub struct AirFile {
     pub static_capacitance_f: f32,
     /// Static conductance, S.
     pub static_conductance_s: f32,
-}
-
-/// The on-disk form of the contact condition `Q = q0 + q1 ln(E / kPa) + q2 ln(F / N)`.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct QModelFile {
-    /// Intercept.
-    pub q0: f64,
-    /// Slope per unit of `ln(E / kPa)`.
-    pub q1: f64,
-    /// Slope per unit of `ln(F / N)` (0: no force term).
-    #[serde(default)]
-    pub q2: f64,
-    /// Relative scatter of the references' Q about the curve (0: not known).
-    #[serde(default)]
-    pub sigma_rel: f64,
 }
 
 /// The on-disk form of the load cell's calibration and the force window.
@@ -140,8 +92,9 @@ pub struct ProfileFile {
     /// (paper's |Z| dip).
     #[serde(default = "motional")]
     pub resonance: String,
-    /// Contact condition of the calibration.
-    pub q_model: Option<QModelFile>,
+    /// Contact condition of the calibration, `Q = q0 + q1 ln(E / kPa) + q2 ln(F / N)` (the
+    /// core's `serde` form: `q0`, `q1`, `q2`, `sigma_rel`).
+    pub q_model: Option<QModel>,
     /// Air reference.
     pub air: Option<AirFile>,
     /// The contact law, when the calibration chose it (readings invert through it), as
@@ -167,12 +120,7 @@ impl ProfileFile {
         Self {
             calibration: CalFile::from_law(&p.calibration, method),
             resonance: p.resonance.name().to_owned(),
-            q_model: p.q_model.map(|m| QModelFile {
-                q0: m.q0,
-                q1: m.q1,
-                q2: m.q2,
-                sigma_rel: m.sigma_rel,
-            }),
+            q_model: p.q_model,
             air: p.air.map(|a| AirFile {
                 free_resonance_hz: a.free_resonance.0,
                 free_q: a.free_q,
@@ -202,12 +150,7 @@ impl ProfileFile {
         let p = UnitProfile {
             calibration: self.calibration.to_law()?,
             resonance,
-            q_model: self.q_model.as_ref().map(|m| QModel {
-                q0: m.q0,
-                q1: m.q1,
-                q2: m.q2,
-                sigma_rel: m.sigma_rel,
-            }),
+            q_model: self.q_model,
             air: self.air.as_ref().map(|a| AirReference {
                 free_resonance: Hz(a.free_resonance_hz),
                 free_q: a.free_q,
@@ -333,4 +276,69 @@ pub fn resolve(
         p.use_power_law(law, Resonance::Motional);
     }
     Ok(p)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A calibration as profile files hold it: the curve's fields, `source` by name, `method`.
+    const CAL: &str = r#"{
+  "a": 266.6,
+  "b": -1104.5,
+  "c": -0.5,
+  "cov": [
+    [
+      0.25,
+      0.0,
+      0.0
+    ],
+    [
+      0.0,
+      4.0,
+      0.0
+    ],
+    [
+      0.0,
+      0.0,
+      0.0001
+    ]
+  ],
+  "model_sigma_hz": 0.55,
+  "min_kpa": 100.0,
+  "max_kpa": 3000.0,
+  "source": "fitted",
+  "method": "auto"
+}"#;
+
+    #[test]
+    fn calibration_reads_and_writes_the_same_json() {
+        let f: CalFile = serde_json::from_str(CAL).unwrap();
+        assert_eq!(f.law.a, 266.6);
+        assert_eq!(f.law.cov[1][1], 4.0);
+        assert_eq!(f.law.source, pzt_probe::unit::calibration::Source::Fitted);
+        assert_eq!(f.method.as_deref(), Some("auto"));
+        assert_eq!(serde_json::to_string_pretty(&f).unwrap(), CAL);
+    }
+
+    #[test]
+    fn q_model_reads_and_writes_the_same_json() {
+        let text =
+            "{\n  \"q0\": 2.5,\n  \"q1\": 1.25,\n  \"q2\": -4.5,\n  \"sigma_rel\": 0.0375\n}";
+        let m: QModel = serde_json::from_str(text).unwrap();
+        assert_eq!(m.q2, -4.5);
+        assert_eq!(serde_json::to_string_pretty(&m).unwrap(), text);
+        // Without a force term or a scatter: both 0.
+        let m: QModel = serde_json::from_str(r#"{"q0": 2.5, "q1": 1.25}"#).unwrap();
+        assert_eq!((m.q2, m.sigma_rel), (0.0, 0.0));
+    }
+
+    #[test]
+    fn unknown_source_is_named() {
+        let text = CAL.replace("\"fitted\"", "\"measured\"");
+        let e = serde_json::from_str::<CalFile>(&text)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("calibration source `measured`"), "{e}");
+    }
 }

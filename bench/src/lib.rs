@@ -9,6 +9,7 @@ pub mod capture;
 pub mod cmd;
 pub mod defmt_log;
 pub mod gen;
+pub mod link;
 pub mod pareto;
 pub mod plot;
 pub mod qemu;

@@ -54,6 +54,9 @@ enum Cmd {
     /// Read the firmware's decoded defmt log: the readings as a table, the sweeps and the
     /// reading history as a plot.
     Log(cmd::log::LogArgs),
+    /// Talk to a probe over its host link (docs/protocol.md): `qemu` (the firmware image in
+    /// QEMU on a scene) or a serial port; a console, or `-c <command>`… run to their replies.
+    Connect(cmd::connect::ConnectArgs),
     /// Rewrite the golden captures of tests/data (for maintainers).
     #[command(hide = true)]
     GenerateCaptures(cmd::generate::GenerateArgs),
@@ -78,6 +81,7 @@ fn main() -> ExitCode {
         Cmd::Log(a) => cmd::log::run(a),
         Cmd::Stream(a) => cmd::stream::run(a),
         Cmd::Selftest(a) => cmd::selftest::run(a),
+        Cmd::Connect(a) => cmd::connect::run(a),
     };
     match r {
         Ok(()) => ExitCode::SUCCESS,

@@ -151,6 +151,14 @@ pub struct Cell {
     /// Relative error of the noise-free reading (the calibration misfit plus the method's
     /// deterministic bias left after calibration), if that reading was ok.
     pub quiet_err: Option<f64>,
+    /// Ok readings that reported a loss tangent.
+    pub loss_ok: usize,
+    /// Sum of the loss tangents' errors against the tissue's.
+    pub sum_loss_err: f64,
+    /// Sum of their squares.
+    pub sum_loss_err2: f64,
+    /// Sum of the squared reported σ of the loss tangent.
+    pub sum_loss_sig2: f64,
 }
 
 impl Cell {
@@ -180,6 +188,18 @@ impl Cell {
     pub fn repeat_pct(&self) -> f64 {
         100.0 * (self.sum_rep2 / self.ok.max(1) as f64).sqrt()
     }
+    /// RMS error of the loss tangents read (`None` without any).
+    pub fn loss_rms(&self) -> Option<f64> {
+        (self.loss_ok > 0).then(|| (self.sum_loss_err2 / self.loss_ok as f64).sqrt())
+    }
+    /// Mean error of the loss tangents read.
+    pub fn loss_bias(&self) -> Option<f64> {
+        (self.loss_ok > 0).then(|| self.sum_loss_err / self.loss_ok as f64)
+    }
+    /// RMS reported σ of the loss tangent.
+    pub fn loss_sigma_rms(&self) -> Option<f64> {
+        (self.loss_ok > 0).then(|| (self.sum_loss_sig2 / self.loss_ok as f64).sqrt())
+    }
 }
 
 /// Run `seeds` readings of config `c` (with the unit's profile `unit`) at modulus `e` under
@@ -192,19 +212,27 @@ pub fn evaluate(
     seeds: usize,
     seed0: u64,
 ) -> Cell {
-    let scene = Scene::on_modulus_kpa(e).with_noise(noise);
+    evaluate_on(c, unit, &Scene::on_modulus_kpa(e), e, noise, seeds, seed0)
+}
+
+/// [`evaluate`] on `quiet_scene` (noise-free; the readings take it with `noise`), whose true
+/// storage modulus is `e` kPa: the loss tangents read are counted against its tissue's.
+pub fn evaluate_on(
+    c: &Config,
+    unit: &UnitProfile,
+    quiet_scene: &Scene,
+    e: f64,
+    noise: NoiseScene,
+    seeds: usize,
+    seed0: u64,
+) -> Cell {
+    let scene = quiet_scene.with_noise(noise);
+    let loss_truth = quiet_scene.tissue.map_or(0.0, |t| t.loss_tangent);
     // The same method, same calibration, noise-free: what the reading would be without noise.
-    let quiet = read(
-        &Scene::on_modulus_kpa(e),
-        seed0,
-        c.method,
-        c.settings,
-        unit,
-        |_| {},
-    )
-    .ok()
-    .and_then(|r| r.modulus)
-    .map(|m| m.0 as f64);
+    let quiet = read(quiet_scene, seed0, c.method, c.settings, unit, |_| {})
+        .ok()
+        .and_then(|r| r.modulus)
+        .map(|m| m.0 as f64);
     let mut cell = Cell {
         n: seeds,
         quiet_err: quiet.map(|q| (q - e) / e),
@@ -217,6 +245,7 @@ pub fn evaluate(
         };
         t += r.probe_time.0 as f64 * 1e3;
         cell.add(&r, e, quiet);
+        cell.add_loss(&r, loss_truth);
     }
     cell.time_ms = t / seeds.max(1) as f64;
     cell.finish(quiet.is_some());
@@ -224,6 +253,20 @@ pub fn evaluate(
 }
 
 impl Cell {
+    /// Count the loss tangent of reading `r` (if ok and it reported one) against the tissue's
+    /// `truth`.
+    pub fn add_loss(&mut self, r: &pzt_probe::Reading, truth: f64) {
+        let (true, Some(l), Some(s)) = (r.status.is_ok(), r.loss_tangent, r.loss_tangent_sigma)
+        else {
+            return;
+        };
+        let err = l as f64 - truth;
+        self.loss_ok += 1;
+        self.sum_loss_err += err;
+        self.sum_loss_err2 += err * err;
+        self.sum_loss_sig2 += (s as f64) * (s as f64);
+    }
+
     /// Count reading `r` of true modulus `e` (kPa) whose noise-free counterpart read `quiet`
     /// (kPa; None: it did not read): its error, its stated σ, its deviation from `quiet`.
     pub fn add(&mut self, r: &pzt_probe::Reading, e: f64, quiet: Option<f64>) {
@@ -644,8 +687,19 @@ pub fn fisher_crb_schedule_hz(
 /// over `t_s` scatters by the cell's conversion noise over the square root of its conversions
 /// ([`force_floor_hz`]).
 pub fn crb_pct(cal: &PowerLaw, e: f64, noise: NoiseScene, drive_v: f64, t_s: f64) -> f64 {
-    let scene = Scene::on_modulus_kpa(e).with_noise(noise);
-    bound_pct(cal, &scene, e, crb_hz(&scene, drive_v, t_s), t_s)
+    scene_crb_pct(
+        cal,
+        &Scene::on_modulus_kpa(e).with_noise(noise),
+        e,
+        drive_v,
+        t_s,
+    )
+}
+
+/// [`crb_pct`] on `scene` (with its noise; true storage modulus `e` kPa): a lossy tissue's
+/// bound is its own, through the scene's `τ` and carrier.
+pub fn scene_crb_pct(cal: &PowerLaw, scene: &Scene, e: f64, drive_v: f64, t_s: f64) -> f64 {
+    bound_pct(cal, scene, e, crb_hz(scene, drive_v, t_s), t_s)
 }
 
 /// The steady-state bound of [`steady_crb_hz`] for `t_s` seconds on `scene` (true modulus `e`,

@@ -149,6 +149,24 @@ where
     Ok(())
 }
 
+/// A backend a chart draws onto (SVG or bitmap): a [`DrawingBackend`] whose errors are
+/// `'static`, so that they convert into [`anyhow::Error`].
+pub trait Backend: DrawingBackend<ErrorType: 'static> {}
+
+impl<DB: DrawingBackend<ErrorType: 'static>> Backend for DB {}
+
+/// The whole drawing area of a figure on backend `DB`.
+pub type Area<DB> = DrawingArea<DB, Shift>;
+
+/// [`with_backend`] with one drawing for both backends: `draw_to!(path, size, |root| draw(root,
+/// ...))`, where `draw` is generic over the [`Backend`].
+macro_rules! draw_to {
+    ($path:expr, $size:expr, |$root:ident| $draw:expr $(,)?) => {
+        $crate::plot::with_backend($path, $size, |$root| $draw, |$root| $draw)
+    };
+}
+pub(crate) use draw_to;
+
 /// Draw onto an SVG or a PNG file chosen by the extension of `path` (`.png` → PNG).
 pub fn with_backend(
     path: &Path,
@@ -184,23 +202,20 @@ pub fn sweep_svg(
     if points.is_empty() {
         return Err(anyhow!("no points to plot"));
     }
-    with_backend(
-        path,
-        (900, 560),
-        |root| draw_sweep(root, title, points, resonance_hz),
-        |root| draw_sweep(root, title, points, resonance_hz),
-    )
+    draw_to!(path, (900, 560), |root| draw_sweep(
+        root,
+        title,
+        points,
+        resonance_hz
+    ))
 }
 
-fn draw_sweep<DB: DrawingBackend>(
-    root: &DrawingArea<DB, plotters::coord::Shift>,
+fn draw_sweep<DB: Backend>(
+    root: &Area<DB>,
     title: &str,
     points: &[SweepPoint],
     resonance_hz: Option<f32>,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
+) -> Result<()> {
     let f0 = points.first().map(|p| p.freq.0 as f64).unwrap_or(0.0);
     let f1 = points.last().map(|p| p.freq.0 as f64).unwrap_or(1.0);
     let ymax = points

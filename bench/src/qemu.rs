@@ -47,8 +47,8 @@ pub fn scene_lines(target: &Target, scene: &SceneArgs, noise: NoiseScene) -> Vec
     lines
 }
 
-/// Build the QEMU image and run `script` on it; the decoded log.
-pub fn run_script(script: &str) -> Result<String> {
+/// Build the QEMU image (`cargo qemu-build`): its path.
+pub fn build_image() -> Result<PathBuf> {
     let status = Command::new(env!("CARGO"))
         .current_dir(root())
         .args(["qemu-build", "-q"])
@@ -60,7 +60,12 @@ pub fn run_script(script: &str) -> Result<String> {
     let target_dir = std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| root().join("target"));
-    let elf = target_dir.join("thumbv7em-none-eabihf/fw/probe");
+    Ok(target_dir.join("thumbv7em-none-eabihf/fw/probe"))
+}
+
+/// Build the QEMU image and run `script` on it; the decoded log.
+pub fn run_script(script: &str) -> Result<String> {
+    let elf = build_image()?;
     let out = Command::new(root().join("scripts/qemu-run"))
         .arg(&elf)
         .env("QEMU_SCRIPT", script)
@@ -147,7 +152,7 @@ pub fn stream(
         }
     }
     lines.push(format!("stream {}", a.seconds));
-    let (log, session) = run_lines("stream", target, &lines, a.json)?;
+    let (log, session) = run_lines("stream", target, &lines, a.out.json)?;
     let [x] = session.streams.as_slice() else {
         bail!(
             "the image logged {} streams, not one:\n{log}",
@@ -159,7 +164,7 @@ pub fn stream(
         .as_ref()
         .context("the image's stream has no end line")?;
     let start = end.start_s.unwrap_or(0.0);
-    if !a.json {
+    if !a.out.json {
         println!(
             "  the firmware: {} readings, {} ok, {} dropped (report channel full), most work from a window to the next plan {} instructions",
             end.readings, end.ok, end.dropped, end.plan_work
@@ -189,7 +194,7 @@ pub fn measure(
     settings: &Settings,
     noise: NoiseScene,
 ) -> Result<()> {
-    if a.plot.is_some() {
+    if a.out.plot.is_some() {
         bail!("--plot is not available with --qemu (use probe-bench log --plot on the log)");
     }
     if a.profile.is_some() || a.calibration != "unit" {
@@ -212,7 +217,7 @@ pub fn measure(
         lines.push(format!("sim seed {}", a.seed + k as u64));
         lines.push("measure".to_owned());
     }
-    let (log, session) = run_lines("measure", target, &lines, a.json)?;
+    let (log, session) = run_lines("measure", target, &lines, a.out.json)?;
     if session.readings.len() != a.repeat as usize {
         bail!(
             "the image logged {} readings of {}:\n{log}",
@@ -224,7 +229,7 @@ pub fn measure(
         let r = r
             .to_reading()
             .with_context(|| format!("unknown status or method in {r:?}"))?;
-        if a.json {
+        if a.out.json {
             println!("{}", report::reading_json(&r));
         } else {
             println!("{}", report::reading_line(&r));

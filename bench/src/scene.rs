@@ -31,14 +31,15 @@ pub fn noise_name(n: NoiseScene) -> String {
     }
 }
 
-/// The simulated front end's noise and the seed of its random numbers: the options `selftest`
-/// and `stream` share.
+/// The simulated front end's noise and the seed of its random numbers: the options `selftest`,
+/// `stream` and `scan` share.
 #[derive(clap::Args, Clone, Debug)]
 pub struct NoiseArgs {
     /// Front-end noise: `quiet`, `paper`, `bench`, or a current-noise density in A/sqrt(Hz).
     #[arg(long, default_value = "bench")]
     pub noise: String,
-    /// Seed of the simulated noise.
+    /// Seed of the simulated noise (of several runs, as scan's grid points, the k-th uses seed +
+    /// k).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
 }

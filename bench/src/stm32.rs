@@ -62,7 +62,7 @@ pub fn measure(
     if noise != NoiseScene::Bench || a.scene.preload_n != 0.03 || a.scene.loss_tangent.is_some() {
         bail!("with --stm32 the probe is at bench noise, 30 mN, the phantom's own loss");
     }
-    if a.plot.is_some() || a.profile.is_some() || a.calibration != "unit" {
+    if a.out.plot.is_some() || a.profile.is_some() || a.calibration != "unit" {
         bail!(
             "with --stm32 the image calibrates itself on A–E (no --plot, --profile, --calibration)"
         );
@@ -107,7 +107,7 @@ pub fn measure(
     }
     args.extend(["--seconds".into(), format!("{}", t + 1.5)]);
 
-    if !a.json {
+    if !a.out.json {
         println!(
             "probe-bench measure --stm32: the STM32 image on the emulated NUCLEO-G474RE, {}",
             target.describe()
@@ -138,7 +138,7 @@ pub fn measure(
     if !(out.status.success() || out.status.code() == Some(3)) {
         bail!("the emulated board failed: {}", stderr.trim());
     }
-    if !a.json {
+    if !a.out.json {
         for l in stderr.lines() {
             println!("  {l}");
         }
@@ -157,7 +157,7 @@ pub fn measure(
         let r = r
             .to_reading()
             .with_context(|| format!("unknown status or method in {r:?}"))?;
-        if a.json {
+        if a.out.json {
             println!("{}", report::reading_json(&r));
         } else {
             println!("{}", report::reading_line(&r));

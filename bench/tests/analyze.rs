@@ -2,7 +2,7 @@
 //! read ok, the time-domain demodulator, and one malformed file per error kind.
 
 mod common;
-use common::{bin, run_fails_one_line, run_json, run_ok};
+use common::{bin, run_fails_one_line, run_json, run_ok, Scratch};
 
 use hal_sim::{phantoms, Scene};
 use probe_bench::capture::{self, CaptureError, DemodOptions, Layout, SweepShape};
@@ -568,8 +568,7 @@ fn methods_for_captures() {
 
 #[test]
 fn cli_json_plot_and_errors() {
-    let dir = std::env::temp_dir().join(format!("probe-bench-analyze-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("analyze");
     let svg = dir.join("a.svg");
     let png = dir.join("a.png");
     let j = run_json(
@@ -610,7 +609,6 @@ fn cli_json_plot_and_errors() {
     );
     assert_eq!(j["status"], "no_resonance");
     assert!(j["modulus_kpa"].is_null());
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1212,8 +1210,7 @@ fn fit_sigma_grows_with_the_misfit() {
 /// chosen curve.
 #[test]
 fn no_profile_reads_resonance_and_q_only() {
-    let dir = std::env::temp_dir().join(format!("probe-bench-exports-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("exports");
     let other = dir.join("other.txt");
     std::fs::write(
         &other,
@@ -1254,7 +1251,6 @@ fn no_profile_reads_resonance_and_q_only() {
     let out = run_ok(bin().arg("analyze").arg(&off));
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("warning: phase inconsistent"), "{text}");
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Truncated exports and garbage: a one-line error naming its line (never a panic, never a
@@ -1322,8 +1318,7 @@ fn truncated_and_garbage_exports_are_one_line_errors() {
         .expect("NaN");
     assert!(e.to_string().contains("not finite"), "{e}");
     // On the command line: exit non-zero, one line.
-    let dir = std::env::temp_dir().join(format!("probe-bench-garbage-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("garbage");
     let full = export_4294a(&sweep, Hp::ZTheta(0.0));
     let path = dir.join("truncated.txt");
     std::fs::write(&path, &full[..full.len() * 3 / 4]).unwrap();
@@ -1332,5 +1327,4 @@ fn truncated_and_garbage_exports_are_one_line_errors() {
     let path = dir.join("garbage.bin");
     std::fs::write(&path, [0u8, 159, 146, 150, 255, 0, 1, 2]).unwrap();
     run_fails_one_line(bin().arg("analyze").arg(&path));
-    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -3,7 +3,7 @@
 //! reading the firmware made.
 
 mod common;
-use common::{bin, run_fails_one_line, run_ok, run_ok_containing};
+use common::{bin, run_fails_one_line, run_ok, run_ok_containing, Scratch};
 
 use probe_bench::defmt_log::{self, compile, parse_line, render, Piece, Ty, Value, TEMPLATES};
 use pzt_probe::engine::sweep::SweepPoint;
@@ -302,8 +302,7 @@ fn readings_sweeps_and_events_of_a_longer_log() {
 fn cli_table_stdin_plot_and_errors() {
     use std::io::Write;
     let log = root().join("tests/data/log/qemu_session.log");
-    let dir = std::env::temp_dir().join(format!("probe-bench-log-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("log");
     let svg = dir.join("log.svg");
     run_ok_containing(
         bin().arg("log").arg(&log).arg("--plot").arg(&svg),
@@ -334,7 +333,6 @@ fn cli_table_stdin_plot_and_errors() {
             .arg("log")
             .arg(root().join("tests/data/bvd_300kpa_y.csv")),
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// A captured QEMU log of two streams (`tests/data/log/qemu_stream.log`, command in its first
@@ -413,8 +411,7 @@ fn missing_stream_readings_are_counted_from_seq_gaps() {
         .iter()
         .all(|x| x.end.is_none() && x.missing() == 0));
     // The CLI says so.
-    let dir = std::env::temp_dir().join(format!("probe-bench-stream-log-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("stream-log");
     let f = dir.join("cut.log");
     std::fs::write(&f, &cut).unwrap();
     run_ok_containing(
@@ -430,5 +427,4 @@ fn missing_stream_readings_are_counted_from_seq_gaps() {
     assert_eq!(j["streams"][0]["missing"], 4);
     assert_eq!(j["streams"][0]["end"]["dropped"], 0);
     assert_eq!(j["streams"][1]["readings"][0]["seq"], 0);
-    let _ = std::fs::remove_dir_all(&dir);
 }

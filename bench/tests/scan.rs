@@ -2,27 +2,19 @@
 //! centre is found within one grid step, for paper 003's coin and paper 002's ball.
 
 mod common;
-use common::{bin, run_fails_one_line, run_json};
+use common::scan::{bench_scene, centre_error, scan_json};
+use common::{bin, run_fails_one_line, Scratch};
 
 use hal_sim::lump::Inclusion;
-use hal_sim::{NoiseScene, Scene};
 use probe_bench::cmd::scan::{
-    away_radius_mm, locate, mean_resonance, over_radius_mm, scan, ScanSpec,
+    away_radius_mm, locate, mean_resonance, over_radius_mm, scan, slide_line, slide_over,
+    ScanScene, ScanSpec,
 };
 use pzt_probe::{PowerLaw, Status};
 
 /// Paper 003, section 4.2: 206.3 Hz away from the lump, 223.5 Hz over it.
 const PAPER_AWAY_HZ: f64 = 206.3;
 const PAPER_OVER_HZ: f64 = 223.5;
-
-fn bench_scene() -> Scene {
-    Scene::free_air().with_noise(NoiseScene::Bench)
-}
-
-fn centre_error(spec: &ScanSpec, x: f64, y: f64) -> f64 {
-    let (tx, ty) = spec.phantom.inclusion.centre_m();
-    (x - tx * 1e3).hypot(y - ty * 1e3)
-}
 
 #[test]
 fn coin_scan_reads_the_papers_frequencies_and_finds_the_coin() {
@@ -124,34 +116,22 @@ fn no_lump_where_there_is_none() {
 
 #[test]
 fn cli_writes_the_map() {
-    let dir = std::env::temp_dir().join(format!("probe-bench-scan-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("scan");
     let png = dir.join("scan.png");
-    let j = run_json(bin().args(["scan", "--json", "--plot"]).arg(&png));
+    let j = scan_json(&[], &png);
     assert_eq!(j["scene"], "coin");
     let over = j["over_mean_hz"].as_f64().unwrap();
     assert!((over - PAPER_OVER_HZ).abs() <= 3.0);
     assert!(j["lump"]["x_mm"].as_f64().is_some());
     assert_eq!(&std::fs::read(&png).unwrap()[1..4], b"PNG");
     // Negative coordinates are numbers, not options.
-    let j = run_json(
-        bin()
-            .args([
-                "scan",
-                "--json",
-                "--step-mm",
-                "3",
-                "--coin-at-mm",
-                "-3",
-                "2",
-                "--plot",
-            ])
-            .arg(dir.join("neg.svg")),
+    let j = scan_json(
+        &["--step-mm", "3", "--coin-at-mm", "-3", "2"],
+        &dir.join("neg.svg"),
     );
     assert_eq!(j["true_centre_mm"][0].as_f64(), Some(-3.0));
     // Bad input: one line, non-zero exit.
     run_fails_one_line(bin().args(["scan", "--scene", "ball", "--ball-d-mm", "25"]));
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// `scan --continuous` (issue #14): sliding across the coin at 1–20 mm/s the stream finds the
@@ -161,23 +141,13 @@ fn cli_writes_the_map() {
 /// the coin moved to the other side is found there.
 #[test]
 fn a_sliding_scan_finds_the_coin() {
-    use probe_bench::cmd::slide::{slide, Slide};
-    let unit =
-        probe_bench::unit::default_for(pzt_probe::instrument::continuous::METHOD).expect("unit");
-    let config = pzt_probe::instrument::continuous::TrackerConfig::DEFAULT;
     for (k, (v, coin_x)) in [(1.0, 1.5), (5.0, 1.5), (20.0, 1.5), (5.0, -3.0)]
         .into_iter()
         .enumerate()
     {
-        let s = Slide {
-            phantom: hal_sim::lump::paper003_coin(coin_x, -1.0),
-            y_mm: -1.0,
-            x_mm: (-13.5, 13.5),
-            speed_mm_s: v,
-            base: bench_scene(),
-            seed: 40 + k as u64,
-        };
-        let r = slide(&s, &config, &unit).expect("a slide");
+        let phantom = hal_sim::lump::paper003_coin(coin_x, -1.0);
+        let line = slide_line(ScanScene::Coin, -1.0);
+        let r = slide_over(phantom, bench_scene(), line, v, 40 + k as u64).expect("a slide");
         let (found, truth) = (r.found.expect("found"), r.truth.expect("closed form"));
         assert!((truth.centre_mm - coin_x).abs() < 0.1, "{truth:?}");
         assert!(

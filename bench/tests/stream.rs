@@ -9,7 +9,7 @@
 
 mod common;
 
-use common::{bin, run_fails_one_line, run_ok};
+use common::{bin, run_fails_one_line, run_ok, Scratch};
 use hal_sim::NoiseScene;
 use probe_bench::stability::{calibrated, stream_catalogue, Must, Outcome, StreamCase, FIRST_SEED};
 use probe_bench::unit::default_for;
@@ -184,8 +184,7 @@ fn the_judge_can_say_no() {
 
 #[test]
 fn the_bench_log_and_the_plot() {
-    let dir = std::env::temp_dir().join(format!("probe-bench-stream-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("stream");
     let svg = dir.join("stream.svg");
     let out = run_ok(
         bin()
@@ -211,7 +210,6 @@ fn the_bench_log_and_the_plot() {
     );
     let plot = std::fs::read_to_string(&svg).unwrap();
     assert!(plot.contains("<svg") && plot.contains("modulus"), "{plot}");
-    std::fs::remove_dir_all(&dir).ok();
     run_fails_one_line(bin().args(["stream", "--phantom", "B", "--step-to", "D"]));
     run_fails_one_line(bin().args(["stream", "--phantom", "C", "--touch-at-s", "1"]));
 }

@@ -224,6 +224,8 @@ pub struct Machine {
     uc: Unicorn<'static, Board>,
     /// Number of resets (power-on not counted).
     pub resets: u32,
+    /// The host's number for the next command frame (`probe_proto::HostMsg::Command::id`).
+    next_command_id: u32,
 }
 
 fn reg<R: Into<i32>>(uc: &Unicorn<'_, Board>, r: R) -> u32 {
@@ -394,7 +396,11 @@ impl Machine {
                 uc.emu_stop().ok();
             }
         })?;
-        let mut m = Machine { uc, resets: 0 };
+        let mut m = Machine {
+            uc,
+            resets: 0,
+            next_command_id: 0,
+        };
         m.reset_cpu()?;
         Ok(m)
     }
@@ -825,6 +831,26 @@ impl Machine {
         let t = b.seconds();
         let pclk1 = b.periph.rcc.pclk1();
         b.periph.lpuart.send(t, bytes, pclk1);
+    }
+
+    /// Send the command line `line` as the host link does (`docs/protocol.md`): one
+    /// `HostMsg::Command` frame on LPUART1's RX line now, numbered from 1. Err when the line
+    /// does not fit a command frame (longer than `probe_proto::MAX_LINE` bytes).
+    pub fn send_command(&mut self, line: &str) -> Result<u32, String> {
+        let line = heapless::String::try_from(line).map_err(|_| {
+            format!(
+                "command longer than {} bytes: {line}",
+                probe_proto::MAX_LINE
+            )
+        })?;
+        self.next_command_id += 1;
+        let id = self.next_command_id;
+        let mut buf = [0u8; probe_proto::MAX_HOST_FRAME];
+        let frame = probe_proto::encode_host(&probe_proto::HostMsg::Command { id, line }, &mut buf)
+            .map_err(|_| "command frame does not fit".to_string())?;
+        let frame = frame.to_vec();
+        self.uart_send(&frame);
+        Ok(id)
     }
 
     /// Seconds of emulated time since power-on.

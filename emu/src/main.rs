@@ -3,8 +3,9 @@
 //! `defmt-print -e <elf>`. With `--phantom` (a name of hal-sim's phantoms, e.g. `B`) the probe
 //! front end is hal-sim's, pressed on that phantom at 30 mN with the bench noise, seed 1 (the
 //! QEMU board's power-on scene); without it nothing is wired to the analog pins. `--send T TEXT`
-//! puts TEXT and a newline on LPUART1 RX at T emulated seconds (115 200 Bd, back to back), as
-//! the ST-LINK virtual COM port delivers a typed line. A run ends after `S` emulated seconds
+//! puts the command line TEXT on LPUART1 RX at T emulated seconds as the host link's command
+//! frame (`docs/protocol.md`; 115 200 Bd, back to back), as the ST-LINK virtual COM port
+//! delivers a host's bytes. A run ends after `S` emulated seconds
 //! (default 2), or at a fault, which is printed to stderr (exit 2). `--scene T NAME|free-air`
 //! moves the probe at T s; `--reset T` pulls NRST at T s (a pin reset: RAM and flash kept).
 //! The documented rules the image broke are printed to stderr at the end (exit 3 if any).
@@ -115,7 +116,10 @@ fn main() -> ExitCode {
                 break;
             }
             let (_, text) = sends.next().unwrap();
-            m.uart_send(format!("{text}\n").as_bytes());
+            if let Err(e) = m.send_command(&text) {
+                eprintln!("stm32-emu: {e}");
+                return ExitCode::FAILURE;
+            }
         }
         while let Some((t, _)) = scenes.peek() {
             if *t > m.seconds() {

@@ -119,7 +119,9 @@ fn run_events(
     while m.seconds() < seconds {
         while pending.first().is_some_and(|(t, _)| *t <= m.seconds()) {
             match pending.remove(0).1 {
-                Event::Send(text) => m.uart_send(format!("{text}\n").as_bytes()),
+                Event::Send(text) => {
+                    m.send_command(text).expect("a command frame");
+                }
                 Event::Scene(name) => {
                     let any: &mut dyn std::any::Any = m.board_mut().periph.analog.as_mut();
                     any.downcast_mut::<HalSimProbe>()
@@ -367,7 +369,7 @@ fn stm32_image_runs_from_hsi16_when_the_hse_never_starts() {
     let mut sent = false;
     while m.seconds() < 2.0 {
         if !sent && m.seconds() >= 1.5 {
-            m.uart_send(b"status\n");
+            m.send_command("status").expect("a command frame");
             sent = true;
         }
         if let Exit::Fault(f) = m.run_until(m.cycles() + 170_000) {
@@ -413,7 +415,7 @@ fn stm32_image_survives_a_dma_transfer_error() {
             injected = true;
         }
         if !sent && m.seconds() >= 1.2 {
-            m.uart_send(b"measure\n");
+            m.send_command("measure").expect("a command frame");
             sent = true;
         }
         if let Exit::Fault(f) = m.run_until(m.cycles() + 170_000) {
@@ -462,7 +464,7 @@ fn stm32_image_survives_a_flash_stuck_busy() {
     let mut sent = false;
     while m.seconds() < 6.0 {
         if !sent && m.seconds() >= 1.0 {
-            m.uart_send(b"store\n");
+            m.send_command("store").expect("a command frame");
             sent = true;
         }
         if let Exit::Fault(f) = m.run_until(m.cycles() + 170_000) {
@@ -511,7 +513,7 @@ fn stm32_image_names_each_probe_fault_in_its_self_test() {
         let mut sent = false;
         while m.seconds() < 2.5 {
             if !sent && m.seconds() >= 1.5 {
-                m.uart_send(b"measure\n");
+                m.send_command("measure").expect("a command frame");
                 sent = true;
             }
             if let Exit::Fault(f) = m.run_until(m.cycles() + 170_000) {

@@ -31,10 +31,29 @@
 //! coin 1 mm under the surface gives an apparent modulus of about 235 kPa over the coin (paper:
 //! 246.3 kPa) and 156 kPa away from it, i.e. about 222 Hz and 206 Hz on the simulated probe
 //! (paper: 223.5 and 206.3 Hz). The lateral free edge of the phantom is not modelled.
+//!
+//! **Loss, and a lump that is not rigid** (ours, not from a source; docs/physics.md, "A lump in
+//! lossy tissue"). The matrix is viscoelastic, `E*_bg = E_bg (1 + j η_bg)`; an inclusion is
+//! either rigid (a coin, a steel ball: it stores no strain energy, so it has no loss) or a tissue
+//! of its own, `E*_l = E_l (1 + j η_l)` ([`LumpMaterial`]). Each support of the blend above is a
+//! compliance in units of the half-space's `1/E`: the layer over the inclusion holds
+//! `1/Φ(a/h)` of it and the rigid inclusion removes the rest down to the table,
+//! `1/Φ(a/H) − 1/Φ(a/h)`. A compliant inclusion keeps that slice, at its own modulus:
+//!
+//! `1/E*_1 = 1/(E*_bg Φ(a/h)) + (1/Φ(a/H) − 1/Φ(a/h)) / E*_l`,
+//!
+//! and the two supports combine with the same load share as before,
+//! `E*_app = w E*_1 + (1 − w) E*_bg Φ(a/H)`. The probe feels the storage modulus
+//! `E'_app = Re E*_app` and the loss tangent `Im E*_app / Re E*_app`. Limits: a rigid inclusion
+//! (`E_l → ∞`) gives the rigid model above with the matrix's loss everywhere
+//! (`E*_app = (1 + j η_bg) E_app`); an inclusion of the matrix's own material gives the bare
+//! layer, `E*_bg Φ(a/H)`, as if it were not there. A lump of the matrix's loss tangent therefore
+//! shows no loss anomaly, however stiff it is.
 
 use crate::scenes::Scene;
 use crate::tissue::{contact_radius_m, Contact, Tissue};
 use core::f64::consts::PI;
+use num_complex::Complex64;
 
 /// Dimitriadis' bonded-layer correction `Φ(χ)` for an incompressible layer, `χ = a / h`
 /// capped at 1.
@@ -121,6 +140,21 @@ impl Inclusion {
             Inclusion::Disc { radius_m, .. } | Inclusion::Sphere { radius_m, .. } => radius_m,
         }
     }
+    /// Depth of its top under the surface, m.
+    pub fn depth_m(&self) -> f64 {
+        match *self {
+            Inclusion::Disc { depth_m, .. } | Inclusion::Sphere { depth_m, .. } => depth_m,
+        }
+    }
+    /// The same inclusion with its top `depth_m` under the surface, m.
+    pub fn with_depth_m(mut self, depth_m: f64) -> Self {
+        match &mut self {
+            Inclusion::Disc { depth_m: d, .. } | Inclusion::Sphere { depth_m: d, .. } => {
+                *d = depth_m
+            }
+        }
+        self
+    }
 
     /// `(w, h)` at surface point `(x, y)`: the load share the inclusion carries and the layer
     /// thickness between the contact and its nearest point.
@@ -149,7 +183,21 @@ impl Inclusion {
     }
 }
 
-/// A soft phantom bonded on a rigid table, with one rigid inclusion.
+/// What an inclusion is made of.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LumpMaterial {
+    /// Rigid (a coin, a steel ball): no strain in it, so no loss.
+    Rigid,
+    /// A linear viscoelastic solid (a tumour-like lump).
+    Tissue {
+        /// Storage modulus `E'_l`, Pa.
+        modulus_pa: f64,
+        /// Loss tangent `η_l = E''_l / E'_l`.
+        loss_tangent: f64,
+    },
+}
+
+/// A soft phantom bonded on a rigid table, with one inclusion.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LumpPhantom {
     /// Short name.
@@ -165,13 +213,17 @@ pub struct LumpPhantom {
     pub outline_radius_m: Option<f64>,
     /// The inclusion.
     pub inclusion: Inclusion,
+    /// What the inclusion is made of.
+    pub material: LumpMaterial,
 }
 
 /// The apparent modulus under the probe and how it came about.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Apparent {
-    /// Apparent Young's modulus, Pa.
+    /// Apparent Young's (storage) modulus, Pa.
     pub modulus_pa: f64,
+    /// Apparent loss tangent `Im E*_app / Re E*_app`.
+    pub loss_tangent: f64,
     /// Contact radius, m (self-consistent).
     pub contact_radius_m: f64,
     /// Load share carried by the inclusion.
@@ -181,15 +233,34 @@ pub struct Apparent {
 }
 
 impl LumpPhantom {
-    /// The apparent modulus under a contact at surface point `(x, y)`.
+    /// `E*_app / E_bg` (complex) for contact radius `a`, load share `w` and layer `h` over the
+    /// inclusion (module docs).
+    fn relative_modulus(&self, a: f64, w: f64, h: f64) -> Complex64 {
+        let phi_h = thin_layer_factor(a / h.max(1e-12));
+        let phi_big = thin_layer_factor(a / self.thickness_m.max(1e-12));
+        let bg = Complex64::new(1.0, self.matrix.loss_tangent);
+        let through_inclusion = match self.material {
+            LumpMaterial::Rigid => bg * phi_h,
+            LumpMaterial::Tissue {
+                modulus_pa,
+                loss_tangent,
+            } => {
+                let lump =
+                    Complex64::new(1.0, loss_tangent) * (modulus_pa / self.matrix.modulus_pa);
+                // The slice the inclusion takes from the layer's compliance (none where the
+                // layer over it is deeper than the table).
+                let slice = (1.0 / phi_big - 1.0 / phi_h).max(0.0);
+                1.0 / (1.0 / (bg * phi_h) + slice / lump)
+            }
+        };
+        through_inclusion * w + bg * (phi_big * (1.0 - w))
+    }
+
+    /// The apparent modulus and loss tangent under a contact at surface point `(x, y)`.
     pub fn apparent(&self, x_m: f64, y_m: f64, contact: &Contact) -> Apparent {
         let (w, h) = self.inclusion.support_at(x_m, y_m);
         let a_h = contact_radius_m(&self.matrix, contact);
-        let big_h = self.thickness_m;
-        let factor = |a: f64| {
-            w * thin_layer_factor(a / h.max(1e-12))
-                + (1.0 - w) * thin_layer_factor(a / big_h.max(1e-12))
-        };
+        let factor = |a: f64| self.relative_modulus(a, w, h).re;
         // a³ Φ(a) = a_H³ (saturated contacts keep the probe radius).
         let mut a = a_h;
         if a_h < contact.probe_radius_m {
@@ -202,20 +273,46 @@ impl LumpPhantom {
                 }
             }
         }
+        let y = self.relative_modulus(a, w, h);
         Apparent {
-            modulus_pa: self.matrix.modulus_pa * factor(a),
+            modulus_pa: self.matrix.modulus_pa * y.re,
+            loss_tangent: y.im / y.re,
             contact_radius_m: a,
             inclusion_share: w,
             layer_over_inclusion_m: h,
         }
     }
 
-    /// The tissue the probe feels at `(x, y)`: the matrix with its apparent modulus.
+    /// The tissue the probe feels at `(x, y)`: the matrix with its apparent modulus and loss
+    /// tangent.
     pub fn tissue_at(&self, x_m: f64, y_m: f64, contact: &Contact) -> Tissue {
+        let app = self.apparent(x_m, y_m, contact);
         Tissue {
-            modulus_pa: self.apparent(x_m, y_m, contact).modulus_pa,
+            modulus_pa: app.modulus_pa,
+            loss_tangent: app.loss_tangent,
             ..self.matrix
         }
+    }
+
+    /// True when the matrix or the inclusion has any loss.
+    pub fn is_lossy(&self) -> bool {
+        let lump = match self.material {
+            LumpMaterial::Rigid => 0.0,
+            LumpMaterial::Tissue { loss_tangent, .. } => loss_tangent,
+        };
+        self.matrix.loss_tangent > 0.0 || lump > 0.0
+    }
+
+    /// The phantom with its matrix's loss tangent set to `loss_tangent`.
+    pub fn with_matrix_loss(mut self, loss_tangent: f64) -> Self {
+        self.matrix.loss_tangent = loss_tangent;
+        self
+    }
+
+    /// The phantom with its inclusion made of `material`.
+    pub fn with_material(mut self, material: LumpMaterial) -> Self {
+        self.material = material;
+        self
     }
 
     /// `base` (probe, front end, noise, preload) pressed onto the phantom at `(x, y)`.
@@ -257,6 +354,7 @@ pub fn paper003_coin(x_mm: f64, y_mm: f64) -> LumpPhantom {
             radius_m: 9.5e-3,
             depth_m: 1.0e-3,
         },
+        material: LumpMaterial::Rigid,
     }
 }
 
@@ -278,6 +376,7 @@ pub fn paper002_ball(d_mm: f64) -> LumpPhantom {
             radius_m: 3e-3,
             depth_m: 1.0e-3,
         },
+        material: LumpMaterial::Rigid,
     }
 }
 
@@ -336,6 +435,98 @@ mod tests {
             assert!(e <= last);
             last = e;
         }
+    }
+
+    #[test]
+    fn a_rigid_lump_carries_the_matrix_loss_everywhere() {
+        // A rigid inclusion stores no strain energy: E*_app = (1 + j η_bg) E_app, so the
+        // storage modulus is the lossless model's and the loss tangent the matrix's, at every
+        // point (equal up to rounding).
+        let c = Contact::default();
+        for p in [paper003_coin(1.5, -1.0), paper002_ball(5.0)] {
+            let lossy = p.with_matrix_loss(0.3);
+            for x in [-12.0, -4.0, 0.0, 1.5, 5.0, 9.0] {
+                let (a, b) = (
+                    p.apparent(x * 1e-3, 0.0, &c),
+                    lossy.apparent(x * 1e-3, 0.0, &c),
+                );
+                assert!((a.modulus_pa / b.modulus_pa - 1.0).abs() < 1e-12, "{x}");
+                assert_eq!(a.loss_tangent, 0.0);
+                assert!(
+                    (b.loss_tangent - 0.3).abs() < 1e-12,
+                    "{x}: {}",
+                    b.loss_tangent
+                );
+                let t = lossy.tissue_at(x * 1e-3, 0.0, &c);
+                assert_eq!(t.loss_tangent, b.loss_tangent);
+            }
+        }
+    }
+
+    #[test]
+    fn a_compliant_lump_lies_between_no_lump_and_a_rigid_one() {
+        let c = Contact::default();
+        let coin = paper003_coin(0.0, 0.0).with_matrix_loss(0.3);
+        let e_bg = coin.matrix.modulus_pa;
+        let lump = |k: f64, eta: f64| {
+            coin.with_material(LumpMaterial::Tissue {
+                modulus_pa: k * e_bg,
+                loss_tangent: eta,
+            })
+        };
+        let rigid = coin.apparent(0.0, 0.0, &c);
+        // A lump of the matrix's own material is no lump: the bare layer's E*_bg Φ(a/H) over
+        // it and beside it alike (equal up to rounding).
+        let same = lump(1.0, 0.3).apparent(0.0, 0.0, &c);
+        let beside = lump(1.0, 0.3).apparent(14e-3, 0.0, &c);
+        assert!((same.modulus_pa / beside.modulus_pa - 1.0).abs() < 1e-12);
+        assert!(same.modulus_pa < 1.05 * e_bg, "{}", same.modulus_pa);
+        assert!((same.loss_tangent - 0.3).abs() < 1e-12);
+        // Stiffer lumps of the matrix's loss tangent: stiffer over the lump, rising towards
+        // the rigid one with E_l, and exactly the matrix's loss tangent (no loss anomaly).
+        let mut last = same.modulus_pa;
+        for k in [2.0, 5.0, 20.0, 1e6] {
+            let a = lump(k, 0.3).apparent(0.0, 0.0, &c);
+            assert!(
+                a.modulus_pa > last && a.modulus_pa < rigid.modulus_pa,
+                "{k}"
+            );
+            assert!(
+                (a.loss_tangent - 0.3).abs() < 1e-12,
+                "{k}: {}",
+                a.loss_tangent
+            );
+            last = a.modulus_pa;
+        }
+        assert!((last / rigid.modulus_pa - 1.0).abs() < 1e-5);
+        // A lump of another loss tangent: the closed form of the series-parallel blend by
+        // hand in real arithmetic, at the model's own contact radius, w and h.
+        let (k, eta_l, eta_b) = (5.0, 0.05, 0.3);
+        let a = lump(k, eta_l).apparent(0.0, 0.0, &c);
+        let (w, h) = coin.inclusion.support_at(0.0, 0.0);
+        let ph = thin_layer_factor(a.contact_radius_m / h);
+        let pb = thin_layer_factor(a.contact_radius_m / coin.thickness_m);
+        let slice = 1.0 / pb - 1.0 / ph;
+        // 1/(1 + jη) = (1 − jη)/(1 + η²): the compliance's real and imaginary parts.
+        let (cr, ci) = (
+            1.0 / ph / (1.0 + eta_b * eta_b) + slice / k / (1.0 + eta_l * eta_l),
+            -(eta_b / ph / (1.0 + eta_b * eta_b) + slice * eta_l / k / (1.0 + eta_l * eta_l)),
+        );
+        let n = cr * cr + ci * ci;
+        let (yr, yi) = (
+            w * cr / n + (1.0 - w) * pb,
+            -w * ci / n + (1.0 - w) * pb * eta_b,
+        );
+        assert!((a.modulus_pa / (e_bg * yr) - 1.0).abs() < 1e-12);
+        assert!((a.loss_tangent - yi / yr).abs() < 1e-12);
+        // A less lossy lump lowers the loss over it; far away the matrix's loss remains.
+        assert!(a.loss_tangent < eta_b - 0.01, "{}", a.loss_tangent);
+        let away = lump(k, eta_l).apparent(14e-3, 0.0, &c);
+        assert!(
+            (away.loss_tangent - eta_b).abs() < 1e-3,
+            "{}",
+            away.loss_tangent
+        );
     }
 
     #[test]

@@ -153,6 +153,20 @@ impl Fault {
     }
 }
 
+/// The builder methods of the scene's optional parts: `with_x(x: T);` is
+/// `pub fn with_x(mut self, x: T) -> Self`, which sets the field `x` to `Some(x)`.
+macro_rules! with_some {
+    ($($(#[$doc:meta])* $name:ident($field:ident: $ty:ty);)*) => {
+        $(
+            $(#[$doc])*
+            pub fn $name(mut self, $field: $ty) -> Self {
+                self.$field = Some($field);
+                self
+            }
+        )*
+    };
+}
+
 /// Everything the simulator needs to build a probe.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Scene {
@@ -254,35 +268,19 @@ impl Scene {
         }
         self
     }
-    /// With a second mechanical mode.
-    pub fn with_second_mode(mut self, mode: SecondMode) -> Self {
-        self.second_mode = Some(mode);
-        self
-    }
-    /// Lifted off during the reading.
-    pub fn with_lift_off(mut self, lift_off: LiftOff) -> Self {
-        self.lift_off = Some(lift_off);
-        self
-    }
-    /// With the contact force changing during the reading.
-    pub fn with_force_change(mut self, change: crate::events::ForceChange) -> Self {
-        self.force_change = Some(change);
-        self
-    }
-    /// With the free resonance drifting during the reading.
-    pub fn with_drift(mut self, drift: Drift) -> Self {
-        self.drift = Some(drift);
-        self
-    }
-    /// With a step in what is under the probe.
-    pub fn with_step(mut self, step: Step) -> Self {
-        self.step = Some(step);
-        self
-    }
-    /// With random knocks.
-    pub fn with_knocks(mut self, knocks: Knocks) -> Self {
-        self.knocks = Some(knocks);
-        self
+    with_some! {
+        /// With a second mechanical mode.
+        with_second_mode(second_mode: SecondMode);
+        /// Lifted off during the reading.
+        with_lift_off(lift_off: LiftOff);
+        /// With the contact force changing during the reading.
+        with_force_change(force_change: crate::events::ForceChange);
+        /// With the free resonance drifting during the reading.
+        with_drift(drift: Drift);
+        /// With a step in what is under the probe.
+        with_step(step: Step);
+        /// With random knocks.
+        with_knocks(knocks: Knocks);
     }
 
     /// True when the physics change during the reading (lift-off, drift, a step); knocks
@@ -368,43 +366,25 @@ impl Scene {
 
     /// The layers this scene uses, in order; returns the count written into `out`.
     pub fn layers(&self, out: &mut [Layer; Layer::COUNT]) -> usize {
+        let used: [(Layer, bool); Layer::COUNT] = [
+            (Layer::Kelvin, true),
+            (Layer::Contact, self.tissue.is_some()),
+            (Layer::Pzt, true),
+            (Layer::DielectricLoss, self.pzt.leakage_s > 0.0),
+            (Layer::FrontEnd, true),
+            (Layer::Noise, self.front_end.current_noise_a_rthz > 0.0),
+            (Layer::Mains, self.front_end.mains.is_some()),
+            (Layer::SecondMode, self.second_mode.is_some()),
+            (Layer::LiftOff, self.lift_off.is_some()),
+            (Layer::ForceChange, self.force_change.is_some()),
+            (Layer::Drift, self.drift.is_some()),
+            (Layer::Knocks, self.knocks.is_some()),
+            (Layer::Step, self.step.is_some()),
+        ];
         let mut n = 0;
-        let mut push = |l: Layer| {
-            out[n] = l;
+        for (layer, _) in used.into_iter().filter(|&(_, on)| on) {
+            out[n] = layer;
             n += 1;
-        };
-        push(Layer::Kelvin);
-        if self.tissue.is_some() {
-            push(Layer::Contact);
-        }
-        push(Layer::Pzt);
-        if self.pzt.leakage_s > 0.0 {
-            push(Layer::DielectricLoss);
-        }
-        push(Layer::FrontEnd);
-        if self.front_end.current_noise_a_rthz > 0.0 {
-            push(Layer::Noise);
-        }
-        if self.front_end.mains.is_some() {
-            push(Layer::Mains);
-        }
-        if self.second_mode.is_some() {
-            push(Layer::SecondMode);
-        }
-        if self.lift_off.is_some() {
-            push(Layer::LiftOff);
-        }
-        if self.force_change.is_some() {
-            push(Layer::ForceChange);
-        }
-        if self.drift.is_some() {
-            push(Layer::Drift);
-        }
-        if self.knocks.is_some() {
-            push(Layer::Knocks);
-        }
-        if self.step.is_some() {
-            push(Layer::Step);
         }
         n
     }

@@ -74,7 +74,7 @@ mod harness {
     use pzt_probe::engine::{PointPlan, PointRaw, Points, SampleEngine};
     use pzt_probe::hal::{FrontEndScale, StreamError};
     use pzt_probe::loadcell::{ForceLog, RawForce};
-    use pzt_probe::reading::driver::{block_on, drive, BatchSource, PointSource, Wanted};
+    use pzt_probe::reading::driver::{block_on, drive, BatchSource, Plans, PointSource};
     use pzt_probe::reading::{Measurement, Procedure};
     use pzt_probe::unit::profile::UnitProfile;
     use pzt_probe::{Failure, Method, Reading, Seconds, Status};
@@ -107,11 +107,11 @@ mod harness {
     pub enum Call {
         /// `Procedure::new`.
         New,
-        /// `Measurement::next_plan`.
+        /// `Plans::next_plan`.
         NextPlan,
-        /// `Measurement::accept`.
+        /// `Plans::accept`.
         Accept,
-        /// `Measurement::is_complete`.
+        /// `Plans::is_complete`.
         IsComplete,
         /// `Measurement::finish`.
         Finish,
@@ -249,10 +249,6 @@ mod harness {
         fn scale(&self) -> FrontEndScale {
             self.stream.scale()
         }
-        /// As the firmware's interrupt: a plan applies from the next batch.
-        fn latency_batches(&self) -> usize {
-            pzt_probe::engine::PIPELINE_BATCHES
-        }
         fn now_sample(&self) -> u64 {
             self.engine.samples()
         }
@@ -260,24 +256,8 @@ mod harness {
             self.intake = Some(plan);
             true
         }
-        /// The driver's window wait over the counted batches.
-        async fn next(&mut self, wanted: &Wanted, budget: u64) -> Option<PointRaw> {
-            self.next_window(wanted, budget)
-        }
-        async fn stop(&mut self) {
-            self.engine.stop();
-        }
-        async fn idle(&mut self, samples: u64) {
-            self.engine.stop();
-            let mut done = 0u64;
-            while done < samples {
-                let (adc, dac) = self.stream.capture();
-                let _ = self.engine.demodulate(adc);
-                self.engine.generate(dac);
-                done += BATCH as u64;
-            }
-            self.held = None;
-        }
+        // The driver's window wait, stop and idle over the counted batches.
+        pzt_probe::batch_source_waits!(engine);
         fn contact_force(&mut self, from: u64, to: u64) -> Option<RawForce> {
             self.forces.over(from, to, self.scale().sample_rate.0)
         }
@@ -289,7 +269,7 @@ mod harness {
         cost: &'a RefCell<Cost>,
     }
 
-    impl<M: Measurement> Measurement for Counted<'_, M> {
+    impl<M: Measurement> Plans for Counted<'_, M> {
         fn next_plan(&mut self) -> Option<PointPlan> {
             let m = &mut self.m;
             self.cost
@@ -305,6 +285,9 @@ mod harness {
                 .borrow_mut()
                 .call(Call::IsComplete, || self.m.is_complete())
         }
+    }
+
+    impl<M: Measurement> Measurement for Counted<'_, M> {
         fn finish(&self, unit: &UnitProfile, force: Option<RawForce>) -> Reading {
             self.cost
                 .borrow_mut()

@@ -12,8 +12,9 @@
 //! | `sample` (hardware) | 3 | per batch: demodulate the ADC half, refill the DAC half ([`pzt_probe::engine::SampleEngine`]) |
 //! | `uart_rx` (hardware) | 2 | host bytes from LPUART1's DMA ring (ST-LINK virtual COM port) into a channel |
 //! | `measure` | 1 | the session ([`pzt_probe::instrument::session`]): profile, settings, the flash store; readings through [`pzt_probe::reading::driver`]; the task's board and loop are [`pzt_probe::instrument::measure`], over the links here |
-//! | `command` | 1 | bytes → lines → [`pzt_probe::instrument::command::parse`] → requests to `measure` (QEMU: the boot command line's script or the built-in one, run by [`pzt_probe::board::sim_script::Runner`]) |
-//! | `report` | 1 | the only place that logs: one defmt line per event (`pzt_probe::instrument::log`) |
+//! | `command` | 1 | the host link's receive side: bytes → frames → [`pzt_probe::instrument::command::parse`] → requests to `measure`, each answered ([`pzt_probe::instrument::link`], `docs/protocol.md`); QEMU: first the boot command line's script or the built-in one, run by [`pzt_probe::board::sim_script::Runner`], the link after its `serve` |
+//! | `report` | 1 | the only place that logs: one defmt line per event (`pzt_probe::instrument::log`); and each event as the link's frames into the transmit queue (full: dropped and counted) |
+//! | `link_tx` | 1 | STM32: the transmit queue to LPUART1 by DMA (QEMU: UART0's transmit interrupt does it; the task ends) |
 //! | `load_cell` | 1 | every 5 ms: the HX711's conversion, if one is ready (80 a second), into the shared force log, stamped with the sample count |
 //! | `guard` | 2 | feeds the independent watchdog every 100 ms while `measure` keeps its liveness promise ([`pzt_probe::instrument::watchdog`]) |
 //!
@@ -67,6 +68,7 @@ mod app {
     use pzt_probe::engine::{PointRaw, SampleEngine, BATCH};
     use pzt_probe::hal::FrontEndScale;
     use pzt_probe::instrument::command::Command;
+    use pzt_probe::instrument::link::LinkEvent;
     use pzt_probe::instrument::measure::{FwIo, Link, Recv};
     use pzt_probe::instrument::session::Event;
     use pzt_probe::instrument::watchdog::{self, Millis, FEED};
@@ -85,9 +87,15 @@ mod app {
     /// 55 KiB, scripts/ci-firmware, keeps the stack 41 KiB; a stream's reading that finds the
     /// channel full is dropped and counted, never waited for).
     const REPORT_CAP: usize = 11;
-    const DONE_CAP: usize = 1;
-    /// Received bytes buffered between the UART interrupt and the command task (STM32).
+    /// Completions: every request queued and the one in service, so none is lost while the
+    /// host link's receive side reads bytes.
+    const DONE_CAP: usize = REQUEST_CAP + 1;
+    // The host link keeps the id of every command queued, in service, or whose completion
+    // waits in the report channel.
+    const _: () = assert!(pzt_probe::instrument::link::PENDING >= REQUEST_CAP + 1 + REPORT_CAP);
+    /// Received bytes buffered between the UART interrupt and the command task.
     const RX_CAP: usize = 64;
+
     /// The load-cell task looks for a conversion this often (ms): above the HX711's 80 a
     /// second, so each is read before the next overwrites it.
     const LOAD_CELL_POLL_MS: u32 = 5;
@@ -111,6 +119,7 @@ mod app {
         scale: FrontEndScale,
         uart: board::Uart,
         rx_tx: Sender<'static, u8, RX_CAP>,
+        link_tx: board::LinkTx,
         load_cell: Option<board::LoadCell>,
     }
 
@@ -159,6 +168,7 @@ mod app {
         guard::spawn().ok();
         measure::spawn(request_rx, plan_tx, point_rx, report_tx.clone(), done_tx).ok();
         report::spawn(report_rx).ok();
+        link_tx::spawn().ok();
         load_cell::spawn().ok();
 
         let (rx_tx, rx_rx) = make_channel!(u8, RX_CAP);
@@ -179,6 +189,7 @@ mod app {
                 scale,
                 uart: parts.uart,
                 rx_tx,
+                link_tx: parts.link_tx,
                 load_cell: parts.load_cell,
             },
         )
@@ -232,13 +243,28 @@ mod app {
             .batch(board::elapsed(t0), engine.overruns(), stream.late());
     }
 
-    /// Host bytes from the UART into the command task's channel.
+    /// Host bytes from the UART into the command task's channel while it has room; then the
+    /// board holds the rest (`Uart::hold`: QEMU keeps the host's stream back in its receive
+    /// register; the STM32 drops what its DMA ring holds, the line then fails to parse and is
+    /// reported), and the command task pends this interrupt after each byte it takes
+    /// ([`rx_taken`]).
     #[task(binds = LPUART1, priority = 2, local = [uart, rx_tx])]
     fn uart_rx(cx: uart_rx::Context) {
-        while let Some(b) = cx.local.uart.read_byte() {
-            // A full channel drops the byte; the line then fails to parse and is reported.
+        loop {
+            if cx.local.rx_tx.is_full() {
+                cx.local.uart.hold();
+                break;
+            }
+            let Some(b) = cx.local.uart.read_byte() else {
+                break;
+            };
             let _ = cx.local.rx_tx.try_send(b);
         }
+    }
+
+    /// The command task took a byte: let `uart_rx` move the next ones in.
+    fn rx_taken() {
+        rtic::pend(board::device::interrupt::LPUART1);
     }
 
     /// The engine's sample count now: the time base of readings and of the force log.
@@ -300,6 +326,9 @@ mod app {
         }
         async fn counters(&mut self) {
             let _ = self.reports.send(Report::Counters).await;
+        }
+        async fn served(&mut self, ok: bool) {
+            let _ = self.reports.send(Report::Link(LinkEvent::Served(ok))).await;
         }
         fn try_report(&mut self, e: Event) -> bool {
             self.reports.try_send(Report::Event(e)).is_ok()
@@ -369,21 +398,23 @@ mod app {
 
     /// The command task: host bytes → lines → requests, one request at a time.
     ///
-    /// On QEMU there is no host on the line: the task runs the boot command line's script (or
-    /// the board's built-in one), waits for each request to finish, then ends the run with
-    /// success iff every request succeeded and no overrun happened.
+    /// The STM32 serves the host link from power-on ([`serve_link`]). On QEMU the task first
+    /// runs the boot command line's script (or the board's built-in one), waiting for each
+    /// request to finish; at its end it ends the run with success iff every request succeeded
+    /// and no overrun happened, or, at a `serve` line, serves the host link.
     #[task(priority = 1)]
     async fn command(
         _cx: command::Context,
-        mut requests: Sender<'static, Command, REQUEST_CAP>,
-        mut reports: Sender<'static, Report, REPORT_CAP>,
-        mut done: Receiver<'static, bool, DONE_CAP>,
+        requests: Sender<'static, Command, REQUEST_CAP>,
+        reports: Sender<'static, Report, REPORT_CAP>,
+        done: Receiver<'static, bool, DONE_CAP>,
         rx: Receiver<'static, u8, RX_CAP>,
     ) {
         let scale = board::scale();
         #[cfg(feature = "qemu")]
         {
             use pzt_probe::board::sim_script::{lines, Action, Runner, SCENE_SETTLE_MS};
+            let (mut requests, mut reports, mut done) = (requests, reports, done);
             // The boot command line's script, else the built-in one.
             let mut cmdline = [0u8; board::CMDLINE_MAX];
             let script = board::boot_script(&mut cmdline).unwrap_or(board::SCRIPT);
@@ -403,39 +434,120 @@ mod app {
                     Action::Reject(message) => {
                         let _ = reports.send(Report::Rejected(message)).await;
                     }
+                    Action::Serve => {
+                        let sim = *run.sim();
+                        serve_link(rx, requests, reports, done, scale, sim).await;
+                        return;
+                    }
                 }
             }
             let ok = run.ok() && !Overruns::now().any();
             let _ = reports.send(Report::Exit(ok)).await;
             drop(rx);
         }
+        // The host link from power-on (the QEMU image: after its script's `serve`).
         #[cfg(not(feature = "qemu"))]
-        let (mut rx, mut lines) = (rx, pzt_probe::instrument::command::LineBuffer::new());
-        #[cfg(not(feature = "qemu"))]
+        serve_link(rx, requests, reports, done, scale).await;
+    }
+
+    /// The host link's receive side (QEMU: after the script's `serve`): bytes → frames →
+    /// commands for the measurement task, each answered (`docs/protocol.md`). A command that
+    /// finds the request queue full is rejected (`busy`), so the byte path never waits on a
+    /// command in service; a frame that is no message is answered with its error. QEMU: `sim`
+    /// lines (`src/board/sim_script.rs`) move the simulated probe from the scene `sim` once every
+    /// command before them has been served, then wait `SCENE_SETTLE_MS` as the script does.
+    async fn serve_link(
+        mut rx: Receiver<'static, u8, RX_CAP>,
+        mut requests: Sender<'static, Command, REQUEST_CAP>,
+        mut reports: Sender<'static, Report, REPORT_CAP>,
+        mut done: Receiver<'static, bool, DONE_CAP>,
+        scale: pzt_probe::hal::FrontEndScale,
+        #[cfg(feature = "qemu")] mut sim: pzt_probe::board::sim_script::SimState,
+    ) {
+        #[cfg(feature = "qemu")]
+        use pzt_probe::board::sim_script::{apply, SCENE_SETTLE_MS};
+        use pzt_probe::instrument::link::{HostLink, Incoming};
+        let mut link = HostLink::new();
+        // Requests queued and not yet served.
+        let mut outstanding = 0u32;
         while let Ok(b) = rx.recv().await {
-            // A stale completion from an earlier request is of no interest here.
-            let _ = done.try_recv();
-            // A parse error is reported and the line dropped.
-            match lines
-                .push(b)
-                .map(|l| l.and_then(|l| pzt_probe::instrument::command::parse(l, &scale)))
-            {
-                Some(Ok(c)) => {
-                    let _ = requests.send(c).await;
+            rx_taken();
+            while done.try_recv().is_ok() {
+                outstanding = outstanding.saturating_sub(1);
+            }
+            let report = match link.push(b, &scale) {
+                None => continue,
+                Some(Incoming::Hello) => LinkEvent::Hello,
+                Some(Incoming::Error(e)) => LinkEvent::FrameError(e),
+                #[cfg(feature = "qemu")]
+                Some(Incoming::Command { id, line, .. }) if line.starts_with("sim ") => {
+                    while outstanding > 0 && done.recv().await.is_ok() {
+                        outstanding -= 1;
+                    }
+                    let error = match apply(&line, &mut sim) {
+                        Ok(_) => {
+                            board::set_scene(sim.scene(), sim.seed);
+                            Mono::delay(SCENE_SETTLE_MS.millis()).await;
+                            None
+                        }
+                        Err(e) => Some(e.message()),
+                    };
+                    LinkEvent::BoardLine { id, error }
                 }
-                Some(Err(e)) => {
-                    let _ = reports.send(Report::Rejected(e.message())).await;
+                Some(Incoming::Command {
+                    id,
+                    parsed: Err(error),
+                    ..
+                }) => LinkEvent::Rejected { id, error },
+                Some(Incoming::Command {
+                    id, parsed: Ok(c), ..
+                }) if !requests.is_full() => {
+                    // Queued before it is handed on: the reply's id waits in the report task
+                    // before any event of the command reaches it. This task alone sends
+                    // requests, so the room seen stays.
+                    let _ = reports.send(Report::Link(LinkEvent::Queued(id))).await;
+                    outstanding += requests.try_send(c).is_ok() as u32;
+                    continue;
                 }
-                None => {}
+                Some(Incoming::Command { id, .. }) => LinkEvent::Busy(id),
+            };
+            let _ = reports.send(Report::Link(report)).await;
+        }
+    }
+
+    /// The host link's transmitter where a task drives it (STM32: LPUART1 by DMA, chunks of the
+    /// transmit queue as they come, looked for every millisecond while it is empty; QEMU: the
+    /// UART's transmit interrupt does it and the task ends at once).
+    #[task(priority = 1, local = [link_tx])]
+    async fn link_tx(cx: link_tx::Context) {
+        if !board::LinkTx::BY_TASK {
+            return;
+        }
+        let mut chunk = [0u8; 128];
+        loop {
+            match board::LinkTx::take(&mut chunk) {
+                0 => Mono::delay(1.millis()).await,
+                n => cx.local.link_tx.write(&chunk[..n]).await,
             }
         }
     }
 
-    /// The report task: the only task that logs. Formats are listed in the crate docs.
+    /// The report task: the only task that logs, and the host link's transmit side:
+    /// each report also as frames into the transmit queue ([`pzt_probe::instrument::link`]).
+    /// Formats are listed in the crate docs.
     #[task(priority = 1)]
     async fn report(_cx: report::Context, mut rx: Receiver<'static, Report, REPORT_CAP>) {
         let mut seen = Overruns::default();
+        let (mut out, mut frame) = (
+            pzt_probe::instrument::link::Outgoing::new(
+                board::NAME,
+                board::ELAPSED_UNIT,
+                board::boot_error(),
+            ),
+            [0u8; probe_proto::MAX_DEVICE_FRAME + 1],
+        );
         while let Ok(r) = rx.recv().await {
+            out.report(&r, &mut frame, board::link_send);
             #[allow(unused_variables)] // the exit status ends only the QEMU image
             if let Some(ok) = pzt_probe::instrument::log::report(r, board::ELAPSED_UNIT, &mut seen)
             {

@@ -15,15 +15,17 @@ pub mod stm32g474;
 /// A firmware board's parts, as the application takes them over from its `init`: each board
 /// names its own types (`qemu::Parts`, `stm32g474::Parts`).
 #[cfg(target_os = "none")]
-pub struct Parts<Stream, Watchdog, Flash, Uart, LoadCell> {
+pub struct Parts<Stream, Watchdog, Flash, Uart, LinkTx, LoadCell> {
     /// The sample stream (not yet started).
     pub stream: Stream,
     /// The watchdog.
     pub watchdog: Watchdog,
     /// The store's flash.
     pub flash: Flash,
-    /// Host link.
+    /// Host link: receive side.
     pub uart: Uart,
+    /// Host link: transmit side, as the task `link_tx` drives it.
+    pub link_tx: LinkTx,
     /// The load cell (`None` when there is none, or its pins cannot be driven).
     pub load_cell: Option<LoadCell>,
 }

@@ -58,13 +58,15 @@ unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
 /// What RTIC needs of a device crate, for the interrupt lines this image uses.
 ///
 /// AN386 has 32 external interrupt lines (UARTs 0–5, 12; GPIO 6–7, 16–31; timers 8–10; SPI 11;
-/// ...). The image binds four of them, and names them after the STM32G474 vectors they stand in
+/// ...). The image binds five of them, and names four after the STM32G474 vectors they stand in
 /// for, so one RTIC application (same `binds`, same dispatcher) serves both boards:
 ///
 /// * line 8, CMSDK timer 0, is `DMA1_CHANNEL1`: the batch cadence, in place of the STM32's ADC DMA
 ///   half/full-transfer interrupt;
 /// * line 0, CMSDK UART0 receive, is `LPUART1` (the STM32 LPUART1 vector): host bytes, like the STM32's ST-LINK virtual COM
 ///   port (QEMU's first serial port);
+/// * line 1, CMSDK UART0 transmit, is `UART0TX`: the host link's transmit queue drained byte by
+///   byte, by this board's own handler ([`link_send`]), not an RTIC task;
 /// * line 11 (the AN386 SPI controller, unused here) is `SPI3` and line 15 (the touch screen,
 ///   not modelled) is `SPI2`: the software-task dispatchers (priorities 1 and 2), the same
 ///   unused vectors the STM32 image dispatches on.
@@ -80,6 +82,8 @@ pub mod device {
     pub enum Interrupt {
         /// CMSDK UART0 receive.
         LPUART1 = 0,
+        /// CMSDK UART0 transmit.
+        UART0TX = 1,
         /// CMSDK timer 0: the sample cadence (one batch per period).
         DMA1_CHANNEL1 = 8,
         /// Line 11: the software-task dispatcher (priority 1).
@@ -105,6 +109,7 @@ pub mod device {
 
     extern "C" {
         fn LPUART1();
+        fn UART0TX();
         fn DMA1_CHANNEL1();
         fn SPI3();
         fn SPI2();
@@ -118,6 +123,7 @@ pub mod device {
     pub static __INTERRUPTS: [Vector; 32] = {
         let mut v = [Vector(DefaultHandler); 32];
         v[0] = Vector(LPUART1);
+        v[1] = Vector(UART0TX);
         v[8] = Vector(DMA1_CHANNEL1);
         v[11] = Vector(SPI3);
         v[15] = Vector(SPI2);
@@ -221,13 +227,22 @@ pub fn scale() -> FrontEndScale {
 }
 
 /// The board's parts, as the application takes them over (the watchdog a stand-in).
-pub type Parts = super::Parts<Stream, Watchdog, StoreFlash, Uart, LoadCell>;
+pub type Parts = super::Parts<Stream, Watchdog, StoreFlash, Uart, LinkTx, LoadCell>;
 
 /// Set the board up: the simulated probe on [`boot_state`]'s scene, and its flash as the
 /// factory left it —
 /// the unit's profile ([`super::sim_factory::RECORD`]) programmed into the store's first slot.
 /// Call once, from `init`.
-pub fn init(_core: &mut cortex_m::Peripherals) -> Parts {
+pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
+    // The host link's transmit interrupt, outside RTIC: the lowest task priority.
+    // SAFETY: before any task runs; the handler shares nothing with RTIC's resources.
+    unsafe {
+        core.NVIC.set_priority(
+            device::Interrupt::UART0TX,
+            super::nvic_priority(1, device::NVIC_PRIO_BITS),
+        );
+        cortex_m::peripheral::NVIC::unmask(device::Interrupt::UART0TX);
+    }
     let mut flash = StoreFlash::new();
     // The simulated flash is erased at boot and the record fits its first sector: the factory
     // programming cannot fail; if it did, the store would load its fallback and say so.
@@ -248,6 +263,7 @@ pub fn init(_core: &mut cortex_m::Peripherals) -> Parts {
         watchdog: Watchdog { last: None },
         flash,
         uart: Uart::new(),
+        link_tx: LinkTx,
         load_cell: load_cell(),
     }
 }
@@ -431,10 +447,14 @@ struct CmsdkUart {
 }
 
 impl CmsdkUart {
+    /// STATE.TXFULL.
+    const TX_FULL: u32 = 1 << 0;
     /// STATE.RXFULL.
     const RX_FULL: u32 = 1 << 1;
-    /// CTRL.TXEN, CTRL.RXEN, CTRL.RXINTEN.
-    const TX_RX_RX_IRQ: u32 = (1 << 0) | (1 << 1) | (1 << 3);
+    /// CTRL.TXEN, CTRL.RXEN, CTRL.TXINTEN, CTRL.RXINTEN.
+    const TX_RX_IRQS: u32 = (1 << 0) | (1 << 1) | (1 << 2) | (1 << 3);
+    /// INTCLEAR.TXINT.
+    const INT_TX: u32 = 1 << 0;
     /// INTCLEAR.RXINT.
     const INT_RX: u32 = 1 << 1;
 }
@@ -450,9 +470,17 @@ impl Uart {
         // SAFETY: CMSDK UART0 registers; the image owns the UART.
         unsafe {
             write_volatile(addr_of_mut!((*UART0).bauddiv), SYSCLK_HZ / 115_200);
-            write_volatile(addr_of_mut!((*UART0).ctrl), CmsdkUart::TX_RX_RX_IRQ);
+            write_volatile(addr_of_mut!((*UART0).ctrl), CmsdkUart::TX_RX_IRQS);
         }
         Self(())
+    }
+
+    /// Leave the received byte in the receive register (STATE.RXFULL: QEMU then takes no
+    /// more from the host) and acknowledge its interrupt; the next [`read_byte`](Self::read_byte)
+    /// takes it.
+    pub fn hold(&mut self) {
+        // SAFETY: write-one-to-clear of UART0's receive interrupt.
+        unsafe { write_volatile(addr_of_mut!((*UART0).intclear), CmsdkUart::INT_RX) };
     }
 
     /// The next received byte, if any (acknowledges the receive interrupt).
@@ -464,6 +492,67 @@ impl Uart {
                 Some(read_volatile(addr_of!((*UART0).data)) as u8)
             } else {
                 None
+            }
+        }
+    }
+}
+
+/// The host link's transmit queue, bytes (1023: two of the longest frames).
+const TX_CAP: usize = 1024;
+
+/// The transmit queue between the report task ([`link_send`]) and UART0's transmit interrupt.
+static TX_QUEUE: cortex_m::interrupt::Mutex<core::cell::RefCell<heapless::Deque<u8, TX_CAP>>> =
+    cortex_m::interrupt::Mutex::new(core::cell::RefCell::new(heapless::Deque::new()));
+
+/// Queue a whole frame of the host link for UART0, or refuse it (`false`) when the queue has no
+/// room for all of it: never waits. The transmit interrupt sends it.
+pub fn link_send(frame: &[u8]) -> bool {
+    let queued = cortex_m::interrupt::free(|cs| {
+        let mut q = TX_QUEUE.borrow(cs).borrow_mut();
+        if q.capacity() - q.len() < frame.len() {
+            return false;
+        }
+        for &b in frame {
+            let _ = q.push_back(b);
+        }
+        true
+    });
+    if queued {
+        cortex_m::peripheral::NVIC::pend(device::Interrupt::UART0TX);
+    }
+    queued
+}
+
+/// The host link's transmit side as the task `link_tx` sees it: nothing to drive here (UART0's
+/// transmit interrupt, [`UART0TX`], sends what [`link_send`] queued), so the task ends at once.
+pub struct LinkTx;
+
+impl LinkTx {
+    /// The task `link_tx` has work on this board.
+    pub const BY_TASK: bool = false;
+
+    /// Bytes the task should send next: none (the interrupt sends them).
+    pub fn take(_buf: &mut [u8]) -> usize {
+        0
+    }
+
+    /// Send `bytes` (never called: [`Self::BY_TASK`] is false).
+    pub async fn write(&mut self, _bytes: &[u8]) {}
+}
+
+/// CMSDK UART0's transmit interrupt (line 1; not an RTIC task, at the lowest priority, set by
+/// [`init`]): queued bytes while the transmitter takes them (STATE.TXFULL clear); after a
+/// byte QEMU's character device could not take at once, the interrupt comes again when it has.
+#[no_mangle]
+extern "C" fn UART0TX() {
+    // SAFETY: CMSDK UART0's transmit registers, written only here. The interrupt is cleared
+    // before the writes, so a byte taken later raises it again.
+    unsafe {
+        write_volatile(addr_of_mut!((*UART0).intclear), CmsdkUart::INT_TX);
+        while read_volatile(addr_of!((*UART0).state)) & CmsdkUart::TX_FULL == 0 {
+            match cortex_m::interrupt::free(|cs| TX_QUEUE.borrow(cs).borrow_mut().pop_front()) {
+                Some(b) => write_volatile(addr_of_mut!((*UART0).data), b as u32),
+                None => break,
             }
         }
     }

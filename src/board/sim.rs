@@ -224,9 +224,6 @@ impl<F: FnMut(f64) -> Option<Option<hal_sim::Tissue>>> crate::reading::driver::P
     fn scale(&self) -> FrontEndScale {
         self.inner.scale()
     }
-    fn latency_batches(&self) -> usize {
-        self.inner.latency_batches()
-    }
     fn now_sample(&self) -> u64 {
         self.inner.now_sample()
     }

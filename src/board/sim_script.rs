@@ -28,8 +28,9 @@
 //! the QEMU board then reports it as its boot error and, for one that leaves the STM32 without
 //! its sample stream, does not start its stream either.
 //!
-//! Every other line is a probe command for the firmware's own parser. The boot command line is
-//! a list of lines separated by `;`.
+//! Every other line is a probe command for the firmware's own parser, but `serve`: the script
+//! ends there and the image serves the host link on its UART (`docs/protocol.md`) for ever
+//! instead of exiting. The boot command line is a list of lines separated by `;`.
 
 use crate::hal::FrontEndScale;
 use crate::instrument::command::{parse, Command, CommandError, MAX_LINE};
@@ -225,11 +226,19 @@ pub enum Step {
     BadSim(SimError),
     /// A line the firmware's parser refuses (as it would from the serial line).
     BadCommand(CommandError),
+    /// `serve`: the script ends; the host link takes over.
+    Serve,
 }
+
+/// The line that ends a script and hands the image to the host link.
+pub const SERVE: &str = "serve";
 
 /// One script line: a `sim` line applied to `state`, or a probe command parsed by the
 /// firmware's own parser against `scale`.
 pub fn step(line: &str, state: &mut SimState, scale: &FrontEndScale) -> Step {
+    if line == SERVE {
+        return Step::Serve;
+    }
     match apply(line, state) {
         Ok(true) => Step::Sim,
         Err(e) => Step::BadSim(e),
@@ -257,6 +266,8 @@ pub enum Action {
     Send(Command),
     /// Report the refusal of a bad line (the run has failed already).
     Reject(&'static str),
+    /// Serve the host link from now on (the script's last action).
+    Serve,
 }
 
 /// The QEMU image's command script, line by line: `sim` lines move the simulated probe, the
@@ -312,6 +323,7 @@ impl<'a, I: Iterator<Item = &'a str>> Iterator for Runner<I> {
             Step::Command(c) => Action::Send(c),
             Step::BadSim(e) => self.reject(e.message()),
             Step::BadCommand(e) => self.reject(e.message()),
+            Step::Serve => Action::Serve,
         })
     }
 }
@@ -330,6 +342,19 @@ mod tests {
             boot_fault: None,
             events: SimEvents::default(),
         }
+    }
+
+    #[test]
+    fn serve_ends_the_script_and_hands_over_to_the_link() {
+        let scale = FrontEndScale::PROBE;
+        let run = Runner::new(lines("sim phantom B; serve; measure"), start(), scale);
+        let actions: Vec<Action> = run.collect();
+        assert_eq!(actions[..2], [Action::Sim, Action::Serve]);
+        assert_eq!(
+            step(" serve", &mut start(), &scale),
+            Step::BadCommand(CommandError::UnknownCommand)
+        );
+        assert_eq!(step("serve", &mut start(), &scale), Step::Serve);
     }
 
     #[test]

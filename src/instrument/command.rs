@@ -128,6 +128,23 @@ pub enum CommandError {
 }
 
 impl CommandError {
+    /// Stable snake_case code (the host link's `Rejected` cause, `docs/protocol.md`).
+    pub const fn code(self) -> &'static str {
+        match self {
+            CommandError::Empty => "empty",
+            CommandError::Oversized => "oversized",
+            CommandError::NotUtf8 => "not_utf8",
+            CommandError::UnknownCommand => "unknown_command",
+            CommandError::MissingArgument => "missing_argument",
+            CommandError::TooManyArguments => "too_many_arguments",
+            CommandError::BadNumber => "bad_number",
+            CommandError::UnknownMethod => "unknown_method",
+            CommandError::UnknownSubcommand => "unknown_subcommand",
+            CommandError::OutOfRange => "out_of_range",
+            CommandError::Settings(_) => "settings",
+        }
+    }
+
     /// One line for a human.
     pub const fn message(self) -> &'static str {
         match self {
@@ -500,28 +517,40 @@ mod tests {
         parse(s.as_bytes(), &FrontEndScale::PROBE)
     }
 
+    /// Each line parses to what it is paired with.
+    fn check(cases: &[(&str, Result<Command, CommandError>)]) {
+        for (line, want) in cases {
+            assert_eq!(p(line), *want, "{line}");
+        }
+    }
+
     #[test]
     fn stream_takes_its_seconds_within_range() {
-        assert_eq!(p("stream 3"), Ok(Command::Stream(Seconds(3.0))));
-        assert_eq!(p("stream 0.1"), Ok(Command::Stream(Seconds(0.1))));
-        assert_eq!(p("stream"), Err(CommandError::MissingArgument));
-        assert_eq!(p("stream 3 4"), Err(CommandError::TooManyArguments));
-        assert_eq!(p("stream x"), Err(CommandError::BadNumber));
-        assert_eq!(p("stream nan"), Err(CommandError::BadNumber));
-        assert_eq!(p("stream 0.05"), Err(CommandError::OutOfRange));
-        assert_eq!(p("stream 601"), Err(CommandError::OutOfRange));
-        assert_eq!(p("stream -1"), Err(CommandError::OutOfRange));
+        use CommandError::*;
+        check(&[
+            ("stream 3", Ok(Command::Stream(Seconds(3.0)))),
+            ("stream 0.1", Ok(Command::Stream(Seconds(0.1)))),
+            ("stream", Err(MissingArgument)),
+            ("stream 3 4", Err(TooManyArguments)),
+            ("stream x", Err(BadNumber)),
+            ("stream nan", Err(BadNumber)),
+            ("stream 0.05", Err(OutOfRange)),
+            ("stream 601", Err(OutOfRange)),
+            ("stream -1", Err(OutOfRange)),
+        ]);
     }
 
     #[test]
     fn commands() {
-        assert_eq!(p("measure"), Ok(Command::Measure));
-        assert_eq!(p("  measure \t"), Ok(Command::Measure));
-        assert_eq!(p("status"), Ok(Command::Status));
-        assert_eq!(p("store"), Ok(Command::Store));
-        assert_eq!(p("air"), Ok(Command::Air));
-        assert_eq!(p("selftest"), Ok(Command::SelfTest));
-        assert_eq!(p("selftest now"), Err(CommandError::TooManyArguments));
+        check(&[
+            ("measure", Ok(Command::Measure)),
+            ("  measure \t", Ok(Command::Measure)),
+            ("status", Ok(Command::Status)),
+            ("store", Ok(Command::Store)),
+            ("air", Ok(Command::Air)),
+            ("selftest", Ok(Command::SelfTest)),
+            ("selftest now", Err(CommandError::TooManyArguments)),
+        ]);
         // The force window in mN, validated: ordered, inside 3–200 mN.
         assert_eq!(
             p("force 15 50"),
@@ -575,13 +604,12 @@ mod tests {
         // Settings the fit method cannot take: three coarse points, a zero span.
         assert!(p("staged 170 290 3 0.02 0.02 5 0.8 3 5").is_err());
         assert!(p("staged 170 290 6 0.02 0.02 8 0 2 5").is_err());
-        assert_eq!(
-            p("calibrate add 279"),
-            Ok(Command::CalibrateAdd(KPa(279.0)))
-        );
-        assert_eq!(p("calibrate fit"), Ok(Command::CalibrateFit));
-        assert_eq!(p("calibrate clear"), Ok(Command::CalibrateClear));
-        assert_eq!(p("calibrate paper"), Ok(Command::CalibratePaper));
+        check(&[
+            ("calibrate add 279", Ok(Command::CalibrateAdd(KPa(279.0)))),
+            ("calibrate fit", Ok(Command::CalibrateFit)),
+            ("calibrate clear", Ok(Command::CalibrateClear)),
+            ("calibrate paper", Ok(Command::CalibratePaper)),
+        ]);
     }
 
     #[test]

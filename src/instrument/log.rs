@@ -48,9 +48,10 @@
 //! and `isr_max` are the sample interrupt's work per batch (plan intake, demodulation, DAC
 //! refill, point hand-off) in `unit`: instructions under QEMU, core cycles on the STM32.
 
+pub use crate::instrument::link::{
+    nan_or, settings_fields, slot_name, store_error_name, Report, COMMANDS,
+};
 use crate::instrument::session::Event;
-use crate::reading::Settings;
-use crate::unit::store::{SlotState, StoreError};
 
 /// A `reading` or `stream` line: `$format` (written out whole: a defmt format string is one
 /// literal, and the line is a wire format), the arguments `$pre` its own fields before
@@ -151,7 +152,7 @@ pub fn event(e: Event) {
         ),
         Event::Help => defmt::info!(
             "help commands={=str} methods={=str} default={=str}",
-            "measure,stream,method,sweep,staged,air,calibrate,force,weigh,store,reload,status,selftest,help",
+            COMMANDS,
             crate::reading::METHOD_NAMES,
             crate::reading::DEFAULT_METHOD.name()
         ),
@@ -270,59 +271,6 @@ pub fn stack() {
     }
 }
 
-/// `v` or NaN (missing values are logged as NaN).
-pub fn nan_or(v: Option<f32>) -> f32 {
-    v.unwrap_or(f32::NAN)
-}
-
-/// The `settings` line's fields `[start_hz, stop_hz, step_hz, settle_s, integrate_s,
-/// drive_v]` of any method's settings: a sweep's own; for the staged methods the band, no
-/// step (`NaN`), the coarse settling, the integration and the drive; for ring-down the
-/// band, no step, the burst as settling, the ring as integration and the drive; `NaN` for
-/// settings of other kinds.
-pub fn settings_fields(s: &Settings) -> [f32; 6] {
-    match s {
-        Settings::Sweep(s) => [
-            s.start.0,
-            s.stop.0,
-            s.step.0,
-            s.settle.0,
-            s.integrate.0,
-            s.drive.0,
-        ],
-        Settings::Staged(s) => [
-            s.band_start.0,
-            s.band_stop.0,
-            f32::NAN,
-            s.coarse_settle.0,
-            s.integrate.0,
-            s.drive.0,
-        ],
-        Settings::Hold(_) => [f32::NAN; 6],
-    }
-}
-
-/// A store slot's state, as logged.
-pub fn slot_name(s: SlotState) -> &'static str {
-    match s {
-        SlotState::Valid(_) => "valid",
-        SlotState::Empty => "empty",
-        SlotState::Corrupt => "corrupt",
-        SlotState::Unreadable => "unreadable",
-    }
-}
-
-/// A store error, as logged.
-pub fn store_error_name(e: StoreError) -> &'static str {
-    match e {
-        StoreError::Geometry => "geometry",
-        StoreError::InvalidRecord => "invalid_record",
-        StoreError::Erase => "erase",
-        StoreError::Program => "program",
-        StoreError::Verify => "verify",
-    }
-}
-
 /// The `counters` line; `unit` is the board's unit of the interrupt's work.
 pub fn counters(unit: &str) {
     use crate::counters::*;
@@ -354,20 +302,6 @@ pub fn overruns_if_grew(seen: &mut crate::counters::Overruns) {
     }
 }
 
-/// Everything the firmware's report task logs: the session's events and the board's own.
-#[derive(Clone, Copy, Debug)]
-pub enum Report {
-    /// A session event.
-    Event(Event),
-    /// A host line the parser refused, or a `sim` line of the QEMU image's script: the
-    /// refusal's message.
-    Rejected(&'static str),
-    /// The health counters.
-    Counters,
-    /// The end of the QEMU image's script, with its overall success.
-    Exit(bool),
-}
-
 /// Log `r` (`unit` is the board's unit of the interrupt's work), then the overrun counters if
 /// they grew since `seen`; `Some(ok)` for [`Report::Exit`].
 pub fn report(r: Report, unit: &str, seen: &mut crate::counters::Overruns) -> Option<bool> {
@@ -385,6 +319,11 @@ pub fn report(r: Report, unit: &str, seen: &mut crate::counters::Overruns) -> Op
             None
         }
         Report::Exit(ok) => Some(ok),
+        Report::Link(crate::instrument::link::LinkEvent::Rejected { error, .. }) => {
+            defmt::warn!("rejected error={=str}", error.message());
+            None
+        }
+        Report::Link(_) => None,
     };
     overruns_if_grew(seen);
     if let Some(ok) = exit {

@@ -10,7 +10,7 @@
 
 use crate::boot::BootError;
 use crate::engine::sweep::SweepPoint;
-use crate::engine::{PointPlan, PointRaw, PIPELINE_BATCHES};
+use crate::engine::{PointPlan, PointRaw};
 use crate::hal::FrontEndScale;
 use crate::instrument::command::Command;
 use crate::instrument::session::{Event, Io, Session};
@@ -63,6 +63,10 @@ pub trait Link {
     /// A session event for the report task, waiting for room (the report task ends only with
     /// the image: a closed channel is not an error).
     async fn report(&mut self, e: Event);
+    /// A request was served (`ok` as the session returned), after every event it caused: the
+    /// host link's reply to it follows them ([`crate::instrument::link::LinkEvent::Served`]),
+    /// waiting for room. Links without a host link do nothing.
+    async fn served(&mut self, _ok: bool) {}
     /// The health counters for the report task, waiting for room.
     async fn counters(&mut self);
     /// A session event for the report task if it has room now; false when it was dropped.
@@ -144,6 +148,7 @@ impl<'a, L: Link, F: NorFlash> FwIo<'a, L, F> {
             };
             self.promise(watchdog::before(&req, session.references()));
             let ok = session.handle(req, self).await;
+            self.link.served(ok).await;
             self.link.done(ok);
         }
     }
@@ -152,10 +157,6 @@ impl<'a, L: Link, F: NorFlash> FwIo<'a, L, F> {
 impl<L: Link, F: NorFlash> PointSource for FwIo<'_, L, F> {
     fn scale(&self) -> FrontEndScale {
         self.scale
-    }
-    /// The interrupt's double buffer: a plan applies from the batch after the one playing.
-    fn latency_batches(&self) -> usize {
-        PIPELINE_BATCHES
     }
     fn now_sample(&self) -> u64 {
         self.link.now_sample()

@@ -5,6 +5,7 @@
 
 pub mod command;
 pub mod continuous;
+pub mod link;
 #[cfg(feature = "defmt")]
 pub mod log;
 pub mod measure;

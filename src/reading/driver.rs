@@ -19,8 +19,13 @@ use crate::units::{DacCode, Seconds};
 pub trait PointSource {
     /// The converters' scale (sample rate, volts and amps per code).
     fn scale(&self) -> FrontEndScale;
-    /// Batches between a DAC batch and the ADC batch that sees it.
-    fn latency_batches(&self) -> usize;
+    /// Batches between a DAC batch and the ADC batch that sees it. The default is every
+    /// board's pipeline, [`PIPELINE_BATCHES`](crate::engine::PIPELINE_BATCHES) (the DAC's two
+    /// half-buffers); a source over a [`SampleStream`] of its own latency (a test stream) gives
+    /// the stream's.
+    fn latency_batches(&self) -> usize {
+        crate::engine::PIPELINE_BATCHES
+    }
     /// The engine's sample count now (the reading's time base).
     fn now_sample(&self) -> u64;
     /// Hand `plan` to the engine; false when the engine can no longer be reached.
@@ -108,18 +113,6 @@ pub trait Plans {
     fn is_complete(&self) -> bool;
 }
 
-impl<M: Measurement> Plans for M {
-    fn next_plan(&mut self) -> Option<PointPlan> {
-        Measurement::next_plan(self)
-    }
-    fn accept(&mut self, raw: &PointRaw) -> Option<SweepPoint> {
-        Measurement::accept(self, raw)
-    }
-    fn is_complete(&self) -> bool {
-        Measurement::is_complete(self)
-    }
-}
-
 /// The plan loop under the one stall rule: `m`'s plans handed to `src` one by one, every
 /// window of a plan waited for within [`window_budget_samples`], each accepted by `m`; the
 /// admittance points go to `on_point` and to the source's own sink ([`PointSource::point`]).
@@ -202,7 +195,8 @@ pub fn block_on<F: core::future::Future>(f: F) -> F::Output {
 }
 
 /// A source that runs the engine batch by batch itself ([`SyncSource`], the QEMU cost image's):
-/// its [`PointSource::next`] is [`next_window`](Self::next_window).
+/// its [`PointSource::next`] is [`next_window`](Self::next_window), its [`PointSource::idle`]
+/// the engine stopped and then [`pass`](Self::pass).
 pub trait BatchSource {
     /// One batch of the engine against the stream: the windows it closed, `Ok(None)` while the
     /// stream's pipeline is still filling, an error when the stream failed.
@@ -235,6 +229,46 @@ pub trait BatchSource {
         }
         None
     }
+
+    /// Let `samples` of the engine's samples pass, one batch after another (an error ends the
+    /// wait); a window kept in [`held`](Self::held) is dropped once a batch has played.
+    fn pass(&mut self, samples: u64) {
+        let mut done = 0u64;
+        while done < samples {
+            let Ok(played) = self.batch() else {
+                return;
+            };
+            done += BATCH as u64;
+            if played.is_some() {
+                *self.held() = None;
+            }
+        }
+    }
+}
+
+/// The [`PointSource`] methods of a [`BatchSource`] whose [`SampleEngine`] is its field
+/// `$engine`, expanded inside its `impl PointSource`: `next` is the window wait
+/// ([`BatchSource::next_window`]), `stop` stops the engine, `idle` stops it and lets the
+/// samples [`pass`](BatchSource::pass). The host's [`SyncSource`] and the QEMU cost image's
+/// source use it.
+#[macro_export]
+macro_rules! batch_source_waits {
+    ($engine:ident) => {
+        async fn next(
+            &mut self,
+            wanted: &$crate::reading::driver::Wanted,
+            budget: u64,
+        ) -> Option<$crate::engine::PointRaw> {
+            $crate::reading::driver::BatchSource::next_window(self, wanted, budget)
+        }
+        async fn stop(&mut self) {
+            self.$engine.stop();
+        }
+        async fn idle(&mut self, samples: u64) {
+            self.$engine.stop();
+            $crate::reading::driver::BatchSource::pass(self, samples);
+        }
+    };
 }
 
 /// A [`PointSource`] that runs the engine and a [`SampleStream`] in one loop: batch by batch,
@@ -314,25 +348,7 @@ impl<S: SampleStream + ForceSource> PointSource for SyncSource<'_, S> {
         self.engine.load(plan);
         self.error.is_none()
     }
-    async fn next(&mut self, wanted: &Wanted, budget: u64) -> Option<PointRaw> {
-        self.next_window(wanted, budget)
-    }
-    async fn stop(&mut self) {
-        self.engine.stop();
-    }
-    async fn idle(&mut self, samples: u64) {
-        self.engine.stop();
-        let mut done = 0u64;
-        while done < samples {
-            let Ok(played) = self.batch() else {
-                return;
-            };
-            done += BATCH as u64;
-            if played.is_some() {
-                self.held = None;
-            }
-        }
-    }
+    crate::batch_source_waits!(engine);
     fn contact_force(&mut self, from: u64, to: u64) -> Option<RawForce> {
         self.stream.contact_force(from, to)
     }

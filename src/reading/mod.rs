@@ -18,6 +18,7 @@ use crate::estimate::staged::{Staged, StagedSettings};
 use crate::estimate::{self, Estimate, Resonance};
 use crate::hal::FrontEndScale;
 use crate::loadcell::RawForce;
+use crate::reading::driver::Plans;
 use crate::reading::pipeline::conclude;
 use crate::status::{Failure, Status};
 use crate::unit::profile::{Reference, UnitProfile};
@@ -497,21 +498,15 @@ impl SweepMeasurement {
     }
 }
 
-/// Anything that asks the sample engine for points and ends in a reading.
-pub trait Measurement {
-    /// The next point to ask for, or `None` (done, or waiting for the point in flight).
-    fn next_plan(&mut self) -> Option<PointPlan>;
-    /// Take a finished point; returns it in physical units when it is an admittance point.
-    fn accept(&mut self, raw: &PointRaw) -> Option<SweepPoint>;
-    /// True when no more points are needed.
-    fn is_complete(&self) -> bool;
+/// Anything that asks the sample engine for points (its [`Plans`]) and ends in a reading.
+pub trait Measurement: Plans {
     /// The reading, through the one [`pipeline`](crate::reading::pipeline) with the unit's profile and
     /// the load cell's counts over the reading's window (`None`: no load cell, or it was
     /// silent).
     fn finish(&self, unit: &UnitProfile, force: Option<RawForce>) -> Reading;
 }
 
-impl Measurement for SweepMeasurement {
+impl Plans for SweepMeasurement {
     fn next_plan(&mut self) -> Option<PointPlan> {
         SweepMeasurement::next_plan(self)
     }
@@ -521,6 +516,9 @@ impl Measurement for SweepMeasurement {
     fn is_complete(&self) -> bool {
         SweepMeasurement::is_complete(self)
     }
+}
+
+impl Measurement for SweepMeasurement {
     fn finish(&self, unit: &UnitProfile, force: Option<RawForce>) -> Reading {
         SweepMeasurement::finish(self, unit, force)
     }
@@ -651,7 +649,7 @@ impl Procedure {
     }
 }
 
-impl Measurement for Procedure {
+impl Plans for Procedure {
     fn next_plan(&mut self) -> Option<PointPlan> {
         match &mut self.inner {
             Inner::Sweep(m) => m.next_plan(),
@@ -746,7 +744,9 @@ impl Measurement for Procedure {
             }
         }
     }
+}
 
+impl Measurement for Procedure {
     fn finish(&self, unit: &UnitProfile, force: Option<RawForce>) -> Reading {
         let t = self.probe_time();
         let (method, est, points) = match &self.inner {

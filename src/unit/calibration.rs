@@ -48,6 +48,13 @@ pub enum Source {
 }
 
 impl Source {
+    /// Every source, in declaration order.
+    pub const ALL: [Source; 3] = [
+        Source::PaperSimulation,
+        Source::PaperExperiment,
+        Source::Fitted,
+    ];
+
     /// Stable name (`paper-simulation`, `paper-experiment`, `fitted`).
     pub const fn name(self) -> &'static str {
         match self {
@@ -55,6 +62,42 @@ impl Source {
             Source::PaperExperiment => "paper-experiment",
             Source::Fitted => "fitted",
         }
+    }
+
+    /// The source of [`name`](Self::name) `s`.
+    pub fn from_name(s: &str) -> Option<Source> {
+        Self::ALL.into_iter().find(|x| x.name() == s)
+    }
+}
+
+/// A source is written as its [`name`](Source::name).
+#[cfg(feature = "serde")]
+impl serde::Serialize for Source {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
+/// A source is read from its [`name`](Source::name); any other string is an error that names
+/// it: ``unknown calibration source `…` ``.
+#[cfg(feature = "serde")]
+impl<'de> serde::Deserialize<'de> for Source {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Name;
+        impl serde::de::Visitor<'_> for Name {
+            type Value = Source;
+            fn expecting(&self, f: &mut core::fmt::Formatter) -> core::fmt::Result {
+                f.write_str("a calibration source: paper-simulation, paper-experiment or fitted")
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Source, E> {
+                Source::from_name(v).ok_or_else(|| {
+                    E::custom(format_args!(
+                        "unknown calibration source `{v}` (paper-simulation, paper-experiment or fitted)"
+                    ))
+                })
+            }
+        }
+        d.deserialize_str(Name)
     }
 }
 
@@ -74,9 +117,12 @@ pub struct RefPoint {
     pub force_n: f64,
 }
 
-/// The calibration curve `f = a + b E^c` with its parameter covariance and valid span.
+/// The calibration curve `f = a + b E^c` with its parameter covariance and valid span. With the
+/// `serde` feature it is (de)serialized as its fields by these names, `source` by its name (the
+/// `calibration` object of probe-bench's profile files).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct PowerLaw {
     /// Asymptote `a` in Hz (resonance on infinitely stiff tissue).
     pub a: f64,
@@ -727,6 +773,14 @@ mod tests {
         assert!((m.value.0 / 151.8 - 1.0).abs() < 0.015, "{}", m.value.0);
         let m = p.invert(Hz(223.5), Hz(0.0)).unwrap();
         assert!((m.value.0 / 246.3 - 1.0).abs() < 0.015, "{}", m.value.0);
+    }
+
+    #[test]
+    fn source_names_round_trip() {
+        for s in Source::ALL {
+            assert_eq!(Source::from_name(s.name()), Some(s));
+        }
+        assert_eq!(Source::from_name("measured"), None);
     }
 
     #[test]

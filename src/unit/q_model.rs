@@ -4,9 +4,12 @@
 /// The unit's quality factor against modulus on the reference phantoms, `Q ≈ q0 + q1 ln E`:
 /// the contact condition the calibration holds for. A reading whose Q strays from it by more
 /// than [`QModel::TOLERANCE`] was not taken in that condition (a different preload changes the
-/// contact area and with it the tissue damping) and its modulus cannot be trusted.
+/// contact area and with it the tissue damping) and its modulus cannot be trusted. With the
+/// `serde` feature it is (de)serialized as its fields by these names, `q2` and `sigma_rel` 0
+/// when absent (the `q_model` object of probe-bench's profile files).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct QModel {
     /// Intercept.
     pub q0: f64,
@@ -14,10 +17,12 @@ pub struct QModel {
     pub q1: f64,
     /// Slope per unit of `ln(F / N)` of the contact force (0 when the references were read at
     /// one force, or without a load cell).
+    #[cfg_attr(feature = "serde", serde(default))]
     pub q2: f64,
     /// Relative scatter of the references' Q about the curve (the RMS of `Q/Q_model − 1` with
     /// the fitted terms' degrees of freedom taken off): how well the curve predicts the Q of
     /// a contact like the calibration's, the floor of a reading's loss uncertainty.
+    #[cfg_attr(feature = "serde", serde(default))]
     pub sigma_rel: f64,
 }
 

@@ -3,12 +3,19 @@
 
 use super::progress;
 use crate::accuracy::{binomial_sd, measure, work_units, Budget, Options};
-use crate::plot::{self, draw_legend, err, padded_range, with_backend, PALETTE};
+use crate::plot::{self, draw_legend, draw_to, err, padded_range, Area, Backend, PALETTE};
 use anyhow::Result;
 use clap::Args;
 use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::path::PathBuf;
+
+/// The frame of both charts, px.
+const FRAME: plot::Frame = plot::Frame {
+    margin: 12,
+    x_labels: 40,
+    y_labels: 60,
+};
 
 #[derive(Args)]
 pub struct AccuracyArgs {
@@ -37,19 +44,9 @@ pub fn run(a: AccuracyArgs) -> Result<()> {
     std::fs::write(a.out_dir.join("accuracy.csv"), csv(&b))?;
     for ext in ["svg", "png"] {
         let path = a.out_dir.join(format!("accuracy.{ext}"));
-        with_backend(
-            &path,
-            (900, 560),
-            |root: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>| draw(root, &b),
-            |root: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>| draw(root, &b),
-        )?;
+        draw_to!(&path, (900, 560), |root| draw(root, &b))?;
         let path = a.out_dir.join(format!("accuracy-loss.{ext}"));
-        with_backend(
-            &path,
-            (900, 480),
-            |root: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>| draw_loss(root, &b),
-            |root: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>| draw_loss(root, &b),
-        )?;
+        draw_to!(&path, (900, 480), |root| draw_loss(root, &b))?;
     }
     let md = markdown(&b, &a);
     print!("{md}");
@@ -371,13 +368,7 @@ fn pct(k: usize, n: usize) -> String {
 
 /// The lossy-tissue set: the modulus's RMS error (%) and the loss tangent's RMS error and
 /// reported σ (in hundredths) against the tissue's loss tangent.
-fn draw_loss<DB: DrawingBackend>(
-    root: &DrawingArea<DB, plotters::coord::Shift>,
-    b: &Budget,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
+fn draw_loss<DB: Backend>(root: &Area<DB>, b: &Budget) -> Result<()> {
     root.fill(&WHITE).map_err(err)?;
     let rows = &b.loss;
     let xmax = rows.iter().map(|r| r.tan_d).fold(0.1, f64::max);
@@ -404,11 +395,7 @@ where
     let mut chart = plot::chart(
         root,
         Some((&caption, 15)),
-        plot::Frame {
-            margin: 12,
-            x_labels: 40,
-            y_labels: 60,
-        },
+        FRAME,
         (0.0..xmax * 1.05, 0.0..ymax),
         ("the tissue's loss tangent tan δ", "RMS error"),
     )
@@ -435,13 +422,7 @@ where
     Ok(())
 }
 
-fn draw<DB: DrawingBackend>(
-    root: &DrawingArea<DB, plotters::coord::Shift>,
-    b: &Budget,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
+fn draw<DB: Backend>(root: &Area<DB>, b: &Budget) -> Result<()> {
     root.fill(&WHITE).map_err(err)?;
     let pts = &b.coverage.points;
     let smax = padded_range(pts.iter().map(|p| p.3), 0.05, (0.0, 1.0)).1;
@@ -459,11 +440,7 @@ where
     let mut chart = plot::chart(
         root,
         Some((&caption, 16)),
-        plot::Frame {
-            margin: 12,
-            x_labels: 40,
-            y_labels: 60,
-        },
+        FRAME,
         (0.0..smax, -emax..emax),
         ("reported σ, % of the reading", "error against the truth, %"),
     )

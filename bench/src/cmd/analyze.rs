@@ -2,6 +2,7 @@
 //! firmware's own estimator and calibration.
 #![allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > y)` also rejects NaN, deliberately
 
+use super::{CalibrationArgs, OutputArgs};
 use crate::calfile;
 use crate::capture::{self, Capture, CaptureError, DemodOptions, Layout, SweepShape};
 use crate::{plot, report};
@@ -33,24 +34,13 @@ pub struct AnalyzeArgs {
     /// drive while measuring (hold) are refused.
     #[arg(long, default_value = "auto")]
     pub method: String,
-    /// Calibration curve from resonance (Hz) to modulus (kPa): `paper-experiment` (paper 003
-    /// eq. 5), `paper-simulation` (eq. 4), `unit` (the profile's own curve; without
-    /// `--profile` the simulated unit's), or a profile file. Without `--profile` only the curve
-    /// is used (no Q model, no air reference). Default: with `--profile`, `paper-experiment`;
-    /// without, none — the reading is the capture's resonance and Q, no modulus.
-    #[arg(long)]
-    pub calibration: Option<String>,
-    /// Unit profile of the probe that made the capture (`probe-bench calibrate --out`): its
-    /// air reference and contact condition check the reading. Without it no check that needs
-    /// a probe's unit data is applied.
-    #[arg(long)]
-    pub profile: Option<PathBuf>,
-    /// Print one JSON object instead of the report.
-    #[arg(long)]
-    pub json: bool,
-    /// Plot the admittance with the estimate marked (.svg or .png).
-    #[arg(long)]
-    pub plot: Option<PathBuf>,
+    /// The calibration and the probe's unit profile.
+    #[command(flatten)]
+    pub cal: CalibrationArgs,
+    /// JSON (one object: the capture, the estimate, the reading) and the plot (the admittance
+    /// with the estimate marked).
+    #[command(flatten)]
+    pub out: OutputArgs,
     /// Time-domain stepped sweeps: settling time discarded at the start of each step, s
     /// (default: the first half of each step).
     #[arg(long)]
@@ -602,7 +592,11 @@ pub fn analysis_json(a: &Analysis, file: &str) -> Value {
 /// Run the subcommand.
 pub fn run(a: AnalyzeArgs) -> Result<()> {
     let method = offline_method(&a.method)?;
-    let unit = profile(a.profile.as_deref(), a.calibration.as_deref(), method)?;
+    let unit = profile(
+        a.cal.profile.as_deref(),
+        a.cal.calibration.as_deref(),
+        method,
+    )?;
     if a.cycles_per_window == 0 || a.cycles_per_window > 1000 {
         bail!("--cycles-per-window must be 1 to 1000");
     }
@@ -629,7 +623,7 @@ pub fn run(a: AnalyzeArgs) -> Result<()> {
     )
     .map_err(|e| anyhow::anyhow!("{}: {e}", a.file.display()))?;
     let c = &an.capture;
-    if a.json {
+    if a.out.json {
         println!("{}", analysis_json(&an, &a.file.display().to_string()));
     } else {
         println!(
@@ -694,7 +688,7 @@ pub fn run(a: AnalyzeArgs) -> Result<()> {
         }
         println!("{}", report::reading_line(&an.reading));
     }
-    if let Some(path) = &a.plot {
+    a.out.plot_with(|path| {
         let title = format!(
             "{} — {} ({})",
             a.file
@@ -707,10 +701,6 @@ pub fn run(a: AnalyzeArgs) -> Result<()> {
                 Status::Failed(f) => f.code().to_owned(),
             }
         );
-        plot::sweep_svg(path, &title, &c.points, an.reading.resonance.map(|f| f.0))?;
-        if !a.json {
-            println!("  plot: {}", path.display());
-        }
-    }
-    Ok(())
+        plot::sweep_svg(path, &title, &c.points, an.reading.resonance.map(|f| f.0))
+    })
 }

@@ -1,7 +1,7 @@
 //! `probe-bench log`: the readings and sweeps in a decoded defmt log of the firmware.
 
 use crate::defmt_log::{self, Level, LoggedReading, Session};
-use crate::plot::{self, draw_legend, err, padded_range, with_backend, PALETTE};
+use crate::plot::{self, draw_legend, draw_to, err, padded_range, Area, Backend, PALETTE};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use plotters::prelude::*;
@@ -21,13 +21,11 @@ pub struct LogArgs {
     /// Decoded defmt log (from `probe-rs run`, `defmt-print`, `scripts/qemu-run` or a saved
     /// file); `-` or nothing reads stdin.
     pub file: Option<PathBuf>,
-    /// Plot the logged admittance sweeps (conductance in nS against Hz) and the reading history
-    /// (resonance in Hz with its standard uncertainty) to .svg or .png.
-    #[arg(long)]
-    pub plot: Option<PathBuf>,
-    /// Print one JSON object (readings, sweeps, events) instead of the table.
-    #[arg(long)]
-    pub json: bool,
+    /// JSON (one object: readings, streams, sweeps, events) and the plot (the logged admittance
+    /// sweeps, conductance in nS against Hz, and the reading history, resonance in Hz with its
+    /// standard uncertainty).
+    #[command(flatten)]
+    pub out: super::OutputArgs,
 }
 
 fn fmt_opt(v: Option<f32>, digits: usize) -> String {
@@ -226,7 +224,7 @@ pub fn run(a: LogArgs) -> Result<()> {
     for e in &s.errors {
         eprintln!("probe-bench log: {name}: skipped {e}");
     }
-    if a.json {
+    if a.out.json {
         println!("{}", session_json(&s));
     } else {
         println!(
@@ -260,16 +258,12 @@ pub fn run(a: LogArgs) -> Result<()> {
             }
         }
     }
-    if let Some(path) = &a.plot {
+    a.out.plot_with(|path| {
         if s.sweeps.is_empty() && s.readings.is_empty() {
             bail!("{name}: nothing to plot (no sweeps or readings in the log)");
         }
-        write_plot(path, &name, &s)?;
-        if !a.json {
-            println!("  plot: {}", path.display());
-        }
-    }
-    Ok(())
+        write_plot(path, &name, &s)
+    })
 }
 
 fn read_stdin() -> Result<String> {
@@ -282,22 +276,10 @@ fn read_stdin() -> Result<String> {
 
 /// Sweeps (top) and reading history (bottom) to .svg or .png.
 pub fn write_plot(path: &Path, title: &str, s: &Session) -> Result<()> {
-    with_backend(
-        path,
-        (960, 900),
-        |root| draw(root, title, s),
-        |root| draw(root, title, s),
-    )
+    draw_to!(path, (960, 900), |root| draw(root, title, s))
 }
 
-fn draw<DB: DrawingBackend>(
-    root: &DrawingArea<DB, plotters::coord::Shift>,
-    title: &str,
-    s: &Session,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
+fn draw<DB: Backend>(root: &Area<DB>, title: &str, s: &Session) -> Result<()> {
     root.fill(&WHITE).map_err(err)?;
     let root = root
         .titled(&format!("defmt log: {title}"), ("sans-serif", 20))

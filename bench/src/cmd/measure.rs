@@ -1,6 +1,6 @@
 //! `probe-bench measure`: one or more readings on the simulated probe.
 
-use super::{progress, MethodArgs};
+use super::{progress, MethodArgs, OutputArgs};
 use crate::calfile;
 use crate::scene::{parse_noise, print_scene_header, SceneArgs};
 use crate::{plot, report};
@@ -34,12 +34,9 @@ pub struct MeasureArgs {
     /// `paper-simulation` (eq. 4) in place of the profile's curve.
     #[arg(long, default_value = "unit")]
     pub calibration: String,
-    /// Print one JSON object per reading instead of the bench log.
-    #[arg(long)]
-    pub json: bool,
-    /// Write an SVG plot of the (first) admittance sweep with the estimate marked.
-    #[arg(long)]
-    pub plot: Option<PathBuf>,
+    /// JSON and the plot (the first reading's admittance sweep).
+    #[command(flatten)]
+    pub out: OutputArgs,
     /// Take the readings with the firmware image in QEMU on the same scene (the scene, noise,
     /// seed, method and settings go to the image as its command script; the image reads with
     /// its factory profile, `src/board/sim_factory.rs`). Needs qemu-system-arm, defmt-print
@@ -80,7 +77,7 @@ pub fn run(a: MeasureArgs) -> Result<()> {
     let unit = calfile::resolve(a.profile.as_deref(), &a.calibration, || {
         crate::unit::default_for(method)
     })?;
-    if !a.json {
+    if !a.out.json {
         print_scene_header("measure", &target, a.scene.preload_n, noise, &scene);
         println!(
             "  simulator ground truth: resonance {:.3} Hz, Q {:.2}",
@@ -104,7 +101,7 @@ pub fn run(a: MeasureArgs) -> Result<()> {
             describe_settings(&settings)
         );
     }
-    let pb = (a.repeat > 1 && !a.json).then(|| progress(a.repeat as u64, "measuring"));
+    let pb = (a.repeat > 1 && !a.out.json).then(|| progress(a.repeat as u64, "measuring"));
     let mut moduli = Vec::new();
     let mut first_points: Vec<SweepPoint> = Vec::new();
     let mut first_resonance = None;
@@ -120,7 +117,7 @@ pub fn run(a: MeasureArgs) -> Result<()> {
             first_points = pts;
             first_resonance = reading.resonance.map(|f| f.0);
         }
-        if a.json {
+        if a.out.json {
             println!("{}", report::reading_json(&reading));
         } else if a.repeat == 1 {
             println!("{}", report::reading_line(&reading));
@@ -135,7 +132,7 @@ pub fn run(a: MeasureArgs) -> Result<()> {
     if let Some(pb) = pb {
         pb.finish_and_clear();
     }
-    if a.repeat > 1 && !a.json {
+    if a.repeat > 1 && !a.out.json {
         let n = moduli.len();
         println!("  {n} of {} readings ok", a.repeat);
         if n >= 2 {
@@ -149,14 +146,10 @@ pub fn run(a: MeasureArgs) -> Result<()> {
             println!();
         }
     }
-    if let Some(path) = &a.plot {
+    a.out.plot_with(|path| {
         let title = format!("{} — {}", target.describe(), method.name());
-        plot::sweep_svg(path, &title, &first_points, first_resonance)?;
-        if !a.json {
-            println!("  plot: {}", path.display());
-        }
-    }
-    Ok(())
+        plot::sweep_svg(path, &title, &first_points, first_resonance)
+    })
 }
 
 /// One line describing a method's settings.

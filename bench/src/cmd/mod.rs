@@ -3,6 +3,7 @@
 pub mod accuracy;
 pub mod analyze;
 pub mod calibrate;
+pub mod connect;
 pub mod generate;
 pub mod log;
 pub mod measure;
@@ -20,6 +21,56 @@ use indicatif::{ProgressBar, ProgressStyle};
 use pzt_probe::engine::sweep::SweepSettings;
 use pzt_probe::reading::Settings;
 use pzt_probe::{Hz, Method, Seconds, Volts};
+use std::path::{Path, PathBuf};
+
+/// The output options of the commands that report a result (`measure`, `stream`, `analyze`,
+/// `log`): JSON for a program in place of the report for a person, and a plot.
+#[derive(Args, Clone, Debug, Default)]
+pub struct OutputArgs {
+    /// Print JSON on stdout instead of the report (one object per reading for measure and
+    /// stream, one object for analyze and log), nothing else.
+    #[arg(long)]
+    pub json: bool,
+    /// Write the command's plot to this file (SVG, or PNG when it ends in `.png`): measure and
+    /// analyze the admittance sweep with the estimate marked, stream modulus and lock against
+    /// time, log the logged sweeps and the reading history.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+}
+
+impl OutputArgs {
+    /// With `--plot`: `draw` the plot to its file, then name the file in the report (not in
+    /// JSON).
+    pub fn plot_with(&self, draw: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+        if let Some(path) = &self.plot {
+            draw(path)?;
+            if !self.json {
+                println!("  plot: {}", path.display());
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The calibration a command reads with, where it is chosen by options that default in the
+/// command (`scan`, `analyze`): a built-in curve or a unit profile file.
+#[derive(Args, Clone, Debug, Default)]
+pub struct CalibrationArgs {
+    /// Calibration curve from resonance (Hz) to modulus (kPa): `paper-experiment` (paper 003
+    /// eq. 5), `paper-simulation` (eq. 4), `unit` (the profile's own curve; without `--profile`
+    /// the simulated unit's), or a profile file. Default: scan `paper-experiment`, and `unit` on
+    /// lossy tissue, whose loss tangent is read through the unit's contact law, which the
+    /// papers' curves do not have; analyze with `--profile` `paper-experiment`, without it none
+    /// (the reading is the capture's resonance and Q, no modulus; the curve alone: no Q model,
+    /// no air reference).
+    #[arg(long)]
+    pub calibration: Option<String>,
+    /// Unit profile file (`probe-bench calibrate --out`): calibration, Q model, air reference.
+    /// Default: scan the simulated unit's; analyze none, so no check that needs a probe's unit
+    /// data (its air reference and contact condition) is applied.
+    #[arg(long)]
+    pub profile: Option<PathBuf>,
+}
 
 #[derive(Args, Clone)]
 pub struct MethodArgs {

@@ -2,11 +2,11 @@
 
 use super::progress;
 use crate::pareto::{
-    calibrate, configs, crb_pct, evaluate, evaluate_stream, scene_tau_ms, steady_crb_pct,
-    stream_unit, tau_ms, Cell, Config, StreamCell, STREAM_SECONDS, STREAM_SEGMENTS_S,
-    STREAM_SETTLE_S,
+    calibrate, configs, crb_pct, evaluate, evaluate_on, evaluate_stream, scene_crb_pct,
+    scene_tau_ms, steady_crb_pct, stream_unit, tau_ms, Cell, Config, StreamCell, STREAM_SECONDS,
+    STREAM_SEGMENTS_S, STREAM_SETTLE_S,
 };
-use crate::plot::{self, draw_legend, err, with_backend, PALETTE};
+use crate::plot::{self, draw_legend, draw_to, err, Area, Backend, PALETTE};
 use crate::scene::Target;
 use anyhow::{anyhow, Result};
 use clap::Args;
@@ -20,6 +20,16 @@ use std::sync::Mutex;
 
 /// Moduli of the study, kPa.
 pub const MODULI: [f64; 5] = [150.0, 300.0, 500.0, 1000.0, 2500.0];
+
+/// Loss tangent of the study's lossy scene.
+pub const LOSSY_TAN_D: f64 = 0.3;
+
+/// The study's lossy scene, noise-free: phantom C's modulus (414 kPa, the tracker's scene)
+/// with the loss tangent [`LOSSY_TAN_D`] (the carcinoma-like tissue's), and its modulus, kPa.
+pub fn lossy_scene() -> (Scene, f64) {
+    let e = phantoms::C.modulus_kpa;
+    (Scene::on_modulus_kpa(e).with_loss_tangent(LOSSY_TAN_D), e)
+}
 
 #[derive(Args)]
 pub struct ParetoArgs {
@@ -122,6 +132,13 @@ struct Row {
     crb: f64,
 }
 
+/// One config on the lossy scene ([`lossy_scene`], bench noise).
+struct LossyRow {
+    c: usize,
+    cell: Cell,
+    crb: f64,
+}
+
 /// The continuous tracker at one segment length on one scene.
 struct StreamRow {
     noise: NoiseScene,
@@ -186,11 +203,12 @@ pub fn run(a: ParetoArgs) -> Result<()> {
     }
     let cfgs = configs();
     let noises = [NoiseScene::Bench, NoiseScene::Paper];
-    let total = cfgs.len() * noises.len() * (1 + MODULI.len());
+    let total = cfgs.len() * (noises.len() * (1 + MODULI.len()) + 1);
     let pb = progress(total as u64, "pareto");
     let per_config = par_map(&cfgs, |c| {
         let mut rows = Vec::new();
         let mut bench_cal = None;
+        let mut lossy = None;
         for noise in noises {
             let cal = calibrate(c, a.cal_repeats, noise);
             pb.inc(1);
@@ -206,15 +224,28 @@ pub fn run(a: ParetoArgs) -> Result<()> {
                 pb.inc(1);
             }
             if noise == NoiseScene::Bench {
+                let (scene, e) = lossy_scene();
+                let cell = evaluate_on(c, &cal, &scene, e, noise, a.seeds, 70_000);
+                let noisy = scene.with_noise(noise);
+                let crb = scene_crb_pct(&cal.calibration, &noisy, e, 5.0, cell.time_ms * 1e-3);
+                lossy = Some((cell, crb));
+                pb.inc(1);
                 bench_cal = Some(cal);
             }
         }
-        (rows, bench_cal)
+        if lossy.is_none() {
+            pb.inc(1);
+        }
+        (rows, bench_cal, lossy)
     });
     pb.finish_and_clear();
     let mut rows = Vec::new();
+    let mut lossy_rows = Vec::new();
     let mut cals: Vec<Option<UnitProfile>> = Vec::new();
-    for (i, (r, cal)) in per_config.into_iter().enumerate() {
+    for (i, (r, cal, lossy)) in per_config.into_iter().enumerate() {
+        if let Some((cell, crb)) = lossy {
+            lossy_rows.push(LossyRow { c: i, cell, crb });
+        }
         rows.extend(r.into_iter().map(|(noise, e, cell, crb)| Row {
             c: i,
             noise,
@@ -229,7 +260,7 @@ pub fn run(a: ParetoArgs) -> Result<()> {
     });
     let streams = stream_study(a.stream_seeds)?;
     std::fs::create_dir_all(&a.out_dir)?;
-    write_csv(&a, &cfgs, &rows, &streams)?;
+    write_csv(&a, &cfgs, &rows, &lossy_rows, &streams)?;
     for noise in noises {
         let suffix = if noise == NoiseScene::Bench {
             ""
@@ -238,10 +269,11 @@ pub fn run(a: ParetoArgs) -> Result<()> {
         };
         for ext in ["svg", "png"] {
             let path = a.out_dir.join(format!("speed-accuracy{suffix}.{ext}"));
-            chart(&path, &cfgs, &rows, &cals, &streams, noise)?;
+            chart(&path, &cfgs, &rows, &lossy_rows, &cals, &streams, noise)?;
         }
     }
     let mut md = summary(&cfgs, &rows, &cals);
+    md.push_str(&lossy_summary(&cfgs, &lossy_rows));
     md.push_str(&stream_summary(&streams, a.stream_seeds));
     std::fs::write(a.out_dir.join("speed-accuracy.md"), &md)?;
     print!("{md}");
@@ -306,10 +338,18 @@ fn stream_study(seeds: usize) -> Result<Vec<StreamRow>> {
     Ok(rows)
 }
 
-fn write_csv(a: &ParetoArgs, cfgs: &[Config], rows: &[Row], streams: &[StreamRow]) -> Result<()> {
+fn write_csv(
+    a: &ParetoArgs,
+    cfgs: &[Config],
+    rows: &[Row],
+    lossy: &[LossyRow],
+    streams: &[StreamRow],
+) -> Result<()> {
     let mut s = String::from(
-        "method,knobs,noise,modulus_kpa,readings,ok,probe_time_ms,tau_ms,rms_err_pct,bias_pct,sd_pct,reported_sigma_pct,reported_repeat_pct,within5,within10,within3sigma,crb_pct,noise_rms_pct,quiet_err_pct,ok_per_s\n",
+        "method,knobs,noise,modulus_kpa,readings,ok,probe_time_ms,tau_ms,rms_err_pct,bias_pct,sd_pct,reported_sigma_pct,reported_repeat_pct,within5,within10,within3sigma,crb_pct,noise_rms_pct,quiet_err_pct,ok_per_s,tissue_loss_tangent,loss_rms_err,loss_sigma_rms\n",
     );
+    let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.4}"));
+    #[allow(clippy::too_many_arguments)]
     let mut line = |method: &str,
                     knobs: String,
                     noise,
@@ -317,10 +357,11 @@ fn write_csv(a: &ParetoArgs, cfgs: &[Config], rows: &[Row], streams: &[StreamRow
                     x: &Cell,
                     tau: f64,
                     crb: f64,
-                    rate: Option<f64>| {
+                    rate: Option<f64>,
+                    tan_d: f64| {
         writeln!(
             s,
-            "{},\"{}\",{},{},{},{},{:.2},{:.2},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{},{:.5},{:.4},{},{}",
+            "{},\"{}\",{},{},{},{},{:.2},{:.2},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{},{:.5},{:.4},{},{},{},{},{}",
             method,
             knobs,
             noise_label(noise),
@@ -340,7 +381,10 @@ fn write_csv(a: &ParetoArgs, cfgs: &[Config], rows: &[Row], streams: &[StreamRow
             crb,
             x.noise_rms_pct(),
             x.quiet_err.map_or("".to_string(), |q| format!("{:.4}", 100.0 * q)),
-            rate.map_or("".to_string(), |r| format!("{r:.2}"))
+            rate.map_or("".to_string(), |r| format!("{r:.2}")),
+            tan_d,
+            opt(x.loss_rms()),
+            opt(x.loss_sigma_rms())
         )
     };
     for r in rows {
@@ -354,6 +398,22 @@ fn write_csv(a: &ParetoArgs, cfgs: &[Config], rows: &[Row], streams: &[StreamRow
             tau_ms(r.e),
             r.crb,
             None,
+            0.0,
+        )?;
+    }
+    let (scene, e) = lossy_scene();
+    for r in lossy {
+        let c = &cfgs[r.c];
+        line(
+            c.method.name(),
+            c.label.clone(),
+            NoiseScene::Bench,
+            e,
+            &r.cell,
+            scene_tau_ms(&scene),
+            r.crb,
+            None,
+            LOSSY_TAN_D,
         )?;
     }
     // The continuous tracker: `readings` its readings after the first 0.5 s, `probe_time_ms` the
@@ -373,6 +433,7 @@ fn write_csv(a: &ParetoArgs, cfgs: &[Config], rows: &[Row], streams: &[StreamRow
             r.tau_ms(),
             r.cell.crb_pct,
             Some(r.cell.ok_per_s),
+            r.target.scene().tissue.map_or(0.0, |t| t.loss_tangent),
         )?;
     }
     std::fs::write(a.out_dir.join("speed-accuracy.csv"), s)?;
@@ -424,38 +485,194 @@ fn stream_curve(streams: &[StreamRow], noise: NoiseScene) -> Vec<(f64, f64)> {
         .collect()
 }
 
+/// One panel of the speed–accuracy chart.
+struct Panel {
+    title: String,
+    /// (config, probe time ms, RMS error from noise %, ok fraction).
+    pts: Vec<(usize, f64, f64, f64)>,
+    front: Vec<(f64, f64)>,
+    crb: Vec<(f64, f64)>,
+    tracker: Vec<(f64, f64)>,
+    steady: Vec<(f64, f64)>,
+}
+
+impl Panel {
+    /// The panel of `pts`, its Pareto front among configs with >= 95 % ok readings.
+    fn new(
+        title: String,
+        pts: Vec<(usize, f64, f64, f64)>,
+        crb: Vec<(f64, f64)>,
+        tracker: Vec<(f64, f64)>,
+        steady: Vec<(f64, f64)>,
+    ) -> Self {
+        let pts: Vec<_> = pts
+            .into_iter()
+            .filter(|p| p.2.is_finite() && p.2 > 0.0)
+            .collect();
+        let mut front: Vec<(f64, f64)> = Vec::new();
+        let mut cand: Vec<&(usize, f64, f64, f64)> = pts.iter().filter(|p| p.3 >= 0.95).collect();
+        cand.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let mut best = f64::INFINITY;
+        for p in cand {
+            if p.2 < best {
+                best = p.2;
+                front.push((p.1, p.2));
+            }
+        }
+        Self {
+            title,
+            pts,
+            front,
+            crb,
+            tracker,
+            steady,
+        }
+    }
+
+    /// The span of the errors it draws: (lowest / 2, highest × 2).
+    fn y_span(&self) -> (f64, f64) {
+        let ymin = self
+            .pts
+            .iter()
+            .map(|p| p.2)
+            .chain(self.tracker.iter().map(|c| c.1))
+            .chain(self.crb.iter().map(|c| c.1))
+            .fold(f64::INFINITY, f64::min)
+            .max(1e-4)
+            / 2.0;
+        let ymax = self.pts.iter().map(|p| p.2).fold(0.0, f64::max).max(1.0) * 2.0;
+        (ymin, ymax)
+    }
+
+    /// Draw the panel on `root`, its errors on the axis from `ymin` to `ymax`.
+    fn draw<DB: Backend>(
+        &self,
+        root: &Area<DB>,
+        cfgs: &[Config],
+        ymin: f64,
+        ymax: f64,
+    ) -> Result<()> {
+        let mut ch = plot::chart(
+            root,
+            Some((self.title.as_str(), 18)),
+            plot::Frame {
+                margin: 14,
+                x_labels: 45,
+                y_labels: 65,
+            },
+            ((10f64..50_000f64).log_scale(), (ymin..ymax).log_scale()),
+            (
+                "probe time per reading (ms)",
+                "RMS modulus error caused by noise (%)",
+            ),
+        )
+        .map_err(err)?;
+        ch.draw_series(LineSeries::new(
+            self.front.iter().copied(),
+            ShapeStyle::from(&RGBColor(170, 170, 170)).stroke_width(8),
+        ))
+        .map_err(err)?
+        .label("Pareto front")
+        .legend(|(x, y)| {
+            PathElement::new(
+                vec![(x, y), (x + 20, y)],
+                RGBColor(170, 170, 170).stroke_width(6),
+            )
+        });
+        plot::line(
+            &mut ch,
+            self.crb.iter().copied(),
+            BLACK.stroke_width(2),
+            "Cramér–Rao bound",
+        )
+        .map_err(err)?;
+        let grey = RGBColor(90, 90, 90);
+        if !self.steady.is_empty() {
+            ch.draw_series(DashedLineSeries::new(
+                self.steady.iter().copied(),
+                6,
+                4,
+                grey.stroke_width(2),
+            ))
+            .map_err(err)?
+            .label("Cramér–Rao bound, steady state (the tracker's)")
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], grey.stroke_width(1))
+            });
+        }
+        for (mi, m) in pzt_probe::Method::ALL.iter().enumerate() {
+            let col = PALETTE[mi % PALETTE.len()];
+            let mut p: Vec<&(usize, f64, f64, f64)> =
+                self.pts.iter().filter(|p| cfgs[p.0].method == *m).collect();
+            if p.is_empty() {
+                continue;
+            }
+            p.sort_by(|a, b| a.1.total_cmp(&b.1));
+            plot::line(
+                &mut ch,
+                p.iter().map(|q| (q.1, q.2)),
+                col.stroke_width(2),
+                m.name(),
+            )
+            .map_err(err)?;
+            ch.draw_series(p.iter().map(|q| {
+                let style = if q.3 >= 0.95 {
+                    col.filled()
+                } else {
+                    col.stroke_width(1)
+                };
+                Circle::new((q.1, q.2), 4, style)
+            }))
+            .map_err(err)?;
+        }
+        // The continuous tracker: one reading per segment, so its probe time per reading is the
+        // time per ok reading (1 / ok readings per second), segment lengths 35–150 ms.
+        if !self.tracker.is_empty() {
+            let col = RGBColor(200, 0, 120);
+            plot::line(
+                &mut ch,
+                self.tracker.iter().copied(),
+                col.stroke_width(3),
+                "stream (tracker): 1 / (ok readings per s)",
+            )
+            .map_err(err)?;
+            ch.draw_series(
+                self.tracker
+                    .iter()
+                    .map(|q| TriangleMarker::new(*q, 6, col.filled())),
+            )
+            .map_err(err)?;
+        }
+        draw_legend(&mut ch, SeriesLabelPosition::UpperRight, 0.85).map_err(err)?;
+        Ok(())
+    }
+}
+
+/// Probe times the bounds are drawn at, ms: 10 ms to 40 s.
+fn bound_times_ms() -> impl Iterator<Item = f64> {
+    (0..60).map(|k| 10f64.powf(1.0 + 3.6 * k as f64 / 59.0))
+}
+
 fn chart(
     path: &std::path::Path,
     cfgs: &[Config],
     rows: &[Row],
+    lossy: &[LossyRow],
     cals: &[Option<UnitProfile>],
     streams: &[StreamRow],
     noise: NoiseScene,
 ) -> Result<()> {
     let pts: Vec<(usize, f64, f64, f64)> = (0..cfgs.len())
         .filter_map(|c| aggregate(rows, c, noise).map(|(t, e, ok)| (c, t, e, ok)))
-        .filter(|p| p.2.is_finite() && p.2 > 0.0)
         .collect();
-    // Pareto front among configs with >= 95 % ok readings.
-    let mut front: Vec<(f64, f64)> = Vec::new();
-    let mut cand: Vec<&(usize, f64, f64, f64)> = pts.iter().filter(|p| p.3 >= 0.95).collect();
-    cand.sort_by(|a, b| a.1.total_cmp(&b.1));
-    let mut best = f64::INFINITY;
-    for p in cand {
-        if p.2 < best {
-            best = p.2;
-            front.push((p.1, p.2));
-        }
-    }
     // CRB line: RMS over moduli of the per-modulus bound, with a representative calibration.
     let cal = cals
         .iter()
         .flatten()
         .next()
         .map_or_else(PowerLaw::paper_experiment, |u| u.calibration);
-    let crb: Vec<(f64, f64)> = (0..60)
-        .map(|k| {
-            let t = 10f64.powf(1.0 + 3.6 * k as f64 / 59.0);
+    let crb: Vec<(f64, f64)> = bound_times_ms()
+        .map(|t| {
             let v = MODULI
                 .iter()
                 .map(|e| crb_pct(&cal, *e, noise, 5.0, t * 1e-3).powi(2))
@@ -467,9 +684,8 @@ fn chart(
     // The tracker's bound: steady state on the resonance (its drive never stops), RMS over the
     // moduli and through the same calibration as the line above.
     let tracker = stream_curve(streams, noise);
-    let steady: Vec<(f64, f64)> = (0..60)
-        .map(|k| {
-            let t = 10f64.powf(1.0 + 3.6 * k as f64 / 59.0);
+    let steady: Vec<(f64, f64)> = bound_times_ms()
+        .map(|t| {
             let v = MODULI
                 .iter()
                 .map(|e| {
@@ -481,15 +697,6 @@ fn chart(
             (t, v.sqrt())
         })
         .collect();
-    let ymin = pts
-        .iter()
-        .map(|p| p.2)
-        .chain(tracker.iter().map(|c| c.1))
-        .chain(crb.iter().map(|c| c.1))
-        .fold(f64::INFINITY, f64::min)
-        .max(1e-4)
-        / 2.0;
-    let ymax = pts.iter().map(|p| p.2).fold(0.0, f64::max).max(1.0) * 2.0;
     let title = format!(
         "speed vs accuracy, {} noise scene (RMS over {} kPa)",
         noise_label(noise),
@@ -499,126 +706,59 @@ fn chart(
             .collect::<Vec<_>>()
             .join(", ")
     );
-    with_backend(
-        path,
-        (1000, 680),
-        |root: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>| {
-            draw_chart(
-                root, &title, cfgs, &pts, &front, &crb, &tracker, &steady, ymin, ymax,
-            )
-        },
-        |root: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>| {
-            draw_chart(
-                root, &title, cfgs, &pts, &front, &crb, &tracker, &steady, ymin, ymax,
-            )
-        },
-    )
-}
-
-#[allow(clippy::too_many_arguments)]
-fn draw_chart<DB: DrawingBackend>(
-    root: &DrawingArea<DB, plotters::coord::Shift>,
-    title: &str,
-    cfgs: &[Config],
-    pts: &[(usize, f64, f64, f64)],
-    front: &[(f64, f64)],
-    crb: &[(f64, f64)],
-    tracker: &[(f64, f64)],
-    steady: &[(f64, f64)],
-    ymin: f64,
-    ymax: f64,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
-    root.fill(&WHITE).map_err(err)?;
-    let mut ch = plot::chart(
-        root,
-        Some((title, 18)),
-        plot::Frame {
-            margin: 14,
-            x_labels: 45,
-            y_labels: 65,
-        },
-        ((10f64..50_000f64).log_scale(), (ymin..ymax).log_scale()),
-        (
-            "probe time per reading (ms)",
-            "RMS modulus error caused by noise (%)",
-        ),
-    )
-    .map_err(err)?;
-    ch.draw_series(LineSeries::new(
-        front.iter().copied(),
-        ShapeStyle::from(&RGBColor(170, 170, 170)).stroke_width(8),
-    ))
-    .map_err(err)?
-    .label("Pareto front")
-    .legend(|(x, y)| {
-        PathElement::new(
-            vec![(x, y), (x + 20, y)],
-            RGBColor(170, 170, 170).stroke_width(6),
-        )
-    });
-    plot::line(
-        &mut ch,
-        crb.iter().copied(),
-        BLACK.stroke_width(2),
-        "Cramér–Rao bound",
-    )
-    .map_err(err)?;
-    let grey = RGBColor(90, 90, 90);
-    ch.draw_series(DashedLineSeries::new(
-        steady.iter().copied(),
-        6,
-        4,
-        grey.stroke_width(2),
-    ))
-    .map_err(err)?
-    .label("Cramér–Rao bound, steady state (the tracker's)")
-    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], grey.stroke_width(1)));
-    for (mi, m) in pzt_probe::Method::ALL.iter().enumerate() {
-        let col = PALETTE[mi % PALETTE.len()];
-        let mut p: Vec<&(usize, f64, f64, f64)> =
-            pts.iter().filter(|p| cfgs[p.0].method == *m).collect();
-        if p.is_empty() {
-            continue;
-        }
-        p.sort_by(|a, b| a.1.total_cmp(&b.1));
-        plot::line(
-            &mut ch,
-            p.iter().map(|q| (q.1, q.2)),
-            col.stroke_width(2),
-            m.name(),
-        )
-        .map_err(err)?;
-        ch.draw_series(p.iter().map(|q| {
-            let style = if q.3 >= 0.95 {
-                col.filled()
-            } else {
-                col.stroke_width(1)
-            };
-            Circle::new((q.1, q.2), 4, style)
-        }))
-        .map_err(err)?;
-    }
-    // The continuous tracker: one reading per segment, so its probe time per reading is the
-    // time per ok reading (1 / ok readings per second), segment lengths 35–150 ms.
-    let col = RGBColor(200, 0, 120);
-    plot::line(
-        &mut ch,
-        tracker.iter().copied(),
-        col.stroke_width(3),
-        "stream (tracker): 1 / (ok readings per s)",
-    )
-    .map_err(err)?;
-    ch.draw_series(
-        tracker
+    let mut panels = vec![Panel::new(title, pts, crb, tracker, steady)];
+    if noise == NoiseScene::Bench && !lossy.is_empty() {
+        // The lossy scene: each config at its own probe time there, the bound of that scene.
+        let (scene, e) = lossy_scene();
+        let noisy = scene.with_noise(noise);
+        let pts = lossy
             .iter()
-            .map(|q| TriangleMarker::new(*q, 6, col.filled())),
-    )
-    .map_err(err)?;
-    draw_legend(&mut ch, SeriesLabelPosition::UpperRight, 0.85).map_err(err)?;
-    Ok(())
+            .map(|r| {
+                let ok = r.cell.ok as f64 / r.cell.n.max(1) as f64;
+                let err = if r.cell.ok > 0 {
+                    r.cell.noise_rms_pct()
+                } else {
+                    f64::NAN
+                };
+                (r.c, r.cell.time_ms, err, ok)
+            })
+            .collect();
+        let crb = bound_times_ms()
+            .map(|t| (t, scene_crb_pct(&cal, &noisy, e, 5.0, t * 1e-3)))
+            .collect();
+        let title = format!(
+            "the same, lossy tissue: {e:.0} kPa (phantom C's modulus), tan d {LOSSY_TAN_D}, {} noise",
+            noise_label(noise)
+        );
+        panels.push(Panel::new(title, pts, crb, Vec::new(), Vec::new()));
+    }
+    // One error axis for every panel, so that they compare.
+    let (ymin, ymax) = panels
+        .iter()
+        .map(Panel::y_span)
+        .fold((f64::INFINITY, 0.0f64), |(lo, hi), (a, b)| {
+            (lo.min(a), hi.max(b))
+        });
+    const PANEL: (u32, u32) = (1000, 680);
+    let size = (PANEL.0, PANEL.1 * panels.len() as u32);
+    fn draw_all<DB: Backend>(
+        root: &Area<DB>,
+        cfgs: &[Config],
+        panels: &[Panel],
+        y: (f64, f64),
+    ) -> Result<()> {
+        root.fill(&WHITE).map_err(err)?;
+        for (area, p) in root.split_evenly((panels.len(), 1)).iter().zip(panels) {
+            p.draw(area, cfgs, y.0, y.1)?;
+        }
+        Ok(())
+    }
+    draw_to!(path, size, |root| draw_all(
+        root,
+        cfgs,
+        &panels,
+        (ymin, ymax)
+    ))
 }
 
 fn summary(cfgs: &[Config], rows: &[Row], cals: &[Option<UnitProfile>]) -> String {
@@ -708,6 +848,65 @@ fn summary(cfgs: &[Config], rows: &[Row], cals: &[Option<UnitProfile>]) -> Strin
         }
     }
     s.push_str(&honesty(cfgs, rows));
+    s
+}
+
+/// The lossy scene's section of docs/speed-accuracy.md: every config on [`lossy_scene`] at
+/// bench noise, its modulus error against that scene's bound and the loss tangent it reports.
+fn lossy_summary(cfgs: &[Config], lossy: &[LossyRow]) -> String {
+    let mut s = String::new();
+    if lossy.is_empty() {
+        return s;
+    }
+    let (scene, e) = lossy_scene();
+    let tau = scene_tau_ms(&scene);
+    let _ = writeln!(
+        s,
+        "\n### lossy tissue: {e:.0} kPa (phantom C's modulus) at tan δ {LOSSY_TAN_D}, bench noise (τ = {tau:.1} ms)\n\n\
+         Each method as calibrated above (bench noise, the lossless phantoms A–E) on tissue of \
+         phantom C's storage modulus with a loss tangent of {LOSSY_TAN_D} (hal-sim's \
+         `Scene::with_loss_tangent`, docs/physics.md, \"Viscoelastic tissue\"), the same seeds' \
+         count. CRB: the bound of this scene (its lower Q: a shorter τ and a broader resonance). \
+         The loss tangent reported beside the modulus: its RMS error against the tissue's, its \
+         mean error and the RMS of its reported σ (\"—\": the method reports no loss).\n"
+    );
+    let _ = writeln!(
+        s,
+        "| method | knobs | probe time (ms) | probe time (τ) | RMS error from noise (%) | RMS error vs truth (%) | ok | CRB (%) | error / CRB | tan δ RMS error | tan δ mean error | tan δ σ (RMS) |"
+    );
+    let _ = writeln!(
+        s,
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+    );
+    let opt = |v: Option<f64>, sign: bool| {
+        v.map_or("—".to_string(), |v| {
+            if sign {
+                format!("{v:+.3}")
+            } else {
+                format!("{v:.3}")
+            }
+        })
+    };
+    for r in lossy {
+        let (c, x) = (&cfgs[r.c], &r.cell);
+        let _ = writeln!(
+            s,
+            "| {} | {} | {:.0} | {:.1} | {:.3} | {:.3} | {}/{} | {:.4} | {:.1} | {} | {} | {} |",
+            c.method.name(),
+            c.label,
+            x.time_ms,
+            x.time_ms / tau,
+            x.noise_rms_pct(),
+            x.rms_pct(),
+            x.ok,
+            x.n,
+            r.crb,
+            x.noise_rms_pct() / r.crb,
+            opt(x.loss_rms(), false),
+            opt(x.loss_bias(), true),
+            opt(x.loss_sigma_rms(), false)
+        );
+    }
     s
 }
 

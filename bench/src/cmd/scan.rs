@@ -8,15 +8,25 @@
 //! connected region around the highest reading that stands above half-way between background
 //! and peak; its centre is the centroid of that region weighted by the rise above background and
 //! its size the diameter of a disc of the region's area.
+//!
+//! On lossy tissue (`--loss-tangent`, and a lump of its own modulus and loss,
+//! `--lump-modulus-kpa`, `--lump-loss-tangent`; the model is `hal_sim::lump`'s) each reading also
+//! reports the tissue's loss tangent, and the scan maps it beside the stiffness. The loss lump is
+//! located by the same rule on the loss map ([`locate_values`]), as a rise or as a dip (a lump
+//! may be more or less lossy than its background): whichever stands out the more, if it rises
+//! above the background by at least [`MIN_LOSS_CONTRAST`] and [`LOSS_CONTRAST_SIGMAS`] times
+//! the map's median reported σ of the loss, beyond what a stiffness contrast alone does to the
+//! loss read (see the constant).
 #![allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > y)` also rejects NaN, deliberately
 
-use super::progress;
+use super::slide::{slide, Slide, SlideResult};
+use super::{progress, CalibrationArgs};
 use crate::calfile;
-use crate::plot::{self, draw_legend, err, padded_range, with_backend};
-use crate::scene::parse_noise;
+use crate::plot::{self, draw_legend, draw_to, err, padded_range, Area, Backend};
+use crate::scene::{parse_noise, NoiseArgs};
 use anyhow::{anyhow, bail, Result};
 use clap::{Args, ValueEnum};
-use hal_sim::lump::{self, Inclusion, LumpPhantom};
+use hal_sim::lump::{self, Inclusion, LumpMaterial, LumpPhantom};
 use hal_sim::Scene;
 use plotters::prelude::*;
 use pzt_probe::board::sim as simboard;
@@ -59,6 +69,21 @@ pub struct ScanArgs {
     /// Ball scene: the ball's position along the probe path, mm (paper 002: 0–20 mm).
     #[arg(long, default_value_t = 5.0)]
     pub ball_d_mm: f64,
+    /// Loss tangent tan δ of the phantom's soft material at the resonance (0–2; default 0, the
+    /// papers' silicone). The scan then maps the loss beside the stiffness.
+    #[arg(long)]
+    pub loss_tangent: Option<f64>,
+    /// Make the inclusion a tissue of this storage modulus, kPa (a tumour-like lump; default:
+    /// rigid, the coin or the steel ball, which has no loss).
+    #[arg(long)]
+    pub lump_modulus_kpa: Option<f64>,
+    /// Loss tangent of the inclusion (0–2; needs --lump-modulus-kpa; default: the soft
+    /// material's).
+    #[arg(long)]
+    pub lump_loss_tangent: Option<f64>,
+    /// Depth of the inclusion's top under the surface, mm (default: the scene's, 1 mm).
+    #[arg(long)]
+    pub lump_depth_mm: Option<f64>,
     /// Grid step, mm (default: 2 mm for the coin, 1 mm for the ball).
     #[arg(long)]
     pub step_mm: Option<f64>,
@@ -68,20 +93,13 @@ pub struct ScanArgs {
     /// Resonance method (one that sweeps: `sweep-g`, `paper`, ...).
     #[arg(long, default_value = "sweep-g")]
     pub method: String,
-    /// Front-end noise: `quiet`, `paper`, `bench`, or a current-noise density in A/sqrt(Hz).
-    #[arg(long, default_value = "bench")]
-    pub noise: String,
-    /// Calibration curve from resonance (Hz) to modulus (kPa): `paper-experiment` (eq. 5, by
-    /// which paper 003 mapped its coin sample), `paper-simulation` (eq. 4) or `unit` (the
-    /// profile's own curve).
-    #[arg(long, default_value = "paper-experiment")]
-    pub calibration: String,
-    /// Unit profile file (`probe-bench calibrate --out`). Default: the simulated unit's.
-    #[arg(long)]
-    pub profile: Option<PathBuf>,
-    /// Seed of the simulated noise (grid point k uses seed + k).
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
+    /// The front end's noise and its seed (grid point k uses seed + k, the k-th slide of
+    /// `--continuous` seed + k).
+    #[command(flatten)]
+    pub noise: NoiseArgs,
+    /// The calibration and the unit profile.
+    #[command(flatten)]
+    pub cal: CalibrationArgs,
     /// Stiffness map to write (.svg or .png).
     #[arg(long, default_value = "scan.svg")]
     pub plot: PathBuf,
@@ -202,6 +220,8 @@ pub struct ScanPoint {
     pub y_mm: f64,
     /// The model's apparent modulus there, kPa (ground truth of the simulation).
     pub apparent_kpa: f64,
+    /// The model's apparent loss tangent there (ground truth of the simulation).
+    pub apparent_loss_tangent: f64,
     /// The reading.
     pub reading: Reading,
 }
@@ -225,6 +245,27 @@ pub struct LumpEstimate {
     pub cells: usize,
 }
 
+/// Where a loss lump was found on the loss map.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LossLump {
+    /// Centre, mm.
+    pub x_mm: f64,
+    /// Centre, mm.
+    pub y_mm: f64,
+    /// Diameter of a disc of the region's area, mm.
+    pub diameter_mm: f64,
+    /// The loss map's background (10th percentile of a rise, 90th of a dip), tan δ.
+    pub background: f64,
+    /// The lump's extreme loss tangent (highest of a rise, lowest of a dip).
+    pub extreme: f64,
+    /// Half-way level that bounds the region, tan δ.
+    pub threshold: f64,
+    /// Grid points in the region.
+    pub cells: usize,
+    /// The least |extreme − background| this map needed to call it a lump.
+    pub min_contrast: f64,
+}
+
 /// A finished scan.
 #[derive(Clone, Debug)]
 pub struct ScanResult {
@@ -232,10 +273,25 @@ pub struct ScanResult {
     pub points: Vec<ScanPoint>,
     /// The lump, if one stands out.
     pub lump: Option<LumpEstimate>,
+    /// The lump on the loss map, if one stands out there.
+    pub loss_lump: Option<LossLump>,
 }
 
 /// Least rise of the peak over the background to call it a lump, Hz.
 pub const MIN_CONTRAST_HZ: f64 = 1.0;
+
+/// Least departure of the loss map's extreme from its background to call it a lump, tan δ.
+pub const MIN_LOSS_CONTRAST: f64 = 0.03;
+
+/// Least departure of the loss map's extreme from its background, in the map's median reported
+/// σ of the loss. A reading's loss σ is mostly the unit's Q model's scatter about the reference
+/// phantoms (`UnitProfile::tissue_loss`), a bias that follows the modulus read rather than
+/// noise: a lump of its background's loss tangent still moves the loss read over it by as much
+/// as the bias differs between the two moduli — at most the bias's spread over the calibrated
+/// range, 2.1 of the smallest σ there (sweep-G; `docs/bench.md`, "Loss map"). Three σ leave that
+/// out with a margin of almost half as much again; white noise on the loss, a few hundredths of
+/// σ, adds nothing.
+pub const LOSS_CONTRAST_SIGMAS: f64 = 3.0;
 
 /// Run the scan; `tick` is called after every grid point.
 pub fn scan(spec: &ScanSpec, mut tick: impl FnMut()) -> Result<ScanResult> {
@@ -252,36 +308,144 @@ pub fn scan(spec: &ScanSpec, mut tick: impl FnMut()) -> Result<ScanResult> {
             |_| {},
         )
         .map_err(|e| anyhow!("reading at ({x}, {y}) mm failed: {e:?}"))?;
-        let apparent_kpa = spec
+        let app = spec
             .phantom
-            .apparent(x * 1e-3, y * 1e-3, &spec.base.contact)
-            .modulus_pa
-            / 1e3;
+            .apparent(x * 1e-3, y * 1e-3, &spec.base.contact);
         points.push(ScanPoint {
             i,
             j,
             x_mm: x,
             y_mm: y,
-            apparent_kpa,
+            apparent_kpa: app.modulus_pa / 1e3,
+            apparent_loss_tangent: app.loss_tangent,
             reading,
         });
         tick();
     }
-    let lump = locate(&points, spec.xs_mm.len(), spec.ys_mm.len(), spec.step_mm);
-    Ok(ScanResult { points, lump })
+    let (nx, ny) = (spec.xs_mm.len(), spec.ys_mm.len());
+    let lump = locate(&points, nx, ny, spec.step_mm);
+    let loss_lump = locate_loss(&points, nx, ny, spec.step_mm);
+    Ok(ScanResult {
+        points,
+        lump,
+        loss_lump,
+    })
 }
 
-/// Find the lump on a scanned grid of `nx` × `ny` (see the module docs).
+/// A region that stands out of a map, in the map's own unit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Anomaly {
+    /// Centre, mm.
+    pub x_mm: f64,
+    /// Centre, mm.
+    pub y_mm: f64,
+    /// Diameter of a disc of the region's area, mm.
+    pub diameter_mm: f64,
+    /// Background: the 10th percentile of the map.
+    pub background: f64,
+    /// Highest value.
+    pub peak: f64,
+    /// Half-way level that bounds the region.
+    pub threshold: f64,
+    /// Grid points in the region.
+    pub cells: usize,
+}
+
+/// One value of a map at grid cell `(i, j)`, placed at `(x, y)` mm.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MapValue {
+    /// Column index.
+    pub i: usize,
+    /// Row index.
+    pub j: usize,
+    /// Position, mm.
+    pub x_mm: f64,
+    /// Position, mm.
+    pub y_mm: f64,
+    /// The value.
+    pub value: f64,
+}
+
+/// The map of `value` over the scanned points (points without one are left out).
+pub fn map_of(points: &[ScanPoint], value: impl Fn(&ScanPoint) -> Option<f64>) -> Vec<MapValue> {
+    points
+        .iter()
+        .filter_map(|p| {
+            value(p).map(|v| MapValue {
+                i: p.i,
+                j: p.j,
+                x_mm: p.x_mm,
+                y_mm: p.y_mm,
+                value: v,
+            })
+        })
+        .collect()
+}
+
+/// Find the lump on a scanned grid of `nx` × `ny`: the stiffness map's rule (see the module
+/// docs) on the resonances.
 pub fn locate(points: &[ScanPoint], nx: usize, ny: usize, step_mm: f64) -> Option<LumpEstimate> {
+    let map = map_of(points, |p| p.reading.resonance.map(|f| f.0 as f64));
+    locate_values(&map, nx, ny, step_mm, MIN_CONTRAST_HZ).map(|a| LumpEstimate {
+        x_mm: a.x_mm,
+        y_mm: a.y_mm,
+        diameter_mm: a.diameter_mm,
+        background_hz: a.background,
+        peak_hz: a.peak,
+        threshold_hz: a.threshold,
+        cells: a.cells,
+    })
+}
+
+/// Find the loss lump on a scanned grid of `nx` × `ny` (see the module docs): the rule of
+/// [`locate_values`] on the loss map and on its negative, the one that stands out the more.
+pub fn locate_loss(points: &[ScanPoint], nx: usize, ny: usize, step_mm: f64) -> Option<LossLump> {
+    let map = map_of(points, |p| p.reading.loss_tangent.map(f64::from));
+    let min_contrast = loss_min_contrast(points)?;
+    let dips: Vec<MapValue> = map
+        .iter()
+        .map(|v| MapValue {
+            value: -v.value,
+            ..*v
+        })
+        .collect();
+    let rise = locate_values(&map, nx, ny, step_mm, min_contrast).map(|a| (a, 1.0));
+    let dip = locate_values(&dips, nx, ny, step_mm, min_contrast).map(|a| (a, -1.0));
+    let contrast = |a: &Option<(Anomaly, f64)>| a.map_or(0.0, |(a, _)| a.peak - a.background);
+    let (a, sign) = if contrast(&dip) > contrast(&rise) {
+        dip?
+    } else {
+        rise?
+    };
+    Some(LossLump {
+        x_mm: a.x_mm,
+        y_mm: a.y_mm,
+        diameter_mm: a.diameter_mm,
+        background: sign * a.background,
+        extreme: sign * a.peak,
+        threshold: sign * a.threshold,
+        cells: a.cells,
+        min_contrast,
+    })
+}
+
+/// The region of `map` (a grid of `nx` × `ny`, step `step_mm`) around its highest value that
+/// stands above half-way between the background (the 10th percentile) and that value, if the
+/// value rises at least `min_contrast` above the background (see the module docs).
+pub fn locate_values(
+    map: &[MapValue],
+    nx: usize,
+    ny: usize,
+    step_mm: f64,
+    min_contrast: f64,
+) -> Option<Anomaly> {
     let mut grid: Vec<Option<(f64, usize)>> = vec![None; nx * ny];
     let mut vals = Vec::new();
-    for (k, p) in points.iter().enumerate() {
-        if let Some(f) = p.reading.resonance {
-            let f = f.0 as f64;
-            if f.is_finite() && p.i < nx && p.j < ny {
-                grid[p.j * nx + p.i] = Some((f, k));
-                vals.push(f);
-            }
+    for (k, p) in map.iter().enumerate() {
+        let f = p.value;
+        if f.is_finite() && p.i < nx && p.j < ny {
+            grid[p.j * nx + p.i] = Some((f, k));
+            vals.push(f);
         }
     }
     if vals.len() < 3 {
@@ -292,7 +456,7 @@ pub fn locate(points: &[ScanPoint], nx: usize, ny: usize, step_mm: f64) -> Optio
     // background is the lowest tenth of the readings, not their median.
     let background = vals[vals.len() / 10];
     let peak = vals[vals.len() - 1];
-    if !(peak - background >= MIN_CONTRAST_HZ) {
+    if !(peak - background >= min_contrast) {
         return None;
     }
     let threshold = 0.5 * (background + peak);
@@ -308,8 +472,8 @@ pub fn locate(points: &[ScanPoint], nx: usize, ny: usize, step_mm: f64) -> Optio
         let Some((f, k)) = grid[c] else { continue };
         let rise = f - background;
         w += rise;
-        wx += rise * points[k].x_mm;
-        wy += rise * points[k].y_mm;
+        wx += rise * map[k].x_mm;
+        wy += rise * map[k].y_mm;
         cells += 1;
         let (i, j) = (c % nx, c / nx);
         let mut push = |ii: usize, jj: usize| {
@@ -335,13 +499,13 @@ pub fn locate(points: &[ScanPoint], nx: usize, ny: usize, step_mm: f64) -> Optio
     if !(w > 0.0) {
         return None;
     }
-    Some(LumpEstimate {
+    Some(Anomaly {
         x_mm: wx / w,
         y_mm: wy / w,
         diameter_mm: 2.0 * (cells as f64 * step_mm * step_mm / std::f64::consts::PI).sqrt(),
-        background_hz: background,
-        peak_hz: peak,
-        threshold_hz: threshold,
+        background,
+        peak,
+        threshold,
         cells,
     })
 }
@@ -413,23 +577,10 @@ pub fn run(a: ScanArgs) -> Result<()> {
 /// simulated unit's profile for the tracker's method ([`super::slide`]).
 fn run_continuous(a: &ScanArgs) -> Result<()> {
     let spec = spec_of(a)?;
-    let (y, x) = match a.scene {
-        ScanScene::Coin => (a.coin_at_mm[1], (-13.5, 13.5)),
-        ScanScene::Ball => (0.0, (-4.0, 24.0)),
-    };
-    let unit = crate::unit::default_for(pzt_probe::instrument::continuous::METHOD)?;
-    let config = pzt_probe::instrument::continuous::TrackerConfig::DEFAULT;
+    let line = slide_line(a.scene, a.coin_at_mm[1]);
     let mut results = Vec::new();
     for (k, &v) in a.speed_mm_s.iter().enumerate() {
-        let s = super::slide::Slide {
-            phantom: spec.phantom,
-            y_mm: y,
-            x_mm: x,
-            speed_mm_s: v,
-            base: spec.base,
-            seed: a.seed + k as u64,
-        };
-        let r = super::slide::slide(&s, &config, &unit)?;
+        let r = slide_over(spec.phantom, spec.base, line, v, a.noise.seed + k as u64)?;
         let line = if a.json {
             super::slide::slide_json(&r).to_string()
         } else {
@@ -445,6 +596,39 @@ fn run_continuous(a: &ScanArgs) -> Result<()> {
     Ok(())
 }
 
+/// The line `--continuous` slides along through `scene`'s lump: its `y` and where the tip
+/// starts and ends in `x`, mm. The coin: its row `coin_y_mm` across the disc, 1.5 mm clear of
+/// the rim; the ball: paper 002's path, 4 mm past either end.
+pub fn slide_line(scene: ScanScene, coin_y_mm: f64) -> (f64, (f64, f64)) {
+    match scene {
+        ScanScene::Coin => (coin_y_mm, (-13.5, 13.5)),
+        ScanScene::Ball => (0.0, (-4.0, 24.0)),
+    }
+}
+
+/// One slide of `--continuous` over `phantom` on `base` (probe, front end, noise, preload)
+/// along `line` ([`slide_line`]) at `speed_mm_s`, noise stream `seed`: the continuous
+/// tracker's default configuration and the simulated unit's profile for its method.
+pub fn slide_over(
+    phantom: LumpPhantom,
+    base: Scene,
+    (y_mm, x_mm): (f64, (f64, f64)),
+    speed_mm_s: f64,
+    seed: u64,
+) -> Result<SlideResult> {
+    let unit = crate::unit::default_for(pzt_probe::instrument::continuous::METHOD)?;
+    let config = pzt_probe::instrument::continuous::TrackerConfig::DEFAULT;
+    let s = Slide {
+        phantom,
+        y_mm,
+        x_mm,
+        speed_mm_s,
+        base,
+        seed,
+    };
+    slide(&s, &config, &unit)
+}
+
 /// The scan the arguments ask for: method, preload, noise, scene and the unit's profile.
 fn spec_of(a: &ScanArgs) -> Result<ScanSpec> {
     let method = Method::from_name(&a.method)
@@ -458,7 +642,7 @@ fn spec_of(a: &ScanArgs) -> Result<ScanSpec> {
     if !(a.preload_n.is_finite() && a.preload_n > 0.0 && a.preload_n <= 1.0) {
         bail!("preload {} N is out of range (0 to 1 N)", a.preload_n);
     }
-    let noise = parse_noise(&a.noise)?;
+    let noise = parse_noise(&a.noise.noise)?;
     let base = Scene::free_air()
         .with_noise(noise)
         .with_preload_n(a.preload_n);
@@ -481,16 +665,105 @@ fn spec_of(a: &ScanArgs) -> Result<ScanSpec> {
             ScanSpec::ball(a.ball_d_mm, step, base)?
         }
     };
+    spec.phantom = lossy_phantom(a, spec.phantom)?;
     spec.method = method;
     spec.settings = method.default_sweep();
-    spec.unit = calfile::resolve(a.profile.as_deref(), &a.calibration, || {
-        let s = Settings::Sweep(method.default_sweep());
-        let mut u = crate::unit::simulated(method, &s, noise, 20, 1000)?;
-        u.use_power_law(PowerLaw::paper_experiment(), method.resonance());
-        Ok(u)
+    let lossy = is_lossy(&spec);
+    let calibration =
+        a.cal
+            .calibration
+            .as_deref()
+            .unwrap_or(if lossy { "unit" } else { "paper-experiment" });
+    spec.unit = calfile::resolve(a.cal.profile.as_deref(), calibration, || {
+        own_unit(method, noise)
     })?;
-    spec.seed = a.seed;
+    if lossy && spec.unit.contact.is_none() {
+        bail!(
+            "the loss tangent is read through the unit's contact law, which `{calibration}` does \
+             not have: scan lossy tissue with --calibration unit (its default) or a profile file"
+        );
+    }
+    spec.seed = a.noise.seed;
     Ok(spec)
+}
+
+/// The simulated unit's own profile for a scan with `method` under `noise`: its air
+/// reference, Q model and contact law, calibrated on A–E (20 repeats, seeds from 1000).
+pub fn own_unit(method: Method, noise: hal_sim::NoiseScene) -> Result<UnitProfile> {
+    crate::unit::simulated(
+        method,
+        &Settings::Sweep(method.default_sweep()),
+        noise,
+        20,
+        1000,
+    )
+}
+
+/// `phantom` with the soft material's loss, the inclusion's material and depth the arguments
+/// ask for.
+fn lossy_phantom(a: &ScanArgs, phantom: LumpPhantom) -> Result<LumpPhantom> {
+    let tan_d = |name: &str, t: f64| -> Result<f64> {
+        if !(t.is_finite() && (0.0..=2.0).contains(&t)) {
+            bail!("{name} {t} is out of range (0 to 2)");
+        }
+        Ok(t)
+    };
+    let mut p = phantom;
+    if let Some(t) = a.loss_tangent {
+        p = p.with_matrix_loss(tan_d("--loss-tangent", t)?);
+    }
+    match (a.lump_modulus_kpa, a.lump_loss_tangent) {
+        (None, Some(_)) => bail!(
+            "a rigid inclusion (the coin, the steel ball) stores no strain energy and has no loss: \
+             give the lump a modulus with --lump-modulus-kpa to give it a loss tangent"
+        ),
+        (None, None) => {}
+        (Some(e), t) => {
+            if !(e.is_finite() && (1.0..=1e6).contains(&e)) {
+                bail!("--lump-modulus-kpa {e} is out of range (1 to 1e6 kPa)");
+            }
+            let loss_tangent = match t {
+                Some(t) => tan_d("--lump-loss-tangent", t)?,
+                None => p.matrix.loss_tangent,
+            };
+            p = p.with_material(LumpMaterial::Tissue {
+                modulus_pa: e * 1e3,
+                loss_tangent,
+            });
+        }
+    }
+    if let Some(d) = a.lump_depth_mm {
+        let d_m = d * 1e-3;
+        if !(d.is_finite() && d >= 0.1 && d_m < p.thickness_m) {
+            bail!(
+                "--lump-depth-mm {d} is out of range (0.1 mm to the phantom's {} mm)",
+                p.thickness_m * 1e3
+            );
+        }
+        p.inclusion = p.inclusion.with_depth_m(d_m);
+    }
+    Ok(p)
+}
+
+/// True when the scan's phantom has any loss (the scan then maps it).
+pub fn is_lossy(spec: &ScanSpec) -> bool {
+    spec.phantom.is_lossy()
+}
+
+/// Mean and count of the loss tangents read where `keep(distance from the inclusion's centre,
+/// mm)`.
+pub fn mean_loss(
+    points: &[ScanPoint],
+    inclusion: &Inclusion,
+    keep: impl Fn(f64) -> bool,
+) -> Option<(f64, usize)> {
+    let (cx, cy) = inclusion.centre_m();
+    let v: Vec<f64> = points
+        .iter()
+        .filter(|p| keep((p.x_mm - cx * 1e3).hypot(p.y_mm - cy * 1e3)))
+        .filter_map(|p| p.reading.loss_tangent.map(f64::from))
+        .collect();
+    (!v.is_empty()).then(|| (v.iter().sum::<f64>() / v.len() as f64, v.len()))
 }
 
 /// The mean resonance over the lump and away from it.
@@ -518,6 +791,9 @@ fn scan_json(spec: &ScanSpec, res: &ScanResult) -> Value {
                 "resonance_hz": p.reading.resonance.map(|f| f.0),
                 "resonance_sigma_hz": p.reading.resonance_sigma.map(|f| f.0),
                 "modulus_kpa": p.reading.modulus.map(|e| e.0),
+                "apparent_loss_tangent": p.apparent_loss_tangent,
+                "loss_tangent": p.reading.loss_tangent,
+                "loss_tangent_sigma": p.reading.loss_tangent_sigma,
             })
         })
         .collect();
@@ -525,15 +801,36 @@ fn scan_json(spec: &ScanSpec, res: &ScanResult) -> Value {
         json!({"x_mm": l.x_mm, "y_mm": l.y_mm, "diameter_mm": l.diameter_mm,
                "background_hz": l.background_hz, "peak_hz": l.peak_hz, "cells": l.cells})
     });
+    let loss_lump = res.loss_lump.map(|l| {
+        json!({"x_mm": l.x_mm, "y_mm": l.y_mm, "diameter_mm": l.diameter_mm,
+               "background": l.background, "extreme": l.extreme, "cells": l.cells,
+               "min_contrast": l.min_contrast})
+    });
+    let (over_loss, away_loss) = (
+        mean_loss(&res.points, &inc, |d| d <= over_radius_mm(&inc)),
+        mean_loss(&res.points, &inc, |d| d >= away_radius_mm(&inc)),
+    );
+    let material = match spec.phantom.material {
+        LumpMaterial::Rigid => json!("rigid"),
+        LumpMaterial::Tissue {
+            modulus_pa,
+            loss_tangent,
+        } => json!({"modulus_kpa": modulus_pa / 1e3, "loss_tangent": loss_tangent}),
+    };
     json!({
         "scene": spec.phantom.name,
         "method": spec.method.name(),
         "step_mm": spec.step_mm,
         "true_centre_mm": [tx * 1e3, ty * 1e3],
         "true_diameter_mm": 2e3 * inc.radius_m(),
+        "matrix_loss_tangent": spec.phantom.matrix.loss_tangent,
+        "lump_material": material,
         "over_mean_hz": over.map(|o| o.hz),
         "away_mean_hz": away.map(|o| o.hz),
+        "over_mean_loss_tangent": over_loss.map(|o| o.0),
+        "away_mean_loss_tangent": away_loss.map(|o| o.0),
         "lump": lump,
+        "loss_lump": loss_lump,
         "points": pts,
     })
 }
@@ -549,12 +846,29 @@ fn print_summary(a: &ScanArgs, spec: &ScanSpec, res: &ScanResult) {
         .filter(|p| p.reading.status == Status::Ok)
         .count();
     println!("probe-bench scan: {}", spec.phantom.source);
+    if is_lossy(spec) || spec.phantom.material != LumpMaterial::Rigid || a.lump_depth_mm.is_some() {
+        let material = match spec.phantom.material {
+            LumpMaterial::Rigid => "rigid".to_owned(),
+            LumpMaterial::Tissue {
+                modulus_pa,
+                loss_tangent,
+            } => format!(
+                "tissue of {:.1} kPa, tan d {loss_tangent:.2}",
+                modulus_pa / 1e3
+            ),
+        };
+        let depth = spec.phantom.inclusion.depth_m() * 1e3;
+        println!(
+            "  as scanned: the soft material's tan d {:.2}; the inclusion {material}, its top {depth:.2} mm under the surface",
+            spec.phantom.matrix.loss_tangent
+        );
+    }
     println!(
         "  grid {} points, step {} mm, preload {:.0} mN, noise {}, method {}; {} readings ok",
         res.points.len(),
         spec.step_mm,
         a.preload_n * 1e3,
-        a.noise,
+        a.noise.noise,
         spec.method.name(),
         ok
     );
@@ -584,7 +898,46 @@ fn print_summary(a: &ScanArgs, spec: &ScanSpec, res: &ScanResult) {
         ),
         None => println!("  no lump stands out of the map"),
     }
+    if is_lossy(spec) {
+        let over = mean_loss(&res.points, &inc, |d| d <= over_radius_mm(&inc));
+        let away = mean_loss(&res.points, &inc, |d| d >= away_radius_mm(&inc));
+        if let (Some((o, n_o)), Some((w, n_w))) = (over, away) {
+            println!(
+                "  loss tangent over the lump {o:.3} ({n_o} points), away {w:.3} ({n_w} points)"
+            );
+        }
+        match res.loss_lump {
+            Some(l) => println!(
+                "  loss lump found at ({:.2}, {:.2}) mm, {:.1} mm across; background tan d {:.3}, lump {:.3}",
+                l.x_mm, l.y_mm, l.diameter_mm, l.background, l.extreme
+            ),
+            None => println!(
+                "  no loss lump stands out of the loss map (needs {:.3} from the background)",
+                loss_min_contrast(&res.points).unwrap_or(MIN_LOSS_CONTRAST)
+            ),
+        }
+    }
     println!("  map: {}", a.plot.display());
+}
+
+/// The least departure from its background a loss lump needs on the map of `points`:
+/// [`MIN_LOSS_CONTRAST`] or [`LOSS_CONTRAST_SIGMAS`] median reported σ of the loss, the larger
+/// (`None` without any σ).
+pub fn loss_min_contrast(points: &[ScanPoint]) -> Option<f64> {
+    loss_bar(points.iter().map(|p| &p.reading))
+}
+
+/// The least departure from its background a loss lump needs among `readings`:
+/// [`MIN_LOSS_CONTRAST`] or [`LOSS_CONTRAST_SIGMAS`] times their median reported σ of the
+/// loss, the larger (`None` without any σ).
+pub fn loss_bar<'a>(readings: impl Iterator<Item = &'a Reading>) -> Option<f64> {
+    let mut s: Vec<f64> = readings
+        .filter_map(|r| r.loss_tangent_sigma.map(f64::from))
+        .filter(|s| s.is_finite())
+        .collect();
+    s.sort_by(f64::total_cmp);
+    let median = *s.get(s.len() / 2)?;
+    Some(MIN_LOSS_CONTRAST.max(LOSS_CONTRAST_SIGMAS * median))
 }
 
 fn check_step(step: f64) -> Result<()> {
@@ -616,16 +969,56 @@ fn colour(t: f64) -> RGBColor {
     RGBColor(lerp(a.0, b.0), lerp(a.1, b.1), lerp(a.2, b.2))
 }
 
-/// Write the stiffness map (resonance per grid point, colour bar in Hz and kPa by the scan's
-/// calibration, phantom outline, true inclusion outline, the lump found).
-pub fn write_map(path: &Path, spec: &ScanSpec, res: &ScanResult) -> Result<()> {
-    with_backend(
-        path,
-        (980, 820),
-        |root| draw_map(root, spec, res),
-        |root| draw_map(root, spec, res),
-    )
+/// Which map a panel draws.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MapKind {
+    /// The resonance (Hz), with the calibrated modulus at the colour bar's ends.
+    Stiffness,
+    /// The loss tangent read.
+    Loss,
 }
+
+impl MapKind {
+    /// The panel's value at a point.
+    fn value(self, p: &ScanPoint) -> Option<f64> {
+        match self {
+            MapKind::Stiffness => p.reading.resonance.map(|f| f.0 as f64),
+            MapKind::Loss => p.reading.loss_tangent.map(f64::from),
+        }
+    }
+    /// The lump this map found: centre and diameter, mm.
+    fn found(self, res: &ScanResult) -> Option<(f64, f64, f64)> {
+        match self {
+            MapKind::Stiffness => res.lump.map(|l| (l.x_mm, l.y_mm, l.diameter_mm)),
+            MapKind::Loss => res.loss_lump.map(|l| (l.x_mm, l.y_mm, l.diameter_mm)),
+        }
+    }
+}
+
+/// Write the stiffness map (resonance per grid point, colour bar in Hz and kPa by the scan's
+/// calibration, phantom outline, true inclusion outline, the lump found); on a lossy phantom
+/// the loss map beside it (loss tangent per grid point, the loss lump found).
+pub fn write_map(path: &Path, spec: &ScanSpec, res: &ScanResult) -> Result<()> {
+    fn both<DB: Backend>(root: &Area<DB>, spec: &ScanSpec, res: &ScanResult) -> Result<()> {
+        root.fill(&WHITE).map_err(err)?;
+        if is_lossy(spec) {
+            let (left, right) = root.split_horizontally(PANEL.0);
+            draw_map(&left, spec, res, MapKind::Stiffness)?;
+            draw_map(&right, spec, res, MapKind::Loss)
+        } else {
+            draw_map(root, spec, res, MapKind::Stiffness)
+        }
+    }
+    let size = if is_lossy(spec) {
+        (2 * PANEL.0, PANEL.1)
+    } else {
+        PANEL
+    };
+    draw_to!(path, size, |root| both(root, spec, res))
+}
+
+/// One map panel's size, px.
+const PANEL: (u32, u32) = (980, 820);
 
 fn circle(cx: f64, cy: f64, r: f64) -> Vec<(f64, f64)> {
     (0..=180)
@@ -636,16 +1029,20 @@ fn circle(cx: f64, cy: f64, r: f64) -> Vec<(f64, f64)> {
         .collect()
 }
 
-fn draw_map<DB: DrawingBackend>(
-    root: &DrawingArea<DB, plotters::coord::Shift>,
+fn draw_map<DB: Backend>(
+    root: &Area<DB>,
     spec: &ScanSpec,
     res: &ScanResult,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
-    root.fill(&WHITE).map_err(err)?;
-    let (fmin, fmax) = resonance_span(res);
+    kind: MapKind,
+) -> Result<()> {
+    let (fmin, fmax) = match kind {
+        MapKind::Stiffness => resonance_span(res),
+        MapKind::Loss => padded_range(
+            res.points.iter().filter_map(|p| kind.value(p)),
+            0.0,
+            (0.0, 0.5),
+        ),
+    };
     let s = spec.step_mm;
     let (x0, x1) = (
         spec.xs_mm.first().copied().unwrap_or(0.0) - s,
@@ -659,7 +1056,7 @@ where
     let inc = spec.phantom.inclusion;
     let (tx, ty) = inc.centre_m();
     let (tx, ty, tr) = (tx * 1e3, ty * 1e3, inc.radius_m() * 1e3);
-    let title = map_title(spec, res);
+    let title = map_title(spec, res, kind);
     // Equal scales on both axes: fit the data span into the plot area.
     let (w_px, h_px) = (820.0 - 80.0, 820.0 - 110.0);
     let (xs, ys) = (x1 - x0, y1 - y0);
@@ -681,8 +1078,8 @@ where
         .map_err(err)?;
     chart
         .draw_series(res.points.iter().map(|p| {
-            let c = match p.reading.resonance {
-                Some(f) => colour((f.0 as f64 - fmin) / (fmax - fmin)).filled(),
+            let c = match kind.value(p) {
+                Some(f) => colour((f - fmin) / (fmax - fmin)).filled(),
                 None => RGBColor(200, 200, 200).filled(),
             };
             Rectangle::new(
@@ -717,24 +1114,24 @@ where
         .map_err(err)?
         .label("true inclusion outline")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RGBColor(150, 150, 150)));
-    if let Some(l) = &res.lump {
+    if let Some((lx, ly, ld)) = kind.found(res) {
         plot::line(
             &mut chart,
-            circle(l.x_mm, l.y_mm, 0.5 * l.diameter_mm),
+            circle(lx, ly, 0.5 * ld),
             RED.stroke_width(3),
             "lump found (half-height region, equal-area disc)",
         )
         .map_err(err)?;
         chart
             .draw_series(std::iter::once(Cross::new(
-                (l.x_mm, l.y_mm),
+                (lx, ly),
                 8,
                 RED.stroke_width(3),
             )))
             .map_err(err)?;
     }
     draw_legend(&mut chart, SeriesLabelPosition::LowerRight, 0.85).map_err(err)?;
-    draw_colour_bar(&bar_area, spec, fmin, fmax)?;
+    draw_colour_bar(&bar_area, spec, fmin, fmax, kind)?;
     Ok(())
 }
 
@@ -750,36 +1147,35 @@ fn resonance_span(res: &ScanResult) -> (f64, f64) {
 }
 
 /// The map's title: the scene, the method and the lump found against the truth.
-fn map_title(spec: &ScanSpec, res: &ScanResult) -> String {
+fn map_title(spec: &ScanSpec, res: &ScanResult, kind: MapKind) -> String {
     let inc = spec.phantom.inclusion;
     let (tx, ty) = inc.centre_m();
     let (tx, ty, tr) = (tx * 1e3, ty * 1e3, inc.radius_m() * 1e3);
-    match &res.lump {
-        Some(l) => format!(
-            "{} scan, {} — lump at ({:.1}, {:.1}) mm, {:.1} mm across (true ({:.1}, {:.1}), {:.0} mm)",
-            spec.phantom.name,
-            spec.method.name(),
-            l.x_mm,
-            l.y_mm,
-            l.diameter_mm,
-            tx,
-            ty,
+    let what = match kind {
+        MapKind::Stiffness => format!("{} scan, {}", spec.phantom.name, spec.method.name()),
+        MapKind::Loss => format!(
+            "loss tangent (background tan d {:.2})",
+            spec.phantom.matrix.loss_tangent
+        ),
+    };
+    match kind.found(res) {
+        Some((x, y, d)) => format!(
+            "{what} — lump at ({x:.1}, {y:.1}) mm, {d:.1} mm across (true ({tx:.1}, {ty:.1}), {:.0} mm)",
             2.0 * tr
         ),
-        None => format!("{} scan, {} — no lump found", spec.phantom.name, spec.method.name()),
+        None => format!("{what} — no lump found"),
     }
 }
 
-/// The colour bar beside the map: resonance in Hz, with the calibrated modulus at its ends.
-fn draw_colour_bar<DB: DrawingBackend>(
-    bar_area: &DrawingArea<DB, plotters::coord::Shift>,
+/// The colour bar beside the map: resonance in Hz, with the calibrated modulus at its ends; or
+/// the loss tangent.
+fn draw_colour_bar<DB: Backend>(
+    bar_area: &Area<DB>,
     spec: &ScanSpec,
     fmin: f64,
     fmax: f64,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
+    kind: MapKind,
+) -> Result<()> {
     let mut bar = ChartBuilder::on(bar_area)
         .margin_top(40)
         .margin_bottom(50)
@@ -791,7 +1187,10 @@ where
     bar.configure_mesh()
         .disable_mesh()
         .disable_x_axis()
-        .y_desc("resonance (Hz)")
+        .y_desc(match kind {
+            MapKind::Stiffness => "resonance (Hz)",
+            MapKind::Loss => "loss tangent tan d",
+        })
         .draw()
         .map_err(err)?;
     let n = 100;
@@ -804,6 +1203,9 @@ where
         )
     }))
     .map_err(err)?;
+    if kind == MapKind::Loss {
+        return Ok(());
+    }
     // Modulus at the bar's ends by the scan's calibration.
     let span = fmax - fmin;
     for (f, anchor) in [(fmin, fmin + 0.04 * span), (fmax, fmax - 0.005 * span)] {

@@ -11,8 +11,12 @@
 //! lump's level (the 90th percentile): its edges are the first and last crossings, linearly
 //! interpolated, its centre their midpoint, its contrast the ratio of the two levels. The
 //! truth is the same rule on the phantom's closed-form apparent modulus along the same line.
+//! On a lossy phantom the loss tangents the readings report are located by the same rule, as
+//! a rise or a dip that departs from the background by the scan's bar (`scan::loss_bar`), after a
+//! running median of seven readings ([`LOSS_MEDIAN_HALF`]), and
+//! so are the closed form's (by the bar's floor alone: it has neither noise nor bias).
 
-use crate::plot::{self, draw_legend, padded_range, with_backend, PALETTE};
+use crate::plot::{self, draw_legend, draw_to, padded_range, Area, Backend, PALETTE};
 use anyhow::{anyhow, bail, Result};
 use hal_sim::lump::LumpPhantom;
 use hal_sim::Scene;
@@ -71,6 +75,20 @@ impl Slide {
             })
             .collect()
     }
+    /// The closed form's loss tangent along the path: `n + 1` points `(x mm, tan δ)` evenly
+    /// over it, in `x`.
+    pub fn loss_truth_line(&self, n: usize) -> Vec<(f64, f64)> {
+        let (lo, hi) = (self.x_mm.0.min(self.x_mm.1), self.x_mm.0.max(self.x_mm.1));
+        (0..=n)
+            .map(|k| {
+                let x = lo + (hi - lo) * k as f64 / n as f64;
+                let app = self
+                    .phantom
+                    .apparent(x * 1e-3, self.y_mm * 1e-3, &self.base.contact);
+                (x, app.loss_tangent)
+            })
+            .collect()
+    }
     /// The closed-form apparent modulus (kPa) at `x` mm on the line.
     pub fn truth_kpa(&self, x_mm: f64) -> f64 {
         self.phantom
@@ -94,13 +112,27 @@ pub struct Located {
 /// The lump in a profile of `(x mm, E kPa)` points ordered in `x` ([`Located`]; `None` with
 /// fewer than ten points, or no rise of at least 10 %).
 pub fn locate(points: &[(f64, f64)]) -> Option<Located> {
+    let (edges, bg, top) = locate_with(points, |bg, top| top >= 1.1 * bg)?;
+    Some(Located {
+        edges_mm: edges,
+        centre_mm: 0.5 * (edges.0 + edges.1),
+        contrast: top / bg,
+    })
+}
+
+/// The rule of [`locate`] with the test of a rise `enough(background, level)`: the edges, the
+/// background (10th percentile) and the lump's level (90th percentile).
+pub fn locate_with(
+    points: &[(f64, f64)],
+    enough: impl Fn(f64, f64) -> bool,
+) -> Option<((f64, f64), f64, f64)> {
     if points.len() < 10 {
         return None;
     }
     let mut e: Vec<f64> = points.iter().map(|p| p.1).collect();
     e.sort_by(f64::total_cmp);
     let (bg, top) = (e[e.len() / 10], e[e.len() * 9 / 10]);
-    if !(top >= 1.1 * bg) {
+    if !enough(bg, top) {
         return None;
     }
     let half = 0.5 * (bg + top);
@@ -112,11 +144,76 @@ pub fn locate(points: &[(f64, f64)]) -> Option<Located> {
         .windows(2)
         .rev()
         .find(|w| w[0].1 >= half && w[1].1 < half)?;
-    let edges = (cross(first[0], first[1]), cross(last[0], last[1]));
-    Some(Located {
+    Some((
+        (cross(first[0], first[1]), cross(last[0], last[1])),
+        bg,
+        top,
+    ))
+}
+
+/// Half-width (readings) of the running median the stream's loss profile is located through.
+/// A reading's loss tangent scatters by a third of the contrast a lump can show (0.08 against
+/// 0.25 in `bench/tests/scan_loss.rs`) and jumps where the tissue changes within a segment: one
+/// reading past the half level would move an edge. Seven readings are 1.4 mm at 5 mm/s.
+pub const LOSS_MEDIAN_HALF: usize = 3;
+
+/// The running median of `points`' values over `half` points either side (fewer at the ends).
+pub fn running_median(points: &[(f64, f64)], half: usize) -> Vec<(f64, f64)> {
+    (0..points.len())
+        .map(|i| {
+            let w = &points[i.saturating_sub(half)..(i + half + 1).min(points.len())];
+            let mut v: Vec<f64> = w.iter().map(|p| p.1).collect();
+            v.sort_by(f64::total_cmp);
+            (points[i].0, v[v.len() / 2])
+        })
+        .collect()
+}
+
+/// Where a profile of the loss tangent puts the lump.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LossLocated {
+    /// Edges (first and last crossing of the half level), mm.
+    pub edges_mm: (f64, f64),
+    /// Centre, mm.
+    pub centre_mm: f64,
+    /// The background's loss tangent (10th percentile of a rise, 90th of a dip).
+    pub background: f64,
+    /// The lump's (90th percentile of a rise, 10th of a dip).
+    pub level: f64,
+}
+
+/// The loss lump in a profile of `(x mm, tan δ)` points ordered in `x`: the rule of [`locate`]
+/// with a departure of at least `bar` (`scan::loss_bar`), on the profile if the lump is the
+/// lossier, on its negative if it is the less lossy. Which it is, the path's ends tell: a slide
+/// starts and ends off the lump, so the background is the level nearer the median of the
+/// profile's first and last tenths.
+pub fn locate_loss(points: &[(f64, f64)], bar: f64) -> Option<LossLocated> {
+    if points.len() < 10 {
+        return None;
+    }
+    let k = points.len() / 10;
+    let mut ends: Vec<f64> = points[..k]
+        .iter()
+        .chain(&points[points.len() - k..])
+        .map(|p| p.1)
+        .collect();
+    ends.sort_by(f64::total_cmp);
+    let end = ends[ends.len() / 2];
+    let mut l: Vec<f64> = points.iter().map(|p| p.1).collect();
+    l.sort_by(f64::total_cmp);
+    let (low, high) = (l[l.len() / 10], l[l.len() * 9 / 10]);
+    let sign = if (end - low).abs() <= (high - end).abs() {
+        1.0
+    } else {
+        -1.0
+    };
+    let signed: Vec<(f64, f64)> = points.iter().map(|&(x, l)| (x, sign * l)).collect();
+    let (edges, bg, top) = locate_with(&signed, |bg, top| top - bg >= bar)?;
+    Some(LossLocated {
         edges_mm: edges,
         centre_mm: 0.5 * (edges.0 + edges.1),
-        contrast: top / bg,
+        background: sign * bg,
+        level: sign * top,
     })
 }
 
@@ -133,6 +230,16 @@ pub struct SlideResult {
     pub found: Option<Located>,
     /// The lump from the closed form on the same line.
     pub truth: Option<Located>,
+    /// The `ok` readings that report a loss tangent as `(x mm, tan δ)`, in order along the path.
+    pub loss_profile: Vec<(f64, f64)>,
+    /// The least departure a loss lump needs on this slide (`scan::loss_bar`; `None` without
+    /// any loss read).
+    pub loss_bar: Option<f64>,
+    /// The loss lump from the stream.
+    pub loss_found: Option<LossLocated>,
+    /// The loss lump from the closed form's loss tangent on the same line (departing by at
+    /// least `scan::MIN_LOSS_CONTRAST`).
+    pub loss_truth: Option<LossLocated>,
 }
 
 impl SlideResult {
@@ -177,16 +284,39 @@ pub fn slide(s: &Slide, config: &TrackerConfig, unit: &UnitProfile) -> Result<Sl
             Some((s.x_at(mid), r.reading.modulus?.0 as f64))
         })
         .collect();
+    let mut loss_profile: Vec<(f64, f64)> = readings
+        .iter()
+        .filter(|r| r.reading.status == Status::Ok)
+        .filter_map(|r| {
+            let mid = r.t_s.0 as f64 - 0.5 * r.reading.probe_time.0 as f64;
+            Some((s.x_at(mid), r.reading.loss_tangent? as f64))
+        })
+        .collect();
     if s.x_mm.1 < s.x_mm.0 {
         profile.reverse();
+        loss_profile.reverse();
     }
     let truth_line = s.truth_line(2000);
+    let loss_bar = super::scan::loss_bar(
+        readings
+            .iter()
+            .filter(|r| r.reading.status == Status::Ok)
+            .map(|r| &r.reading),
+    );
+    let loss_found =
+        loss_bar.and_then(|bar| locate_loss(&running_median(&loss_profile, LOSS_MEDIAN_HALF), bar));
+    // The closed form has neither noise nor bias: its least departure is the floor alone.
+    let loss_truth = locate_loss(&s.loss_truth_line(2000), super::scan::MIN_LOSS_CONTRAST);
     Ok(SlideResult {
         slide: *s,
         found: locate(&profile),
         truth: locate(&truth_line),
         readings,
         profile,
+        loss_profile,
+        loss_bar,
+        loss_found,
+        loss_truth,
     })
 }
 
@@ -208,6 +338,15 @@ pub fn slide_json(r: &SlideResult) -> Value {
         "truth_edges_mm": r.truth.map(|l| [l.edges_mm.0, l.edges_mm.1]),
         "truth_contrast": r.truth.map(|l| l.contrast),
         "centre_error_mm": r.centre_error_mm(),
+        "loss_ok_on_path": r.loss_profile.len(),
+        "loss_bar": r.loss_bar,
+        "loss_centre_mm": r.loss_found.map(|l| l.centre_mm),
+        "loss_edges_mm": r.loss_found.map(|l| [l.edges_mm.0, l.edges_mm.1]),
+        "loss_background": r.loss_found.map(|l| l.background),
+        "loss_level": r.loss_found.map(|l| l.level),
+        "truth_loss_centre_mm": r.loss_truth.map(|l| l.centre_mm),
+        "truth_loss_background": r.loss_truth.map(|l| l.background),
+        "truth_loss_level": r.loss_truth.map(|l| l.level),
     })
 }
 
@@ -221,7 +360,7 @@ pub fn summary(r: &SlideResult) -> String {
             )
         })
     };
-    format!(
+    let mut line = format!(
         "{:6.1} mm/s: {:4} ok readings on the path ({:.1}/s); stream: {}; closed form: {}; centre error {}",
         r.slide.speed_mm_s,
         r.profile.len(),
@@ -230,25 +369,32 @@ pub fn summary(r: &SlideResult) -> String {
         f(r.truth),
         r.centre_error_mm()
             .map_or("—".to_owned(), |e| format!("{e:+.2} mm"))
-    )
+    );
+    if r.slide.phantom.is_lossy() {
+        let g = |l: Option<LossLocated>| {
+            l.map_or("no loss lump".to_owned(), |l| {
+                format!(
+                    "centre {:+.2} mm, tan d {:.3} -> {:.3}",
+                    l.centre_mm, l.background, l.level
+                )
+            })
+        };
+        line.push_str(&format!(
+            "; loss (bar {}): stream: {}; closed form: {}",
+            r.loss_bar.map_or("—".to_owned(), |b| format!("{b:.3}")),
+            g(r.loss_found),
+            g(r.loss_truth)
+        ));
+    }
+    line
 }
 
 /// Plot one slide (modulus against position, with the closed form) or, for several speeds,
 /// the centre's error and the contrast against speed.
 pub fn plot(path: &Path, results: &[SlideResult]) -> Result<()> {
     match results {
-        [one] => with_backend(
-            path,
-            (900, 480),
-            |r| draw_profile(r, one),
-            |r| draw_profile(r, one),
-        ),
-        many => with_backend(
-            path,
-            (900, 620),
-            |r| draw_speeds(r, many),
-            |r| draw_speeds(r, many),
-        ),
+        [one] => draw_to!(path, (900, 480), |r| draw_profile(r, one)),
+        many => draw_to!(path, (900, 620), |r| draw_speeds(r, many)),
     }
 }
 
@@ -256,13 +402,7 @@ fn err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
     anyhow!("{e:?}")
 }
 
-fn draw_profile<DB: DrawingBackend>(
-    root: &DrawingArea<DB, plotters::coord::Shift>,
-    r: &SlideResult,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
+fn draw_profile<DB: Backend>(root: &Area<DB>, r: &SlideResult) -> Result<()> {
     root.fill(&WHITE).map_err(err)?;
     let s = &r.slide;
     let (lo, hi) = (s.x_mm.0.min(s.x_mm.1), s.x_mm.0.max(s.x_mm.1));
@@ -313,13 +453,7 @@ where
     Ok(())
 }
 
-fn draw_speeds<DB: DrawingBackend>(
-    root: &DrawingArea<DB, plotters::coord::Shift>,
-    results: &[SlideResult],
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
+fn draw_speeds<DB: Backend>(root: &Area<DB>, results: &[SlideResult]) -> Result<()> {
     root.fill(&WHITE).map_err(err)?;
     let (upper, lower) = root.split_vertically(310);
     let vmax = results

@@ -1,7 +1,7 @@
 //! `probe-bench stability`: methods × the scene catalogue, the stability map.
 
 use super::progress;
-use crate::plot::{err, with_backend};
+use crate::plot::{draw_to, err, Area, Backend};
 use crate::stability::{
     calibrated, classify, run_case, statement, stream_catalogue, tally, Must, Outcome, StreamCase,
     FIRST_SEED, STREAM_SETTLE_S,
@@ -194,18 +194,13 @@ pub fn run(a: StabilityArgs) -> Result<()> {
         .collect();
     for ext in ["svg", "png"] {
         let path = a.out_dir.join(format!("stability.{ext}"));
-        with_backend(
+        draw_to!(
             &path,
             (
                 190 + 150 * Method::ALL.len() as u32 + STREAM_W as u32 + 20,
                 140 + 34 * (names.len() + stream_map.len()) as u32,
             ),
-            |root: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>| {
-                draw(root, &names, &grid, &stream_map)
-            },
-            |root: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>| {
-                draw(root, &names, &grid, &stream_map)
-            },
+            |root| draw(root, &names, &grid, &stream_map)
         )?;
     }
     let mut total = [0usize; 4];
@@ -411,15 +406,12 @@ fn summary(c: &Cell) -> String {
     format!("{label} {}/{n} ({})", c.counts[worst], c.codes.join(","))
 }
 
-fn draw<DB: DrawingBackend>(
-    root: &DrawingArea<DB, plotters::coord::Shift>,
+fn draw<DB: Backend>(
+    root: &Area<DB>,
     names: &[&str],
     grid: &[Vec<Cell>],
     stream: &[(String, &StreamRow, usize)],
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
+) -> Result<()> {
     root.fill(&WHITE).map_err(err)?;
     let colors = [
         RGBColor(90, 180, 90),

@@ -1,6 +1,8 @@
 //! `probe-bench stream`: continuous reading on the simulated probe (the core's tracker,
 //! `pzt_probe::instrument::continuous`), with a step in stiffness, a lift-off and a new contact on the way.
 
+use super::OutputArgs;
+use crate::plot::{Area, Backend};
 use crate::report;
 use crate::scene::{parse_noise, print_scene_header, NoiseArgs, SceneArgs};
 use crate::stream::{self, settled_after, summarize, StreamScene, Truth};
@@ -12,7 +14,7 @@ use pzt_probe::instrument::continuous::{StreamReading, TrackerConfig, METHOD};
 use pzt_probe::{Seconds, Status};
 use serde_json::json;
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 #[derive(Args)]
 pub struct StreamArgs {
@@ -64,13 +66,10 @@ pub struct StreamArgs {
     /// The front end's noise and its seed.
     #[command(flatten)]
     pub noise: NoiseArgs,
-    /// One JSON object per reading on stdout (seq, t_s, status, resonance_hz, modulus_kpa,
-    /// modulus_sigma_kpa, locked, ...), nothing else.
-    #[arg(long)]
-    pub json: bool,
-    /// Write a plot of modulus and lock against time (SVG, or PNG by extension).
-    #[arg(long)]
-    pub plot: Option<PathBuf>,
+    /// JSON (each reading's fields with seq, t_s, locked) and the plot (modulus and lock against
+    /// time).
+    #[command(flatten)]
+    pub out: OutputArgs,
     /// Stream on the firmware image in QEMU instead (its `stream` command with the default
     /// tracker and its factory profile, the scene and events as `sim` lines): the same
     /// output, `t_s` counted from the stream's start. Needs qemu-system-arm, defmt-print and
@@ -122,7 +121,7 @@ pub fn run(a: StreamArgs) -> Result<()> {
         ..TrackerConfig::DEFAULT
     };
     let unit = crate::unit::default_for(METHOD)?;
-    if !a.json {
+    if !a.out.json {
         print_scene_header("stream", &target, a.scene.preload_n, noise, &scene);
         if !a.qemu {
             println!(
@@ -138,7 +137,7 @@ pub fn run(a: StreamArgs) -> Result<()> {
     let mut last_progress = -1.0f64;
     let mut write_err = None;
     let mut each = |r: &StreamReading| {
-        if a.json {
+        if a.out.json {
             if let Err(e) = writeln!(out, "{}", stream_json(r)) {
                 write_err.get_or_insert(e);
             }
@@ -167,7 +166,7 @@ pub fn run(a: StreamArgs) -> Result<()> {
         return Err(e.into());
     }
     let s = summarize(&readings, &truth, stream::SETTLE_S);
-    if !a.json {
+    if !a.out.json {
         eprintln!();
         println!(
             "  {} readings in {:.2} s of probe time, {} dropped (gaps in seq)",
@@ -203,13 +202,8 @@ pub fn run(a: StreamArgs) -> Result<()> {
             }
         }
     }
-    if let Some(path) = &a.plot {
-        plot(path, &target.describe(), &readings, &truth)?;
-        if !a.json {
-            println!("  plot: {}", path.display());
-        }
-    }
-    Ok(())
+    a.out
+        .plot_with(|path| plot(path, &target.describe(), &readings, &truth))
 }
 
 /// The JSON object of one stream reading: the reading's own fields and seq, t_s, locked.
@@ -255,7 +249,7 @@ fn plot(path: &Path, title: &str, readings: &[StreamReading], truth: &Truth) -> 
         t_end,
         range: (lo, hi),
     };
-    crate::plot::with_backend(path, (900, 560), |r| draw(r, &p), |r| draw(r, &p))
+    crate::plot::draw_to!(path, (900, 560), |r| draw(r, &p))
 }
 
 struct Plot<'a> {
@@ -267,10 +261,7 @@ struct Plot<'a> {
     range: (f64, f64),
 }
 
-fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, plotters::coord::Shift>, p: &Plot) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
+fn draw<DB: Backend>(root: &Area<DB>, p: &Plot) -> Result<()> {
     let (title, readings, truth, pts, t_end) = (p.title, p.readings, p.truth, p.pts, p.t_end);
     let (lo, hi) = p.range;
     {

@@ -1,7 +1,11 @@
 //! What the CLI tests of `probe-bench` share: running the binary and checking its two kinds of
-//! outcome (success with output, or a one-line error and a non-zero exit).
+//! outcome (success with output, or a one-line error and a non-zero exit), a scratch directory;
+//! and, in [`scan`], what the scan tests share.
 #![allow(dead_code)] // each test file uses its own subset
 
+pub mod scan;
+
+use std::path::PathBuf;
 use std::process::{Command, Output};
 
 /// The `probe-bench` binary under test.
@@ -41,4 +45,26 @@ pub fn run_fails_one_line(cmd: &mut Command) -> String {
     let e = String::from_utf8_lossy(&out.stderr).into_owned();
     assert_eq!(e.trim_end().lines().count(), 1, "{e}");
     e
+}
+
+/// A test's own scratch directory, `probe-bench-NAME-PID` under the system's temporary
+/// directory: made when created, removed with all it holds when dropped.
+pub struct Scratch(PathBuf);
+
+impl Scratch {
+    pub fn new(name: &str) -> Self {
+        let dir = std::env::temp_dir().join(format!("probe-bench-{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        Self(dir)
+    }
+    /// The path of `file` in it.
+    pub fn join(&self, file: impl AsRef<std::path::Path>) -> PathBuf {
+        self.0.join(file)
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }

@@ -403,22 +403,22 @@ pub(super) fn converters(p: ConverterPins) -> Converters {
     let adc2 = Adc::new(p.adc2, AdcConfig::default());
     // SAFETY: init context, before any DMA runs; the rings are handed to embassy for good.
     let (ring1, ring2) = unsafe { (&mut *addr_of_mut!(ADC1_RING), &mut *addr_of_mut!(ADC2_RING)) };
-    let adc1 = adc1.into_ring_buffered(
-        p.adc1_dma,
-        ring1,
-        Irqs,
-        [(p.pa0.degrade_adc(), SampleTime::CYCLES47_5)].into_iter(),
-        embassy_stm32::triggers::TIM6_TRGO,
-        Exten::RISING_EDGE,
-    );
-    let adc2 = adc2.into_ring_buffered(
-        p.adc2_dma,
-        ring2,
-        Irqs,
-        [(p.pa1.degrade_adc(), SampleTime::CYCLES47_5)].into_iter(),
-        embassy_stm32::triggers::TIM6_TRGO,
-        Exten::RISING_EDGE,
-    );
+    // Each converts its one channel (47.5 cycles' sampling) on every TIM6 update, into its DMA
+    // ring.
+    macro_rules! on_tim6 {
+        ($adc:expr, $dma:expr, $ring:expr, $pin:expr) => {
+            $adc.into_ring_buffered(
+                $dma,
+                $ring,
+                Irqs,
+                [($pin.degrade_adc(), SampleTime::CYCLES47_5)].into_iter(),
+                embassy_stm32::triggers::TIM6_TRGO,
+                Exten::RISING_EDGE,
+            )
+        };
+    }
+    let adc1 = on_tim6!(adc1, p.adc1_dma, ring1, p.pa0);
+    let adc2 = on_tim6!(adc2, p.adc2_dma, ring2, p.pa1);
     Converters {
         adc1,
         adc2,

@@ -14,6 +14,7 @@ bind_interrupts!(pub(super) struct Irqs {
     DMA1_CHANNEL3 => DmaFaults, dma::InterruptHandler<peripherals::DMA1_CH3>;
     DMA1_CHANNEL4 => DmaFaults, dma::InterruptHandler<peripherals::DMA1_CH4>;
     DMA1_CHANNEL5 => DmaFaults, dma::InterruptHandler<peripherals::DMA1_CH5>;
+    DMA1_CHANNEL6 => dma::InterruptHandler<peripherals::DMA1_CH6>;
 });
 
 // DMA1 CH1's vector (`DMA1_CHANNEL1`) is the RTIC task `sample` (src/bin/probe.rs), which calls

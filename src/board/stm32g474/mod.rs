@@ -20,7 +20,7 @@
 //! boost, 4 wait states, PLL 170 MHz, ADC12 kernel clock = SYSCLK, DMA interrupt priority);
 //! flash prefetch; the option bytes' bank mode (embassy's `Flash::new_blocking` panics on a
 //! mismatch: checked first, [`BootError::FlashSingleBank`]); the converters; LPUART1 receive
-//! on a DMA ring. A failed step records a [`BootError`] (the first is kept, [`boot_error`]) and
+//! on a DMA ring and transmit by DMA. A failed step records a [`BootError`] (the first is kept, [`boot_error`]) and
 //! the board carries on degraded. Unverified on hardware.
 //!
 //! # Parts
@@ -32,12 +32,12 @@
 //! | `interrupts` | DMA1 and LPUART1 bindings, the DMA transfer-error count |
 //! | `analog` | the sample stream: TIM6, DAC1, ADC1/ADC2 on DMA1 ([`Stream`], [`stream_faults`]) |
 //! | `store` | the store's bank-2 flash ([`InternalFlash`], [`STORE_BASE`]) |
-//! | `uart` | LPUART1 receive ([`Uart`]) |
+//! | `uart` | LPUART1: receive ([`Uart`]), the host link's transmit queue and DMA ([`link_send`], [`LinkTx`]) |
 //! | `watchdog` | the IWDG ([`Watchdog`]) |
 //! | `loadcell` | the HX711 on PB4/PB5 ([`LoadCell`]) |
 //!
 //! Pins: PA0 sense current (TIA output), PA1 drive monitor, PA4 DAC out to the drive amplifier,
-//! PA3 LPUART1 RX (AF12) from the ST-LINK virtual COM port, PB4 (Arduino D5) the load cell's
+//! PA3 LPUART1 RX (AF12) from and PA2 LPUART1 TX (AF12) to the ST-LINK virtual COM port, PB4 (Arduino D5) the load cell's
 //! HX711 `DOUT` (input, pull-up), PB5 (D4) its `PD_SCK` (push-pull output).
 
 mod analog;
@@ -54,7 +54,7 @@ pub use clocks::{clock_name, clock_source, ClockSource};
 pub use loadcell::{CycleDelay, LoadCell};
 pub use reset::boot_error;
 pub use store::{FlashError, InternalFlash, StoreFlash, STORE_BASE};
-pub use uart::Uart;
+pub use uart::{link_send, LinkTx, Uart};
 pub use watchdog::Watchdog;
 
 use crate::hal::FrontEndScale;
@@ -135,7 +135,7 @@ fn spin_until(cycles: u32, mut done: impl FnMut() -> bool) -> bool {
 }
 
 /// The board's parts, as the application takes them over (the independent watchdog running).
-pub type Parts = super::Parts<Stream, Watchdog, StoreFlash, Uart, LoadCell>;
+pub type Parts = super::Parts<Stream, Watchdog, StoreFlash, Uart, LinkTx, LoadCell>;
 
 /// Set the board up: cycle counter; 170 MHz from the 24 MHz HSE crystal through the PLL
 /// (HSI16 if the crystal does not start), range 1 boost; the converters; UART; watchdog
@@ -185,7 +185,7 @@ pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
         }))
     };
 
-    let uart = uart::open(p.LPUART1, p.PA3, p.DMA1_CH4);
+    let (uart, link_tx) = uart::open(p.LPUART1, p.PA3, p.PA2, p.DMA1_CH4, p.DMA1_CH6);
     let load_cell = loadcell::open(p.PB4, p.PB5);
 
     Parts {
@@ -194,5 +194,6 @@ pub fn init(core: &mut cortex_m::Peripherals) -> Parts {
         watchdog,
         flash,
         uart,
+        link_tx,
     }
 }

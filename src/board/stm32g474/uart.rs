@@ -1,7 +1,9 @@
-//! The STM32 board's host link: LPUART1 receive on the ST-LINK virtual COM port.
+//! The STM32 board's host link on the ST-LINK virtual COM port: LPUART1 receive (PA3, a DMA
+//! ring) and transmit (PA2, by DMA from the link's transmit queue; `docs/protocol.md`).
 
 use core::ptr::addr_of_mut;
-use embassy_stm32::usart::{RingBufferedUartRx, UartRx};
+use embassy_stm32::mode::Async;
+use embassy_stm32::usart::{RingBufferedUartRx, Uart as Lpuart, UartTx};
 use embassy_stm32::{peripherals, Peri};
 
 use super::interrupts::Irqs;
@@ -23,9 +25,16 @@ const UART_RING: usize = 64;
 pub struct Uart(Option<RingBufferedUartRx<'static>>);
 
 impl Uart {
+    /// No room for more bytes: drop what the ring holds (reading clears the idle and error
+    /// flags, which would otherwise raise the interrupt again at once); the host link answers
+    /// the frame they belonged to with its error (`BadCrc`, `BadCobs`).
+    pub fn hold(&mut self) {
+        while self.read_byte().is_some() {}
+    }
+
     /// The next received byte, if any (reading clears the receive interrupt). A receive error
     /// (overrun, noise, framing) is dropped and the read retried once: the lost byte shows up
-    /// as a malformed line, which the parser reports.
+    /// as a bad frame, which the host link reports.
     pub fn read_byte(&mut self) -> Option<u8> {
         let rx = self.0.as_mut()?;
         for _ in 0..2 {
@@ -39,29 +48,89 @@ impl Uart {
     }
 }
 
-/// LPUART1 RX on PA3 (AF12), its DMA ring on DMA1 CH4, started; without one
-/// ([`BootError::Uart`]) no byte ever arrives.
+/// LPUART1 on PA3 (RX, AF12; its DMA ring on DMA1 CH4, started) and PA2 (TX, AF12; DMA1 CH6);
+/// without it ([`BootError::Uart`]) no byte ever arrives or leaves.
 pub(super) fn open(
     lpuart1: Peri<'static, peripherals::LPUART1>,
     pa3: Peri<'static, peripherals::PA3>,
-    dma: Peri<'static, peripherals::DMA1_CH4>,
-) -> Uart {
+    pa2: Peri<'static, peripherals::PA2>,
+    rx_dma: Peri<'static, peripherals::DMA1_CH4>,
+    tx_dma: Peri<'static, peripherals::DMA1_CH6>,
+) -> (Uart, LinkTx) {
     let mut cfg = embassy_stm32::usart::Config::default();
     cfg.baudrate = LPUART_BAUD;
     static mut UART_BUF: [u8; UART_RING] = [0; UART_RING];
     // SAFETY: init context; the ring is handed to embassy for good.
     let uart_buf = unsafe { &mut *addr_of_mut!(UART_BUF) };
-    Uart(match UartRx::new(lpuart1, pa3, dma, Irqs, cfg) {
-        Ok(rx) => {
+    match Lpuart::new(lpuart1, pa3, pa2, tx_dma, rx_dma, Irqs, cfg) {
+        Ok(uart) => {
+            let (tx, rx) = uart.split();
             let mut rx = rx.into_ring_buffered(uart_buf);
             // The ring's DMA and the idle/error interrupts; embassy starts them only from a
             // read, and the first read here waits for the first interrupt.
             rx.start_uart();
-            Some(rx)
+            (Uart(Some(rx)), LinkTx(Some(tx)))
         }
         Err(_) => {
             record(BootError::Uart);
-            None
+            (Uart(None), LinkTx(None))
         }
+    }
+}
+
+/// The host link's transmit queue, bytes (1023: two of the longest frames; at 115 200 Bd it
+/// empties in 89 ms).
+const TX_CAP: usize = 1024;
+
+/// The transmit queue between the report task ([`link_send`]) and the task `link_tx`.
+static TX_QUEUE: cortex_m::interrupt::Mutex<core::cell::RefCell<heapless::Deque<u8, TX_CAP>>> =
+    cortex_m::interrupt::Mutex::new(core::cell::RefCell::new(heapless::Deque::new()));
+
+/// Queue a whole frame of the host link, or refuse it (`false`) when the queue has no room for
+/// all of it: never waits. The task `link_tx` sends it.
+pub fn link_send(frame: &[u8]) -> bool {
+    cortex_m::interrupt::free(|cs| {
+        let mut q = TX_QUEUE.borrow(cs).borrow_mut();
+        if q.capacity() - q.len() < frame.len() {
+            return false;
+        }
+        for &b in frame {
+            let _ = q.push_back(b);
+        }
+        true
     })
+}
+
+/// LPUART1's transmitter (DMA1 CH6), driven by the task `link_tx`: queued bytes in chunks, each
+/// written by DMA (embassy's async write, woken by the channel's interrupt).
+pub struct LinkTx(Option<UartTx<'static, Async>>);
+
+impl LinkTx {
+    /// The task `link_tx` has work on this board.
+    pub const BY_TASK: bool = true;
+
+    /// Move the queued bytes, up to `buf`'s length, into `buf`: how many.
+    pub fn take(buf: &mut [u8]) -> usize {
+        cortex_m::interrupt::free(|cs| {
+            let mut q = TX_QUEUE.borrow(cs).borrow_mut();
+            let mut n = 0;
+            for slot in buf.iter_mut() {
+                match q.pop_front() {
+                    Some(b) => {
+                        *slot = b;
+                        n += 1;
+                    }
+                    None => break,
+                }
+            }
+            n
+        })
+    }
+
+    /// Send `bytes` by DMA; without a transmitter ([`BootError::Uart`]) they are dropped.
+    pub async fn write(&mut self, bytes: &[u8]) {
+        if let Some(tx) = self.0.as_mut() {
+            let _ = tx.write(bytes).await;
+        }
+    }
 }
