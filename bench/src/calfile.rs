@@ -8,7 +8,7 @@ use pzt_probe::loadcell::{ForceWindow, LoadCellCal, LoadCellCounts};
 use pzt_probe::unit::calibration::{PowerLaw, Source};
 use pzt_probe::unit::contact_law::{self, ContactLaw};
 use pzt_probe::unit::profile::{AirReference, UnitProfile};
-use pzt_probe::unit::q_model::QModel;
+use pzt_probe::unit::q_model::{DampingModel, QModel};
 
 fn motional() -> String {
     Resonance::Motional.name().to_owned()
@@ -111,6 +111,22 @@ pub struct QModelFile {
     /// Relative scatter of the references' Q about the curve (0: not known).
     #[serde(default)]
     pub sigma_rel: f64,
+    /// The contact-damping curve (`QModel::damping`), when the calibration fitted one through
+    /// its contact law.
+    #[serde(default)]
+    pub damping: Option<DampingFile>,
+}
+
+/// The on-disk form of the Q model's contact-damping curve (`DampingModel`, the same fields):
+/// `1/Q = (probe_per_s + contact_per_s (E/kPa)^(−1/6) (F/F0)^(2/3)) / (sqrt(k m)/m0)`.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+pub struct DampingFile {
+    /// The probe's own damping per modal mass, s⁻¹.
+    pub probe_per_s: f64,
+    /// The contact's damping per modal mass at 1 kPa and the contact law's reference force, s⁻¹.
+    pub contact_per_s: f64,
+    /// Relative uncertainty of the curve's Q between the references (held out).
+    pub sigma_rel: f64,
 }
 
 /// The on-disk form of the load cell's calibration and the force window.
@@ -172,6 +188,11 @@ impl ProfileFile {
                 q1: m.q1,
                 q2: m.q2,
                 sigma_rel: m.sigma_rel,
+                damping: m.damping.map(|d| DampingFile {
+                    probe_per_s: d.probe_per_s,
+                    contact_per_s: d.contact_per_s,
+                    sigma_rel: d.sigma_rel,
+                }),
             }),
             air: p.air.map(|a| AirFile {
                 free_resonance_hz: a.free_resonance.0,
@@ -207,6 +228,11 @@ impl ProfileFile {
                 q1: m.q1,
                 q2: m.q2,
                 sigma_rel: m.sigma_rel,
+                damping: m.damping.map(|d| DampingModel {
+                    probe_per_s: d.probe_per_s,
+                    contact_per_s: d.contact_per_s,
+                    sigma_rel: d.sigma_rel,
+                }),
             }),
             air: self.air.as_ref().map(|a| AirReference {
                 free_resonance: Hz(a.free_resonance_hz),
@@ -277,10 +303,19 @@ pub fn describe(p: &PowerLaw) -> String {
 /// The profile for humans.
 pub fn describe_profile(p: &UnitProfile) -> String {
     let q = p.q_model.map_or("no Q model".to_owned(), |m| {
-        if m.q2 != 0.0 {
+        let empirical = if m.q2 != 0.0 {
             format!("Q = {:.2} + {:.3} ln E {:+.3} ln F", m.q0, m.q1, m.q2)
         } else {
             format!("Q = {:.2} + {:.3} ln E", m.q0, m.q1)
+        };
+        match m.damping {
+            Some(d) => format!(
+                "{empirical}; lossless Q from the contact's damping {:.2} + {:.1} E^(-1/6) (F/F0)^(2/3) s^-1 per modal mass (±{:.2} %)",
+                d.probe_per_s,
+                d.contact_per_s,
+                100.0 * d.sigma_rel
+            ),
+            None => empirical,
         }
     });
     let cell = p.load_cell.map_or("no load cell".to_owned(), |c| {
