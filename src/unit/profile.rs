@@ -408,10 +408,10 @@ pub fn calibrate(
         }
     }
     let law = PowerLaw::fit_robust(&mut points[..m])?;
-    let q_of = || refs.iter().map(|r| (r.modulus_kpa, r.force_n, r.q));
     let q_model = QModel {
-        damping: contact.as_ref().and_then(|c| DampingModel::fit(q_of(), c)),
-        ..QModel::fit(q_of()).ok_or(crate::unit::calibration::FitError::TooFewPoints)?
+        damping: contact.as_ref().and_then(|c| DampingModel::fit(refs, c)),
+        ..QModel::fit(refs.iter().map(|r| (r.modulus_kpa, r.force_n, r.q)))
+            .ok_or(crate::unit::calibration::FitError::TooFewPoints)?
     };
     Ok(Calibration {
         law,

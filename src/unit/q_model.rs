@@ -3,6 +3,7 @@
 //! reading's tissue loss is read against. May import the leaves and the contact law.
 
 use crate::unit::contact_law::ContactLaw;
+use crate::unit::profile::Reference;
 
 /// The unit's quality factor against modulus on the reference phantoms: the contact condition
 /// the calibration holds for. A reading whose Q strays from it by more than
@@ -57,8 +58,7 @@ pub struct DampingModel {
     pub contact_per_s: f64,
     /// Relative uncertainty of the curve's Q at a modulus between the references: each interior
     /// reference modulus left out in turn, the curve fitted to the others, the mean `Q/Q_model
-    /// − 1` of its readings at each force, RMS over those groups (the in-sample scatter with
-    /// two degrees of freedom off when there is no interior modulus). What a reading's loss
+    /// − 1` of its readings at each force, RMS over those groups. What a reading's loss
     /// inherits from the curve, beside its own σ(Q).
     pub sigma_rel: f64,
 }
@@ -235,38 +235,34 @@ impl DampingModel {
         }
     }
 
-    /// Fit to `(E kPa, F N, Q)` reference readings (`F` 0: not measured, the law's reference
-    /// force) through the unit's contact law `law`: weighted least squares of each reading's
-    /// damping per modal mass `R/Q` on the shape ([`ContactLaw::damping_shape`]), a straight
-    /// line, weights `(Q/R)²` (each reading's relative error in `Q` counts alike), and
-    /// [`Self::sigma_rel`] from fits that leave each interior modulus out. `None` with fewer
-    /// than two distinct moduli, non-finite input, or a damping of either part that comes out
+    /// Fit to the reference readings `refs` (modulus, force — 0: not measured, the law's
+    /// reference force — and Q of each) through the unit's contact law `law`: weighted least
+    /// squares of each reading's damping per modal mass `R/Q` on the shape
+    /// ([`ContactLaw::damping_shape`]), a straight line, weights `(Q/R)²` (each reading's
+    /// relative error in `Q` counts alike), and [`Self::sigma_rel`] from fits that leave each
+    /// interior modulus out. Readings without a positive finite modulus and Q are left out.
+    /// `None` without a modulus between the lowest and the highest (none to hold out), or a
+    /// damping of either part that comes out
     /// negative (the readings do not follow the contact's mechanics: the empirical curve
     /// stays). Allocation free; `O(n²)` in the readings for the held-out fits.
-    pub fn fit<I: IntoIterator<Item = (f64, f64, f64)>>(data: I, law: &ContactLaw) -> Option<Self>
-    where
-        I::IntoIter: Clone,
-    {
-        let data = data.into_iter().filter(usable);
-        let m = Self::fit_without(data.clone(), law, None)?;
-        let sigma_rel = m
-            .held_out(data.clone(), law)
-            .or_else(|| m.in_sample(data, law))?;
+    pub fn fit(refs: &[Reference], law: &ContactLaw) -> Option<Self> {
+        let m = Self::fit_without(refs, law, None)?;
+        let sigma_rel = m.held_out(refs, law)?;
         let m = Self { sigma_rel, ..m };
         m.is_valid().then_some(m)
     }
 
-    /// The two constants fitted to the readings of `data` not at the modulus `leave_out`.
-    fn fit_without<I: Iterator<Item = (f64, f64, f64)>>(
-        data: I,
-        law: &ContactLaw,
-        leave_out: Option<f64>,
-    ) -> Option<Self> {
+    /// The two constants fitted to the usable readings of `refs` not at the modulus
+    /// `leave_out`.
+    fn fit_without(refs: &[Reference], law: &ContactLaw, leave_out: Option<f64>) -> Option<Self> {
         let mut line = crate::linalg::Line::default();
-        for (e, f, q) in data.filter(|d| Some(d.0) != leave_out) {
-            let force = (f > 0.0).then_some(f);
-            let c = law.mode_rate(e, force) / q;
-            line.add(law.damping_shape(e, force), c, 1.0 / (c * c));
+        for r in refs
+            .iter()
+            .filter(|r| usable(r) && Some(r.modulus_kpa) != leave_out)
+        {
+            let force = force_of(r);
+            let c = law.mode_rate(r.modulus_kpa, force) / r.q;
+            line.add(law.damping_shape(r.modulus_kpa, force), c, 1.0 / (c * c));
         }
         let fit = line.solve()?;
         let m = Self {
@@ -277,71 +273,48 @@ impl DampingModel {
         (m.is_valid() && m.contact_per_s > 0.0).then_some(m)
     }
 
-    /// RMS over the groups of readings at one interior modulus and one force (forces within
-    /// [`crate::unit::calibration::SAME_FORCE`]) of the mean `Q/Q_model − 1`, the model fitted
-    /// without that modulus; `None` without an interior modulus or where a fit fails.
-    fn held_out<I: Iterator<Item = (f64, f64, f64)> + Clone>(
-        &self,
-        data: I,
-        law: &ContactLaw,
-    ) -> Option<f64> {
-        let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
-        for (e, _, _) in data.clone() {
-            lo = lo.min(e);
-            hi = hi.max(e);
-        }
-        let same_force = |a: f64, b: f64| {
-            a == b
-                || (a > 0.0
-                    && b > 0.0
-                    && libm::fabs(a / b - 1.0) <= crate::unit::calibration::SAME_FORCE)
-        };
-        let (mut sum2, mut groups) = (0.0, 0u32);
-        // Each modulus once, at its first reading (found by looking back: nothing is listed),
-        // then each of its forces once, the same way.
-        for (i, (e, _, _)) in data.clone().enumerate() {
-            if e == lo || e == hi || data.clone().take(i).any(|x| x.0 == e) {
-                continue;
-            }
-            let m = Self::fit_without(data.clone(), law, Some(e))?;
-            let at_e = |x: &(f64, f64, f64)| x.0 == e;
-            for (j, g) in data.clone().enumerate().skip(i).filter(|(_, x)| at_e(x)) {
-                if data
-                    .clone()
-                    .take(j)
-                    .skip(i)
-                    .filter(at_e)
-                    .any(|x| same_force(x.1, g.1))
-                {
-                    continue;
-                }
-                let (mut rsum, mut k) = (0.0, 0.0);
-                for (e, f, q) in data.clone().filter(at_e).filter(|x| same_force(x.1, g.1)) {
-                    rsum += q / m.q_at(law, e, (f > 0.0).then_some(f)) - 1.0;
-                    k += 1.0;
-                }
-                let r = rsum / k;
-                sum2 += r * r;
-                groups += 1;
-            }
-        }
-        (groups > 0).then(|| libm::sqrt(sum2 / groups as f64))
+    /// `Q/Q_model − 1` of the reading `r`.
+    fn residual(&self, law: &ContactLaw, r: &Reference) -> f64 {
+        r.q / self.q_at(law, r.modulus_kpa, force_of(r)) - 1.0
     }
 
-    /// RMS of `Q/Q_model − 1` over `data` with the two constants' degrees of freedom off.
-    fn in_sample<I: Iterator<Item = (f64, f64, f64)>>(
-        &self,
-        data: I,
-        law: &ContactLaw,
-    ) -> Option<f64> {
-        let (mut n, mut ss) = (0usize, 0.0);
-        for (e, f, q) in data {
-            let r = q / self.q_at(law, e, (f > 0.0).then_some(f)) - 1.0;
-            ss += r * r;
-            n += 1;
+    /// RMS over the groups of usable readings at one interior modulus and one force (forces
+    /// within [`crate::unit::calibration::SAME_FORCE`]) of the mean [`Self::residual`], the
+    /// model fitted without that modulus; `None` without an interior modulus or where a fit
+    /// fails.
+    fn held_out(&self, refs: &[Reference], law: &ContactLaw) -> Option<f64> {
+        let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+        for r in refs.iter().filter(|r| usable(r)) {
+            lo = lo.min(r.modulus_kpa);
+            hi = hi.max(r.modulus_kpa);
         }
-        let s = libm::sqrt(ss / n.saturating_sub(2).max(1) as f64);
-        s.is_finite().then_some(s)
+        let (mut sum2, mut groups) = (0.0, 0u32);
+        // Each group once, at its first reading (found by looking back: nothing is listed),
+        // against the model fitted without its modulus.
+        for (j, g) in refs.iter().enumerate() {
+            let e = g.modulus_kpa;
+            if !usable(g)
+                || e == lo
+                || e == hi
+                || refs[..j]
+                    .iter()
+                    .any(|x| usable(x) && x.modulus_kpa == e && same_force(x, g))
+            {
+                continue;
+            }
+            let m = Self::fit_without(refs, law, Some(e))?;
+            let (mut rsum, mut k) = (0.0, 0.0);
+            for x in refs[j..].iter() {
+                if usable(x) && x.modulus_kpa == e && same_force(x, g) {
+                    rsum += m.residual(law, x);
+                    k += 1.0;
+                }
+            }
+            let r = rsum / k;
+            sum2 += r * r;
+            groups += 1;
+        }
+        (groups > 0).then(|| libm::sqrt(sum2 / groups as f64))
     }
 
     /// True when both constants are finite and not negative and the uncertainty finite and
@@ -357,8 +330,22 @@ impl DampingModel {
 }
 
 /// A reading a fit can use: positive finite modulus and Q, a force not negative.
-fn usable(&(e, f, q): &(f64, f64, f64)) -> bool {
+fn usable(r: &Reference) -> bool {
+    let (e, f, q) = (r.modulus_kpa, r.force_n, r.q);
     e > 0.0 && e.is_finite() && q > 0.0 && q.is_finite() && f >= 0.0 && f.is_finite()
+}
+
+/// True when `a` and `b` were read at one force (within
+/// [`crate::unit::calibration::SAME_FORCE`]; both unmeasured counts as one).
+fn same_force(a: &Reference, b: &Reference) -> bool {
+    let (a, b) = (a.force_n, b.force_n);
+    a == b
+        || (a > 0.0 && b > 0.0 && libm::fabs(a / b - 1.0) <= crate::unit::calibration::SAME_FORCE)
+}
+
+/// The measured contact force of `r`, N (`None`: not measured).
+fn force_of(r: &Reference) -> Option<f64> {
+    (r.force_n > 0.0).then_some(r.force_n)
 }
 
 #[cfg(test)]
@@ -406,6 +393,19 @@ mod tests {
     }
 
     const PHANTOMS: [f64; 5] = [157.5, 279.0, 414.0, 1146.0, 2465.0];
+
+    /// Reference readings of `(E kPa, F N, Q)` (their resonance is not used here).
+    fn references(data: &[(f64, f64, f64)]) -> Vec<Reference> {
+        data.iter()
+            .map(|&(modulus_kpa, force_n, q)| Reference {
+                modulus_kpa,
+                resonance_hz: 0.0,
+                sigma_hz: 0.0,
+                q,
+                force_n,
+            })
+            .collect()
+    }
     const FORCES: [f64; 3] = [0.030, 0.015, 0.050];
 
     /// Fitted to hal-sim's own lossless Q of A–E at 15, 30 and 50 mN, the curve is that Q at
@@ -419,7 +419,7 @@ mod tests {
             .iter()
             .flat_map(|&e| FORCES.map(|f| (e, f, kelvin_q(&mech, e, f))))
             .collect();
-        let m = DampingModel::fit(refs.iter().copied(), &law).expect("a fit");
+        let m = DampingModel::fit(&references(&refs), &law).expect("a fit");
         let probe = 2.0 * PI * mech.free_resonance_hz / mech.free_q;
         assert!(
             (m.probe_per_s / probe - 1.0).abs() < 1e-9,
@@ -470,7 +470,7 @@ mod tests {
                 }
             }
         }
-        let m = DampingModel::fit(refs.iter().copied(), &law).expect("a fit");
+        let m = DampingModel::fit(&references(&refs), &law).expect("a fit");
         assert!(m.sigma_rel > 0.5 * d && m.sigma_rel < 3.0 * d, "{m:?}");
         let empirical = QModel::fit(refs.iter().copied()).expect("a fit");
         assert!(
@@ -489,10 +489,16 @@ mod tests {
             .iter()
             .map(|&e| (e, 0.030, 30.0 - 10.0 * libm::log10(e)))
             .collect();
-        assert_eq!(DampingModel::fit(falling, &law), None);
-        assert_eq!(DampingModel::fit([(300.0, 0.03, 10.0); 4], &law), None);
+        assert_eq!(DampingModel::fit(&references(&falling), &law), None);
         assert_eq!(
-            DampingModel::fit([(-1.0, 0.03, 10.0), (f64::NAN, 0.03, 9.0)], &law),
+            DampingModel::fit(&references(&[(300.0, 0.03, 10.0); 4]), &law),
+            None
+        );
+        assert_eq!(
+            DampingModel::fit(
+                &references(&[(-1.0, 0.03, 10.0), (f64::NAN, 0.03, 9.0)]),
+                &law
+            ),
             None
         );
     }
