@@ -69,7 +69,12 @@ fn lossy_tissue_reads_within_its_sigma_or_says_the_resonance_is_too_broad() {
 /// σ(Q) of its own: the curve's held-out scatter, the noise of the references' means,
 /// `q_model::tests::the_held_out_uncertainty_is_the_references_noise`). A lossless-Q curve
 /// that misses the contact's Q curve (the empirical `ln E` curve read 0.065 at 414–600 kPa)
-/// is far outside.
+/// is far outside. That stated uncertainty is itself held to the noise: the curve is fitted
+/// to references read with the same method and noise, several per modulus and force, so what
+/// it states (RMS over the moduli) is within three times the readings' own scatter (RMS of
+/// their SDs; 3 for the 15 and 50 mN references' larger scatter and the SDs' own sampling
+/// error over six readings; measured 0.9× auto, 1.1× sweep-G). The empirical curve stated
+/// 0.07, 17 times that.
 #[test]
 fn lossless_tissue_reads_no_loss_beyond_its_noise_between_the_references() {
     use hal_sim::{NoiseScene, Scene};
@@ -77,6 +82,7 @@ fn lossless_tissue_reads_no_loss_beyond_its_noise_between_the_references() {
     let n = 6;
     for method in [Method::Auto, Method::SweepG] {
         let unit = probe_bench::unit::default_for(method).expect("the unit");
+        let (mut sd2, mut curve2, mut moduli) = (0.0, 0.0, 0.0);
         for e in [200.0, 340.0, 600.0, 850.0, 1700.0, 2200.0] {
             let scene = Scene::on_modulus_kpa(e)
                 .with_noise(NoiseScene::Bench)
@@ -119,6 +125,15 @@ fn lossless_tissue_reads_no_loss_beyond_its_noise_between_the_references() {
                 mean.abs() <= 3.0 * se,
                 "{method:?} {e} kPa: mean loss {mean} against 3 × {se}"
             );
+            sd2 += sd * sd;
+            curve2 += cal * cal;
+            moduli += 1.0;
         }
+        let (sd, curve) = ((sd2 / moduli).sqrt(), (curve2 / moduli).sqrt());
+        println!("{method:?}: the curve's uncertainty {curve:.4} against the readings' SD {sd:.4}");
+        assert!(
+            curve <= 3.0 * sd,
+            "{method:?}: curve {curve} against SD {sd}"
+        );
     }
 }
