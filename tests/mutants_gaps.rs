@@ -38,6 +38,7 @@ fn q_model() -> QModel {
         q1: 10.0 / std::f64::consts::LN_10,
         q2: 0.0,
         sigma_rel: 0.0,
+        damping: None,
     }
 }
 
@@ -141,16 +142,16 @@ fn unresolved_q_is_low_snr() {
 #[test]
 fn contact_condition_holds_within_twenty_percent() {
     let m = q_model();
-    assert!((m.q_at(1000.0, None) - 20.0).abs() < 1e-12);
-    assert!((m.q_at(100.0, None) - 10.0).abs() < 1e-12);
-    assert!(m.holds(1000.0, None, 20.0));
-    assert!(m.holds(1000.0, None, 23.9)); // +19.5 %
-    assert!(m.holds(1000.0, None, 16.1)); // −19.5 %
-    assert!(!m.holds(1000.0, None, 24.1)); // +20.5 %
-    assert!(!m.holds(1000.0, None, 15.9)); // −20.5 %
-                                           // Where the model expects no positive Q (E below e^1 = 2.7 kPa here), nothing holds.
-    assert!(m.q_at(2.0, None) < 0.0);
-    assert!(!m.holds(2.0, None, m.q_at(2.0, None)));
+    assert!((m.q_at(1000.0, None, None) - 20.0).abs() < 1e-12);
+    assert!((m.q_at(100.0, None, None) - 10.0).abs() < 1e-12);
+    assert!(m.holds(1000.0, None, 20.0, None));
+    assert!(m.holds(1000.0, None, 23.9, None)); // +19.5 %
+    assert!(m.holds(1000.0, None, 16.1, None)); // −19.5 %
+    assert!(!m.holds(1000.0, None, 24.1, None)); // +20.5 %
+    assert!(!m.holds(1000.0, None, 15.9, None)); // −20.5 %
+                                                 // Where the model expects no positive Q (E below e^1 = 2.7 kPa here), nothing holds.
+    assert!(m.q_at(2.0, None, None) < 0.0);
+    assert!(!m.holds(2.0, None, m.q_at(2.0, None, None), None));
 
     // Through the pipeline: off-condition contact is `bad_contact`, not a modulus.
     let f = f_of(1000.0);
@@ -319,6 +320,7 @@ fn profile_with_non_finite_q_model_is_invalid() {
         q1: 1.0,
         q2: 0.0,
         sigma_rel: 0.0,
+        damping: None,
     });
     assert!(!p.is_valid());
     p.q_model = Some(QModel {
@@ -326,6 +328,7 @@ fn profile_with_non_finite_q_model_is_invalid() {
         q1: f64::INFINITY,
         q2: 0.0,
         sigma_rel: 0.0,
+        damping: None,
     });
     assert!(!p.is_valid());
 }

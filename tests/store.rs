@@ -29,6 +29,7 @@ fn record(n: u32) -> UnitProfile {
             q1: 1.0,
             q2: -0.5 * n as f64,
             sigma_rel: 0.01 * n as f64,
+            damping: None,
         }),
         air: Some(AirReference {
             free_resonance: Hz(232.0 + n as f32),

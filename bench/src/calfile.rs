@@ -220,10 +220,19 @@ pub fn describe(p: &PowerLaw) -> String {
 /// The profile for humans.
 pub fn describe_profile(p: &UnitProfile) -> String {
     let q = p.q_model.map_or("no Q model".to_owned(), |m| {
-        if m.q2 != 0.0 {
+        let empirical = if m.q2 != 0.0 {
             format!("Q = {:.2} + {:.3} ln E {:+.3} ln F", m.q0, m.q1, m.q2)
         } else {
             format!("Q = {:.2} + {:.3} ln E", m.q0, m.q1)
+        };
+        match m.damping {
+            Some(d) => format!(
+                "{empirical}; lossless Q from the contact's damping {:.2} + {:.1} E^(-1/6) (F/F0)^(2/3) s^-1 per modal mass (±{:.2} %)",
+                d.probe_per_s,
+                d.contact_per_s,
+                100.0 * d.sigma_rel
+            ),
+            None => empirical,
         }
     });
     let cell = p.load_cell.map_or("no load cell".to_owned(), |c| {

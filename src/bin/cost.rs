@@ -495,7 +495,7 @@ mod harness {
                 modulus_kpa: e,
                 resonance_hz: f + up * 0.3 + up * off,
                 sigma_hz: 0.2,
-                q: q_model.map_or(20.0, |q| q.q_at(e, Some(force))),
+                q: q_model.map_or(20.0, |q| q.q_at(e, Some(force), unit.contact.as_ref())),
                 force_n: force,
             });
         }

@@ -147,9 +147,10 @@ pub fn conclude(
     // a Q off the curve either way is the only sign of a press unlike the calibration's.
     let force_n = force.map(|w| w.mean.0 as f64);
     let (e_kpa, q) = (m.value.0 as f64, q as f64);
+    let law = unit.contact.as_ref();
     let contact_unlike = match force_n {
-        Some(_) => q_model.exceeded(e_kpa, force_n, q),
-        None => !q_model.holds(e_kpa, force_n, q),
+        Some(_) => q_model.exceeded(e_kpa, force_n, q, law),
+        None => !q_model.holds(e_kpa, force_n, q, law),
     };
     if contact_unlike {
         r.status = Status::Failed(Failure::BadContact);
@@ -236,7 +237,7 @@ mod tests {
             .modulus
             .expect("a modulus on the calibrated curve")
             .0 as f64;
-        let expect = q_model.q_at(e, Some(0.030)) as f32;
+        let expect = q_model.q_at(e, Some(0.030), unit.contact.as_ref()) as f32;
         assert_eq!(at(0.3 * expect, Some(press)).status, Status::Ok);
         assert_eq!(
             at(1.5 * expect, Some(press)).status,

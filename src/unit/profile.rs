@@ -14,7 +14,7 @@ use crate::loadcell::{ContactForce, ForceWindow, LoadCellCal};
 use crate::status::Failure;
 use crate::unit::calibration::{held_out_rms, Modulus, PowerLaw, RefPoint, MAX_REFERENCES};
 use crate::unit::contact_law::ContactLaw;
-use crate::unit::q_model::QModel;
+use crate::unit::q_model::{DampingModel, QModel};
 use crate::units::{Farads, Hz, Seconds, Siemens, Volts};
 
 /// A reading whose Q exceeds this fraction of the free Q may be free air.
@@ -191,21 +191,26 @@ impl UnitProfile {
     }
 
     /// Read through the power law `law` (mapping `resonance`) from now on: the contact law, if
-    /// any, goes (it belongs to the calibration `law` replaces).
+    /// any, goes (it belongs to the calibration `law` replaces), and with it the Q model's
+    /// contact-damping curve (fitted through it; the empirical curve stays).
     pub fn use_power_law(&mut self, law: PowerLaw, resonance: crate::estimate::Resonance) {
         self.calibration = law;
         self.resonance = resonance;
         self.contact = None;
+        if let Some(m) = self.q_model.as_mut() {
+            m.damping = None;
+        }
     }
 
     /// The tissue's loss tangent and its standard uncertainty from a reading of modulus `e_kpa`
     /// at the contact force `force_n` (N) with quality factor `q ± q_sigma`, beyond the
-    /// reference phantoms' own loss: the mode's `1/Q` above the calibrated contact's
-    /// ([`QModel::q_at`]) is the tissue's loss tangent times its share of the mode's loss
+    /// reference phantoms' own loss: the mode's `1/Q` above the lossless calibrated contact's
+    /// ([`QModel::q_at`] through the contact law: the contact-damping curve where the
+    /// calibration fitted one) is the tissue's loss tangent times its share of the mode's loss
     /// ([`ContactLaw::loss_share`]), `η = (1/Q − 1/Q_cal) / φ`. Its σ combines the reading's
-    /// σ(Q) and the Q model's scatter about the references ([`QModel::sigma_rel`]); the contact
-    /// law's own uncertainty, a common scale on `φ`, is left out. `None` without a contact law, a
-    /// Q model, a σ(Q), or where the tissue's share vanishes.
+    /// σ(Q) and the curve's own uncertainty ([`QModel::scatter`]); the contact law's own
+    /// uncertainty, a common scale on `φ`, is left out. `None` without a contact law, a Q
+    /// model, a σ(Q), or where the tissue's share vanishes.
     pub fn tissue_loss(
         &self,
         e_kpa: f64,
@@ -215,12 +220,12 @@ impl UnitProfile {
     ) -> Option<(f64, f64)> {
         let (law, model, q_sigma) = (self.contact?, self.q_model?, q_sigma?);
         let share = law.loss_share(e_kpa, force_n);
-        let q_cal = model.q_at(e_kpa, force_n);
+        let q_cal = model.q_at(e_kpa, force_n, Some(&law));
         if !(share > 1e-6) || !(q_cal > 0.0) || !(q > 0.0) {
             return None;
         }
         let eta = (1.0 / q - 1.0 / q_cal) / share;
-        let (d_q, d_cal) = (q_sigma / (q * q), model.sigma_rel / q_cal);
+        let (d_q, d_cal) = (q_sigma / (q * q), model.scatter(Some(&law)) / q_cal);
         let sigma = libm::sqrt(d_q * d_q + d_cal * d_cal) / share;
         (eta.is_finite() && sigma.is_finite()).then_some((eta, sigma))
     }
@@ -280,13 +285,16 @@ impl UnitProfile {
     }
 
     /// True when the profile may be stored and used (valid curve, finite covariance, finite
-    /// contact condition and valid air reference where present).
+    /// contact condition and valid air reference where present; a contact-damping curve only
+    /// with the contact law it was fitted through).
     pub fn is_valid(&self) -> bool {
         self.calibration.is_valid()
             && self.calibration.cov.iter().flatten().all(|v| v.is_finite())
             && self.calibration.model_sigma_hz.is_finite()
             && self.calibration.model_sigma_hz >= 0.0
-            && self.q_model.is_none_or(|m| m.is_valid())
+            && self
+                .q_model
+                .is_none_or(|m| m.is_valid() && (m.damping.is_none() || self.contact.is_some()))
             && self.air.is_none_or(|a| a.is_valid())
             && self.contact.is_none_or(|c| c.is_valid())
             && self.load_cell.is_none_or(|c| c.is_valid())
@@ -324,7 +332,8 @@ pub struct Calibration {
 
 /// Calibrate a unit from its reference readings: the robust weighted fit of `f = a + b E^c`
 /// ([`PowerLaw::fit_robust`]) on the readings at the nominal force ([`NOMINAL_FORCE`], or all
-/// of them when none has a measured force), the contact condition `Q(E, F)` ([`QModel::fit`])
+/// of them when none has a measured force), the contact condition `Q(E, F)` ([`QModel::fit`];
+/// with the contact law kept, also its contact-damping curve through it, [`DampingModel::fit`])
 /// and, with the air reference's free resonance, the contact law ([`ContactLaw::fit`]) of
 /// every reading at its own force. The contact law is kept only when it predicts the
 /// references better held out: each distinct reference modulus in turn is left out (at every
@@ -399,8 +408,11 @@ pub fn calibrate(
         }
     }
     let law = PowerLaw::fit_robust(&mut points[..m])?;
-    let q_model = QModel::fit(refs.iter().map(|r| (r.modulus_kpa, r.force_n, r.q)))
-        .ok_or(crate::unit::calibration::FitError::TooFewPoints)?;
+    let q_model = QModel {
+        damping: contact.as_ref().and_then(|c| DampingModel::fit(refs, c)),
+        ..QModel::fit(refs.iter().map(|r| (r.modulus_kpa, r.force_n, r.q)))
+            .ok_or(crate::unit::calibration::FitError::TooFewPoints)?
+    };
     Ok(Calibration {
         law,
         q_model,

@@ -1,12 +1,23 @@
 //! The unit's Q model: its quality factor against modulus (and contact force) on the reference
-//! phantoms, the contact condition its calibration holds for. May import the leaves.
+//! phantoms, the contact condition its calibration holds for and the lossless contact a
+//! reading's tissue loss is read against. May import the leaves and the contact law.
 
-/// The unit's quality factor against modulus on the reference phantoms, `Q ≈ q0 + q1 ln E`:
-/// the contact condition the calibration holds for. A reading whose Q strays from it by more
-/// than [`QModel::TOLERANCE`] was not taken in that condition (a different preload changes the
-/// contact area and with it the tissue damping) and its modulus cannot be trusted. With the
-/// `serde` feature it is (de)serialized as its fields by these names, `q2` and `sigma_rel` 0
-/// when absent (the `q_model` object of probe-bench's profile files).
+use crate::unit::contact_law::ContactLaw;
+use crate::unit::profile::Reference;
+
+/// The unit's quality factor against modulus on the reference phantoms: the contact condition
+/// the calibration holds for. A reading whose Q strays from it by more than
+/// [`QModel::TOLERANCE`] was not taken in that condition (a different preload changes the
+/// contact area and with it the tissue damping) and its modulus cannot be trusted.
+///
+/// Two curves: `Q ≈ q0 + q1 ln E + q2 ln F`, empirical, which needs nothing else; and, when the
+/// calibration kept the contact law, the contact's own damping ([`DampingModel`]), which
+/// follows the mode's Q curve through the contact law and is the one used wherever the law is
+/// at hand ([`QModel::q_at`]).
+///
+/// With the `serde` feature it is (de)serialized as its fields by these names, `q2`,
+/// `sigma_rel` and `damping` default when absent (the `q_model` object of probe-bench's profile
+/// files).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -19,10 +30,45 @@ pub struct QModel {
     /// one force, or without a load cell).
     #[cfg_attr(feature = "serde", serde(default))]
     pub q2: f64,
-    /// Relative scatter of the references' Q about the curve (the RMS of `Q/Q_model − 1` with
-    /// the fitted terms' degrees of freedom taken off): how well the curve predicts the Q of
-    /// a contact like the calibration's, the floor of a reading's loss uncertainty.
+    /// Relative scatter of the references' Q about the curve `q0 + q1 ln E + q2 ln F` (the RMS
+    /// of `Q/Q_model − 1` with the fitted terms' degrees of freedom taken off).
     #[cfg_attr(feature = "serde", serde(default))]
+    pub sigma_rel: f64,
+    /// The contact-damping curve, fitted through the contact law the calibration kept (`None`
+    /// without one).
+    #[cfg_attr(feature = "serde", serde(default))]
+    pub damping: Option<DampingModel>,
+}
+
+/// The lossless Q of the unit's contact from the Kelvin model of paper 003 (docs/physics.md,
+/// "Equations"; `hal-sim`'s `tissue.rs`): the loaded mode has the damping `c = c1 + c_m` of
+/// the probe and the contact, and `Q = sqrt(k m) / c`, so
+///
+/// ```text
+/// 1/Q = (g1 + g2 (E/kPa)^(−1/6) (F/F0)^(2/3)) / R(E, F)
+/// ```
+///
+/// with `g1 = c1/m0` the probe's own damping and `g2 (E/kPa)^(−1/6) (F/F0)^(2/3) = c_m/m0` the
+/// contact's (paper 003's appendix, `c_m ∝ v S` on the Hertz contact:
+/// [`ContactLaw::damping_shape`]), both per modal mass, and `R = sqrt(k m)/m0` the loaded
+/// mode's rate from the unit's contact law ([`ContactLaw::mode_rate`]: its stiffness and its
+/// co-moving tissue mass at `E` and `F`). Two constants, fitted to the reference readings'
+/// `R/Q` (linear in them). The mode's Q is not monotonic in `E`: on soft tissue the
+/// co-moving mass lowers the rate faster than the contact's damping falls; a curve in `ln E`
+/// cannot follow that, this one does by construction.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct DampingModel {
+    /// The probe's own damping per modal mass `c1/m0`, s⁻¹.
+    pub probe_per_s: f64,
+    /// The contact's damping per modal mass at 1 kPa and the contact law's reference force,
+    /// s⁻¹ (`c_m/m0 = contact_per_s (E/kPa)^(−1/6) (F/F0)^(2/3)`).
+    pub contact_per_s: f64,
+    /// Relative uncertainty of the curve's Q at a modulus between the references: each interior
+    /// reference modulus left out in turn, the curve fitted to the others, the mean `Q/Q_model
+    /// − 1` of its readings at each force, RMS over those groups. What a reading's loss
+    /// inherits from the curve, beside its own σ(Q).
     pub sigma_rel: f64,
 }
 
@@ -72,6 +118,7 @@ impl QModel {
                 q1: c[1],
                 q2: c[2],
                 sigma_rel: 0.0,
+                damping: None,
             };
             return c
                 .iter()
@@ -88,6 +135,7 @@ impl QModel {
             q1: f.b,
             q2: 0.0,
             sigma_rel: 0.0,
+            damping: None,
         };
         (f.a.is_finite() && f.b.is_finite()).then(|| m.with_scatter(data.filter(ok), 2))
     }
@@ -96,7 +144,7 @@ impl QModel {
     fn with_scatter<I: Iterator<Item = (f64, f64, f64)>>(self, data: I, terms: usize) -> Self {
         let (mut n, mut ss) = (0usize, 0.0);
         for (e, f, q) in data {
-            let expect = self.q_at(e, (f > 0.0).then_some(f));
+            let expect = self.log_linear_q(e, (f > 0.0).then_some(f));
             if expect > 0.0 {
                 let r = q / expect - 1.0;
                 ss += r * r;
@@ -114,9 +162,9 @@ impl QModel {
         }
     }
 
-    /// Expected Q at `e_kpa` and contact force `force_n` (ignored by a model without a force
-    /// term).
-    pub fn q_at(&self, e_kpa: f64, force_n: Option<f64>) -> f64 {
+    /// The empirical curve `q0 + q1 ln E + q2 ln F` at `e_kpa` and contact force `force_n` (N;
+    /// the force term is left out for a model without one or without a force).
+    pub fn log_linear_q(&self, e_kpa: f64, force_n: Option<f64>) -> f64 {
         let f = match force_n {
             Some(f) if self.q2 != 0.0 && f > 0.0 => self.q2 * libm::log(f),
             _ => 0.0,
@@ -124,18 +172,51 @@ impl QModel {
         self.q0 + self.q1 * libm::log(e_kpa) + f
     }
 
-    /// True when `q` at `e_kpa` (and `force_n`) is within [`Self::TOLERANCE`] of the curve.
-    pub fn holds(&self, e_kpa: f64, force_n: Option<f64>, q: f64) -> bool {
-        let expect = self.q_at(e_kpa, force_n);
+    /// Expected Q of the lossless calibrated contact at `e_kpa` and contact force `force_n`
+    /// (N): the contact-damping curve ([`DampingModel::q_at`]) through `law` when the model has
+    /// one and the unit's contact law `law` is given, else the empirical curve
+    /// ([`Self::log_linear_q`]).
+    pub fn q_at(&self, e_kpa: f64, force_n: Option<f64>, law: Option<&ContactLaw>) -> f64 {
+        match (self.damping, law) {
+            (Some(d), Some(law)) => d.q_at(law, e_kpa, force_n),
+            _ => self.log_linear_q(e_kpa, force_n),
+        }
+    }
+
+    /// Relative uncertainty of [`Self::q_at`] with `law`: the contact-damping curve's
+    /// ([`DampingModel::sigma_rel`]) or the empirical curve's scatter ([`Self::sigma_rel`]).
+    pub fn scatter(&self, law: Option<&ContactLaw>) -> f64 {
+        match (self.damping, law) {
+            (Some(d), Some(_)) => d.sigma_rel,
+            _ => self.sigma_rel,
+        }
+    }
+
+    /// True when `q` at `e_kpa` (and `force_n`) is within [`Self::TOLERANCE`] of the curve
+    /// ([`Self::q_at`] with `law`).
+    pub fn holds(
+        &self,
+        e_kpa: f64,
+        force_n: Option<f64>,
+        q: f64,
+        law: Option<&ContactLaw>,
+    ) -> bool {
+        let expect = self.q_at(e_kpa, force_n, law);
         expect > 0.0 && libm::fabs(q / expect - 1.0) <= Self::TOLERANCE
     }
 
     /// True when `q` at `e_kpa` (and `force_n`) stands more than [`Self::TOLERANCE`] above the
-    /// curve: a contact narrower or looser than the calibration's (a tip touching on its edge
-    /// radiates less into the tissue). Tissue loss only ever lowers Q, so unlike [`Self::holds`]
-    /// no lossy tissue can trigger it.
-    pub fn exceeded(&self, e_kpa: f64, force_n: Option<f64>, q: f64) -> bool {
-        let expect = self.q_at(e_kpa, force_n);
+    /// curve ([`Self::q_at`] with `law`): a contact narrower or looser than the calibration's (a
+    /// tip touching on its edge radiates less into the tissue). Tissue loss only ever lowers Q,
+    /// so unlike [`Self::holds`] no lossy tissue can trigger it.
+    pub fn exceeded(
+        &self,
+        e_kpa: f64,
+        force_n: Option<f64>,
+        q: f64,
+        law: Option<&ContactLaw>,
+    ) -> bool {
+        let expect = self.q_at(e_kpa, force_n, law);
         !(expect > 0.0) || q / expect - 1.0 > Self::TOLERANCE
     }
 
@@ -146,5 +227,329 @@ impl QModel {
             && self.q2.is_finite()
             && self.sigma_rel.is_finite()
             && self.sigma_rel >= 0.0
+            && self.damping.is_none_or(|d| d.is_valid())
+    }
+}
+
+impl DampingModel {
+    /// Expected Q at `e_kpa` and contact force `force_n` (N; the law's reference force when
+    /// `None`) through the unit's contact law `law`: `R / (g1 + g2 shape)` ([`DampingModel`]).
+    /// Not positive where the damping is not.
+    pub fn q_at(&self, law: &ContactLaw, e_kpa: f64, force_n: Option<f64>) -> f64 {
+        let c = self.probe_per_s + self.contact_per_s * law.damping_shape(e_kpa, force_n);
+        if c > 0.0 {
+            law.mode_rate(e_kpa, force_n) / c
+        } else {
+            0.0
+        }
+    }
+
+    /// Fit to the reference readings `refs` (modulus, force — 0: not measured, the law's
+    /// reference force — and Q of each) through the unit's contact law `law`: weighted least
+    /// squares of each reading's damping per modal mass `R/Q` on the shape
+    /// ([`ContactLaw::damping_shape`]), a straight line, weights `(Q/R)²` (each reading's
+    /// relative error in `Q` counts alike), and [`Self::sigma_rel`] from fits that leave each
+    /// interior modulus out. Readings without a positive finite modulus and Q are left out.
+    /// `None` without a modulus between the lowest and the highest (none to hold out), or a
+    /// damping of either part that comes out
+    /// negative (the readings do not follow the contact's mechanics: the empirical curve
+    /// stays). Allocation free; `O(n²)` in the readings for the held-out fits.
+    pub fn fit(refs: &[Reference], law: &ContactLaw) -> Option<Self> {
+        let m = Self::fit_without(refs, law, None)?;
+        let sigma_rel = m.held_out(refs, law)?;
+        let m = Self { sigma_rel, ..m };
+        m.is_valid().then_some(m)
+    }
+
+    /// The two constants fitted to the usable readings of `refs` not at the modulus
+    /// `leave_out`.
+    fn fit_without(refs: &[Reference], law: &ContactLaw, leave_out: Option<f64>) -> Option<Self> {
+        let mut line = crate::linalg::Line::default();
+        for r in refs
+            .iter()
+            .filter(|r| usable(r) && Some(r.modulus_kpa) != leave_out)
+        {
+            let force = force_of(r);
+            let c = law.mode_rate(r.modulus_kpa, force) / r.q;
+            line.add(law.damping_shape(r.modulus_kpa, force), c, 1.0 / (c * c));
+        }
+        let fit = line.solve()?;
+        let m = Self {
+            probe_per_s: fit.a,
+            contact_per_s: fit.b,
+            sigma_rel: 0.0,
+        };
+        (m.is_valid() && m.contact_per_s > 0.0).then_some(m)
+    }
+
+    /// `Q/Q_model − 1` of the reading `r`.
+    fn residual(&self, law: &ContactLaw, r: &Reference) -> f64 {
+        r.q / self.q_at(law, r.modulus_kpa, force_of(r)) - 1.0
+    }
+
+    /// RMS over the groups of usable readings at one interior modulus and one force (forces
+    /// within [`crate::unit::calibration::SAME_FORCE`]) of the mean [`Self::residual`], the
+    /// model fitted without that modulus; `None` without an interior modulus or where a fit
+    /// fails.
+    fn held_out(&self, refs: &[Reference], law: &ContactLaw) -> Option<f64> {
+        let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+        for r in refs.iter().filter(|r| usable(r)) {
+            lo = lo.min(r.modulus_kpa);
+            hi = hi.max(r.modulus_kpa);
+        }
+        let (mut sum2, mut groups) = (0.0, 0u32);
+        // Each group once, at its first reading (found by looking back: nothing is listed),
+        // against the model fitted without its modulus.
+        for (j, g) in refs.iter().enumerate() {
+            let e = g.modulus_kpa;
+            if !usable(g)
+                || e == lo
+                || e == hi
+                || refs[..j]
+                    .iter()
+                    .any(|x| usable(x) && x.modulus_kpa == e && same_force(x, g))
+            {
+                continue;
+            }
+            let m = Self::fit_without(refs, law, Some(e))?;
+            let (mut rsum, mut k) = (0.0, 0.0);
+            for x in refs[j..].iter() {
+                if usable(x) && x.modulus_kpa == e && same_force(x, g) {
+                    rsum += m.residual(law, x);
+                    k += 1.0;
+                }
+            }
+            let r = rsum / k;
+            sum2 += r * r;
+            groups += 1;
+        }
+        (groups > 0).then(|| libm::sqrt(sum2 / groups as f64))
+    }
+
+    /// True when both constants are finite and not negative and the uncertainty finite and
+    /// not negative.
+    pub fn is_valid(&self) -> bool {
+        self.probe_per_s.is_finite()
+            && self.probe_per_s >= 0.0
+            && self.contact_per_s.is_finite()
+            && self.contact_per_s >= 0.0
+            && self.sigma_rel.is_finite()
+            && self.sigma_rel >= 0.0
+    }
+}
+
+/// A reading a fit can use: positive finite modulus and Q, a force not negative.
+fn usable(r: &Reference) -> bool {
+    let (e, f, q) = (r.modulus_kpa, r.force_n, r.q);
+    e > 0.0 && e.is_finite() && q > 0.0 && q.is_finite() && f >= 0.0 && f.is_finite()
+}
+
+/// True when `a` and `b` were read at one force (within
+/// [`crate::unit::calibration::SAME_FORCE`]; both unmeasured counts as one).
+fn same_force(a: &Reference, b: &Reference) -> bool {
+    let (a, b) = (a.force_n, b.force_n);
+    a == b
+        || (a > 0.0 && b > 0.0 && libm::fabs(a / b - 1.0) <= crate::unit::calibration::SAME_FORCE)
+}
+
+/// The measured contact force of `r`, N (`None`: not measured).
+fn force_of(r: &Reference) -> Option<f64> {
+    (r.force_n > 0.0).then_some(r.force_n)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::f64::consts::PI;
+    use hal_sim::tissue::{Contact, SensorMech, Tissue, TissueElements};
+
+    /// hal-sim's mechanics as a contact law (paper 003's Kelvin model with the appendix's
+    /// elements, `hal_sim::tissue`): `Ks = k_s/m0`, `A = k_m/(m0 E^(2/3))` and `B = m_m E/m0`
+    /// at 30 mN, read off the elements at 1000 kPa (exact for the Hertz radius below the
+    /// probe's, which holds above 68 kPa at 30 mN).
+    fn simulated_law() -> (ContactLaw, SensorMech) {
+        let mech = SensorMech::default();
+        let el = TissueElements::new(
+            &Tissue::with_modulus_kpa(1000.0),
+            &Contact::default(),
+            &mech,
+        );
+        let m0 = mech.mass_kg;
+        let law = ContactLaw {
+            free_hz: mech.free_resonance_hz,
+            p: [
+                libm::log(mech.coupling_stiffness_n_m / m0),
+                libm::log(el.stiffness_n_m / (m0 * 100.0)),
+                libm::log(el.mass_kg * 1000.0 / m0),
+            ],
+            cov: [[0.0; 3]; 3],
+            model_sigma_hz: 0.0,
+            min_kpa: 100.0,
+            max_kpa: 3000.0,
+            force_n: 0.030,
+        };
+        (law, mech)
+    }
+
+    /// The simulated probe's lossless Q at `e_kpa` pressed with `force_n` (hal-sim's closed
+    /// form `sqrt(k m)/c`).
+    fn kelvin_q(mech: &SensorMech, e_kpa: f64, force_n: f64) -> f64 {
+        let contact = Contact {
+            preload_n: force_n,
+            ..Contact::default()
+        };
+        mech.loaded(&Tissue::with_modulus_kpa(e_kpa), &contact).q()
+    }
+
+    const PHANTOMS: [f64; 5] = [157.5, 279.0, 414.0, 1146.0, 2465.0];
+
+    /// Reference readings of `(E kPa, F N, Q)` (their resonance is not used here).
+    fn references(data: &[(f64, f64, f64)]) -> Vec<Reference> {
+        data.iter()
+            .map(|&(modulus_kpa, force_n, q)| Reference {
+                modulus_kpa,
+                resonance_hz: 0.0,
+                sigma_hz: 0.0,
+                q,
+                force_n,
+            })
+            .collect()
+    }
+    const FORCES: [f64; 3] = [0.030, 0.015, 0.050];
+
+    /// Fitted to hal-sim's own lossless Q of A–E at 15, 30 and 50 mN, the curve is that Q at
+    /// every modulus and force the references do not include: its two constants are the
+    /// probe's damping `c1/m0 = 2π f1/Q_air` and the contact's at 1 kPa, and its held-out
+    /// uncertainty is rounding. The damping shape is the appendix's exponents.
+    #[test]
+    fn fitted_to_the_kelvin_q_the_curve_is_the_kelvin_q() {
+        let (law, mech) = simulated_law();
+        let refs: Vec<(f64, f64, f64)> = PHANTOMS
+            .iter()
+            .flat_map(|&e| FORCES.map(|f| (e, f, kelvin_q(&mech, e, f))))
+            .collect();
+        let m = DampingModel::fit(&references(&refs), &law).expect("a fit");
+        let probe = 2.0 * PI * mech.free_resonance_hz / mech.free_q;
+        assert!(
+            (m.probe_per_s / probe - 1.0).abs() < 1e-9,
+            "{m:?} vs {probe}"
+        );
+        let el = TissueElements::new(
+            &Tissue::with_modulus_kpa(1000.0),
+            &Contact::default(),
+            &mech,
+        );
+        let contact = el.damping_n_s_m / mech.mass_kg * libm::pow(1000.0, 1.0 / 6.0);
+        assert!((m.contact_per_s / contact - 1.0).abs() < 1e-9, "{m:?}");
+        assert!(m.sigma_rel < 1e-9, "{m:?}");
+        for e in [140.0, 200.0, 340.0, 600.0, 850.0, 1700.0, 2200.0, 2700.0] {
+            for f in [0.012, 0.020, 0.030, 0.040, 0.055] {
+                let want = kelvin_q(&mech, e, f);
+                let got = m.q_at(&law, e, Some(f));
+                assert!(
+                    (got / want - 1.0).abs() < 1e-9,
+                    "{e} kPa {f} N: {got} vs {want}"
+                );
+            }
+        }
+        for (e, f) in [(150.0, 0.012), (900.0, 0.030), (2500.0, 0.055)] {
+            let want = libm::pow(e, DAMPING_E) * libm::pow(f / law.force_n, DAMPING_F);
+            assert!((law.damping_shape(e, Some(f)) / want - 1.0).abs() < 1e-12);
+        }
+    }
+
+    use crate::unit::contact_law::{
+        DAMPING_EXPONENT_E as DAMPING_E, DAMPING_EXPONENT_F as DAMPING_F,
+    };
+
+    /// The held-out uncertainty is the noise of the references' group means when the curve
+    /// follows them: each group (modulus, force) of readings off the Kelvin Q by a relative
+    /// offset `±d` gives a σ of the order of `d`, not of the spread of Q over the moduli; an
+    /// empirical curve in `ln E` fitted to the same readings scatters by far more.
+    #[test]
+    fn the_held_out_uncertainty_is_the_references_noise() {
+        let (law, mech) = simulated_law();
+        let d = 0.002;
+        let mut refs = Vec::new();
+        for (i, &e) in PHANTOMS.iter().enumerate() {
+            for (j, &f) in FORCES.iter().enumerate() {
+                let off = if (i + j) % 2 == 0 { d } else { -d };
+                for _ in 0..6 {
+                    refs.push((e, f, kelvin_q(&mech, e, f) * (1.0 + off)));
+                }
+            }
+        }
+        let m = DampingModel::fit(&references(&refs), &law).expect("a fit");
+        assert!(m.sigma_rel > 0.5 * d && m.sigma_rel < 3.0 * d, "{m:?}");
+        let empirical = QModel::fit(refs.iter().copied()).expect("a fit");
+        assert!(
+            empirical.sigma_rel > 5.0 * m.sigma_rel,
+            "{empirical:?} vs {m:?}"
+        );
+    }
+
+    /// Readings that do not follow the contact's damping (Q falling with the modulus, so the
+    /// contact's damping would have to grow with it), fewer than two moduli, or no usable
+    /// reading give no curve: the empirical one stays.
+    #[test]
+    fn readings_unlike_a_contact_give_no_curve() {
+        let (law, _) = simulated_law();
+        let falling: Vec<(f64, f64, f64)> = PHANTOMS
+            .iter()
+            .map(|&e| (e, 0.030, 30.0 - 10.0 * libm::log10(e)))
+            .collect();
+        assert_eq!(DampingModel::fit(&references(&falling), &law), None);
+        assert_eq!(
+            DampingModel::fit(&references(&[(300.0, 0.03, 10.0); 4]), &law),
+            None
+        );
+        assert_eq!(
+            DampingModel::fit(
+                &references(&[(-1.0, 0.03, 10.0), (f64::NAN, 0.03, 9.0)]),
+                &law
+            ),
+            None
+        );
+    }
+
+    /// With a contact law the Q model reads through its damping curve, without one through the
+    /// empirical curve; the one-sided contact check follows the curve in use.
+    #[test]
+    fn the_curve_in_use_follows_the_contact_law() {
+        let (law, mech) = simulated_law();
+        let d = DampingModel {
+            probe_per_s: 2.0 * PI * mech.free_resonance_hz / mech.free_q,
+            contact_per_s: 336.0,
+            sigma_rel: 0.002,
+        };
+        let m = QModel {
+            q0: 5.0,
+            q1: 0.0,
+            q2: 0.0,
+            sigma_rel: 0.04,
+            damping: Some(d),
+        };
+        let q = d.q_at(&law, 600.0, Some(0.030));
+        assert_eq!(m.q_at(600.0, Some(0.030), Some(&law)), q);
+        assert_eq!(m.scatter(Some(&law)), 0.002);
+        assert_eq!(m.q_at(600.0, Some(0.030), None), 5.0);
+        assert_eq!(m.scatter(None), 0.04);
+        assert!(!m.exceeded(600.0, Some(0.030), 1.19 * q, Some(&law)));
+        assert!(m.exceeded(600.0, Some(0.030), 1.21 * q, Some(&law)));
+        assert!(!m.exceeded(600.0, Some(0.030), 0.3 * q, Some(&law)));
+        assert!(m.holds(600.0, None, 1.19 * q, Some(&law)));
+        assert!(!m.holds(600.0, None, 0.79 * q, Some(&law)));
+    }
+
+    /// The damping curve belongs to the contact law it was fitted through: a profile keeps it
+    /// only with that law, and reading through a power law instead drops it.
+    #[test]
+    fn the_damping_curve_goes_with_its_contact_law() {
+        let mut p = crate::board::sim_factory::profile().expect("the factory profile");
+        assert!(p.is_valid() && p.q_model.is_some_and(|m| m.damping.is_some()));
+        let without_law = crate::unit::profile::UnitProfile { contact: None, ..p };
+        assert!(!without_law.is_valid());
+        p.use_power_law(p.calibration, p.resonance);
+        assert!(p.is_valid() && p.q_model.is_some_and(|m| m.damping.is_none()));
     }
 }

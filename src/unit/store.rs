@@ -13,7 +13,7 @@
 //! | 4 | 2 | format version ([`FORMAT_VERSION`]) |
 //! | 6 | 2 | record length ([`RECORD_LEN`]) |
 //! | 8 | 4 | sequence number |
-//! | 12 | 1 | flags (bit 0: air reference present, bit 1: Q model present, bit 2: contact law present, bit 3: load cell present) |
+//! | 12 | 1 | flags (bit 0: air reference present, bit 1: Q model present, bit 2: contact law present, bit 3: load cell present, bit 4: the Q model's contact-damping curve present) |
 //! | 13 | 1 | calibration source (0 paper-simulation, 1 paper-experiment, 2 fitted) |
 //! | 14 | 1 | the resonance the curve maps (0 motional, 1 impedance dip) |
 //! | 15 | 1 | zero |
@@ -33,7 +33,8 @@
 //! | 312 | 8 | load cell: newtons per count (f32), tare counts (i32) |
 //! | 320 | 8 | force window: `min`, `max`, N (f32) |
 //! | 328 | 8 | Q model `sigma_rel` (f64) |
-//! | 336 | 44 | zero |
+//! | 336 | 24 | Q model's contact-damping curve: `probe_per_s`, `contact_per_s`, `sigma_rel` (f64) |
+//! | 360 | 20 | zero |
 //! | 380 | 4 | CRC-32 (IEEE) of bytes 0..380 |
 //!
 //! [`Store::save`] writes the slot that does **not** hold the newest valid record (erase, program,
@@ -41,6 +42,11 @@
 //! is therefore never touched: a reset or power loss at any point of a save leaves it readable,
 //! and [`Store::load`] returns either it or, once the save completed, the new one. The CRC is the
 //! last field programmed, so a partly programmed record fails its check.
+//!
+//! A record of the previous format ([`PREVIOUS_FORMAT_VERSION`]) is the same layout with bit 4
+//! clear and bytes 336–380 zero: it loads, its Q model without the contact-damping curve (the
+//! empirical curve reads the loss until the unit is calibrated again). Older formats are
+//! refused (the slot is [`SlotState::Corrupt`]).
 //!
 //! [`Store::load`] picks the valid record with the highest sequence number (compared with
 //! wrap-around). When neither slot holds a valid record (empty, corrupt or unreadable) it falls
@@ -52,21 +58,25 @@ use crate::loadcell::{ForceWindow, LoadCellCal, LoadCellCounts};
 use crate::unit::calibration::{PowerLaw, Source};
 use crate::unit::contact_law::{self, ContactLaw};
 pub use crate::unit::profile::{AirReference, UnitProfile};
-use crate::unit::q_model::QModel;
+use crate::unit::q_model::{DampingModel, QModel};
 use crate::units::{Farads, Hz, Newtons, Siemens};
 use embedded_storage::nor_flash::NorFlash;
 
 /// Bytes of one record (a multiple of every common program word: 1, 2, 4, 8, 16, 32).
 pub const RECORD_LEN: usize = 384;
 /// Format version written into every record (4: the contact law; 5: the contact force — the
-/// law's reference force, the Q model's force term, the load cell, the force window).
-pub const FORMAT_VERSION: u16 = 6;
+/// law's reference force, the Q model's force term, the load cell, the force window; 6: the Q
+/// model's scatter; 7: the Q model's contact-damping curve).
+pub const FORMAT_VERSION: u16 = 7;
+/// The format before [`FORMAT_VERSION`], still read (module documentation).
+pub const PREVIOUS_FORMAT_VERSION: u16 = 6;
 const MAGIC: [u8; 4] = *b"PZTC";
 const CRC_AT: usize = RECORD_LEN - 4;
 const FLAG_AIR: u8 = 1;
 const FLAG_Q_MODEL: u8 = 2;
 const FLAG_CONTACT: u8 = 4;
 const FLAG_LOAD_CELL: u8 = 8;
+const FLAG_Q_DAMPING: u8 = 16;
 
 /// State of one slot as found by a scan.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -396,6 +406,7 @@ pub fn encode(record: &UnitProfile, seq: u32) -> [u8; RECORD_LEN] {
         at: 0,
     };
     let c = &record.calibration;
+    let damping = record.q_model.and_then(|m| m.damping);
     w.put(&MAGIC);
     w.put(&FORMAT_VERSION.to_le_bytes());
     w.put(&(RECORD_LEN as u16).to_le_bytes());
@@ -416,7 +427,8 @@ pub fn encode(record: &UnitProfile, seq: u32) -> [u8; RECORD_LEN] {
                 FLAG_LOAD_CELL
             } else {
                 0
-            },
+            }
+            | if damping.is_some() { FLAG_Q_DAMPING } else { 0 },
         source_code(c.source),
         match record.resonance {
             crate::estimate::Resonance::Motional => 0,
@@ -462,18 +474,26 @@ pub fn encode(record: &UnitProfile, seq: u32) -> [u8; RECORD_LEN] {
     w.put(&record.force_window.min.0.to_le_bytes());
     w.put(&record.force_window.max.0.to_le_bytes());
     w.put(&record.q_model.map_or(0.0, |m| m.sigma_rel).to_le_bytes());
+    let d = damping.map_or([0.0; 3], |d| [d.probe_per_s, d.contact_per_s, d.sigma_rel]);
+    for v in d {
+        w.put(&v.to_le_bytes());
+    }
     let crc = crc32(w.buf.get(..CRC_AT).unwrap_or(&[]));
     w.at = CRC_AT;
     w.put(&crc.to_le_bytes());
     w.buf
 }
 
-/// Parse and check a record: magic, version, length, CRC and content validity. Returns the
-/// sequence number and the record.
+/// Parse and check a record: magic, version ([`FORMAT_VERSION`] or
+/// [`PREVIOUS_FORMAT_VERSION`]), length, CRC and content validity. Returns the sequence number
+/// and the record.
 pub fn decode(buf: &[u8; RECORD_LEN]) -> Option<(u32, UnitProfile)> {
     let mut r = Reader { buf, at: 0 };
-    if r.take::<4>() != MAGIC
-        || u16::from_le_bytes(r.take()) != FORMAT_VERSION
+    if r.take::<4>() != MAGIC {
+        return None;
+    }
+    let version = u16::from_le_bytes(r.take());
+    if !(version == FORMAT_VERSION || version == PREVIOUS_FORMAT_VERSION)
         || u16::from_le_bytes(r.take()) as usize != RECORD_LEN
     {
         return None;
@@ -526,12 +546,26 @@ pub fn decode(buf: &[u8; RECORD_LEN]) -> Option<(u32, UnitProfile)> {
         max: Newtons(r.f32()),
     };
     let sigma_rel = r.f64();
+    let (probe_per_s, contact_per_s, damping_sigma_rel) = (r.f64(), r.f64(), r.f64());
+    // The previous format has no such curve (bit 4 clear, its bytes zero).
+    if version == PREVIOUS_FORMAT_VERSION && flags & FLAG_Q_DAMPING != 0 {
+        return None;
+    }
+    let damping = (flags & FLAG_Q_DAMPING != 0).then_some(DampingModel {
+        probe_per_s,
+        contact_per_s,
+        sigma_rel: damping_sigma_rel,
+    });
     let q_model = (flags & FLAG_Q_MODEL != 0).then_some(QModel {
         q0,
         q1,
         q2,
         sigma_rel,
+        damping,
     });
+    if damping.is_some() && q_model.is_none() {
+        return None;
+    }
     let record = UnitProfile {
         calibration: PowerLaw {
             a,
@@ -576,6 +610,11 @@ mod tests {
                 q1: 1.25,
                 q2: -4.5,
                 sigma_rel: 0.0375,
+                damping: Some(DampingModel {
+                    probe_per_s: 36.5,
+                    contact_per_s: 336.0,
+                    sigma_rel: 0.0021,
+                }),
             }),
             air: Some(AirReference {
                 free_resonance: Hz(232.3),
@@ -605,6 +644,39 @@ mod tests {
         assert_eq!(decode(&buf), Some((7, rec)));
         let no_air = UnitProfile::fallback();
         assert_eq!(decode(&encode(&no_air, u32::MAX)), Some((u32::MAX, no_air)));
+    }
+
+    /// A record of the previous format (6: no contact-damping curve, bit 4 clear, its bytes
+    /// zero) loads with the empirical Q model alone; one that claims the curve, and any older
+    /// format, is refused.
+    #[test]
+    fn the_previous_format_loads_without_the_damping_curve() {
+        let unit = crate::board::sim_factory::profile().expect("the factory profile");
+        assert!(unit.q_model.is_some_and(|m| m.damping.is_some()));
+        let with_version = |version: u16, flags: u8| {
+            let mut buf = encode(&unit, 3);
+            buf[4..6].copy_from_slice(&version.to_le_bytes());
+            buf[12] = flags;
+            buf[336..CRC_AT].fill(0);
+            let crc = crc32(&buf[..CRC_AT]);
+            buf[CRC_AT..].copy_from_slice(&crc.to_le_bytes());
+            buf
+        };
+        let flags = encode(&unit, 3)[12];
+        let old = with_version(PREVIOUS_FORMAT_VERSION, flags & !FLAG_Q_DAMPING);
+        let mut expect = unit;
+        if let Some(m) = expect.q_model.as_mut() {
+            m.damping = None;
+        }
+        assert_eq!(decode(&old), Some((3, expect)));
+        assert_eq!(decode(&with_version(PREVIOUS_FORMAT_VERSION, flags)), None);
+        assert_eq!(
+            decode(&with_version(
+                PREVIOUS_FORMAT_VERSION - 1,
+                flags & !FLAG_Q_DAMPING
+            )),
+            None
+        );
     }
 
     #[test]

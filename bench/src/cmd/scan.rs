@@ -284,13 +284,13 @@ pub const MIN_CONTRAST_HZ: f64 = 1.0;
 pub const MIN_LOSS_CONTRAST: f64 = 0.03;
 
 /// Least departure of the loss map's extreme from its background, in the map's median reported
-/// σ of the loss. A reading's loss σ is mostly the unit's Q model's scatter about the reference
-/// phantoms (`UnitProfile::tissue_loss`), a bias that follows the modulus read rather than
-/// noise: a lump of its background's loss tangent still moves the loss read over it by as much
-/// as the bias differs between the two moduli — at most the bias's spread over the calibrated
-/// range, 2.1 of the smallest σ there (sweep-G; `docs/bench.md`, "Loss map"). Three σ leave that
-/// out with a margin of almost half as much again; white noise on the loss, a few hundredths of
-/// σ, adds nothing.
+/// σ of the loss. A reading's loss σ is its own σ(Q) and the uncertainty of the unit's lossless-Q
+/// curve (`UnitProfile::tissue_loss`, `QModel::scatter`), and the curve follows the contact's
+/// Q over the calibrated range: on lossless tissue the loss read's bias stays within that σ
+/// (sweep-G, 152–2465 kPa: from −0.002 to +0.001, against a σ of 0.002; `docs/bench.md`, "Loss
+/// map"), so a lump of its background's loss moves the loss read over it by no more than the
+/// noise, and three σ is the bar against the noise. On the step scan's maps (median σ 0.002–0.003,
+/// sweep-G) [`MIN_LOSS_CONTRAST`] is the larger and sets the bar.
 pub const LOSS_CONTRAST_SIGMAS: f64 = 3.0;
 
 /// Run the scan; `tick` is called after every grid point.

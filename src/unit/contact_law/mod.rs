@@ -64,6 +64,11 @@ pub struct ContactLaw {
 pub const FORCE_EXPONENT_A: f64 = 1.0 / 3.0;
 /// Exponent of the force in `B` (Hertz: `m_m ∝ a³ ∝ F/E`).
 pub const FORCE_EXPONENT_B: f64 = 1.0;
+/// Exponent of the modulus in the contact's damping ([`ContactLaw::damping_shape`]: paper
+/// 003's `c_m ∝ v S`, `v ∝ E^(1/2)`, `S ∝ a² ∝ (F/E)^(2/3)`).
+pub const DAMPING_EXPONENT_E: f64 = -1.0 / 6.0;
+/// Exponent of the force in the contact's damping (`S ∝ a² ∝ F^(2/3)`).
+pub const DAMPING_EXPONENT_F: f64 = 2.0 / 3.0;
 
 /// The force ratio `F/F0` of a reading at `force_n` on a law of reference force `ref_n`: 1
 /// when either is not a positive force.
@@ -381,6 +386,30 @@ impl ContactLaw {
         let km = k.a * libm::cbrt(e_kpa * e_kpa);
         let s = k.ks / (k.ks + km);
         s * s * km / (k.k1 + s * km)
+    }
+
+    /// The loaded mode's `sqrt(k m) / m0` at modulus `e_kpa` pressed with `force_n` (N; the
+    /// reference force when `None`), s⁻¹: `sqrt(N M)` with `N = K1 + s k_m` the mode's
+    /// stiffness and `M = 1 + s² B/E` its mass, both per modal mass `m0`. A damping `c` gives
+    /// the mode `Q = sqrt(k m) / c`, so `Q = mode_rate / (c / m0)` (paper 003 eq. 1–2; the
+    /// Kelvin model of `hal-sim`'s `tissue.rs`).
+    pub fn mode_rate(&self, e_kpa: f64, force_n: Option<f64>) -> f64 {
+        let ratio = force_ratio(self.force_n, force_n.unwrap_or(0.0));
+        let k = Constants::of(self.free_hz, &self.p, ratio);
+        let km = k.a * libm::cbrt(e_kpa * e_kpa);
+        let s = k.ks / (k.ks + km);
+        libm::sqrt((k.k1 + s * km) * (1.0 + s * s * k.b / e_kpa))
+    }
+
+    /// How the contact's damping varies with the modulus `e_kpa` (kPa) and the force `force_n`
+    /// (N; the reference force when `None`): `(E / kPa)^(−1/6) (F/F0)^(2/3)`. Paper 003's
+    /// appendix gives the contact damping `c_m = κ ρ v S / (1 − ν)` with the shear-wave speed
+    /// `v ∝ E^(1/2)` and the contact area `S = π a²`; with the law's Hertz radius
+    /// `a ∝ (F/E)^(1/3)` ([`FORCE_EXPONENT_A`]) it is `∝ E^(−1/6) F^(2/3)`
+    /// ([`DAMPING_EXPONENT_E`], [`DAMPING_EXPONENT_F`]).
+    pub fn damping_shape(&self, e_kpa: f64, force_n: Option<f64>) -> f64 {
+        let ratio = force_ratio(self.force_n, force_n.unwrap_or(0.0));
+        libm::cbrt(ratio * ratio) / libm::sqrt(libm::cbrt(e_kpa))
     }
 
     /// The rigid limit `sqrt(K1 + Ks)/2π`, Hz.
