@@ -116,3 +116,36 @@ impl AdcCode {
         self.0 as i32 - MID_CODE as i32
     }
 }
+
+/// `x` limited to `lo..=hi`: `lo` below, `hi` above, `x` itself between (and a NaN `x` stays
+/// NaN). Unlike `f64::clamp` it never panics: bounds out of order give `lo` below `lo` and `hi`
+/// otherwise, and a NaN bound is ignored, so computed bounds (a band, the room left in a
+/// buffer) cannot stop the firmware.
+pub fn bounded<T: PartialOrd + Copy>(x: T, lo: T, hi: T) -> T {
+    if x < lo {
+        lo
+    } else if x > hi {
+        hi
+    } else {
+        x
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::bounded;
+
+    #[test]
+    fn bounded_limits_and_never_panics() {
+        assert_eq!(bounded(5.0, 1.0, 3.0), 3.0);
+        assert_eq!(bounded(-5.0, 1.0, 3.0), 1.0);
+        assert_eq!(bounded(2.5, 1.0, 3.0), 2.5);
+        assert!(bounded(f64::NAN, 1.0, 3.0).is_nan());
+        // Where `f64::clamp` panics: bounds out of order, a NaN bound.
+        assert_eq!(bounded(0.0, 3.0, 1.0), 3.0);
+        assert_eq!(bounded(2.0, 3.0, 1.0), 1.0);
+        assert_eq!(bounded(2.0, f64::NAN, 1.0), 1.0);
+        assert_eq!(bounded(2.0, 1.0, f64::NAN), 2.0);
+        assert_eq!(bounded(7_i32, 0, 4), 4);
+    }
+}

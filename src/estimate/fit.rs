@@ -13,6 +13,7 @@ use super::{screen, Estimate};
 use crate::engine::sweep::SweepPoint;
 use crate::linalg::{levenberg_marquardt, spd_inverse, Fit3, LmStop, Lsq3};
 use crate::status::Failure;
+use crate::units::bounded;
 use crate::units::Hz;
 
 /// Fitted Butterworth–Van Dyke parameters.
@@ -101,7 +102,7 @@ pub fn linear_part<'a>(
 pub fn fit_bvd(points: &[SweepPoint], f_start: f64, q_start: f64) -> Result<Bvd, Failure> {
     screen(points)?;
     let f_ref = f_start;
-    let mut p = [0.0, 0.0, 0.0, f_start, q_start.clamp(1.0, 200.0)];
+    let mut p = [0.0, 0.0, 0.0, f_start, bounded(q_start, 1.0, 200.0)];
     // Linear start for (G0, b0, g) at the given f0, Q.
     let (lin, _) = linear_part(points.iter(), p[3], p[4], f_ref).ok_or(Failure::NoResonance)?;
     p[0] = lin.p[0];

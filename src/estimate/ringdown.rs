@@ -27,6 +27,7 @@ use crate::engine::{PointPlan, PointRaw};
 use crate::hal::FrontEndScale;
 use crate::linalg::Line;
 use crate::status::Failure;
+use crate::units::bounded;
 use crate::units::{Hz, Seconds, Volts};
 use core::f64::consts::PI;
 
@@ -176,7 +177,7 @@ impl<const W: usize> Ringdown<W> {
             },
             _ => {
                 let per = self.s.window_cycles as f64 / self.f_ref;
-                let n = libm::ceil(self.s.ring.0 as f64 / per).clamp(1.0, W as f64);
+                let n = bounded(libm::ceil(self.s.ring.0 as f64 / per), 1.0, W as f64);
                 self.n_windows = n as u16;
                 self.windows.clear();
                 PointPlan {

@@ -15,6 +15,7 @@ use crate::engine::sweep::{
 use crate::engine::{PointPlan, PointRaw};
 use crate::hal::FrontEndScale;
 use crate::status::Failure;
+use crate::units::bounded;
 use crate::units::{Hz, Seconds, Volts};
 use heapless::Vec;
 
@@ -194,7 +195,7 @@ impl Staged {
             return;
         }
         self.f0 = f0;
-        self.q = q.clamp(1.0, 200.0);
+        self.q = bounded(q, 1.0, 200.0);
         self.stage = 1;
         self.next = 0;
         self.plan.clear();
@@ -208,7 +209,7 @@ impl Staged {
             } else {
                 1.0 - 2.0 * k as f64 / (n - 1) as f64
             };
-            let _ = self.plan.push((f0 + x * half).clamp(a, b) as f32);
+            let _ = self.plan.push(bounded(f0 + x * half, a, b) as f32);
         }
     }
 

@@ -49,6 +49,7 @@ use crate::reading::driver::{PointSource, Wanted};
 use crate::reading::{Method, Reading};
 use crate::status::{Failure, Status};
 use crate::unit::profile::UnitProfile;
+use crate::units::bounded;
 use crate::units::{Hz, Seconds, Volts};
 use core::f64::consts::PI;
 use num_complex::Complex64 as C64;
@@ -289,8 +290,11 @@ impl Tracker {
                 }
                 let (lo, hi) = (self.cfg.band_start.0 as f64, self.cfg.band_stop.0 as f64);
                 let half_width = self.f_est / (2.0 * self.q_est.max(1.0));
-                let f =
-                    (self.f_est + self.side * self.cfg.dither as f64 * half_width).clamp(lo, hi);
+                let f = bounded(
+                    self.f_est + self.side * self.cfg.dither as f64 * half_width,
+                    lo,
+                    hi,
+                );
                 self.side = -self.side;
                 let ftw = tuning_word(f, self.fs);
                 self.f_h = frequency_hz(ftw, self.fs);
@@ -300,7 +304,11 @@ impl Tracker {
                 let seg = self.cfg.segment.0 as f64;
                 let cycles = libm::ceil(seg / per_cycle / MAX_WINDOWS as f64)
                     .max(resonator::first_cycles(self.f_h, self.fs));
-                let n = libm::floor(seg / (cycles * per_cycle)).clamp(4.0, MAX_WINDOWS as f64);
+                let n = bounded(
+                    libm::floor(seg / (cycles * per_cycle)),
+                    4.0,
+                    MAX_WINDOWS as f64,
+                );
                 self.tag = self.tag.wrapping_add(1);
                 let plan = PointPlan {
                     ftw,
@@ -342,7 +350,7 @@ impl Tracker {
                 let locked = match est {
                     Ok(e) => {
                         self.f_est = e.resonance.0 as f64;
-                        self.q_est = e.q.map_or(10.0, |q| q as f64).clamp(2.0, 200.0);
+                        self.q_est = bounded(e.q.map_or(10.0, |q| q as f64), 2.0, 200.0);
                         self.mode = Mode::Track;
                         self.plan = None;
                         self.misses = 0;

@@ -29,6 +29,7 @@ use crate::hal::FrontEndScale;
 use crate::reading::driver::{run_plans, Plans, PointSource, Stop};
 use crate::status::Failure;
 use crate::unit::profile::UnitProfile;
+use crate::units::bounded;
 use crate::units::{Farads, Hz, Seconds, Siemens, Volts};
 
 /// The test frequency: 3.8 times the highest loaded resonance (267 Hz, rigid contact) and 4.3
@@ -280,7 +281,7 @@ impl SelfTest {
         } else {
             NOMINAL_FREE.1 / (core::f32::consts::PI * NOMINAL_FREE.0)
         };
-        let settle = (SETTLE_TAUS * tau * scale.sample_rate.0).clamp(0.0, 1e6);
+        let settle = bounded(SETTLE_TAUS * tau * scale.sample_rate.0, 0.0, 1e6);
         Ok(Self {
             plan: PointPlan {
                 ftw,

@@ -63,6 +63,7 @@ use crate::engine::sweep::Drive;
 use crate::engine::{PointPlan, PointRaw};
 use crate::hal::FrontEndScale;
 use crate::status::Failure;
+use crate::units::bounded;
 use crate::units::Hz;
 use core::f64::consts::PI;
 use num_complex::Complex64 as C64;
@@ -174,7 +175,7 @@ impl Hold {
                 }
                 .max(2) as f64;
                 let cycles = libm::ceil(hold / per_cycle / room).max(fewest);
-                let n = libm::floor(hold / (cycles * per_cycle)).clamp(2.0, room);
+                let n = bounded(libm::floor(hold / (cycles * per_cycle)), 2.0, room);
                 self.n_windows = n as u16;
                 // A first segment stays open: its windows go on while the second's plan, chosen
                 // from them, passes the DAC's pipeline (at most the pipeline and the batch its
@@ -354,9 +355,9 @@ impl Hold {
             } else {
                 self.s.seed.0 + quarter
             };
-            let next = self
-                .s
-                .seed_settings(Hz(f.clamp(self.s.band_start.0, self.s.band_stop.0)));
+            let next =
+                self.s
+                    .seed_settings(Hz(bounded(f, self.s.band_start.0, self.s.band_stop.0)));
             if let Ok(r) = next.validate(scale) {
                 self.seed = Some(r);
                 return;

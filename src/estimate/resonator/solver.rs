@@ -6,6 +6,7 @@ use super::model::{c32, cexp, evaluate, prepare, DriveModel, Normal, Params, Pro
 use super::{Carry, HoldFit, HoldWindow, Segment, FIRST_WINDOWS, MAX_SEGMENTS, MAX_WINDOWS};
 use crate::estimate::Estimate;
 use crate::status::Failure;
+use crate::units::bounded;
 use crate::units::Hz;
 use num_complex::Complex64 as C64;
 
@@ -235,7 +236,7 @@ fn fit_segments(
         wt: 1.0 / var,
     };
     let prior = |q: f64| (q - q_start) * (q - q_start) * q_w;
-    let q0 = if q_begin > 0.0 { q_begin } else { q_start }.clamp(2.0, 200.0);
+    let q0 = bounded(if q_begin > 0.0 { q_begin } else { q_start }, 2.0, 200.0);
     let at = |f0: f64| Params {
         f0,
         q: q0,
