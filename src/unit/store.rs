@@ -530,9 +530,12 @@ mod tests {
     use super::*;
 
     #[test]
-    fn crc_check_value() {
-        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
-        assert_eq!(crc32(b""), 0);
+    fn a_records_crc_field_is_zlibs_crc_of_its_bytes() {
+        // The fallback profile as sequence 1; the pinned value is Python's
+        // `zlib.crc32(record[:380])` of these bytes, so records in flash keep verifying.
+        let buf = encode(&UnitProfile::fallback(), 1);
+        assert_eq!(buf[CRC_AT..], 0xB234_E999u32.to_le_bytes());
+        assert!(decode(&buf).is_some());
     }
 
     #[test]
