@@ -473,24 +473,15 @@ pub fn event_msg(e: &Event) -> Option<DeviceMsg<'static>> {
             ok,
             dropped,
         },
-        Event::Status {
-            method,
-            calibration,
-            fallback,
-            air,
-            q_model,
-            references,
-            selftest,
-            boot,
-        } => DeviceMsg::Status {
-            method: method.name(),
-            calibration: calibration.source.name(),
-            fallback,
-            air,
-            q_model,
-            references,
-            selftest: outcome_code(selftest),
-            boot: boot.map(|b| b.code()),
+        Event::Status(s) => DeviceMsg::Status {
+            method: s.method.name(),
+            calibration: s.calibration.source.name(),
+            fallback: s.fallback,
+            air: s.air,
+            q_model: s.q_model,
+            references: s.references,
+            selftest: outcome_code(s.selftest),
+            boot: s.boot.map(|b| b.code()),
         },
     })
 }
