@@ -269,15 +269,9 @@ fn settings_that_do_not_suit_the_method_are_refused() {
     ));
     assert!(send(&mut s, &mut io, "status"));
     match io.events.last() {
-        Some(Event::Status {
-            method,
-            fallback,
-            air,
-            q_model,
-            ..
-        }) => {
-            assert_eq!(*method, Method::Auto);
-            assert!(*fallback && !*air && !*q_model);
+        Some(Event::Status(st)) => {
+            assert_eq!(st.method, Method::Auto);
+            assert!(st.fallback && !st.air && !st.q_model);
         }
         e => panic!("{e:?}"),
     }
@@ -361,7 +355,7 @@ fn a_failed_selftest_refuses_every_reading_until_one_passes() {
         assert!(send(&mut s, &mut io, "status"));
         assert!(matches!(
             io.events.last(),
-            Some(Event::Status { selftest: Some(Err(f)), .. }) if *f == want
+            Some(Event::Status(st)) if st.selftest == Some(Err(want))
         ));
         // `reload` keeps the verdict on the hardware; a self-test on the faulty probe fails
         // again.
@@ -454,7 +448,7 @@ fn a_failed_boot_step_is_named_in_refusals_and_status() {
         assert!(send(&mut s, &mut io, "method sweep-g"), "{e:?}");
         assert!(send(&mut s, &mut io, "status"), "{e:?}");
         assert!(
-            matches!(io.events.last(), Some(Event::Status { boot: Some(b), .. }) if *b == e),
+            matches!(io.events.last(), Some(Event::Status(st)) if st.boot == Some(e)),
             "{e:?}: {:?}",
             io.events.last()
         );
@@ -465,7 +459,7 @@ fn a_failed_boot_step_is_named_in_refusals_and_status() {
     assert!(send(&mut s, &mut io, "status"));
     assert!(matches!(
         io.events.last(),
-        Some(Event::Status { boot: None, .. })
+        Some(Event::Status(st)) if st.boot.is_none()
     ));
 }
 

@@ -646,31 +646,23 @@ pub struct Session {
 impl LoggedReading {
     /// The reading the firmware logged, as the core's [`pzt_probe::Reading`] (so that it prints
     /// through the same JSON as a host reading); `None` when its status or method is unknown.
+    /// The same conversion as a reading received on the link ([`crate::link::reading_of`]).
     pub fn to_reading(&self) -> Option<pzt_probe::Reading> {
-        use pzt_probe::units::{Hz, KPa, Seconds};
-        let status = match self.status.as_str() {
-            "ok" => pzt_probe::Status::Ok,
-            code => pzt_probe::Status::Failed(pzt_probe::Failure::from_code(code)?),
-        };
-        Some(pzt_probe::Reading {
-            status,
-            method: pzt_probe::Method::from_name(&self.method)?,
-            resonance: self.f_hz.map(Hz),
-            resonance_sigma: self.f_sigma_hz.map(Hz),
-            modulus: self.e_kpa.map(KPa),
-            modulus_sigma: self.e_sigma_kpa.map(KPa),
-            modulus_sigma_repeat: self.e_repeat_kpa.map(KPa),
+        crate::link::reading_of(&probe_proto::ReadingMsg {
+            status: &self.status,
+            method: &self.method,
+            f_hz: self.f_hz,
+            f_sigma_hz: self.f_sigma_hz,
+            e_kpa: self.e_kpa,
+            e_sigma_kpa: self.e_sigma_kpa,
+            e_repeat_kpa: self.e_repeat_kpa,
             q: self.q,
             loss_tangent: self.loss,
             loss_tangent_sigma: self.loss_sigma,
-            probe_time: Seconds(self.probe_time_s.unwrap_or(f32::NAN)),
+            force_n: self.force_n,
+            force_sigma_n: self.force_sigma_n,
+            probe_time_s: self.probe_time_s.unwrap_or(f32::NAN),
             points: self.points.min(u16::MAX as u32) as u16,
-            force: self.force_n.map(|f| pzt_probe::loadcell::ContactForce {
-                mean: pzt_probe::units::Newtons(f),
-                sigma: pzt_probe::units::Newtons(self.force_sigma_n.unwrap_or(f32::NAN)),
-                change: pzt_probe::units::Newtons(f32::NAN),
-                samples: 0,
-            }),
         })
     }
 }

@@ -9,6 +9,53 @@ pub const fn max_encoded_len(len: usize) -> usize {
     len + len / 254 + 1
 }
 
+/// The encoder between two content bytes: where the open block's code byte goes, where the
+/// next byte goes, and the open block's code so far.
+struct Blocks {
+    code_at: usize,
+    out: usize,
+    code: u8,
+}
+
+impl Blocks {
+    const fn new() -> Self {
+        Self {
+            code_at: 0,
+            out: 1,
+            code: 1,
+        }
+    }
+
+    /// Content byte `b` into `dst`: `None` when `dst` is too short.
+    fn push(&mut self, dst: &mut [u8], b: u8) -> Option<()> {
+        if b == 0 {
+            return self.close(dst);
+        }
+        *dst.get_mut(self.out)? = b;
+        self.out += 1;
+        self.code += 1;
+        if self.code == 0xFF {
+            return self.close(dst);
+        }
+        Some(())
+    }
+
+    /// Write the open block's code and open the next.
+    fn close(&mut self, dst: &mut [u8]) -> Option<()> {
+        *dst.get_mut(self.code_at)? = self.code;
+        self.code_at = self.out;
+        self.out += 1;
+        self.code = 1;
+        Some(())
+    }
+
+    /// Write the last block's code: the encoded length.
+    fn finish(self, dst: &mut [u8]) -> Option<usize> {
+        *dst.get_mut(self.code_at)? = self.code;
+        Some(self.out)
+    }
+}
+
 /// COBS-encode the `len` content bytes at `buf[start..]` to the start of `buf`, in place: the
 /// encoded length, or `None` when `buf` is too short, the content does not fit, or `start` is
 /// too small for the encoding to stay behind the bytes still to be read
@@ -18,65 +65,28 @@ pub fn encode_within(buf: &mut [u8], start: usize, len: usize) -> Option<usize> 
     if end > buf.len() {
         return None;
     }
-    let mut code_at = 0usize;
-    let mut out = 1usize;
-    let mut code = 1u8;
-    for k in 0..len {
-        let at = start + k;
+    let mut enc = Blocks::new();
+    for at in start..end {
         let b = *buf.get(at)?;
         // The write may reach the byte just read, never one still to be read.
-        if out > at {
+        if enc.out > at {
             return None;
         }
-        if b == 0 {
-            *buf.get_mut(code_at)? = code;
-            code_at = out;
-            out += 1;
-            code = 1;
-        } else {
-            *buf.get_mut(out)? = b;
-            out += 1;
-            code += 1;
-            if code == 0xFF {
-                *buf.get_mut(code_at)? = code;
-                code_at = out;
-                out += 1;
-                code = 1;
-            }
-        }
+        enc.push(buf, b)?;
     }
-    if code_at > end || code_at >= buf.len() {
+    if enc.code_at > end {
         return None;
     }
-    *buf.get_mut(code_at)? = code;
-    Some(out)
+    enc.finish(buf)
 }
 
 /// COBS-encode `src` into `dst`: the encoded length, or `None` when `dst` is too short.
 pub fn encode(src: &[u8], dst: &mut [u8]) -> Option<usize> {
-    let mut code_at = 0usize;
-    let mut out = 1usize;
-    let mut code = 1u8;
+    let mut enc = Blocks::new();
     for &b in src {
-        if b == 0 {
-            *dst.get_mut(code_at)? = code;
-            code_at = out;
-            out += 1;
-            code = 1;
-        } else {
-            *dst.get_mut(out)? = b;
-            out += 1;
-            code += 1;
-            if code == 0xFF {
-                *dst.get_mut(code_at)? = code;
-                code_at = out;
-                out += 1;
-                code = 1;
-            }
-        }
+        enc.push(dst, b)?;
     }
-    *dst.get_mut(code_at)? = code;
-    Some(out)
+    enc.finish(dst)
 }
 
 /// Decode the COBS bytes of `buf` (one frame, no delimiter) in place: the content's length,

@@ -8,6 +8,8 @@
 //! * **Decoder**: [`Decoder`] takes bytes one at a time and returns each frame's postcard body
 //!   or a typed [`FrameError`]; its buffer is fixed, it never panics, and a delimiter always
 //!   resynchronises it.
+//! * **Self-check**: [`roundtrip::RoundTrip`], both decoders over one byte stream, each
+//!   decoded message re-encoded and decoded again (the fuzz target's check).
 //!
 //! `no_std`, allocation free; every function is total on any input.
 #![no_std]
@@ -16,6 +18,7 @@
 pub mod cobs;
 mod crc;
 mod msg;
+pub mod roundtrip;
 
 pub use crc::crc32;
 pub use msg::*;

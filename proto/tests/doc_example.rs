@@ -23,59 +23,62 @@ fn doc_bytes(doc: &str, label: &str) -> String {
     line.trim_start()["frame:".len()..].trim().to_owned()
 }
 
+/// A host message's frame.
+fn host(m: &HostMsg) -> Vec<u8> {
+    encode_host(m, &mut [0u8; MAX_DEVICE_FRAME])
+        .unwrap()
+        .to_vec()
+}
+
+/// A probe message's frame, as the `seq`th sent, none dropped before it.
+fn device(seq: u32, msg: DeviceMsg) -> Vec<u8> {
+    let f = DeviceFrame {
+        seq,
+        dropped: 0,
+        msg,
+    };
+    encode_device(&f, &mut [0u8; MAX_DEVICE_FRAME])
+        .unwrap()
+        .to_vec()
+}
+
 fn examples() -> Vec<(&'static str, Vec<u8>)> {
-    let mut out = Vec::new();
-    let mut buf = [0u8; MAX_DEVICE_FRAME];
-    let host = HostMsg::Command {
+    let command = HostMsg::Command {
         id: 1,
         line: heapless::String::try_from("measure").unwrap(),
     };
-    out.push((
-        "<!-- example: command -->",
-        encode_host(&host, &mut buf).unwrap().to_vec(),
-    ));
-    let hello = HostMsg::Hello { version: VERSION };
-    out.push((
-        "<!-- example: hello -->",
-        encode_host(&hello, &mut buf).unwrap().to_vec(),
-    ));
-    let reading = DeviceFrame {
-        seq: 300,
-        dropped: 0,
-        msg: DeviceMsg::Reading(ReadingMsg {
-            status: "ok",
-            method: "auto",
-            f_hz: Some(241.5),
-            f_sigma_hz: Some(0.03125),
-            e_kpa: Some(279.0),
-            e_sigma_kpa: Some(4.5),
-            e_repeat_kpa: Some(1.25),
-            q: Some(11.5),
-            loss_tangent: None,
-            loss_tangent_sigma: None,
-            force_n: Some(0.03125),
-            force_sigma_n: Some(0.0005),
-            probe_time_s: 0.375,
-            points: 12,
-        }),
+    let reading = ReadingMsg {
+        status: "ok",
+        method: "auto",
+        f_hz: Some(241.5),
+        f_sigma_hz: Some(0.03125),
+        e_kpa: Some(279.0),
+        e_sigma_kpa: Some(4.5),
+        e_repeat_kpa: Some(1.25),
+        q: Some(11.5),
+        loss_tangent: None,
+        loss_tangent_sigma: None,
+        force_n: Some(0.03125),
+        force_sigma_n: Some(0.0005),
+        probe_time_s: 0.375,
+        points: 12,
     };
-    out.push((
-        "<!-- example: reading -->",
-        encode_device(&reading, &mut buf).unwrap().to_vec(),
-    ));
-    let reply = DeviceFrame {
-        seq: 301,
-        dropped: 0,
-        msg: DeviceMsg::Reply {
-            id: 1,
-            outcome: Outcome::Accepted,
-        },
+    let reply = DeviceMsg::Reply {
+        id: 1,
+        outcome: Outcome::Accepted,
     };
-    out.push((
-        "<!-- example: reply -->",
-        encode_device(&reply, &mut buf).unwrap().to_vec(),
-    ));
-    out
+    vec![
+        ("<!-- example: command -->", host(&command)),
+        (
+            "<!-- example: hello -->",
+            host(&HostMsg::Hello { version: VERSION }),
+        ),
+        (
+            "<!-- example: reading -->",
+            device(300, DeviceMsg::Reading(reading)),
+        ),
+        ("<!-- example: reply -->", device(301, reply)),
+    ]
 }
 
 #[test]

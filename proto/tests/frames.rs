@@ -204,6 +204,18 @@ fn command(id: u32, line: &str) -> HostMsg {
     }
 }
 
+/// A whole frame around `data` (version and body, unchecked): its CRC appended, COBS-encoded,
+/// delimited.
+fn frame_around(data: &[u8]) -> Vec<u8> {
+    let mut content = data.to_vec();
+    content.extend_from_slice(&crc32(data).to_le_bytes());
+    let mut enc = [0u8; 64];
+    let n = cobs::encode(&content, &mut enc).unwrap();
+    let mut s = enc[..n].to_vec();
+    s.push(0);
+    s
+}
+
 /// Every outcome of feeding `bytes` to a device-side decoder, bodies decoded as probe frames.
 fn device_outcomes(bytes: &[u8]) -> Vec<Result<DeviceFrame<'static>, FrameError>> {
     let mut d = Decoder::<MAX_DEVICE_FRAME>::new();
@@ -352,17 +364,9 @@ fn every_single_bit_flip_is_caught() {
 
 #[test]
 fn a_wrong_version_is_told_as_such() {
-    // The content of a version-2 frame: a valid CRC over version 2's bytes.
-    let mut content = vec![2u8];
-    content.extend_from_slice(&[0x00, 0x01]);
-    let crc = crc32(&content).to_le_bytes();
-    content.extend_from_slice(&crc);
-    let mut enc = [0u8; 64];
-    let n = cobs::encode(&content, &mut enc).unwrap();
-    let mut s = enc[..n].to_vec();
-    s.push(0);
+    // A version-2 frame: a valid CRC over version 2's bytes.
     assert_eq!(
-        host_outcomes(&s),
+        host_outcomes(&frame_around(&[2, 0x00, 0x01])),
         vec![Err(FrameError::WrongVersion { got: 2 })]
     );
     // A Hello of another version in a frame of this one decodes: the firmware answers it.
@@ -373,29 +377,18 @@ fn a_wrong_version_is_told_as_such() {
 #[test]
 fn a_valid_frame_with_a_body_of_no_message_is_malformed() {
     for body in [&[9u8][..], &[1, 5], &[0, 1, 2], &[1, 0, 200]] {
-        let mut content = vec![VERSION];
-        content.extend_from_slice(body);
-        let crc = crc32(&content).to_le_bytes();
-        content.extend_from_slice(&crc);
-        let mut enc = [0u8; 64];
-        let n = cobs::encode(&content, &mut enc).unwrap();
-        let mut s = enc[..n].to_vec();
-        s.push(0);
+        let data = [&[VERSION][..], body].concat();
         assert_eq!(
-            host_outcomes(&s),
+            host_outcomes(&frame_around(&data)),
             vec![Err(FrameError::Malformed)],
             "{body:?}"
         );
     }
     // Trailing bytes after a whole message are malformed too.
-    let mut content = vec![VERSION, 0, VERSION, 0xAA];
-    let crc = crc32(&content).to_le_bytes();
-    content.extend_from_slice(&crc);
-    let mut enc = [0u8; 64];
-    let n = cobs::encode(&content, &mut enc).unwrap();
-    let mut s = enc[..n].to_vec();
-    s.push(0);
-    assert_eq!(host_outcomes(&s), vec![Err(FrameError::Malformed)]);
+    assert_eq!(
+        host_outcomes(&frame_around(&[VERSION, 0, VERSION, 0xAA])),
+        vec![Err(FrameError::Malformed)]
+    );
     // Too short for a version and a CRC.
     assert_eq!(
         host_outcomes(&[0x03, 0x01, 0x02, 0x00]),

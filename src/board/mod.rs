@@ -11,6 +11,8 @@ pub mod sim_script;
 pub mod qemu;
 #[cfg(all(target_os = "none", feature = "stm32"))]
 pub mod stm32g474;
+#[cfg(target_os = "none")]
+pub mod tx_queue;
 
 /// A firmware board's parts, as the application takes them over from its `init`: each board
 /// names its own types (`qemu::Parts`, `stm32g474::Parts`).

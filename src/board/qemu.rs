@@ -21,6 +21,7 @@
 //! Run with `-machine mps2-an386 -cpu cortex-m4 -icount shift=0,sleep=off
 //! -semihosting-config enable=on,target=native` (see `scripts/qemu-run`).
 
+use crate::board::tx_queue;
 use crate::engine::SampleEngine;
 use crate::engine::BATCH;
 use crate::hal::{AdcFrame, FrontEndScale};
@@ -497,26 +498,11 @@ impl Uart {
     }
 }
 
-/// The host link's transmit queue, bytes (1023: two of the longest frames).
-const TX_CAP: usize = 1024;
-
-/// The transmit queue between the report task ([`link_send`]) and UART0's transmit interrupt.
-static TX_QUEUE: cortex_m::interrupt::Mutex<core::cell::RefCell<heapless::Deque<u8, TX_CAP>>> =
-    cortex_m::interrupt::Mutex::new(core::cell::RefCell::new(heapless::Deque::new()));
-
-/// Queue a whole frame of the host link for UART0, or refuse it (`false`) when the queue has no
-/// room for all of it: never waits. The transmit interrupt sends it.
+/// Queue a whole frame of the host link for UART0 ([`tx_queue::queue`]), or refuse it
+/// (`false`) when the queue has no room for all of it: never waits. The transmit interrupt
+/// sends it.
 pub fn link_send(frame: &[u8]) -> bool {
-    let queued = cortex_m::interrupt::free(|cs| {
-        let mut q = TX_QUEUE.borrow(cs).borrow_mut();
-        if q.capacity() - q.len() < frame.len() {
-            return false;
-        }
-        for &b in frame {
-            let _ = q.push_back(b);
-        }
-        true
-    });
+    let queued = tx_queue::queue(frame);
     if queued {
         cortex_m::peripheral::NVIC::pend(device::Interrupt::UART0TX);
     }
@@ -550,7 +536,7 @@ extern "C" fn UART0TX() {
     unsafe {
         write_volatile(addr_of_mut!((*UART0).intclear), CmsdkUart::INT_TX);
         while read_volatile(addr_of!((*UART0).state)) & CmsdkUart::TX_FULL == 0 {
-            match cortex_m::interrupt::free(|cs| TX_QUEUE.borrow(cs).borrow_mut().pop_front()) {
+            match tx_queue::pop() {
                 Some(b) => write_volatile(addr_of_mut!((*UART0).data), b as u32),
                 None => break,
             }

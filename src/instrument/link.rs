@@ -473,24 +473,15 @@ pub fn event_msg(e: &Event) -> Option<DeviceMsg<'static>> {
             ok,
             dropped,
         },
-        Event::Status {
-            method,
-            calibration,
-            fallback,
-            air,
-            q_model,
-            references,
-            selftest,
-            boot,
-        } => DeviceMsg::Status {
-            method: method.name(),
-            calibration: calibration.source.name(),
-            fallback,
-            air,
-            q_model,
-            references,
-            selftest: outcome_code(selftest),
-            boot: boot.map(|b| b.code()),
+        Event::Status(s) => DeviceMsg::Status {
+            method: s.method.name(),
+            calibration: s.calibration.source.name(),
+            fallback: s.fallback,
+            air: s.air,
+            q_model: s.q_model,
+            references: s.references,
+            selftest: outcome_code(s.selftest),
+            boot: s.boot.map(|b| b.code()),
         },
     })
 }
@@ -673,22 +664,17 @@ mod tests {
             };
             encode_host(&m, buf).unwrap().to_vec()
         };
-        assert_eq!(
-            feed(&cmd(3, "measure", &mut buf)),
-            [Incoming::Command {
-                id: 3,
-                line: heapless::String::try_from("measure").unwrap(),
-                parsed: Ok(Command::Measure)
-            }]
-        );
-        assert_eq!(
-            feed(&cmd(4, "stream 0.01", &mut buf)),
-            [Incoming::Command {
-                id: 4,
-                line: heapless::String::try_from("stream 0.01").unwrap(),
-                parsed: Err(CommandError::OutOfRange)
-            }]
-        );
+        // Command `id`'s frame of `line` comes in as that command, parsed to `parsed`.
+        let mut command_in = |id, line: &str, parsed| {
+            let want = Incoming::Command {
+                id,
+                line: heapless::String::try_from(line).unwrap(),
+                parsed,
+            };
+            assert_eq!(feed(&cmd(id, line, &mut buf)), [want]);
+        };
+        command_in(3, "measure", Ok(Command::Measure));
+        command_in(4, "stream 0.01", Err(CommandError::OutOfRange));
         let hello = encode_host(&HostMsg::Hello { version: 2 }, &mut buf)
             .unwrap()
             .to_vec();

@@ -203,28 +203,19 @@ pub fn event(e: Event) {
         ),
         Event::Refused(why) => defmt::warn!("rejected error={=str}", why.message()),
         Event::SelfTest(r) => selftest(&r),
-        Event::Status {
-            method,
-            calibration,
-            fallback,
-            air,
-            q_model,
-            references,
-            selftest,
-            boot,
-        } => {
+        Event::Status(s) => {
             defmt::info!(
                 "status method={=str} calibration={=str} fallback={=bool} air={=bool} q_model={=bool} references={=u16} selftest={=str}",
-                method.name(),
-                calibration.source.name(),
-                fallback,
-                air,
-                q_model,
-                references,
-                crate::instrument::selftest::outcome_code(selftest)
+                s.method.name(),
+                s.calibration.source.name(),
+                s.fallback,
+                s.air,
+                s.q_model,
+                s.references,
+                crate::instrument::selftest::outcome_code(s.selftest)
             );
             // A failed bring-up step, on a line of its own (the status line's format stays).
-            if let Some(b) = boot {
+            if let Some(b) = s.boot {
                 defmt::warn!("status boot={=str} message={=str}", b.code(), b.message());
             }
             stack();

@@ -205,7 +205,7 @@ impl<L: Link, F: NorFlash> Io for FwIo<'_, L, F> {
     /// The event, and the health counters after a reading or a status.
     async fn emit(&mut self, e: Event) {
         self.link.report(e).await;
-        if matches!(e, Event::Reading(_) | Event::Status { .. }) {
+        if matches!(e, Event::Reading(_) | Event::Status(_)) {
             self.link.counters().await;
         }
     }
@@ -252,7 +252,7 @@ mod tests {
         match e {
             Event::Point { .. } => Out::Point,
             Event::Reading(_) => Out::Reading,
-            Event::Status { .. } => Out::Status,
+            Event::Status(_) => Out::Status,
             _ => Out::Other,
         }
     }

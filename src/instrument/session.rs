@@ -95,24 +95,28 @@ pub enum Event {
         plan_work: Option<u32>,
     },
     /// The session's state.
-    Status {
-        /// Active method.
-        method: Method,
-        /// Calibration in use.
-        calibration: PowerLaw,
-        /// The store held no valid profile at boot and none was stored since.
-        fallback: bool,
-        /// An air reference is held.
-        air: bool,
-        /// A contact condition (Q model) is held.
-        q_model: bool,
-        /// Reference readings held.
-        references: u16,
-        /// The last self-test: `None` when none ran, else passed or its fault.
-        selftest: Option<Result<(), SelfTestFault>>,
-        /// The board's first failed bring-up step, if any ([`Io::boot_error`]).
-        boot: Option<BootError>,
-    },
+    Status(StatusReport),
+}
+
+/// The session's state, as `status` reports it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StatusReport {
+    /// Active method.
+    pub method: Method,
+    /// Calibration in use.
+    pub calibration: PowerLaw,
+    /// The store held no valid profile at boot and none was stored since.
+    pub fallback: bool,
+    /// An air reference is held.
+    pub air: bool,
+    /// A contact condition (Q model) is held.
+    pub q_model: bool,
+    /// Reference readings held.
+    pub references: u16,
+    /// The last self-test: `None` when none ran, else passed or its fault.
+    pub selftest: Option<Result<(), SelfTestFault>>,
+    /// The board's first failed bring-up step, if any ([`Io::boot_error`]).
+    pub boot: Option<BootError>,
 }
 
 /// Why a command was refused.
@@ -398,7 +402,7 @@ impl Session {
             }
             Command::Status => {
                 self.emit_load_cell(io).await;
-                io.emit(Event::Status {
+                io.emit(Event::Status(StatusReport {
                     method: self.method,
                     calibration: self.profile.calibration,
                     fallback: self.fallback,
@@ -407,7 +411,7 @@ impl Session {
                     references: self.refs.len() as u16,
                     selftest: self.selftest,
                     boot: io.boot_error(),
-                })
+                }))
                 .await;
                 true
             }

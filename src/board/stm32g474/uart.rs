@@ -9,6 +9,7 @@ use embassy_stm32::{peripherals, Peri};
 use super::interrupts::Irqs;
 use super::reset::record;
 use super::BootError;
+use crate::board::tx_queue;
 
 /// LPUART1 baud rate (ST-LINK virtual COM port).
 const LPUART_BAUD: u32 = 115_200;
@@ -78,27 +79,10 @@ pub(super) fn open(
     }
 }
 
-/// The host link's transmit queue, bytes (1023: two of the longest frames; at 115 200 Bd it
-/// empties in 89 ms).
-const TX_CAP: usize = 1024;
-
-/// The transmit queue between the report task ([`link_send`]) and the task `link_tx`.
-static TX_QUEUE: cortex_m::interrupt::Mutex<core::cell::RefCell<heapless::Deque<u8, TX_CAP>>> =
-    cortex_m::interrupt::Mutex::new(core::cell::RefCell::new(heapless::Deque::new()));
-
-/// Queue a whole frame of the host link, or refuse it (`false`) when the queue has no room for
-/// all of it: never waits. The task `link_tx` sends it.
+/// Queue a whole frame of the host link ([`tx_queue::queue`]), or refuse it (`false`) when the
+/// queue has no room for all of it: never waits. The task `link_tx` sends it.
 pub fn link_send(frame: &[u8]) -> bool {
-    cortex_m::interrupt::free(|cs| {
-        let mut q = TX_QUEUE.borrow(cs).borrow_mut();
-        if q.capacity() - q.len() < frame.len() {
-            return false;
-        }
-        for &b in frame {
-            let _ = q.push_back(b);
-        }
-        true
-    })
+    tx_queue::queue(frame)
 }
 
 /// LPUART1's transmitter (DMA1 CH6), driven by the task `link_tx`: queued bytes in chunks, each
@@ -111,20 +95,7 @@ impl LinkTx {
 
     /// Move the queued bytes, up to `buf`'s length, into `buf`: how many.
     pub fn take(buf: &mut [u8]) -> usize {
-        cortex_m::interrupt::free(|cs| {
-            let mut q = TX_QUEUE.borrow(cs).borrow_mut();
-            let mut n = 0;
-            for slot in buf.iter_mut() {
-                match q.pop_front() {
-                    Some(b) => {
-                        *slot = b;
-                        n += 1;
-                    }
-                    None => break,
-                }
-            }
-            n
-        })
+        tx_queue::take(buf)
     }
 
     /// Send `bytes` by DMA; without a transmitter ([`BootError::Uart`]) they are dropped.
