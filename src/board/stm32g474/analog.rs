@@ -10,7 +10,7 @@
 //! time and resolution, so the current and the drive monitor are sampled at the same instant.
 //! They run as two independent ADCs rather than in the dual regular-simultaneous mode: embassy
 //! 0.6 writes ADC_CCR.DUAL after enabling ADC1, where RM0440 allows the field to be written
-//! only with both ADCs disabled (docs/firmware.md). The DMA1 CH1 half/full-transfer interrupt
+//! only with both ADCs disabled (docs/bringup.md, row 5e). The DMA1 CH1 half/full-transfer interrupt
 //! (ADC1's ring) is the RTIC `sample` task; it runs embassy's DMA handler for that channel
 //! itself ([`Stream::capture`]).
 //!
@@ -360,7 +360,7 @@ pub(super) fn converters(p: ConverterPins) -> Converters {
     tim.set_frequency(Hertz(SAMPLE_RATE_HZ), RoundTo::Faster);
     // Gap: embassy 0.6's low-level timer has no master-mode setter. RAW 7/13: TIM6_CR2.MMS =
     // update → TRGO (RM0440 "Basic timers (TIM6/TIM7)" chapter, TIMx_CR2;
-    // its number unverified: docs/firmware.md).
+    // its number unverified: docs/bringup.md).
     tim.regs_basic()
         .cr2()
         .modify(|w| w.set_mms(pac::timer::vals::Mms::UPDATE));

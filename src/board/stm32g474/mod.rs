@@ -2,14 +2,14 @@
 //! on DMA ring buffers, the bank-2 flash of the calibration store, LPUART1 and the independent
 //! watchdog are embassy drivers, used from RTIC 2 tasks without an embassy executor. Raw
 //! register code remains only where embassy 0.6 lacks the feature: thirteen accesses, each
-//! marked `RAW n/13` with the gap and the RM0440 section, listed in `docs/firmware.md`. The
+//! marked `RAW n/13` with the gap and the RM0440 section, listed in `docs/bringup.md`. The
 //! HSE runs under the clock security system (CSSON with HSEON in one access); its NMI resets
 //! the core into a boot on HSI16 through the PLL ([`BootError::HseFailure`]).
 //!
 //! # Bring-up ([`init`])
 //!
 //! The cycle counter first (it times the bounded waits); the IWDG, frozen under the debugger,
-//! started before any of embassy's own waits (several have no bound: `docs/firmware.md`), with
+//! started before any of embassy's own waits (several have no bound: `docs/bringup.md`), with
 //! the step in progress kept in RAM a reset does not clear (`Step`): a step that hangs ends in
 //! a watchdog reset, and the next boot goes around it with a typed [`BootError`]
 //! (`clock_hang`: HSI16 at 16 MHz, no stream; `converter_hang`: no stream; `flash_hang`: no

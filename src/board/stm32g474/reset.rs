@@ -88,7 +88,7 @@ pub(super) struct ResetCause {
 ///
 /// Gap: embassy-stm32 0.6 has no reset-cause API. RAW 12/13: RCC_CSR read-modify-write,
 /// IWDGRSTF and SFTRSTF read and RMVF set in one access (RM0440 7.4.28 RCC_CSR, numbered by
-/// the register order: see docs/firmware.md).
+/// the register order: see docs/bringup.md).
 pub(super) fn reset_cause() -> ResetCause {
     pac::RCC.csr().modify(|w| {
         let cause = ResetCause {

@@ -26,7 +26,7 @@ impl crate::instrument::watchdog::Watchdog for Watchdog {
 pub(super) fn start(safe_clock: bool) -> Watchdog {
     // Gap: embassy 0.6 has no DBGMCU API. RAW 8/13: DBGMCU_APB1FZR1.DBG_IWDG_STOP (RM0440
     // "Debug support (DBG)" chapter, DBGMCU_APB1FZR1; its number unverified:
-    // docs/firmware.md), before the IWDG starts.
+    // docs/bringup.md), before the IWDG starts.
     pac::DBGMCU.apb1lfzr().modify(|w| w.set_iwdg(true));
     // On HSI16 without the PLL the monotonic (started for 170 MHz) runs 10.6 times slow, and
     // the measurement task's 100 ms feeds come every 1.06 s: the timeout grows with it.
