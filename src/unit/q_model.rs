@@ -16,8 +16,8 @@ use crate::unit::profile::Reference;
 /// at hand ([`QModel::q_at`]).
 ///
 /// With the `serde` feature it is (de)serialized as its fields by these names, `q2`,
-/// `sigma_rel` and `damping` default when absent (the `q_model` object of probe-bench's profile
-/// files).
+/// `sigma_rel` and `damping` default when absent and `damping` left out when `None` (the
+/// `q_model` object of probe-bench's profile files).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -36,7 +36,10 @@ pub struct QModel {
     pub sigma_rel: f64,
     /// The contact-damping curve, fitted through the contact law the calibration kept (`None`
     /// without one).
-    #[cfg_attr(feature = "serde", serde(default))]
+    #[cfg_attr(
+        feature = "serde",
+        serde(default, skip_serializing_if = "Option::is_none")
+    )]
     pub damping: Option<DampingModel>,
 }
 
