@@ -30,10 +30,11 @@ coded_enum! {
         /// The run before hung in a flash erase or program (embassy's waits on FLASH_SR.BSY): the
         /// store's flash is not used this boot.
         FlashHang: "flash_hang" => "boot: a flash erase or program hung on the run before: calibration store disabled until reset";
-        /// The HSE crystal failed while the image ran: the clock security system switched the core
-        /// to HSI16 and its NMI reset the core; this boot runs from HSI16 through the PLL (170 MHz
-        /// at RC accuracy, about ±1 % over temperature) and does not start the HSE again.
-        HseFailure: "hse_failure" => "boot: the 24 MHz crystal failed while running (clock security system): running on the internal RC oscillator, frequencies carry its error; check the crystal";
+        /// The HSE crystal did not start within its bound (RM0440 RCC_CR.HSERDY), or failed while
+        /// the image ran (the clock security system switched the core to HSI16 and its NMI reset
+        /// the core): this boot runs from HSI16 through the PLL (170 MHz at RC accuracy, about
+        /// ±1 % over temperature) and does not start the HSE again.
+        HseFailure: "hse_failure" => "boot: the 24 MHz crystal did not start or failed while running: running on the internal RC oscillator, frequencies carry its error; check the crystal";
     }
     /// Every boot error, in declaration order.
     const ALL;

@@ -354,8 +354,9 @@ fn stm32_image_survives_an_adc_that_never_becomes_ready() {
 
 /// A fault the bring-up must survive: the HSE crystal never starts. The image waits for
 /// HSERDY with a bound (100 ms at HSI16) and runs its PLL from HSI16 at the same 170 MHz
-/// (`clock=hsi16-pll`): it boots and passes its self-test. (It does not tell the user: no boot
-/// error is recorded and `status` has no clock field — issue 26 asks for `hse_failure`; open.)
+/// (`clock=hsi16-pll`): it boots and passes its self-test, and says why it runs on the RC
+/// oscillator: `boot fault=hse_failure clock=hsi16-pll` in the log, and `status` names the boot
+/// error.
 #[test]
 fn stm32_image_runs_from_hsi16_when_the_hse_never_starts() {
     let elf = build_image();
@@ -393,6 +394,21 @@ fn stm32_image_runs_from_hsi16_when_the_hse_never_starts() {
         .expect("a selftest line")
         .1;
     assert_eq!(t["result"], "passed", "{t:?}");
+    let named = |name: &str, key: &str| {
+        parsed
+            .iter()
+            .any(|(n, f)| n == name && f.get(key).map(String::as_str) == Some("hse_failure"))
+    };
+    assert!(named("boot", "fault"), "no boot fault line: {lines:?}");
+    let clock = parsed
+        .iter()
+        .find(|(n, f)| n == "boot" && f.contains_key("fault"))
+        .map(|(_, f)| f["clock"].clone());
+    assert_eq!(clock.as_deref(), Some("hsi16-pll"));
+    assert!(
+        named("status", "boot"),
+        "status does not name it: {lines:?}"
+    );
 }
 
 /// A fault the bring-up must survive: a DMA transfer error on ADC1's channel (DMA1 CH1) while

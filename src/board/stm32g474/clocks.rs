@@ -58,7 +58,7 @@ pub fn clock_source() -> ClockSource {
 
 /// The oscillator for this boot: HSI16 alone after a boot that hung in the clock setup
 /// (`safe`, [`BootError::ClockHang`]), HSI16 through the PLL after the HSE failed on the run
-/// before (`hse_failed`, [`BootError::HseFailure`]) or does not start now, else the HSE.
+/// before (`hse_failed`) or does not start now (both [`BootError::HseFailure`]), else the HSE.
 /// Records the boot error and the choice ([`clock_source`]).
 pub(super) fn choose(safe: bool, hse_failed: bool) -> ClockSource {
     let clock = if safe {
@@ -70,6 +70,9 @@ pub(super) fn choose(safe: bool, hse_failed: bool) -> ClockSource {
     } else if hse_starts() {
         ClockSource::Hse24
     } else {
+        // The crystal did not start within its bound: the same fallback as after a failure
+        // while running, and the user is told the same way.
+        record(BootError::HseFailure);
         ClockSource::Hsi16Pll
     };
     CLOCK.store(
