@@ -142,8 +142,8 @@ mod tests {
         assert_eq!(bounded(2.5, 1.0, 3.0), 2.5);
         assert!(bounded(f64::NAN, 1.0, 3.0).is_nan());
         // Where `f64::clamp` panics: bounds out of order, a NaN bound.
-        assert_eq!(bounded(0.0, 3.0, 1.0), 3.0);
-        assert_eq!(bounded(2.0, 3.0, 1.0), 1.0);
+        assert_eq!(bounded(2.0, 3.0, 1.0), 3.0);
+        assert_eq!(bounded(5.0, 3.0, 1.0), 1.0);
         assert_eq!(bounded(2.0, f64::NAN, 1.0), 1.0);
         assert_eq!(bounded(2.0, 1.0, f64::NAN), 2.0);
         assert_eq!(bounded(7_i32, 0, 4), 4);

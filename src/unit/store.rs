@@ -563,12 +563,31 @@ pub fn decode(buf: &[u8; RECORD_LEN]) -> Option<(u32, UnitProfile)> {
 mod tests {
     use super::*;
 
+    /// CRC-32/ISO-HDLC bit by bit (reflected polynomial 0xEDB88320, start and final XOR all
+    /// ones: zlib's `crc32`), the reference the table-driven `probe_proto::crc32` is held to.
+    fn crc32_bitwise(data: &[u8]) -> u32 {
+        let mut c = !0u32;
+        for &b in data {
+            c ^= b as u32;
+            for _ in 0..8 {
+                c = if c & 1 != 0 {
+                    (c >> 1) ^ 0xEDB8_8320
+                } else {
+                    c >> 1
+                };
+            }
+        }
+        !c
+    }
+
     #[test]
     fn a_records_crc_field_is_zlibs_crc_of_its_bytes() {
-        // The fallback profile as sequence 1; the pinned value is Python's
-        // `zlib.crc32(record[:380])` of these bytes, so records in flash keep verifying.
+        // The catalogue's check value of CRC-32/ISO-HDLC, then the fallback profile as
+        // sequence 1: its CRC field is zlib's CRC of the bytes before it, so records in flash
+        // written by any earlier build keep verifying.
+        assert_eq!(crc32_bitwise(b"123456789"), 0xCBF4_3926);
         let buf = encode(&UnitProfile::fallback(), 1);
-        assert_eq!(buf[CRC_AT..], 0xB234_E999u32.to_le_bytes());
+        assert_eq!(buf[CRC_AT..], crc32_bitwise(&buf[..CRC_AT]).to_le_bytes());
         assert!(decode(&buf).is_some());
     }
 
