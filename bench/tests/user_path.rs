@@ -124,7 +124,8 @@ fn help_lists_every_method_and_the_firmwares_default() {
 }
 
 /// The firmware image in QEMU on the same scene, seed, method and settings as the host reading
-/// agrees on status and method, and on the modulus within 1 % (the image reads with its factory
+/// agrees on status and method, and on the modulus within 1 %, and on lossy tissue both loss
+/// tangents cover the scene's within 3 σ (the image reads with its factory
 /// profile, which is the host's auto profile: tests/factory_profile.rs). Needs QEMU's tools
 /// (tests/qemu.rs says which are missing).
 #[test]
@@ -135,6 +136,15 @@ fn the_firmware_in_qemu_agrees_with_the_host() {
         &["--free-air"],
         &["--phantom", "B", "--preload-n", "0.002"],
         &["--modulus-kpa", "6000"],
+        // Lossy tissue (issue #25): the image's reading carries the loss tangent too.
+        &[
+            "--modulus-kpa",
+            "950",
+            "--loss-tangent",
+            "0.41",
+            "--seed",
+            "7",
+        ],
     ];
     for c in cases {
         let host = measure(c);
@@ -146,6 +156,16 @@ fn the_firmware_in_qemu_agrees_with_the_host() {
         assert_eq!(host["method"], fw["method"], "{c:?}");
         if let (Some(h), Some(f)) = (host["modulus_kpa"].as_f64(), fw["modulus_kpa"].as_f64()) {
             assert!((f / h - 1.0).abs() <= 0.01, "{c:?}: {f} vs {h} kPa");
+        }
+        // Where the scene is lossy, each reading's loss tangent covers the scene's within 3 of
+        // its σ.
+        if let Some(i) = c.iter().position(|a| *a == "--loss-tangent") {
+            let truth: f64 = c[i + 1].parse().expect("a loss tangent");
+            for r in [&host, &fw] {
+                let l = r["loss_tangent"].as_f64().expect("a loss tangent");
+                let s = r["loss_tangent_sigma"].as_f64().expect("its σ");
+                assert!((l - truth).abs() <= 3.0 * s, "{c:?}: {r}");
+            }
         }
     }
 }
