@@ -11,4 +11,5 @@ pub mod log;
 pub mod measure;
 pub mod selftest;
 pub mod session;
+pub mod tasks;
 pub mod watchdog;
