@@ -11,6 +11,8 @@ pub mod sim_script;
 pub mod qemu;
 #[cfg(all(target_os = "none", feature = "stm32"))]
 pub mod stm32g474;
+#[cfg(all(target_os = "none", any(feature = "qemu", feature = "stm32")))]
+pub mod tasks;
 #[cfg(target_os = "none")]
 pub mod tx_queue;
 

@@ -34,6 +34,8 @@
 
 use crate::hal::FrontEndScale;
 use crate::instrument::command::{parse, Command, CommandError, MAX_LINE};
+use crate::instrument::link::Report;
+use crate::instrument::tasks::CommandLink;
 use hal_sim::events::{ForceChange, LiftOff, Step as TissueStep};
 use hal_sim::{phantoms, Fault, NoiseScene, Scene};
 
@@ -328,6 +330,75 @@ impl<'a, I: Iterator<Item = &'a str>> Iterator for Runner<I> {
     }
 }
 
+/// The QEMU command task's links: the host link's ([`CommandLink`]) and the simulated probe.
+#[allow(async_fn_in_trait)] // used with concrete types only, in one task
+pub trait SimLink: CommandLink {
+    /// Put the probe on `sim`'s scene (from the sample interrupt's next batch), then wait
+    /// [`SCENE_SETTLE_MS`].
+    async fn scene(&mut self, sim: &SimState);
+}
+
+/// How a script ended.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum End {
+    /// Its lines ran out: the run succeeded iff this holds (the power-on self-test, every
+    /// request and every line).
+    Exit(bool),
+    /// At `serve`: the host link takes over.
+    Serve,
+}
+
+/// The QEMU command task's script from the probe at `sim`, its commands parsed against
+/// `scale`: it first waits for the power-on self-test's outcome, then runs each line in turn,
+/// waiting for each request to finish ([`Runner`]). At `serve`, `sim` is the probe as the
+/// script's `sim` lines left it.
+pub async fn run_script(
+    link: &mut impl SimLink,
+    script: &str,
+    sim: &mut SimState,
+    scale: FrontEndScale,
+) -> End {
+    let mut run = Runner::new(lines(script), *sim, scale);
+    // After the power-on self-test (on the script's leading `sim` lines' scene).
+    run.done(link.done().await.unwrap_or(false));
+    while let Some(action) = run.next() {
+        match action {
+            Action::Sim => link.scene(run.sim()).await,
+            Action::Send(c) => {
+                let sent = link.request(c).await;
+                run.done(sent && link.done().await.unwrap_or(false));
+            }
+            Action::Reject(message) => link.report(Report::Rejected(message)).await,
+            Action::Serve => {
+                *sim = *run.sim();
+                return End::Serve;
+            }
+        }
+    }
+    End::Exit(run.ok())
+}
+
+/// A `sim` line from the host link ([`CommandLink::board_line`]), applied to `sim`: the probe
+/// moved to its scene, or why the line is refused (the probe unmoved).
+pub async fn sim_line(
+    link: &mut impl SimLink,
+    line: &str,
+    sim: &mut SimState,
+) -> Option<&'static str> {
+    match apply(line, sim) {
+        Ok(_) => {
+            link.scene(sim).await;
+            None
+        }
+        Err(e) => Some(e.message()),
+    }
+}
+
+/// The host link's board lines on the simulated probe.
+pub fn is_sim_line(line: &str) -> bool {
+    line.starts_with("sim ")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -560,5 +631,107 @@ mod tests {
             assert_eq!(apply(line, &mut s), Err(e), "{line}");
             assert_eq!(s, start(), "{line}");
         }
+    }
+
+    /// The command task's links as a script sees them: completions to hand out, what the
+    /// task did, in order.
+    #[derive(Default)]
+    struct Script {
+        done: std::collections::VecDeque<bool>,
+        closed: bool,
+        log: std::vec::Vec<std::string::String>,
+    }
+
+    impl CommandLink for Script {
+        async fn byte(&mut self) -> Option<u8> {
+            None
+        }
+        async fn request(&mut self, c: Command) -> bool {
+            self.log.push(std::format!("request {c:?}"));
+            !self.closed
+        }
+        fn has_room(&self) -> bool {
+            true
+        }
+        fn try_request(&mut self, _: Command) -> bool {
+            true
+        }
+        async fn done(&mut self) -> Option<bool> {
+            self.done.pop_front()
+        }
+        fn try_done(&mut self) -> Option<bool> {
+            None
+        }
+        async fn report(&mut self, r: Report) {
+            self.log.push(std::format!("{r:?}"));
+        }
+    }
+
+    impl SimLink for Script {
+        async fn scene(&mut self, sim: &SimState) {
+            self.log.push(std::format!("scene {}", sim.preload_n));
+        }
+    }
+
+    fn script(link: &mut Script, text: &str) -> (End, SimState) {
+        let mut sim = start();
+        let end = run_script(link, text, &mut sim, FrontEndScale::PROBE);
+        (crate::reading::driver::block_on(end), sim)
+    }
+
+    #[test]
+    fn a_script_waits_for_the_selftest_and_each_request() {
+        let mut link = Script {
+            done: [true, true, true].into(),
+            ..Default::default()
+        };
+        let (end, _) = script(&mut link, "sim preload 0.02; status; measure");
+        assert_eq!(end, End::Exit(true));
+        assert_eq!(
+            link.log,
+            ["scene 0.02", "request Status", "request Measure"]
+        );
+        assert!(link.done.is_empty(), "the self-test's and two requests'");
+
+        // A failed self-test, a bad line (reported, the run goes on), then `serve` with the
+        // probe as the lines left it.
+        let mut link = Script {
+            done: [false].into(),
+            ..Default::default()
+        };
+        let (end, sim) = script(&mut link, "sim seed 9; sim nonsense; serve; measure");
+        assert_eq!(end, End::Serve);
+        assert_eq!(sim.seed, 9);
+        assert_eq!(link.log.len(), 2);
+        assert!(link.log[1].starts_with("Rejected(\"sim: phantom"));
+    }
+
+    #[test]
+    fn a_request_that_cannot_be_sent_fails_the_run_without_a_wait() {
+        let mut link = Script {
+            done: [true, true].into(),
+            closed: true,
+            ..Default::default()
+        };
+        assert_eq!(script(&mut link, "status").0, End::Exit(false));
+        assert_eq!(link.done, [true], "no completion waited for");
+    }
+
+    #[test]
+    fn a_sim_line_from_the_host_moves_the_probe_or_is_refused() {
+        let mut link = Script::default();
+        let mut sim = start();
+        assert!(is_sim_line("sim preload 0.01") && !is_sim_line("simulate"));
+        use crate::reading::driver::block_on as block;
+        assert_eq!(
+            block(sim_line(&mut link, "sim preload 0.01", &mut sim)),
+            None
+        );
+        assert_eq!(
+            block(sim_line(&mut link, "sim preload 9", &mut sim)),
+            Some(SimError::BadArgument.message())
+        );
+        assert_eq!(sim.preload_n, 0.01);
+        assert_eq!(link.log, ["scene 0.01"]);
     }
 }

@@ -111,7 +111,7 @@ pub enum LinkEvent {
 
 /// Ids the link keeps of commands not yet answered: each is queued or in service (at most the
 /// request channel's 4 and one) or its [`LinkEvent::Served`] waits in the report channel (at
-/// most its 11): 16 bound them all (`src/bin/probe.rs`).
+/// most its 11): 16 bound them all (asserted with the capacities, [`crate::instrument::tasks`]).
 pub const PENDING: usize = 16;
 
 /// The rejection's message of a failed `store` (the store's error code is its cause).

@@ -2,8 +2,8 @@
 //! [`Io`] over the links to the sample interrupt and the other tasks) and its loop
 //! ([`FwIo::serve`]), both under the watchdog's rules ([`crate::instrument::watchdog`]).
 //!
-//! The RTIC application (`src/bin/probe.rs`) implements [`Link`] over its channels and its
-//! monotonic; everything the task decides — which windows it takes, how long it waits for one,
+//! The tasks' RTIC side (`src/board/tasks.rs`, `MeasureLinks`) implements [`Link`] over the
+//! channels and the monotonic; everything the task decides — which windows it takes, how long it waits for one,
 //! what it promises the watchdog before each wait and each command, when it tells the report
 //! task the counters, how it measures the work from a window to the next plan — is here, and
 //! is tested on the host over a scripted link.
