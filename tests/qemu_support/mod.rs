@@ -4,11 +4,15 @@
 //! Needs `qemu-system-arm`, `defmt-print` and the target; [`require_tools`] fails the test with
 //! the install commands when one is missing. A test never passes by skipping.
 
-use std::collections::HashMap;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
+
+/// The decoded log's fields (shared with the emulated STM32 board's tests).
+#[allow(dead_code)] // each test uses some of them
+#[path = "../support/log_fields.rs"]
+pub mod log_fields;
 
 const TARGET: &str = "thumbv7em-none-eabihf";
 
@@ -186,37 +190,4 @@ pub fn run_script(elf: &Path, timeout: Duration, script: Option<&str>) -> (bool,
     let printed = print.wait().expect("wait for defmt-print");
     assert!(printed.success(), "defmt-print failed: {printed}");
     (status.success(), text.lines().map(str::to_owned).collect())
-}
-
-/// A decoded line `LEVEL name k=v k=v ...` as (name, map).
-pub type Fields = (String, HashMap<String, String>);
-
-/// `LEVEL name k=v k=v ...` → (name, map).
-pub fn fields(line: &str) -> Option<Fields> {
-    let mut words = line.split_whitespace();
-    let _level = words.next()?;
-    let name = words.next()?.to_owned();
-    let map = words
-        .filter_map(|w| w.split_once('='))
-        .map(|(k, v)| (k.to_owned(), v.to_owned()))
-        .collect();
-    Some((name, map))
-}
-
-/// The number under `key` (panics when missing or not a number).
-pub fn num(map: &HashMap<String, String>, key: &str) -> f64 {
-    map.get(key)
-        .unwrap_or_else(|| panic!("missing {key}"))
-        .parse()
-        .unwrap_or_else(|_| panic!("{key} is not a number"))
-}
-
-/// The last line named `name` (panics when there is none).
-pub fn last(parsed: &[Fields], name: &str) -> HashMap<String, String> {
-    parsed
-        .iter()
-        .rev()
-        .find(|(n, _)| n == name)
-        .map(|(_, m)| m.clone())
-        .unwrap_or_else(|| panic!("no `{name}` line"))
 }
