@@ -6,11 +6,19 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 
 use stm32_emu::elf::Elf;
 use stm32_emu::probe::HalSimProbe;
 use stm32_emu::{rtt, Exit, Machine};
+
+#[path = "../../tests/support/image_tools.rs"]
+mod image_tools;
+use image_tools::{cargo_firmware, defmt_print};
+
+#[path = "../../tests/support/log_fields.rs"]
+mod log_fields;
+use log_fields::{all, fields, first, last, num};
 
 const TARGET: &str = "thumbv7em-none-eabihf";
 
@@ -18,19 +26,7 @@ const TARGET: &str = "thumbv7em-none-eabihf";
 fn build_image() -> PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
     let target_dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("stm32-image");
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let status = Command::new(cargo)
-        .current_dir(root)
-        .args(["fw"])
-        .env("CARGO_TARGET_DIR", &target_dir)
-        .env("DEFMT_LOG", "info")
-        // The target's link flags come from .cargo/config.toml; an outer RUSTFLAGS would
-        // replace them.
-        .env_remove("RUSTFLAGS")
-        .env_remove("CARGO_ENCODED_RUSTFLAGS")
-        .env_remove("CARGO_BUILD_TARGET")
-        .status()
-        .expect("run `cargo fw` (the thumbv7em-none-eabihf target and flip-link: scripts/setup)");
+    let status = cargo_firmware(root, &target_dir, &["fw"]);
     assert!(
         status.success(),
         "`cargo fw` failed (scripts/setup installs the target and flip-link)"
@@ -40,10 +36,7 @@ fn build_image() -> PathBuf {
 
 /// Decode RTT bytes with `defmt-print` against `elf`: `LEVEL message` lines.
 fn decode(elf: &Path, bytes: &[u8]) -> Vec<String> {
-    let mut p = Command::new("defmt-print")
-        .arg("-e")
-        .arg(elf)
-        .args(["--log-format", "{L} {s}"])
+    let mut p = defmt_print(elf)
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .spawn()
@@ -56,10 +49,6 @@ fn decode(elf: &Path, bytes: &[u8]) -> Vec<String> {
         .map(str::to_owned)
         .collect()
 }
-
-#[path = "../../tests/support/log_fields.rs"]
-mod log_fields;
-use log_fields::{all, fields, first, last, num};
 
 /// What happens to the board at a time: a line typed on the virtual COM port, the probe moved
 /// (onto a phantom, or `None`: lifted into free air), the reset button, a fault injected into

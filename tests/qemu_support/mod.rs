@@ -14,6 +14,10 @@ use std::time::{Duration, Instant};
 #[path = "../support/log_fields.rs"]
 pub mod log_fields;
 
+#[path = "../support/image_tools.rs"]
+mod image_tools;
+use image_tools::{cargo_firmware, defmt_print};
+
 const TARGET: &str = "thumbv7em-none-eabihf";
 
 fn have(tool: &str) -> bool {
@@ -78,10 +82,10 @@ pub fn require_tools() {
 /// by the QEMU tests, so the second build only links) and return its ELF.
 pub fn build_image(bin: &str) -> PathBuf {
     let target_dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("qemu-image");
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let status = Command::new(cargo)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args([
+    let status = cargo_firmware(
+        Path::new(env!("CARGO_MANIFEST_DIR")),
+        &target_dir,
+        &[
             "build",
             "--profile",
             "fw",
@@ -92,16 +96,8 @@ pub fn build_image(bin: &str) -> PathBuf {
             "qemu",
             "--bin",
             bin,
-        ])
-        .env("CARGO_TARGET_DIR", &target_dir)
-        .env("DEFMT_LOG", "info")
-        // The target's link flags come from .cargo/config.toml; an outer RUSTFLAGS would
-        // replace them.
-        .env_remove("RUSTFLAGS")
-        .env_remove("CARGO_ENCODED_RUSTFLAGS")
-        .env_remove("CARGO_BUILD_TARGET")
-        .status()
-        .expect("run cargo build of the QEMU image");
+        ],
+    );
     assert!(status.success(), "building the QEMU image `{bin}` failed");
     target_dir.join(TARGET).join("fw").join(bin)
 }
@@ -160,10 +156,7 @@ pub fn run_script(elf: &Path, timeout: Duration, script: Option<&str>) -> (bool,
         .spawn()
         .expect("start qemu-system-arm");
     let frames = qemu.stdout.take().expect("qemu stdout");
-    let mut print = Command::new("defmt-print")
-        .arg("-e")
-        .arg(elf)
-        .args(["--log-format", "{L} {s}"])
+    let mut print = defmt_print(elf)
         .stdin(Stdio::from(frames))
         .stdout(Stdio::piped())
         .spawn()
