@@ -113,8 +113,7 @@ fn main() -> ExitCode {
                 eprintln!("stm32-emu: no scene {name}");
                 return ExitCode::from(1);
             };
-            let any: &mut dyn std::any::Any = m.board_mut().periph.analog.as_mut();
-            match any.downcast_mut::<HalSimProbe>() {
+            match HalSimProbe::at_pins(&mut m) {
                 Some(p) => p.set_scene(scene),
                 None => {
                     eprintln!("stm32-emu: --scene needs --phantom (the probe at the pins)");

@@ -115,10 +115,7 @@ fn run(elf: &Path, seconds: f64, on: hal_sim::Scene, events: &[(f64, Event)]) ->
                     m.send_command(text).expect("a command frame");
                 }
                 Event::Scene(name) => {
-                    let any: &mut dyn std::any::Any = m.board_mut().periph.analog.as_mut();
-                    any.downcast_mut::<HalSimProbe>()
-                        .unwrap()
-                        .set_scene(scene(name));
+                    HalSimProbe::at_pins(&mut m).unwrap().set_scene(scene(name));
                 }
                 Event::Reset => m.system_reset(stm32_emu::periph::ResetCause::Pin).unwrap(),
                 Event::Fault(set) => set(&mut m),
