@@ -91,8 +91,6 @@ fn main() -> ExitCode {
     let wall = std::time::Instant::now();
     let mut out = std::io::stdout().lock();
     let mut code = ExitCode::SUCCESS;
-    // Drain RTT every emulated millisecond at 170 MHz (the buffer is 1 KiB).
-    let slice = 170_000u64;
     loop {
         while let Some((t, _)) = sends.peek() {
             if *t > m.seconds() {
@@ -128,7 +126,7 @@ fn main() -> ExitCode {
                 return ExitCode::from(2);
             }
         }
-        let until = m.cycles() + slice;
+        let until = m.cycles() + rtt::DRAIN_CYCLES;
         let exit = m.run_until(until);
         if std::env::var_os("STM32_EMU_DEBUG").is_some() {
             eprintln!(

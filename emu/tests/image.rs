@@ -96,9 +96,9 @@ impl Run {
 }
 
 /// Run `elf` for `seconds` of emulated time with hal-sim's probe on `on` (noise seed 1) and
-/// `events` (time s, event) applied in order, draining RTT every emulated millisecond (170 000
-/// cycles); panics when the board faults. Prints the wall time, the rules broken and the log
-/// but for the sweep points.
+/// `events` (time s, event) applied in order, draining RTT every [`rtt::DRAIN_CYCLES`]; panics
+/// when the board faults. Prints the wall time, the rules broken and the log but for the sweep
+/// points.
 fn run(elf: &Path, seconds: f64, on: hal_sim::Scene, events: &[(f64, Event)]) -> Run {
     let bytes = std::fs::read(elf).unwrap();
     let image = Elf::parse(&bytes).unwrap();
@@ -121,7 +121,7 @@ fn run(elf: &Path, seconds: f64, on: hal_sim::Scene, events: &[(f64, Event)]) ->
                 Event::Fault(set) => set(&mut m),
             }
         }
-        let exit = m.run_until(m.cycles() + 170_000);
+        let exit = m.run_until(m.cycles() + rtt::DRAIN_CYCLES);
         log.extend(rtt::drain(&mut m, cb).unwrap_or_default());
         if let Exit::Fault(f) = exit {
             panic!("the emulated board stopped at {:.6} s: {f}", m.seconds());
