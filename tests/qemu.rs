@@ -8,7 +8,8 @@
 mod qemu_support;
 mod reference;
 
-use qemu_support::{build_and_run, build_image, fields, last, num, require_tools, run_script};
+use qemu_support::log_fields::{all, fields, last, num};
+use qemu_support::{build_and_run, build_image, require_tools, run_script};
 use std::collections::HashMap;
 use std::time::Duration;
 
@@ -281,13 +282,7 @@ fn qemu_session_air_calibrate_store_reload_measure() {
     }
     let parsed: Vec<(String, HashMap<String, String>)> =
         lines.iter().filter_map(|l| fields(l)).collect();
-    let all = |name: &str| -> Vec<&HashMap<String, String>> {
-        parsed
-            .iter()
-            .filter(|(n, _)| n == name)
-            .map(|(_, m)| m)
-            .collect()
-    };
+    let all = |name: &str| all(&parsed, name);
     let readings = all("reading");
     // 1 free-air reading, 10 references, 2 readings of B.
     assert_eq!(readings.len(), 13, "{readings:?}");

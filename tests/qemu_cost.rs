@@ -12,7 +12,8 @@
 mod qemu_support;
 
 use pzt_probe::Method;
-use qemu_support::{build_and_run, fields, last, num};
+use qemu_support::build_and_run;
+use qemu_support::log_fields::{all, fields, last, num};
 use std::collections::{BTreeSet, HashMap};
 use std::time::Duration;
 
@@ -330,11 +331,7 @@ fn print_tables(cases: &[Case]) {
 /// (`pzt_probe::instrument::watchdog::fit_bound`, recomputed here), and its milliseconds agree with its
 /// instruction count at 170 MHz. Prints the table of `docs/firmware.md`.
 fn check_fits(parsed: &[(String, HashMap<String, String>)]) {
-    let fits: Vec<_> = parsed
-        .iter()
-        .filter(|(n, _)| n == "fit")
-        .map(|(_, m)| m)
-        .collect();
+    let fits = all(parsed, "fit");
     let names: Vec<&str> = fits.iter().map(|f| f["case"].as_str()).collect();
     assert_eq!(
         names,

@@ -13,21 +13,13 @@
 mod qemu_support;
 
 use pzt_probe::instrument::selftest::{Channel, SelfTestFault};
-use qemu_support::{build_image, fields, last, num, require_tools, run_script, Fields};
-use std::collections::HashMap;
+use qemu_support::log_fields::{all, fields, last, num, Fields};
+use qemu_support::{build_image, require_tools, run_script};
 use std::path::Path;
 use std::time::{Duration, Instant};
 
 /// A run takes 2–4 s of wall time; a hang is caught well before this.
 const TIMEOUT: Duration = Duration::from_secs(120);
-
-fn all<'a>(parsed: &'a [Fields], name: &str) -> Vec<&'a HashMap<String, String>> {
-    parsed
-        .iter()
-        .filter(|(n, _)| n == name)
-        .map(|(_, m)| m)
-        .collect()
-}
 
 /// Run `script` on the image `elf`: whether it exited ok, its log lines and their fields; the
 /// log (without the sweep points) printed under `--- <what> (<wall time>)`.

@@ -17,7 +17,8 @@
 #[allow(dead_code)] // build_and_run, last: not used here
 mod qemu_support;
 
-use qemu_support::{build_image, fields, num, require_tools, run_script, Fields};
+use qemu_support::log_fields::{fields, num, Fields};
+use qemu_support::{build_image, require_tools, run_script};
 use std::collections::HashMap;
 use std::time::Duration;
 

@@ -18,8 +18,16 @@ use std::path::PathBuf;
 use std::process::Command;
 
 /// The workspace root (the firmware package).
-fn root() -> PathBuf {
+pub(crate) fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// The target directory cargo builds into from the workspace root (`CARGO_TARGET_DIR`, else
+/// `target/`).
+pub(crate) fn target_dir() -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root().join("target"))
 }
 
 /// The `sim` lines that put the simulated probe on `target` as `scene` presses it (its preload
@@ -57,10 +65,7 @@ pub fn build_image() -> Result<PathBuf> {
     if !status.success() {
         bail!("building the QEMU image failed (is the thumbv7em-none-eabihf target installed?)");
     }
-    let target_dir = std::env::var_os("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root().join("target"));
-    Ok(target_dir.join("thumbv7em-none-eabihf/fw/probe"))
+    Ok(target_dir().join("thumbv7em-none-eabihf/fw/probe"))
 }
 
 /// Build the QEMU image and run `script` on it; the decoded log.
@@ -225,11 +230,17 @@ pub fn measure(
             a.repeat
         );
     }
-    for r in &session.readings {
+    print_readings(&session.readings, a.out.json)
+}
+
+/// Each reading an image logged, printed through the same JSON (`json`) or line as a host
+/// reading; an error at a status or method the host does not know.
+pub(crate) fn print_readings(readings: &[defmt_log::LoggedReading], json: bool) -> Result<()> {
+    for r in readings {
         let r = r
             .to_reading()
             .with_context(|| format!("unknown status or method in {r:?}"))?;
-        if a.out.json {
+        if json {
             println!("{}", report::reading_json(&r));
         } else {
             println!("{}", report::reading_line(&r));

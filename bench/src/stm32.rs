@@ -11,18 +11,12 @@
 
 use crate::cmd::measure::MeasureArgs;
 use crate::defmt_log;
-use crate::report;
+use crate::qemu::{self, root, target_dir};
 use crate::scene::Target;
 use anyhow::{bail, Context, Result};
 use hal_sim::NoiseScene;
 use pzt_probe::reading::{Method, Settings};
-use std::path::PathBuf;
 use std::process::{Command, Stdio};
-
-/// The workspace root.
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
 
 fn cargo(args: &[&str]) -> Result<()> {
     let status = Command::new(env!("CARGO"))
@@ -72,9 +66,7 @@ pub fn measure(
     }
     cargo(&["fw", "-q"])?;
     cargo(&["build", "-q", "--release", "-p", "stm32-emu"])?;
-    let target_dir = std::env::var_os("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root().join("target"));
+    let target_dir = target_dir();
     let elf = target_dir.join("thumbv7em-none-eabihf/fw/probe");
     let emu = target_dir.join("release/stm32-emu");
 
@@ -153,15 +145,5 @@ pub fn measure(
     if n < a.repeat as usize + REFERENCES.len() {
         bail!("the image logged {n} readings:\n{log}");
     }
-    for r in &session.readings[n - a.repeat as usize..] {
-        let r = r
-            .to_reading()
-            .with_context(|| format!("unknown status or method in {r:?}"))?;
-        if a.out.json {
-            println!("{}", report::reading_json(&r));
-        } else {
-            println!("{}", report::reading_line(&r));
-        }
-    }
-    Ok(())
+    qemu::print_readings(&session.readings[n - a.repeat as usize..], a.out.json)
 }

@@ -244,8 +244,25 @@ fn rebuild_hflags(uc: &mut Unicorn<'_, Board>) {
     set(uc, RegisterARM::APSR_NZCV, nzcv);
 }
 
-const FP_FRAME_WORDS: u32 = 26;
-const BASIC_FRAME_WORDS: u32 = 8;
+/// The stack pointer an exception stacks on and unstacks from: PSP (thread mode with
+/// CONTROL.SPSEL set, `psp`) or MSP (ARMv7-M B1.4.1).
+fn stack_pointer(psp: bool) -> RegisterARM {
+    if psp {
+        RegisterARM::PSP
+    } else {
+        RegisterARM::MSP
+    }
+}
+
+/// Words of an exception frame: with the FP context (`fp`: S0–S15, FPSCR, a reserved word) 26,
+/// else the basic 8 (R0–R3, R12, LR, PC, xPSR; ARMv7-M B1.5.6).
+fn frame_words(fp: bool) -> u32 {
+    if fp {
+        26
+    } else {
+        8
+    }
+}
 
 impl Machine {
     /// A board with `elf` programmed into its flash, powered on (reset, not yet run).
@@ -548,16 +565,8 @@ impl Machine {
         let thread = ipsr == 0;
         let psp = thread && control & 2 != 0;
         let fpca = control & 4 != 0;
-        let sp = if psp {
-            reg(uc, RegisterARM::PSP)
-        } else {
-            reg(uc, RegisterARM::MSP)
-        };
-        let words = if fpca {
-            FP_FRAME_WORDS
-        } else {
-            BASIC_FRAME_WORDS
-        };
+        let sp = reg(uc, stack_pointer(psp));
+        let words = frame_words(fpca);
         let unaligned = sp.wrapping_sub(words * 4);
         let frame = unaligned & !7;
         let realigned = (unaligned & 4 != 0) as u32;
@@ -584,11 +593,7 @@ impl Machine {
         uc.mem_write(frame as u64, &bytes).map_err(|e| {
             format!("exception {exc}: stacking at {frame:#010x} failed ({e:?}): stack overflow?")
         })?;
-        if psp {
-            set(uc, RegisterARM::PSP, frame);
-        } else {
-            set(uc, RegisterARM::MSP, frame);
-        }
+        set(uc, stack_pointer(psp), frame);
         let exc_return =
             0xFFFF_FFE1 | (thread as u32) << 3 | (psp as u32) << 2 | (!fpca as u32) << 4;
         let vtor = uc.get_data().scs.scb.vtor;
@@ -659,16 +664,8 @@ impl Machine {
                 ));
             }
         }
-        let frame = if psp {
-            reg(uc, RegisterARM::PSP)
-        } else {
-            reg(uc, RegisterARM::MSP)
-        };
-        let words = if fp {
-            FP_FRAME_WORDS
-        } else {
-            BASIC_FRAME_WORDS
-        };
+        let frame = reg(uc, stack_pointer(psp));
+        let words = frame_words(fp);
         let bytes = uc
             .mem_read_as_vec(frame as u64, words as usize * 4)
             .map_err(|e| format!("unstacking at {frame:#010x} failed ({e:?})"))?;
@@ -699,11 +696,7 @@ impl Machine {
         // The stacked xPSR's IPSR is the interrupted context's exception number.
         set(uc, RegisterARM::XPSR_NZCVQG, xpsr & !(1 << 9));
         set(uc, RegisterARM::CONTROL, control);
-        if psp {
-            set(uc, RegisterARM::PSP, sp);
-        } else {
-            set(uc, RegisterARM::MSP, sp);
-        }
+        set(uc, stack_pointer(psp), sp);
         set(uc, RegisterARM::SP, sp);
         rebuild_hflags(uc);
         set(uc, RegisterARM::PC, w(6) | 1);

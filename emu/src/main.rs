@@ -30,39 +30,22 @@ fn main() -> ExitCode {
         match args[i].as_str() {
             "--seconds" => {
                 i += 1;
-                seconds = args
-                    .get(i)
-                    .and_then(|s| s.parse().ok())
-                    .unwrap_or_else(|| usage());
+                seconds = number(&args, i);
             }
             "--phantom" => {
                 i += 1;
-                phantom = Some(args.get(i).cloned().unwrap_or_else(|| usage()));
+                phantom = Some(word(&args, i));
             }
             "--scene" => {
-                let t = args
-                    .get(i + 1)
-                    .and_then(|s| s.parse().ok())
-                    .unwrap_or_else(|| usage());
-                let name = args.get(i + 2).cloned().unwrap_or_else(|| usage());
-                scenes.push((t, name));
+                scenes.push((number(&args, i + 1), word(&args, i + 2)));
                 i += 2;
             }
             "--reset" => {
                 i += 1;
-                resets.push(
-                    args.get(i)
-                        .and_then(|s| s.parse().ok())
-                        .unwrap_or_else(|| usage()),
-                );
+                resets.push(number(&args, i));
             }
             "--send" => {
-                let t = args
-                    .get(i + 1)
-                    .and_then(|s| s.parse().ok())
-                    .unwrap_or_else(|| usage());
-                let text = args.get(i + 2).cloned().unwrap_or_else(|| usage());
-                sends.push((t, text));
+                sends.push((number(&args, i + 1), word(&args, i + 2)));
                 i += 2;
             }
             s if !s.starts_with('-') && elf_path.is_none() => elf_path = Some(s.to_string()),
@@ -108,8 +91,6 @@ fn main() -> ExitCode {
     let wall = std::time::Instant::now();
     let mut out = std::io::stdout().lock();
     let mut code = ExitCode::SUCCESS;
-    // Drain RTT every emulated millisecond at 170 MHz (the buffer is 1 KiB).
-    let slice = 170_000u64;
     loop {
         while let Some((t, _)) = sends.peek() {
             if *t > m.seconds() {
@@ -130,8 +111,7 @@ fn main() -> ExitCode {
                 eprintln!("stm32-emu: no scene {name}");
                 return ExitCode::from(1);
             };
-            let any: &mut dyn std::any::Any = m.board_mut().periph.analog.as_mut();
-            match any.downcast_mut::<HalSimProbe>() {
+            match HalSimProbe::at_pins(&mut m) {
                 Some(p) => p.set_scene(scene),
                 None => {
                     eprintln!("stm32-emu: --scene needs --phantom (the probe at the pins)");
@@ -146,7 +126,7 @@ fn main() -> ExitCode {
                 return ExitCode::from(2);
             }
         }
-        let until = m.cycles() + slice;
+        let until = m.cycles() + rtt::DRAIN_CYCLES;
         let exit = m.run_until(until);
         if std::env::var_os("STM32_EMU_DEBUG").is_some() {
             eprintln!(
@@ -193,6 +173,18 @@ fn main() -> ExitCode {
         code = ExitCode::from(3);
     }
     code
+}
+
+/// The number at `args[i]` (the usage and exit 1 when it is missing or not a number).
+fn number(args: &[String], i: usize) -> f64 {
+    args.get(i)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| usage())
+}
+
+/// The word at `args[i]` (the usage and exit 1 when it is missing).
+fn word(args: &[String], i: usize) -> String {
+    args.get(i).cloned().unwrap_or_else(|| usage())
 }
 
 fn usage() -> ! {

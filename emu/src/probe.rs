@@ -28,6 +28,12 @@ pub struct HalSimProbe {
 }
 
 impl HalSimProbe {
+    /// The hal-sim probe at `m`'s analog pins (`None` when another front end, or none, is wired).
+    pub fn at_pins(m: &mut crate::Machine) -> Option<&mut HalSimProbe> {
+        let any: &mut dyn std::any::Any = m.board_mut().periph.analog.as_mut();
+        any.downcast_mut::<HalSimProbe>()
+    }
+
     /// The probe on `scene` with noise seed `seed`.
     pub fn new(scene: Scene, seed: u64) -> HalSimProbe {
         let period_s = scene.front_end.dt();

@@ -6,6 +6,10 @@
 
 use crate::machine::Machine;
 
+/// Core cycles between two drains: an emulated millisecond at 170 MHz, in which the image's
+/// 1 KiB up-buffer does not fill.
+pub const DRAIN_CYCLES: u64 = 170_000;
+
 /// Offset of up-buffer 0's descriptor in the control block (16-byte id, two counts).
 const UP0: u32 = 24;
 

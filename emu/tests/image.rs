@@ -4,14 +4,21 @@
 //! Needs the `thumbv7em-none-eabihf` target, flip-link and defmt-print (scripts/setup); without
 //! them the test fails naming what is missing (it never passes by skipping).
 
-use std::collections::HashMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 
 use stm32_emu::elf::Elf;
 use stm32_emu::probe::HalSimProbe;
 use stm32_emu::{rtt, Exit, Machine};
+
+#[path = "../../tests/support/image_tools.rs"]
+mod image_tools;
+use image_tools::{cargo_firmware, defmt_print};
+
+#[path = "../../tests/support/log_fields.rs"]
+mod log_fields;
+use log_fields::{all, fields, first, last, num};
 
 const TARGET: &str = "thumbv7em-none-eabihf";
 
@@ -19,19 +26,7 @@ const TARGET: &str = "thumbv7em-none-eabihf";
 fn build_image() -> PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
     let target_dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("stm32-image");
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let status = Command::new(cargo)
-        .current_dir(root)
-        .args(["fw"])
-        .env("CARGO_TARGET_DIR", &target_dir)
-        .env("DEFMT_LOG", "info")
-        // The target's link flags come from .cargo/config.toml; an outer RUSTFLAGS would
-        // replace them.
-        .env_remove("RUSTFLAGS")
-        .env_remove("CARGO_ENCODED_RUSTFLAGS")
-        .env_remove("CARGO_BUILD_TARGET")
-        .status()
-        .expect("run `cargo fw` (the thumbv7em-none-eabihf target and flip-link: scripts/setup)");
+    let status = cargo_firmware(root, &target_dir, &["fw"]);
     assert!(
         status.success(),
         "`cargo fw` failed (scripts/setup installs the target and flip-link)"
@@ -41,10 +36,7 @@ fn build_image() -> PathBuf {
 
 /// Decode RTT bytes with `defmt-print` against `elf`: `LEVEL message` lines.
 fn decode(elf: &Path, bytes: &[u8]) -> Vec<String> {
-    let mut p = Command::new("defmt-print")
-        .arg("-e")
-        .arg(elf)
-        .args(["--log-format", "{L} {s}"])
+    let mut p = defmt_print(elf)
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .spawn()
@@ -58,61 +50,61 @@ fn decode(elf: &Path, bytes: &[u8]) -> Vec<String> {
         .collect()
 }
 
-/// `LEVEL name k=v ...` → (name, map).
-fn fields(line: &str) -> Option<(String, HashMap<String, String>)> {
-    let mut w = line.split_whitespace();
-    let _level = w.next()?;
-    let name = w.next()?.to_owned();
-    Some((
-        name,
-        w.filter_map(|x| x.split_once('='))
-            .map(|(k, v)| (k.into(), v.into()))
-            .collect(),
-    ))
-}
-
-fn num(m: &HashMap<String, String>, k: &str) -> f64 {
-    m.get(k)
-        .unwrap_or_else(|| panic!("no {k} in {m:?}"))
-        .parse()
-        .unwrap()
-}
-
 /// What happens to the board at a time: a line typed on the virtual COM port, the probe moved
-/// (onto a phantom, or `None`: lifted into free air), the reset button.
+/// (onto a phantom, or `None`: lifted into free air), the reset button, a fault injected into
+/// the board (a peripheral's state set; at time 0, before the first instruction).
 #[derive(Clone, Copy, Debug)]
 enum Event {
     Send(&'static str),
     Scene(Option<&'static str>),
     Reset,
+    Fault(fn(&mut Machine)),
 }
 
-/// Run `elf` for `seconds` of emulated time with the probe on phantom B, sending `lines`
-/// (time s, text) on LPUART1; the decoded log.
-fn run(elf: &Path, seconds: f64, lines: &[(f64, &'static str)]) -> (Vec<String>, Vec<String>) {
-    let events: Vec<_> = lines.iter().map(|&(t, l)| (t, Event::Send(l))).collect();
-    run_events(elf, seconds, Some("B"), &events)
+/// The bench scene (hal-sim's probe at bench noise, 30 mN) on phantom `name`, or in free air.
+fn scene(name: Option<&str>) -> hal_sim::Scene {
+    HalSimProbe::bench_scene(
+        name.map(|n| hal_sim::phantoms::by_name(n).unwrap())
+            .as_ref(),
+    )
 }
 
-/// Run `elf` for `seconds` with the probe first on `phantom` (`None`: free air) and `events`
-/// (time s, event) applied in order; the decoded log and the RM0440 rules the image broke.
-fn run_events(
-    elf: &Path,
-    seconds: f64,
-    phantom: Option<&str>,
-    events: &[(f64, Event)],
-) -> (Vec<String>, Vec<String>) {
+/// A run of the image: the board as it ended and the decoded log.
+struct Run {
+    m: Machine,
+    lines: Vec<String>,
+}
+
+impl Run {
+    /// The log's lines as (name, fields).
+    fn parsed(&self) -> Vec<log_fields::Fields> {
+        self.lines.iter().filter_map(|l| fields(l)).collect()
+    }
+
+    /// The RM0440 rules the image broke.
+    fn rules(&self) -> Vec<String> {
+        let v = &self.m.board().periph.violations;
+        v.iter().map(|v| v.rule.clone()).collect()
+    }
+
+    /// True when a `boot` line names the boot-step fault `fault`.
+    fn booted_with(&self, fault: &str) -> bool {
+        all(&self.parsed(), "boot")
+            .iter()
+            .any(|f| f.get("fault").map(String::as_str) == Some(fault))
+    }
+}
+
+/// Run `elf` for `seconds` of emulated time with hal-sim's probe on `on` (noise seed 1) and
+/// `events` (time s, event) applied in order, draining RTT every [`rtt::DRAIN_CYCLES`]; panics
+/// when the board faults. Prints the wall time, the rules broken and the log but for the sweep
+/// points.
+fn run(elf: &Path, seconds: f64, on: hal_sim::Scene, events: &[(f64, Event)]) -> Run {
     let bytes = std::fs::read(elf).unwrap();
     let image = Elf::parse(&bytes).unwrap();
     let cb = image.symbol("_SEGGER_RTT").expect("_SEGGER_RTT");
     let mut m = Machine::new(&image).unwrap();
-    let scene = |name: Option<&str>| {
-        HalSimProbe::bench_scene(
-            name.map(|n| hal_sim::phantoms::by_name(n).unwrap())
-                .as_ref(),
-        )
-    };
-    m.board_mut().periph.analog = Box::new(HalSimProbe::new(scene(phantom), 1));
+    m.board_mut().periph.analog = Box::new(HalSimProbe::new(on, 1));
     let wall = std::time::Instant::now();
     let mut log = Vec::new();
     let mut pending = events.to_vec();
@@ -123,15 +115,13 @@ fn run_events(
                     m.send_command(text).expect("a command frame");
                 }
                 Event::Scene(name) => {
-                    let any: &mut dyn std::any::Any = m.board_mut().periph.analog.as_mut();
-                    any.downcast_mut::<HalSimProbe>()
-                        .unwrap()
-                        .set_scene(scene(name));
+                    HalSimProbe::at_pins(&mut m).unwrap().set_scene(scene(name));
                 }
                 Event::Reset => m.system_reset(stm32_emu::periph::ResetCause::Pin).unwrap(),
+                Event::Fault(set) => set(&mut m),
             }
         }
-        let exit = m.run_until(m.cycles() + 170_000);
+        let exit = m.run_until(m.cycles() + rtt::DRAIN_CYCLES);
         log.extend(rtt::drain(&mut m, cb).unwrap_or_default());
         if let Exit::Fault(f) = exit {
             panic!("the emulated board stopped at {:.6} s: {f}", m.seconds());
@@ -148,20 +138,19 @@ fn run_events(
     for l in lines.iter().filter(|l| !l.contains(" point ")) {
         println!("{l}");
     }
-    let rules = m
-        .board()
-        .periph
-        .violations
-        .iter()
-        .map(|v| v.rule.clone())
-        .collect();
-    (lines, rules)
+    Run { m, lines }
 }
 
 #[test]
 fn stm32_image_boots_and_passes_its_self_test_on_phantom_b() {
     let elf = build_image();
-    let (lines, rules) = run(&elf, 3.0, &[(1.0, "measure")]);
+    let run = run(
+        &elf,
+        3.0,
+        scene(Some("B")),
+        &[(1.0, Event::Send("measure"))],
+    );
+    let rules = run.rules();
     // RM0440's sequences (the emulator's rule checks): none broken but the clock switch inside
     // embassy-stm32 0.6's `rcc::init` (docs/firmware.md: not fixed, a change of the bring-up),
     // which breaks once per boot.
@@ -171,31 +160,23 @@ fn stm32_image_boots_and_passes_its_self_test_on_phantom_b() {
         .collect();
     assert!(others.is_empty(), "rules broken: {others:?}");
     assert!(rules.len() <= 1, "{rules:?}");
-    let parsed: Vec<_> = lines.iter().filter_map(|l| fields(l)).collect();
-    let boot = &parsed
-        .iter()
-        .find(|(n, _)| n == "boot")
-        .expect("a boot line")
-        .1;
+    let parsed = run.parsed();
+    let boot = first(&parsed, "boot");
     assert_eq!(boot["board"], "stm32");
-    assert_eq!(num(boot, "fs_hz"), 10_000.0);
+    assert_eq!(num(&boot, "fs_hz"), 10_000.0);
     assert!(!boot.contains_key("fault"), "boot fault: {boot:?}");
     // The power-on self-test on phantom B: passed, and its capacitance is the scene's
     // closed-form admittance at the test frequency (as tests/qemu_selftest.rs checks the
     // QEMU image), within 5 sigma and 0.2 %.
-    let t = &parsed
-        .iter()
-        .find(|(n, _)| n == "selftest")
-        .expect("a selftest line")
-        .1;
+    let t = first(&parsed, "selftest");
     assert_eq!(t["result"], "passed", "{t:?}");
-    let f = num(t, "f_hz");
+    let f = num(&t, "f_hz");
     let scene = hal_sim::Scene::on_phantom(&hal_sim::phantoms::B)
         .with_noise(hal_sim::NoiseScene::Bench)
         .with_preload_n(0.03);
     let truth_pf = scene.admittance(f).im / (2.0 * std::f64::consts::PI * f) * 1e12;
-    let c = num(t, "c_pf");
-    let tol = 5.0 * num(t, "c_sigma_pf") + 2e-3 * truth_pf;
+    let c = num(&t, "c_pf");
+    let tol = 5.0 * num(&t, "c_sigma_pf") + 2e-3 * truth_pf;
     println!("self-test: C {c:.3} pF, closed form {truth_pf:.3} pF, tolerance {tol:.3} pF");
     assert!(
         (c - truth_pf).abs() <= tol,
@@ -204,21 +185,12 @@ fn stm32_image_boots_and_passes_its_self_test_on_phantom_b() {
     // A reading (refused for want of an air reference, but run) and the image's own overrun
     // accounting: no batch late, no ring overrun, nothing dropped — the sample interrupt takes
     // a few thousand of a batch's 425 000 cycles.
-    let r = &parsed
-        .iter()
-        .find(|(n, _)| n == "reading")
-        .expect("a reading line")
-        .1;
+    let r = first(&parsed, "reading");
     assert_eq!(r["status"], "no_air_reference", "{r:?}");
-    let counters = &parsed
-        .iter()
-        .rev()
-        .find(|(n, _)| n == "counters")
-        .expect("a counters line")
-        .1;
-    assert!(num(counters, "batches") > 100.0, "{counters:?}");
+    let counters = last(&parsed, "counters");
+    assert!(num(&counters, "batches") > 100.0, "{counters:?}");
     for k in ["late", "ring", "dropped"] {
-        assert_eq!(num(counters, k), 0.0, "{k}: {counters:?}");
+        assert_eq!(num(&counters, k), 0.0, "{k}: {counters:?}");
     }
 }
 
@@ -248,21 +220,16 @@ fn stm32_image_calibrates_stores_survives_a_reset_and_reads_phantom_b() {
         (29.0, Reset),
         (33.0, Send("measure")),
     ];
-    let (lines, rules) = run_events(&elf, 36.0, None, &events);
+    let run = run(&elf, 36.0, scene(None), &events);
+    let rules = run.rules();
     assert!(
         rules
             .iter()
             .all(|r| r.starts_with("SYSCLK switched to the PLL")),
         "rules broken: {rules:?}"
     );
-    let parsed: Vec<_> = lines.iter().filter_map(|l| fields(l)).collect();
-    let named = |n: &str| {
-        parsed
-            .iter()
-            .filter(|(k, _)| k == n)
-            .map(|(_, m)| m)
-            .collect::<Vec<_>>()
-    };
+    let parsed = run.parsed();
+    let named = |n: &str| all(&parsed, n);
 
     // The air reference: the free probe's resonance (closed form) within 0.1 Hz. The air
     // sweep's fit reads a little above the undamped natural frequency on the host too
@@ -287,30 +254,28 @@ fn stm32_image_calibrates_stores_survives_a_reset_and_reads_phantom_b() {
     // Two boots; the second loads the stored unit from bank 2.
     assert_eq!(named("boot").len(), 2);
     assert!(
-        lines
+        run.lines
             .iter()
             .any(|l| l.contains("store loaded slot=0 seq=1")),
         "the store did not survive the reset"
     );
     // The reading of B after the reset: ok, its resonance at the closed form, its modulus
     // within 1 % of the phantom's 279 kPa.
-    let r = named("reading");
-    let r = r.last().expect("a reading");
+    let r = last(&parsed, "reading");
     assert_eq!(r["status"], "ok", "{r:?}");
     let f_b = HalSimProbe::bench_scene(Some(&hal_sim::phantoms::B)).resonance_hz();
-    let tol = 5.0 * num(r, "f_sigma_hz") + 0.01;
+    let tol = 5.0 * num(&r, "f_sigma_hz") + 0.01;
     assert!(
-        (num(r, "f_hz") - f_b).abs() <= tol,
+        (num(&r, "f_hz") - f_b).abs() <= tol,
         "f {} Hz vs closed form {f_b} Hz ± {tol}",
-        num(r, "f_hz")
+        num(&r, "f_hz")
     );
-    let e = num(r, "e_kpa");
+    let e = num(&r, "e_kpa");
     assert!(
         (e / 279.0 - 1.0).abs() < 0.01,
         "B read {e} kPa, phantom 279 kPa"
     );
-    let counters = named("counters");
-    assert_eq!(num(counters.last().unwrap(), "late"), 0.0);
+    assert_eq!(num(&last(&parsed, "counters"), "late"), 0.0);
 }
 
 /// A fault the bring-up must survive (issue 26, point 6): ADC1 never becomes ready. embassy's
@@ -320,36 +285,11 @@ fn stm32_image_calibrates_stores_survives_a_reset_and_reads_phantom_b() {
 #[test]
 fn stm32_image_survives_an_adc_that_never_becomes_ready() {
     let elf = build_image();
-    let bytes = std::fs::read(&elf).unwrap();
-    let image = Elf::parse(&bytes).unwrap();
-    let cb = image.symbol("_SEGGER_RTT").unwrap();
-    let mut m = Machine::new(&image).unwrap();
-    m.board_mut().periph.analog = Box::new(HalSimProbe::bench(Some(&hal_sim::phantoms::B)));
-    m.board_mut().periph.adc[0].never_ready = true;
-    let mut log = Vec::new();
-    while m.seconds() < 2.0 {
-        if let Exit::Fault(f) = m.run_until(m.cycles() + 170_000) {
-            panic!("the emulated board stopped: {f}");
-        }
-        log.extend(rtt::drain(&mut m, cb).unwrap_or_default());
-    }
-    let lines = decode(&elf, &log);
-    for l in &lines {
-        println!("{l}");
-    }
-    assert_eq!(m.resets, 1, "one watchdog reset, no loop");
+    let never_ready = Event::Fault(|m| m.board_mut().periph.adc[0].never_ready = true);
+    let run = run(&elf, 2.0, scene(Some("B")), &[(0.0, never_ready)]);
+    assert_eq!(run.m.resets, 1, "one watchdog reset, no loop");
     // (RCC_CSR's IWDGRSTF is not looked at here: the image reads and clears it with RMVF.)
-    let boots: Vec<_> = lines
-        .iter()
-        .filter_map(|l| fields(l))
-        .filter(|(n, _)| n == "boot")
-        .collect();
-    assert!(
-        boots
-            .iter()
-            .any(|(_, f)| f.get("fault").map(String::as_str) == Some("converter_hang")),
-        "{lines:?}"
-    );
+    assert!(run.booted_with("converter_hang"), "{:?}", run.lines);
 }
 
 /// A fault the bring-up must survive: the HSE crystal never starts. The image waits for
@@ -360,54 +300,37 @@ fn stm32_image_survives_an_adc_that_never_becomes_ready() {
 #[test]
 fn stm32_image_runs_from_hsi16_when_the_hse_never_starts() {
     let elf = build_image();
-    let bytes = std::fs::read(&elf).unwrap();
-    let image = Elf::parse(&bytes).unwrap();
-    let cb = image.symbol("_SEGGER_RTT").unwrap();
-    let mut m = Machine::new(&image).unwrap();
-    m.board_mut().periph.analog = Box::new(HalSimProbe::bench(Some(&hal_sim::phantoms::B)));
-    m.board_mut().periph.rcc.hse_present = false;
-    let mut log = Vec::new();
-    let mut sent = false;
-    while m.seconds() < 2.0 {
-        if !sent && m.seconds() >= 1.5 {
-            m.send_command("status").expect("a command frame");
-            sent = true;
-        }
-        if let Exit::Fault(f) = m.run_until(m.cycles() + 170_000) {
-            panic!("the emulated board stopped: {f}");
-        }
-        log.extend(rtt::drain(&mut m, cb).unwrap_or_default());
-    }
-    let lines = decode(&elf, &log);
-    for l in &lines {
-        println!("{l}");
-    }
-    assert_eq!(m.resets, 0);
+    let no_hse = Event::Fault(|m| m.board_mut().periph.rcc.hse_present = false);
+    let events = [(0.0, no_hse), (1.5, Event::Send("status"))];
+    let run = run(&elf, 2.0, scene(Some("B")), &events);
+    assert_eq!(run.m.resets, 0);
     // RM0440 RCC: the PLL from HSI16 (PLLSRC = 10) and SYSCLK from it at 170 MHz.
-    let rcc = &m.board().periph.rcc;
+    let rcc = &run.m.board().periph.rcc;
     assert_eq!(rcc.pllcfgr & 3, 2, "PLL source HSI16");
     assert!((rcc.hclk() - 170e6).abs() < 1.0, "HCLK {} Hz", rcc.hclk());
-    let parsed: Vec<_> = lines.iter().filter_map(|l| fields(l)).collect();
-    let t = &parsed
-        .iter()
-        .find(|(n, _)| n == "selftest")
-        .expect("a selftest line")
-        .1;
+    let t = first(&run.parsed(), "selftest");
     assert_eq!(t["result"], "passed", "{t:?}");
-    let named = |name: &str, key: &str| {
-        parsed
-            .iter()
-            .any(|(n, f)| n == name && f.get(key).map(String::as_str) == Some("hse_failure"))
-    };
-    assert!(named("boot", "fault"), "no boot fault line: {lines:?}");
-    let clock = parsed
-        .iter()
-        .find(|(n, f)| n == "boot" && f.contains_key("fault"))
-        .map(|(_, f)| f["clock"].clone());
-    assert_eq!(clock.as_deref(), Some("hsi16-pll"));
     assert!(
-        named("status", "boot"),
-        "status does not name it: {lines:?}"
+        run.booted_with("hse_failure"),
+        "no boot fault line: {:?}",
+        run.lines
+    );
+    let parsed = run.parsed();
+    let boot = all(&parsed, "boot");
+    let fault = boot.iter().find(|f| f.contains_key("fault"));
+    assert_eq!(
+        fault.map(|f| f["clock"].as_str()),
+        Some("hsi16-pll"),
+        "{:?}",
+        run.lines
+    );
+    let status = all(&parsed, "status");
+    assert!(
+        status
+            .iter()
+            .any(|f| f.get("boot").map(String::as_str) == Some("hse_failure")),
+        "status does not name it: {:?}",
+        run.lines
     );
 }
 
@@ -418,47 +341,20 @@ fn stm32_image_runs_from_hsi16_when_the_hse_never_starts() {
 #[test]
 fn stm32_image_survives_a_dma_transfer_error() {
     let elf = build_image();
-    let bytes = std::fs::read(&elf).unwrap();
-    let image = Elf::parse(&bytes).unwrap();
-    let cb = image.symbol("_SEGGER_RTT").unwrap();
-    let mut m = Machine::new(&image).unwrap();
-    m.board_mut().periph.analog = Box::new(HalSimProbe::bench(Some(&hal_sim::phantoms::B)));
-    let mut log = Vec::new();
-    let (mut injected, mut sent) = (false, false);
-    while m.seconds() < 3.0 {
-        if !injected && m.seconds() >= 1.0 {
-            m.board_mut().periph.dma.error(0);
-            injected = true;
-        }
-        if !sent && m.seconds() >= 1.2 {
-            m.send_command("measure").expect("a command frame");
-            sent = true;
-        }
-        if let Exit::Fault(f) = m.run_until(m.cycles() + 170_000) {
-            panic!("the emulated board stopped: {f}");
-        }
-        log.extend(rtt::drain(&mut m, cb).unwrap_or_default());
-    }
-    let lines = decode(&elf, &log);
-    for l in lines.iter().filter(|l| !l.contains(" point ")) {
-        println!("{l}");
-    }
-    assert_eq!(m.resets, 0, "no panic, no watchdog reset");
+    let error = Event::Fault(|m| m.board_mut().periph.dma.error(0));
+    let events = [(1.0, error), (1.2, Event::Send("measure"))];
+    let run = run(&elf, 3.0, scene(Some("B")), &events);
+    assert_eq!(run.m.resets, 0, "no panic, no watchdog reset");
     // The channel is off (the hardware disabled it) and TIM6 stopped by the image.
-    assert_eq!(m.board().periph.dma.ch[0].ccr & 1, 0);
+    assert_eq!(run.m.board().periph.dma.ch[0].ccr & 1, 0);
     assert!(
-        m.board().periph.tim6.next_event().is_none(),
+        run.m.board().periph.tim6.next_event().is_none(),
         "TIM6 still running"
     );
-    let parsed: Vec<_> = lines.iter().filter_map(|l| fields(l)).collect();
-    let r = &parsed
-        .iter()
-        .find(|(n, _)| n == "reading")
-        .expect("a reading line")
-        .1;
+    let r = first(&run.parsed(), "reading");
     assert_ne!(r["status"], "ok", "{r:?}");
     assert!(
-        lines.iter().any(|l| l.contains("stalled")),
+        run.lines.iter().any(|l| l.contains("stalled")),
         "no stalled line"
     );
 }
@@ -470,40 +366,11 @@ fn stm32_image_survives_a_dma_transfer_error() {
 #[test]
 fn stm32_image_survives_a_flash_stuck_busy() {
     let elf = build_image();
-    let bytes = std::fs::read(&elf).unwrap();
-    let image = Elf::parse(&bytes).unwrap();
-    let cb = image.symbol("_SEGGER_RTT").unwrap();
-    let mut m = Machine::new(&image).unwrap();
-    m.board_mut().periph.analog = Box::new(HalSimProbe::bench(Some(&hal_sim::phantoms::B)));
-    m.board_mut().periph.flash.stuck_busy = true;
-    let mut log = Vec::new();
-    let mut sent = false;
-    while m.seconds() < 6.0 {
-        if !sent && m.seconds() >= 1.0 {
-            m.send_command("store").expect("a command frame");
-            sent = true;
-        }
-        if let Exit::Fault(f) = m.run_until(m.cycles() + 170_000) {
-            panic!("the emulated board stopped: {f}");
-        }
-        log.extend(rtt::drain(&mut m, cb).unwrap_or_default());
-    }
-    let lines = decode(&elf, &log);
-    for l in lines.iter().filter(|l| !l.contains(" point ")) {
-        println!("{l}");
-    }
-    assert_eq!(m.resets, 1, "one watchdog reset, no loop");
-    let boots: Vec<_> = lines
-        .iter()
-        .filter_map(|l| fields(l))
-        .filter(|(n, _)| n == "boot")
-        .collect();
-    assert!(
-        boots
-            .iter()
-            .any(|(_, f)| f.get("fault").map(String::as_str) == Some("flash_hang")),
-        "{lines:?}"
-    );
+    let stuck = Event::Fault(|m| m.board_mut().periph.flash.stuck_busy = true);
+    let events = [(0.0, stuck), (1.0, Event::Send("store"))];
+    let run = run(&elf, 6.0, scene(Some("B")), &events);
+    assert_eq!(run.m.resets, 1, "one watchdog reset, no loop");
+    assert!(run.booted_with("flash_hang"), "{:?}", run.lines);
 }
 
 /// Probe faults at power-on (hal-sim's fault scenes, as tests/qemu_selftest.rs runs them on the
@@ -513,48 +380,26 @@ fn stm32_image_survives_a_flash_stuck_busy() {
 #[test]
 fn stm32_image_names_each_probe_fault_in_its_self_test() {
     let elf = build_image();
-    let bytes = std::fs::read(&elf).unwrap();
-    let image = Elf::parse(&bytes).unwrap();
-    let cb = image.symbol("_SEGGER_RTT").unwrap();
     for (fault, code) in [
         (hal_sim::Fault::OpenPzt, "open_pzt"),
         (hal_sim::Fault::ShortedPzt, "shorted_pzt"),
         (hal_sim::Fault::StuckDac, "no_drive"),
         (hal_sim::Fault::AdcRail, "adc_rail_current"),
     ] {
-        let mut m = Machine::new(&image).unwrap();
-        let scene = fault.apply(HalSimProbe::bench_scene(Some(&hal_sim::phantoms::B)));
-        m.board_mut().periph.analog = Box::new(HalSimProbe::new(scene, 1));
-        let mut log = Vec::new();
-        let mut sent = false;
-        while m.seconds() < 2.5 {
-            if !sent && m.seconds() >= 1.5 {
-                m.send_command("measure").expect("a command frame");
-                sent = true;
-            }
-            if let Exit::Fault(f) = m.run_until(m.cycles() + 170_000) {
-                panic!("{}: the emulated board stopped: {f}", fault.name());
-            }
-            log.extend(rtt::drain(&mut m, cb).unwrap_or_default());
-        }
-        let lines = decode(&elf, &log);
-        let parsed: Vec<_> = lines.iter().filter_map(|l| fields(l)).collect();
-        let t = &parsed
-            .iter()
-            .find(|(n, _)| n == "selftest")
-            .expect("a selftest line")
-            .1;
+        println!("--- {}", fault.name());
+        let on = fault.apply(scene(Some("B")));
+        let run = run(&elf, 2.5, on, &[(1.5, Event::Send("measure"))]);
+        let parsed = run.parsed();
+        let t = first(&parsed, "selftest");
         println!("{}: selftest {}", fault.name(), t["result"]);
-        assert_eq!(t["result"], code, "{}: {lines:?}", fault.name());
+        assert_eq!(t["result"], code, "{}: {:?}", fault.name(), run.lines);
         assert!(
-            !parsed
-                .iter()
-                .any(|(n, r)| n == "reading" && r["status"] == "ok"),
+            !all(&parsed, "reading").iter().any(|r| r["status"] == "ok"),
             "{}: a reading was taken on a faulty probe",
             fault.name()
         );
         assert!(
-            lines
+            run.lines
                 .iter()
                 .any(|l| l.contains("refused") || l.contains(code)),
             "{}",

@@ -204,8 +204,8 @@ impl QModel {
         q: f64,
         law: Option<&ContactLaw>,
     ) -> bool {
-        let expect = self.q_at(e_kpa, force_n, law);
-        expect > 0.0 && libm::fabs(q / expect - 1.0) <= Self::TOLERANCE
+        self.deviation(e_kpa, force_n, q, law)
+            .is_some_and(|d| libm::fabs(d) <= Self::TOLERANCE)
     }
 
     /// True when `q` at `e_kpa` (and `force_n`) stands more than [`Self::TOLERANCE`] above the
@@ -219,8 +219,21 @@ impl QModel {
         q: f64,
         law: Option<&ContactLaw>,
     ) -> bool {
+        self.deviation(e_kpa, force_n, q, law)
+            .is_none_or(|d| d > Self::TOLERANCE)
+    }
+
+    /// `q`'s relative deviation from the curve at `e_kpa` (and `force_n`), `q / q_at - 1`
+    /// ([`Self::q_at`] with `law`); `None` where the curve is not positive (or NaN).
+    fn deviation(
+        &self,
+        e_kpa: f64,
+        force_n: Option<f64>,
+        q: f64,
+        law: Option<&ContactLaw>,
+    ) -> Option<f64> {
         let expect = self.q_at(e_kpa, force_n, law);
-        !(expect > 0.0) || q / expect - 1.0 > Self::TOLERANCE
+        (expect > 0.0).then(|| q / expect - 1.0)
     }
 
     /// True when every coefficient is finite and the scatter not negative.

@@ -4,11 +4,19 @@
 //! Needs `qemu-system-arm`, `defmt-print` and the target; [`require_tools`] fails the test with
 //! the install commands when one is missing. A test never passes by skipping.
 
-use std::collections::HashMap;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
+
+/// The decoded log's fields (shared with the emulated STM32 board's tests).
+#[allow(dead_code)] // each test uses some of them
+#[path = "../support/log_fields.rs"]
+pub mod log_fields;
+
+#[path = "../support/image_tools.rs"]
+mod image_tools;
+use image_tools::{cargo_firmware, defmt_print};
 
 const TARGET: &str = "thumbv7em-none-eabihf";
 
@@ -74,10 +82,10 @@ pub fn require_tools() {
 /// by the QEMU tests, so the second build only links) and return its ELF.
 pub fn build_image(bin: &str) -> PathBuf {
     let target_dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("qemu-image");
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let status = Command::new(cargo)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args([
+    let status = cargo_firmware(
+        Path::new(env!("CARGO_MANIFEST_DIR")),
+        &target_dir,
+        &[
             "build",
             "--profile",
             "fw",
@@ -88,16 +96,8 @@ pub fn build_image(bin: &str) -> PathBuf {
             "qemu",
             "--bin",
             bin,
-        ])
-        .env("CARGO_TARGET_DIR", &target_dir)
-        .env("DEFMT_LOG", "info")
-        // The target's link flags come from .cargo/config.toml; an outer RUSTFLAGS would
-        // replace them.
-        .env_remove("RUSTFLAGS")
-        .env_remove("CARGO_ENCODED_RUSTFLAGS")
-        .env_remove("CARGO_BUILD_TARGET")
-        .status()
-        .expect("run cargo build of the QEMU image");
+        ],
+    );
     assert!(status.success(), "building the QEMU image `{bin}` failed");
     target_dir.join(TARGET).join("fw").join(bin)
 }
@@ -156,10 +156,7 @@ pub fn run_script(elf: &Path, timeout: Duration, script: Option<&str>) -> (bool,
         .spawn()
         .expect("start qemu-system-arm");
     let frames = qemu.stdout.take().expect("qemu stdout");
-    let mut print = Command::new("defmt-print")
-        .arg("-e")
-        .arg(elf)
-        .args(["--log-format", "{L} {s}"])
+    let mut print = defmt_print(elf)
         .stdin(Stdio::from(frames))
         .stdout(Stdio::piped())
         .spawn()
@@ -186,37 +183,4 @@ pub fn run_script(elf: &Path, timeout: Duration, script: Option<&str>) -> (bool,
     let printed = print.wait().expect("wait for defmt-print");
     assert!(printed.success(), "defmt-print failed: {printed}");
     (status.success(), text.lines().map(str::to_owned).collect())
-}
-
-/// A decoded line `LEVEL name k=v k=v ...` as (name, map).
-pub type Fields = (String, HashMap<String, String>);
-
-/// `LEVEL name k=v k=v ...` → (name, map).
-pub fn fields(line: &str) -> Option<Fields> {
-    let mut words = line.split_whitespace();
-    let _level = words.next()?;
-    let name = words.next()?.to_owned();
-    let map = words
-        .filter_map(|w| w.split_once('='))
-        .map(|(k, v)| (k.to_owned(), v.to_owned()))
-        .collect();
-    Some((name, map))
-}
-
-/// The number under `key` (panics when missing or not a number).
-pub fn num(map: &HashMap<String, String>, key: &str) -> f64 {
-    map.get(key)
-        .unwrap_or_else(|| panic!("missing {key}"))
-        .parse()
-        .unwrap_or_else(|_| panic!("{key} is not a number"))
-}
-
-/// The last line named `name` (panics when there is none).
-pub fn last(parsed: &[Fields], name: &str) -> HashMap<String, String> {
-    parsed
-        .iter()
-        .rev()
-        .find(|(n, _)| n == name)
-        .map(|(_, m)| m.clone())
-        .unwrap_or_else(|| panic!("no `{name}` line"))
 }
