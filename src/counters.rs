@@ -1,5 +1,5 @@
 //! The firmware's health counters: what the sample interrupt counts and the report task logs
-//! (`counters` and `overrun` lines, `src/log.rs`, built with `defmt`). Plain atomics, written by
+//! (`counters` and `overrun` lines, `src/instrument/log.rs`, built with `defmt`). Plain atomics, written by
 //! the interrupt with relaxed stores and read by the tasks.
 
 use core::sync::atomic::{AtomicU32, Ordering};

@@ -1,6 +1,6 @@
 //! Checks that the mutation-testing pass (`docs/testing.md`) found missing: each test here fails
-//! for at least one surviving mutant of `src/pipeline.rs`, `src/profile.rs` or
-//! `src/calibration.rs` that the other tests let through.
+//! for at least one surviving mutant of `src/reading/pipeline.rs`, `src/unit/profile.rs` or
+//! `src/unit/calibration.rs` that the other tests let through.
 //!
 //! References are worked by hand from closed forms, not taken from the crate: paper 003's
 //! experimental curve `f = 266.6 − 2305 E^−0.7243` (E in kPa) and its slope

@@ -345,7 +345,7 @@ fn qemu_session_air_calibrate_store_reload_measure() {
 /// A `calibrate fit` of 16 references on 16 moduli runs 3.4 G instructions of synchronous work
 /// in the measurement task (5.9 G before the faster fit) — 3.4 s of the QEMU machine's virtual
 /// time (one instruction per nanosecond), 20 s on the STM32 — and must not trip the watchdog: the guard task (priority
-/// 2) feeds it through the fit under the measurement task's promise (`src/watchdog.rs`). The
+/// 2) feeds it through the fit under the measurement task's promise (`src/instrument/watchdog.rs`). The
 /// QEMU board's watchdog stand-in fails the run when two feeds are more than the IWDG's 500 ms
 /// apart (`watchdog reset` line, exit with failure): before the guard, when the measurement
 /// task fed the watchdog itself, this fit would have ended there.

@@ -1,4 +1,4 @@
-//! The power-on self-test (src/selftest.rs) on the simulated probe: every contact the probe can
+//! The power-on self-test (src/instrument/selftest.rs) on the simulated probe: every contact the probe can
 //! be in at power-on passes against the unit's air reference, every fault scene of `hal-sim`
 //! ends in its own typed fault, and the measured capacitance agrees with the closed-form
 //! admittance of the scene.

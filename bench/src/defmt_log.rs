@@ -3,7 +3,7 @@
 //!
 //! The firmware logs one defmt message per event with structured values (`key={=f32}` …); the
 //! formats are listed in the crate docs of `src/bin/probe.rs` (logged there and in
-//! `src/log.rs`) and repeated here in
+//! `src/instrument/log.rs`) and repeated here in
 //! [`TEMPLATES`] (a test checks the two sets are identical, so a change on one side fails the
 //! build's tests). The decoder (`defmt-print`, `probe-rs run`, or `scripts/qemu-run`) prints
 //! each message as text in a configurable frame, e.g. `INFO  point tag=3 f_hz=204.0 …`,

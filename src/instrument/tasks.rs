@@ -1,6 +1,6 @@
 //! The firmware's other tasks apart from RTIC, beside the measurement task
 //! ([`crate::instrument::measure`]): what each decides, over links its RTIC side implements
-//! (`src/board/app.rs`: the channels, the monotonic, the board), tested here on the host.
+//! (`src/board/tasks.rs`: the channels, the monotonic, the board), tested here on the host.
 //!
 //! * [`batch`]: the sample interrupt's work on one batch, given the ADC half just captured and
 //!   the DAC half just played.

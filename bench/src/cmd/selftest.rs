@@ -1,4 +1,4 @@
-//! `probe-bench selftest`: the firmware's power-on self-test (`src/selftest.rs`, run by the
+//! `probe-bench selftest`: the firmware's power-on self-test (`src/instrument/selftest.rs`, run by the
 //! session at power-on and on `selftest`) on the simulated probe, with a fault of `hal-sim` if
 //! asked: what the firmware would log, as text or JSON. A failed self-test exits non-zero.
 
