@@ -6,14 +6,13 @@
 //! the same parser as `probe-bench log`, and each logged reading prints through the same JSON
 //! and line as a host reading.
 
-use crate::cmd::measure::MeasureArgs;
+use crate::cmd::measure::Request;
 use crate::defmt_log;
 use crate::report;
 use crate::scene::{SceneArgs, Target};
 use anyhow::{bail, Context, Result};
 use hal_sim::NoiseScene;
 use pzt_probe::instrument::command::SettingsLine;
-use pzt_probe::reading::{Method, Settings};
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -192,13 +191,8 @@ pub fn stream(
 }
 
 /// `measure --qemu`.
-pub fn measure(
-    a: &MeasureArgs,
-    target: &Target,
-    method: Method,
-    settings: &Settings,
-    noise: NoiseScene,
-) -> Result<()> {
+pub fn measure(request: Request) -> Result<()> {
+    let (a, method, settings) = (request.args, request.method, request.settings);
     if a.out.plot.is_some() {
         bail!("--plot is not available with --qemu (use probe-bench log --plot on the log)");
     }
@@ -207,7 +201,7 @@ pub fn measure(
             "with --qemu the image reads with its own factory profile (src/board/sim_factory.rs)"
         );
     }
-    let mut lines = scene_lines(target, &a.scene, noise);
+    let mut lines = scene_lines(request.target, &a.scene, request.noise);
     lines.push(format!("method {}", method.name()));
     if *settings != method.default_settings() {
         match SettingsLine::of(settings) {
@@ -222,7 +216,7 @@ pub fn measure(
         lines.push(format!("sim seed {}", a.seed + k as u64));
         lines.push("measure".to_owned());
     }
-    let (log, session) = run_lines("measure", target, &lines, a.out.json)?;
+    let (log, session) = run_lines("measure", request.target, &lines, a.out.json)?;
     if session.readings.len() != a.repeat as usize {
         bail!(
             "the image logged {} readings of {}:\n{log}",

@@ -9,13 +9,13 @@
 //! log goes through the same parser as `probe-bench log`, and each reading prints through the
 //! same JSON and line as a host reading.
 
-use crate::cmd::measure::MeasureArgs;
+use crate::cmd::measure::Request;
 use crate::defmt_log;
 use crate::qemu::{self, root, target_dir};
 use crate::scene::Target;
 use anyhow::{bail, Context, Result};
 use hal_sim::NoiseScene;
-use pzt_probe::reading::{Method, Settings};
+use pzt_probe::reading::Method;
 use std::process::{Command, Stdio};
 
 fn cargo(args: &[&str]) -> Result<()> {
@@ -40,17 +40,12 @@ const REFERENCES: [(&str, &str); 5] = [
 ];
 
 /// `measure --stm32`.
-pub fn measure(
-    a: &MeasureArgs,
-    target: &Target,
-    method: Method,
-    settings: &Settings,
-    noise: NoiseScene,
-) -> Result<()> {
+pub fn measure(request: Request) -> Result<()> {
+    let (a, target, method, noise) = (request.args, request.target, request.method, request.noise);
     let Target::Phantom(p) = target else {
         bail!("with --stm32 the target is a --phantom (the emulator's probe scenes are phantoms)");
     };
-    if method != Method::Auto || *settings != method.default_settings() {
+    if method != Method::Auto || *request.settings != method.default_settings() {
         bail!("with --stm32 the image reads with its default method and settings (auto)");
     }
     if noise != NoiseScene::Bench || a.scene.preload_n != 0.03 || a.scene.loss_tangent.is_some() {
