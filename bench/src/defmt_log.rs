@@ -18,6 +18,7 @@
 //! the sweep is kept with it. `boot` and `stalled` abandon a sweep in progress.
 #![allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > y)` also rejects NaN, deliberately
 
+use probe_proto::ReadingMsg;
 use std::fmt;
 
 /// The firmware's log formats (defmt format strings), one per message kind.
@@ -496,34 +497,9 @@ pub struct LoggedReading {
     pub line: usize,
     /// Timestamp, s.
     pub time_s: Option<f64>,
-    /// `ok` or the failure code.
-    pub status: String,
-    /// Resonance, Hz.
-    pub f_hz: Option<f32>,
-    /// Its standard uncertainty, Hz.
-    pub f_sigma_hz: Option<f32>,
-    /// Modulus, kPa.
-    pub e_kpa: Option<f32>,
-    /// Its standard uncertainty, kPa.
-    pub e_sigma_kpa: Option<f32>,
-    /// Its repeatability part, kPa.
-    pub e_repeat_kpa: Option<f32>,
-    /// Quality factor.
-    pub q: Option<f32>,
-    /// Probe time, s.
-    pub probe_time_s: Option<f32>,
-    /// Points.
-    pub points: u32,
-    /// Method.
-    pub method: String,
-    /// Contact force, N.
-    pub force_n: Option<f32>,
-    /// Its standard uncertainty, N.
-    pub force_sigma_n: Option<f32>,
-    /// The tissue's loss tangent.
-    pub loss: Option<f32>,
-    /// Its standard uncertainty.
-    pub loss_sigma: Option<f32>,
+    /// Its fields, as the link's reading message carries them: a value the line has not (or
+    /// logged as `NaN`) `None`, a missing probe time `NaN`, a missing point count 0.
+    pub msg: ReadingMsg<String>,
     /// Index of its sweep, when points were logged.
     pub sweep: Option<usize>,
 }
@@ -599,15 +575,18 @@ impl LoggedStream {
     pub fn ok(&self) -> usize {
         self.readings
             .iter()
-            .filter(|r| r.reading.status == "ok")
+            .filter(|r| r.reading.msg.status == "ok")
             .count()
     }
     /// Probe time of the start (the end line's) or of the first reading's start, s.
     pub fn start_s(&self) -> Option<f32> {
         self.end.as_ref().and_then(|e| e.start_s).or_else(|| {
-            self.readings
-                .first()
-                .map(|r| r.t_s - r.reading.probe_time_s.unwrap_or(0.0))
+            self.readings.first().map(|r| {
+                r.t_s
+                    - Some(r.reading.msg.probe_time_s)
+                        .filter(|p| p.is_finite())
+                        .unwrap_or(0.0)
+            })
         })
     }
     /// `ok` readings per second of probe time from `after_s` past the start to the last
@@ -618,7 +597,7 @@ impl LoggedStream {
         let n = self
             .readings
             .iter()
-            .filter(|r| r.t_s > from && r.reading.status == "ok")
+            .filter(|r| r.t_s > from && r.reading.msg.status == "ok")
             .count();
         (last > from).then(|| n as f64 / (last - from) as f64)
     }
@@ -648,22 +627,7 @@ impl LoggedReading {
     /// through the same JSON as a host reading); `None` when its status or method is unknown.
     /// The same conversion as a reading received on the link ([`crate::link::reading_of`]).
     pub fn to_reading(&self) -> Option<pzt_probe::Reading> {
-        crate::link::reading_of(&probe_proto::ReadingMsg {
-            status: &self.status,
-            method: &self.method,
-            f_hz: self.f_hz,
-            f_sigma_hz: self.f_sigma_hz,
-            e_kpa: self.e_kpa,
-            e_sigma_kpa: self.e_sigma_kpa,
-            e_repeat_kpa: self.e_repeat_kpa,
-            q: self.q,
-            loss_tangent: self.loss,
-            loss_tangent_sigma: self.loss_sigma,
-            force_n: self.force_n,
-            force_sigma_n: self.force_sigma_n,
-            probe_time_s: self.probe_time_s.unwrap_or(f32::NAN),
-            points: self.points.min(u16::MAX as u32) as u16,
-        })
+        crate::link::reading_of(&self.msg)
     }
 }
 
@@ -672,20 +636,24 @@ fn reading_of(m: &Message, sweep: Option<usize>) -> LoggedReading {
     LoggedReading {
         line: m.line,
         time_s: m.time_s,
-        status: m.str("status").unwrap_or_default().to_owned(),
-        f_hz: m.f32("f_hz"),
-        f_sigma_hz: m.f32("f_sigma_hz"),
-        e_kpa: m.f32("e_kpa"),
-        e_sigma_kpa: m.f32("e_sigma_kpa"),
-        e_repeat_kpa: m.f32("e_repeat_kpa"),
-        q: m.f32("q"),
-        probe_time_s: m.f32("probe_time_s"),
-        points: m.uint("points").unwrap_or(0),
-        method: m.str("method").unwrap_or_default().to_owned(),
-        force_n: m.f32("force_n"),
-        force_sigma_n: m.f32("force_sigma_n"),
-        loss: m.f32("loss"),
-        loss_sigma: m.f32("loss_sigma"),
+        msg: ReadingMsg {
+            status: m.str("status").unwrap_or_default().to_owned(),
+            method: m.str("method").unwrap_or_default().to_owned(),
+            f_hz: m.f32("f_hz"),
+            f_sigma_hz: m.f32("f_sigma_hz"),
+            e_kpa: m.f32("e_kpa"),
+            e_sigma_kpa: m.f32("e_sigma_kpa"),
+            e_repeat_kpa: m.f32("e_repeat_kpa"),
+            q: m.f32("q"),
+            loss_tangent: m.f32("loss"),
+            loss_tangent_sigma: m.f32("loss_sigma"),
+            force_n: m.f32("force_n"),
+            force_sigma_n: m.f32("force_sigma_n"),
+            probe_time_s: m.f32("probe_time_s").unwrap_or(f32::NAN),
+            points: m
+                .uint("points")
+                .map_or(0, |n| n.min(u16::MAX as u32) as u16),
+        },
         sweep,
     }
 }
