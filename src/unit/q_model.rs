@@ -383,19 +383,12 @@ mod tests {
             &mech,
         );
         let m0 = mech.mass_kg;
-        let law = ContactLaw {
-            free_hz: mech.free_resonance_hz,
-            p: [
-                libm::log(mech.coupling_stiffness_n_m / m0),
-                libm::log(el.stiffness_n_m / (m0 * 100.0)),
-                libm::log(el.mass_kg * 1000.0 / m0),
-            ],
-            cov: [[0.0; 3]; 3],
-            model_sigma_hz: 0.0,
-            min_kpa: 100.0,
-            max_kpa: 3000.0,
-            force_n: 0.030,
-        };
+        let p = [
+            libm::log(mech.coupling_stiffness_n_m / m0),
+            libm::log(el.stiffness_n_m / (m0 * 100.0)),
+            libm::log(el.mass_kg * 1000.0 / m0),
+        ];
+        let law = ContactLaw::exact(mech.free_resonance_hz, p, (100.0, 3000.0), 0.030);
         (law, mech)
     }
 
