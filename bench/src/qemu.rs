@@ -117,18 +117,14 @@ pub fn stream(
     target: &Target,
     noise: NoiseScene,
 ) -> Result<Vec<pzt_probe::instrument::continuous::StreamReading>> {
-    use pzt_probe::instrument::continuous::{StreamReading, TrackerConfig};
-    let d = TrackerConfig::DEFAULT;
-    if a.segment_s != d.segment.0 as f64
-        || a.dither != d.dither as f64
-        || a.q_prior != d.q_prior as f64
-    {
+    use pzt_probe::instrument::continuous::StreamReading;
+    if !a.tracker.is_default() {
         bail!("with --qemu the image streams with its default tracker (no --segment-s, --dither, --q-prior)");
     }
     if a.knocks_hz.is_some() {
         bail!("with --qemu there are no knocks (the image's script has no knock line)");
     }
-    if a.lift_off_ramp_s != 0.0 {
+    if a.lift.lift_off_ramp_s != 0.0 {
         bail!("with --qemu the lift-off is a step (no --lift-off-ramp-s)");
     }
     if !(pzt_probe::instrument::command::STREAM_SECONDS.0 as f64
@@ -139,17 +135,17 @@ pub fn stream(
     }
     let mut lines = scene_lines(target, &a.scene, noise);
     lines.push(format!("sim seed {}", a.noise.seed));
-    if let (Some(p), Some(t)) = (&a.step_to, a.step_at_s) {
+    if let (Some(p), Some(t)) = (&a.step.step_to, a.step.step_at_s) {
         lines.push(format!("sim step {p} {t}"));
     }
-    if let Some(t) = a.lift_off_at_s {
+    if let Some(t) = a.lift.lift_off_at_s {
         lines.push(format!("sim lift-off {t}"));
     }
-    if let (Some(f), Some(t)) = (a.press_to, a.press_at_s) {
+    if let (Some(f), Some(t)) = (a.press.press_to, a.press.press_at_s) {
         // The image's press is a step.
         lines.push(format!("sim press {f} {t}"));
     }
-    if let Some(t) = a.touch_at_s {
+    if let Some(t) = a.lift.touch_at_s {
         match target {
             Target::Phantom(p) => lines.push(format!("sim step {} {t}", p.name)),
             _ => bail!("with --qemu --touch-at-s needs a --phantom"),
