@@ -195,6 +195,14 @@ pub struct Message {
 }
 
 impl Message {
+    /// The message as logged: its kind and values (`kind key=value ...`).
+    pub fn text(&self) -> String {
+        let mut t = self.kind.clone();
+        for (k, v) in &self.fields {
+            t += &format!(" {k}={}", v.render());
+        }
+        t
+    }
     /// The value of `key`.
     pub fn get(&self, key: &str) -> Option<&Value> {
         self.fields.iter().find(|(k, _)| k == key).map(|(_, v)| v)
@@ -504,19 +512,6 @@ pub struct LoggedReading {
     pub sweep: Option<usize>,
 }
 
-/// A notable event (warnings and errors of the firmware).
-#[derive(Clone, Debug, PartialEq)]
-pub struct LoggedEvent {
-    /// Line.
-    pub line: usize,
-    /// Timestamp, s.
-    pub time_s: Option<f64>,
-    /// Level.
-    pub level: Option<Level>,
-    /// The message as logged (kind and values).
-    pub text: String,
-}
-
 /// One logged reading of a continuous stream (`stream seq=…` line).
 #[derive(Clone, Debug, PartialEq)]
 pub struct LoggedStreamReading {
@@ -612,8 +607,8 @@ pub struct Session {
     pub streams: Vec<LoggedStream>,
     /// Sweeps in order.
     pub sweeps: Vec<LoggedSweep>,
-    /// Warnings and errors, and boots.
-    pub events: Vec<LoggedEvent>,
+    /// Notable messages: warnings and errors, rejections, overruns, stalls, and boots.
+    pub events: Vec<Message>,
     /// Messages recognised.
     pub messages: usize,
     /// Lines that were no firmware message.
@@ -680,13 +675,6 @@ pub fn parse_log(text: &str) -> Session {
             }
         };
         s.messages += 1;
-        let text_of = |m: &Message| {
-            let mut t = m.kind.clone();
-            for (k, v) in &m.fields {
-                t += &format!(" {k}={}", v.render());
-            }
-            t
-        };
         match m.kind.as_str() {
             "settings" => {
                 settings = Some(LoggedSettings {
@@ -764,23 +752,13 @@ pub fn parse_log(text: &str) -> Session {
                 if let Some(sw) = open.take() {
                     s.sweeps.push(sw);
                 }
-                s.events.push(LoggedEvent {
-                    line,
-                    time_s: m.time_s,
-                    level: m.level,
-                    text: text_of(&m),
-                });
+                s.events.push(m.clone());
             }
             _ => {
                 let notable = matches!(m.level, Some(Level::Warn | Level::Error))
                     || matches!(m.kind.as_str(), "rejected" | "overrun" | "stalled");
                 if notable {
-                    s.events.push(LoggedEvent {
-                        line,
-                        time_s: m.time_s,
-                        level: m.level,
-                        text: text_of(&m),
-                    });
+                    s.events.push(m.clone());
                 }
             }
         }

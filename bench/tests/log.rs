@@ -293,7 +293,7 @@ fn readings_sweeps_and_events_of_a_longer_log() {
     assert_eq!(s.sweeps[2].reading, Some(2));
     assert_eq!(s.readings[2].sweep, Some(2));
     // Events: boot, rejected (its message with spaces), stalled.
-    let ev: Vec<&str> = s.events.iter().map(|e| e.text.as_str()).collect();
+    let ev: Vec<String> = s.events.iter().map(|e| e.text()).collect();
     assert_eq!(ev.len(), 3, "{ev:?}");
     assert!(ev[1].ends_with("error=stop frequency must be above start frequency"));
     assert_eq!(s.other_lines, 1);

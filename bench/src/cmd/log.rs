@@ -192,7 +192,7 @@ fn session_json(s: &Session) -> Value {
     let events: Vec<Value> = s
         .events
         .iter()
-        .map(|e| json!({"line": e.line, "time_s": e.time_s, "text": e.text}))
+        .map(|e| json!({"line": e.line, "time_s": e.time_s, "text": e.text()}))
         .collect();
     json!({
         "messages": s.messages,
@@ -254,7 +254,7 @@ pub fn run(a: LogArgs) -> Result<()> {
                     Some(Level::Trace) => "TRACE",
                     None => "     ",
                 };
-                println!("    line {:>5}  {lvl}  {}", e.line, e.text);
+                println!("    line {:>5}  {lvl}  {}", e.line, e.text());
             }
         }
     }
