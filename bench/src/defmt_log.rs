@@ -468,30 +468,13 @@ pub struct LoggedPoint {
     pub sigma_s: f32,
 }
 
-/// Sweep settings in force.
-#[derive(Clone, Debug, PartialEq)]
-pub struct LoggedSettings {
-    /// Line of the `settings` message.
-    pub line: usize,
-    /// Method.
-    pub method: String,
-    /// Start, Hz.
-    pub start_hz: Option<f32>,
-    /// Stop, Hz.
-    pub stop_hz: Option<f32>,
-    /// Step, Hz.
-    pub step_hz: Option<f32>,
-    /// Drive, V.
-    pub drive_v: Option<f32>,
-}
-
 /// The points one measurement logged.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LoggedSweep {
     /// Line of its first point.
     pub first_line: usize,
-    /// Settings in force when it started.
-    pub settings: Option<LoggedSettings>,
+    /// The `settings` message in force when it started (`method`, `start_hz`, ...).
+    pub settings: Option<Message>,
     /// Points, in log order.
     pub points: Vec<LoggedPoint>,
     /// Index of the reading that closed it (`None`: abandoned or the log ended).
@@ -657,7 +640,7 @@ fn reading_of(m: &Message, sweep: Option<usize>) -> LoggedReading {
 pub fn parse_log(text: &str) -> Session {
     let templates = compiled();
     let mut s = Session::default();
-    let mut settings: Option<LoggedSettings> = None;
+    let mut settings: Option<Message> = None;
     let mut open: Option<LoggedSweep> = None;
     for (k, raw) in text.lines().enumerate() {
         let line = k + 1;
@@ -677,14 +660,7 @@ pub fn parse_log(text: &str) -> Session {
         s.messages += 1;
         match m.kind.as_str() {
             "settings" => {
-                settings = Some(LoggedSettings {
-                    line,
-                    method: m.str("method").unwrap_or_default().to_owned(),
-                    start_hz: m.f32("start_hz"),
-                    stop_hz: m.f32("stop_hz"),
-                    step_hz: m.f32("step_hz"),
-                    drive_v: m.f32("drive_v"),
-                });
+                settings = Some(m.clone());
             }
             "point" => {
                 let p = LoggedPoint {

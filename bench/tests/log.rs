@@ -181,7 +181,10 @@ fn qemu_log_reconstructs_the_firmwares_reading() {
         .all(|(k, p)| p.tag as usize == k + 1));
     // The settings in force were the second `settings` line (200–260 Hz).
     let set = w.settings.as_ref().unwrap();
-    assert_eq!((set.start_hz, set.stop_hz), (Some(200.0), Some(260.0)));
+    assert_eq!(
+        (set.f32("start_hz"), set.f32("stop_hz")),
+        (Some(200.0), Some(260.0))
+    );
     // The firmware's estimator on the logged points gives the logged resonance again.
     let pts: Vec<SweepPoint> = w
         .points

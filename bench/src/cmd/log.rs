@@ -181,7 +181,7 @@ fn session_json(s: &Session) -> Value {
         .map(|w| {
             json!({
                 "first_line": w.first_line,
-                "method": w.settings.as_ref().map(|x| x.method.clone()),
+                "method": w.settings.as_ref().map(|x| x.str("method").unwrap_or_default()),
                 "reading": w.reading,
                 "points": w.points.iter().map(|p| json!({
                     "tag": p.tag, "f_hz": p.f_hz, "g_s": p.g_s, "b_s": p.b_s, "sigma_s": p.sigma_s
