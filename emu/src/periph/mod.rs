@@ -445,8 +445,8 @@ impl Peripherals {
                     }
                 }
                 3 => {
-                    let pclk1 = self.rcc.pclk1();
-                    if self.lpuart.advance(t, pclk1) {
+                    let f_ck = self.rcc.lpuart1_kernel_hz();
+                    if self.lpuart.advance(t, f_ck) {
                         self.request(dma::req::LPUART1_RX, at, mem);
                     }
                 }
@@ -466,6 +466,16 @@ impl Peripherals {
         let t = self.clock_seconds(at);
         let (out, req, violation) = self.dac1.trigger(analog::Trigger::Tim6Trgo);
         if let Some(v) = violation {
+            self.violate(at, v);
+        }
+        let need = analog::dac_hfsel_needed(self.rcc.hclk());
+        if out.is_some() && !self.dac1.hfsel_flagged && self.dac1.hfsel() < need {
+            self.dac1.hfsel_flagged = true;
+            let v = format!(
+                "DAC1 converting with DAC_MCR.HFSEL {:#04b} at HCLK {:.0} MHz, which needs {need:#04b} (RM0440 DAC_MCR)",
+                self.dac1.hfsel(),
+                self.rcc.hclk() / 1e6
+            );
             self.violate(at, v);
         }
         if let Some(code) = out {
@@ -906,6 +916,82 @@ mod tests {
         assert_eq!(p.violations.len(), 2, "no new violation");
         // FLASHEN is set at reset (AHB1ENR reset value 0x100): FLASH_ACR is reachable.
         assert_eq!(p.read(0x4002_2000, 4, 14).unwrap(), 0x600);
+    }
+
+    const RCC: u32 = 0x4002_1000;
+    const CFGR: u32 = RCC + 0x08;
+    const FLASH_ACR: u32 = 0x4002_2000;
+    /// RCC_CFGR: SW = PLL (3).
+    const SW_PLL: u32 = 3;
+    /// RCC_CFGR.HPRE = /2 (code 8, bits 7:4).
+    const HPRE_DIV2: u32 = 8 << 4;
+
+    /// RM0440 6.1.5's steps 1–3 on a board at reset (HSI16): the 24 MHz HSE and the PLL at
+    /// 170 MHz ready, the AHB divided by 2, range 1 boost (R1MODE = 0), `ws` wait states; at
+    /// cycle 100.
+    fn ready_to_switch(ws: u32) -> Peripherals {
+        let mut p = Peripherals::default();
+        p.write(RCC + 0x58, 4, 1 << 28, 1).unwrap(); // APB1ENR1.PWREN
+        p.write(RCC, 4, (1 << 8) | (1 << 16), 2).unwrap(); // HSION, HSEON
+        p.write(RCC + 0x0C, 4, 3 | (5 << 4) | (85 << 8) | (1 << 24), 3)
+            .unwrap(); // HSE / 6 × 85 / 2, PLLREN
+        p.write(RCC, 4, (1 << 8) | (1 << 16) | (1 << 24), 4)
+            .unwrap(); // PLLON
+        p.write(CFGR, 4, 1 | HPRE_DIV2, 5).unwrap(); // step 1: AHB /2 on HSI16
+        p.write(0x4000_7080, 4, 0, 6).unwrap(); // step 2: PWR_CR5.R1MODE = 0 (boost)
+        p.write(FLASH_ACR, 4, 0x600 | ws, 7).unwrap(); // step 3: wait states
+        p
+    }
+
+    fn rules(p: &Peripherals) -> Vec<&str> {
+        p.violations.iter().map(|v| v.rule.as_str()).collect()
+    }
+
+    #[test]
+    fn the_switch_to_the_pll_in_one_write_with_the_ahb_at_1_breaks_the_boost_sequence() {
+        // embassy-stm32 0.6's `rcc::init` with `ahb_pre = DIV1`: 4 wait states, then SW = PLL and
+        // HPRE = /1 in one RCC_CFGR write. The AHB is never at /2 with the PLL applied.
+        let mut p = ready_to_switch(4);
+        p.write(CFGR, 4, SW_PLL, 100).unwrap();
+        assert!((p.rcc.hclk() - 170e6).abs() < 1.0);
+        let r = rules(&p);
+        assert_eq!(r.len(), 1, "{r:?}");
+        assert!(r[0].starts_with("SYSCLK switched to the PLL"), "{r:?}");
+    }
+
+    #[test]
+    fn the_ahb_back_to_1_within_1_us_of_the_switch_breaks_the_boost_sequence() {
+        // Step 4 at HCLK 85 MHz (2 wait states do), then 4 wait states and /1 after 0.5 µs.
+        let mut p = ready_to_switch(2);
+        p.write(CFGR, 4, SW_PLL | HPRE_DIV2, 100).unwrap();
+        assert!((p.rcc.hclk() - 85e6).abs() < 1.0);
+        p.write(FLASH_ACR, 4, 0x600 | 4, 110).unwrap();
+        p.write(CFGR, 4, SW_PLL, 100 + 42).unwrap(); // 42 cycles at 85 MHz: 0.49 µs
+        let r = rules(&p);
+        assert_eq!(r.len(), 1, "{r:?}");
+        assert!(r[0].starts_with("AHB back to /1 0.49"), "{r:?}");
+    }
+
+    #[test]
+    fn the_boost_sequence_with_the_hold_and_the_wait_states_breaks_no_rule() {
+        // RM0440 6.1.5 steps 4 and 5 as the board does them: switch at /2, 4 wait states,
+        // 1 µs (85 cycles at 85 MHz) after the switch /1: HCLK 170 MHz, nothing broken.
+        let mut p = ready_to_switch(2);
+        p.write(CFGR, 4, SW_PLL | HPRE_DIV2, 100).unwrap();
+        p.write(FLASH_ACR, 4, 0x600 | 4, 110).unwrap();
+        p.write(CFGR, 4, SW_PLL, 100 + 85).unwrap();
+        assert!((p.rcc.hclk() - 170e6).abs() < 1.0);
+        assert_eq!(rules(&p), Vec::<&str>::new());
+        // With too few wait states for 170 MHz, /1 breaks the latency rule instead.
+        let mut p = ready_to_switch(2);
+        p.write(CFGR, 4, SW_PLL | HPRE_DIV2, 100).unwrap();
+        p.write(CFGR, 4, SW_PLL, 100 + 170).unwrap();
+        let r = rules(&p);
+        assert!(
+            r.len() == 1
+                && r[0].starts_with("HCLK raised to 170000000 Hz with FLASH_ACR.LATENCY 2"),
+            "{r:?}"
+        );
     }
 
     #[test]

@@ -41,9 +41,9 @@ pub(super) struct DmaFaults;
 
 impl<I: interrupt::typelevel::Interrupt> Handler<I> for DmaFaults {
     unsafe fn on_interrupt() {
-        // RAW 1/13: DMA1_ISR TEIF1..4 (RM0440 12, DMA: DMA_ISR).
+        // RAW 1/16: DMA1_ISR TEIF1..4 (RM0440 12, DMA: DMA_ISR).
         let isr = pac::DMA1.isr().read();
-        // RAW 2/13: DMA1_IFCR CTEIF1..4, write-one-to-clear (RM0440 12, DMA: DMA_IFCR).
+        // RAW 2/16: DMA1_IFCR CTEIF1..4, write-one-to-clear (RM0440 12, DMA: DMA_IFCR).
         let n = pac::DMA1.ifcr().write(|w| {
             let mut n = 0;
             for ch in 0..4 {
