@@ -338,8 +338,8 @@ fn stm32_image_runs_from_hsi16_when_the_hse_never_starts() {
 
 /// A fault the bring-up must survive: a DMA transfer error on ADC1's channel (DMA1 CH1) while
 /// the stream runs. RM0440 DMA: TEIF set, the channel disabled by the hardware. The image counts
-/// it before embassy's handler (which would panic), stops TIM6, and a reading then ends as
-/// `stalled` — no panic, no hang.
+/// it before embassy's handler (which would panic), stops TIM6, and a reading then stalls and
+/// ends as `dma_error`, the count in the `counters` line — no panic, no hang.
 #[test]
 fn stm32_image_survives_a_dma_transfer_error() {
     let elf = build_image();
@@ -353,12 +353,41 @@ fn stm32_image_survives_a_dma_transfer_error() {
         run.m.board().periph.tim6.next_event().is_none(),
         "TIM6 still running"
     );
-    let r = first(&run.parsed(), "reading");
-    assert_ne!(r["status"], "ok", "{r:?}");
+    let parsed = run.parsed();
+    let r = first(&parsed, "reading");
+    assert_eq!(r["status"], "dma_error", "{r:?}");
+    assert_eq!(num(&last(&parsed, "counters"), "dma_errors"), 1.0);
     assert!(
         run.lines.iter().any(|l| l.contains("stalled")),
         "no stalled line"
     );
+}
+
+/// A DMA transfer error on each other DMA1 channel the board uses (CH2 ADC2, CH3 DAC1, CH4
+/// LPUART1 RX, CH6 LPUART1 TX): counted before embassy's handler (which panics on TEIF) on
+/// every channel's vector, the stream stopped, the next reading `dma_error` — no panic, no
+/// reset.
+#[test]
+fn stm32_image_ends_a_dma_error_on_any_of_its_channels_typed() {
+    let elf = build_image();
+    type Inject = fn(&mut Machine);
+    let errors: [(&str, Inject); 4] = [
+        ("CH2 ADC2", |m| m.board_mut().periph.dma.error(1)),
+        ("CH3 DAC1", |m| m.board_mut().periph.dma.error(2)),
+        ("CH4 LPUART1 RX", |m| m.board_mut().periph.dma.error(3)),
+        ("CH6 LPUART1 TX", |m| m.board_mut().periph.dma.error(5)),
+    ];
+    for (name, error) in errors {
+        println!("--- {name}");
+        let events = [(1.0, Event::Fault(error)), (1.2, Event::Send("measure"))];
+        let run = run(&elf, 2.5, scene(Some("B")), &events);
+        assert_eq!(run.m.resets, 0, "{name}: no panic, no watchdog reset");
+        let parsed = run.parsed();
+        let r = first(&parsed, "reading");
+        assert_eq!(r["status"], "dma_error", "{name}: {r:?}");
+        assert_eq!(num(&last(&parsed, "counters"), "dma_errors"), 1.0, "{name}");
+        assert!(run.rules().is_empty(), "{name}: {:?}", run.rules());
+    }
 }
 
 /// A fault the bring-up must survive: the flash stuck busy (BSY never clears) while the store

@@ -959,14 +959,25 @@ mod tests {
         assert!(r[0].starts_with("SYSCLK switched to the PLL"), "{r:?}");
     }
 
-    #[test]
-    fn the_ahb_back_to_1_within_1_us_of_the_switch_breaks_the_boost_sequence() {
-        // Step 4 at HCLK 85 MHz (2 wait states do), then 4 wait states and /1 after 0.5 µs.
+    /// RM0440 6.1.5 steps 4 and 5 after [`ready_to_switch`] with 2 wait states: SYSCLK to the
+    /// PLL with the AHB at /2 at cycle 100 (HCLK 85 MHz), 4 wait states at cycle 110 if
+    /// `raise_ws`, HPRE = /1 `hold` cycles after the switch.
+    fn boost_switch(raise_ws: bool, hold: u64) -> Peripherals {
         let mut p = ready_to_switch(2);
         p.write(CFGR, 4, SW_PLL | HPRE_DIV2, 100).unwrap();
         assert!((p.rcc.hclk() - 85e6).abs() < 1.0);
-        p.write(FLASH_ACR, 4, 0x600 | 4, 110).unwrap();
-        p.write(CFGR, 4, SW_PLL, 100 + 42).unwrap(); // 42 cycles at 85 MHz: 0.49 µs
+        if raise_ws {
+            p.write(FLASH_ACR, 4, 0x600 | 4, 110).unwrap();
+        }
+        p.write(CFGR, 4, SW_PLL, 100 + hold).unwrap();
+        assert!((p.rcc.hclk() - 170e6).abs() < 1.0);
+        p
+    }
+
+    #[test]
+    fn the_ahb_back_to_1_within_1_us_of_the_switch_breaks_the_boost_sequence() {
+        // 42 cycles at 85 MHz: 0.49 µs.
+        let p = boost_switch(true, 42);
         let r = rules(&p);
         assert_eq!(r.len(), 1, "{r:?}");
         assert!(r[0].starts_with("AHB back to /1 0.49"), "{r:?}");
@@ -974,18 +985,10 @@ mod tests {
 
     #[test]
     fn the_boost_sequence_with_the_hold_and_the_wait_states_breaks_no_rule() {
-        // RM0440 6.1.5 steps 4 and 5 as the board does them: switch at /2, 4 wait states,
-        // 1 µs (85 cycles at 85 MHz) after the switch /1: HCLK 170 MHz, nothing broken.
-        let mut p = ready_to_switch(2);
-        p.write(CFGR, 4, SW_PLL | HPRE_DIV2, 100).unwrap();
-        p.write(FLASH_ACR, 4, 0x600 | 4, 110).unwrap();
-        p.write(CFGR, 4, SW_PLL, 100 + 85).unwrap();
-        assert!((p.rcc.hclk() - 170e6).abs() < 1.0);
-        assert_eq!(rules(&p), Vec::<&str>::new());
+        // As the board does it: 4 wait states, /1 1 µs (85 cycles at 85 MHz) after the switch.
+        assert_eq!(rules(&boost_switch(true, 85)), Vec::<&str>::new());
         // With too few wait states for 170 MHz, /1 breaks the latency rule instead.
-        let mut p = ready_to_switch(2);
-        p.write(CFGR, 4, SW_PLL | HPRE_DIV2, 100).unwrap();
-        p.write(CFGR, 4, SW_PLL, 100 + 170).unwrap();
+        let p = boost_switch(false, 170);
         let r = rules(&p);
         assert!(
             r.len() == 1

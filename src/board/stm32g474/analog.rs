@@ -14,10 +14,12 @@
 //! (ADC1's ring) is the RTIC `sample` task; it runs embassy's DMA handler for that channel
 //! itself ([`Stream::capture`]).
 //!
-//! DMA transfer errors (TEIF on any of the four channels) are counted and cleared before
-//! embassy's DMA handler runs (embassy 0.6 panics on TEIF); DAC DMA underruns (DMAUDR1; embassy
-//! has no check) are read every batch. Either makes [`Stream::late`] true, is counted in
-//! [`stream_faults`] and stops TIM6, so readings stall rather than run on without drive.
+//! DMA transfer errors (TEIF on any of the board's six DMA1 channels) are counted and cleared
+//! before embassy's DMA handler runs (embassy 0.6 panics on TEIF); DAC DMA underruns (DMAUDR1;
+//! embassy has no check) are read every batch. Either makes [`Stream::late`] true, is counted in
+//! [`stream_faults`] and stops TIM6, so readings stall rather than run on without drive: after
+//! a transfer error they end as `dma_error` (`Failure::of_stall`), after an underrun as
+//! `drive_fault`.
 
 use crate::engine::{SampleEngine, BATCH};
 use crate::hal::{AdcFrame, FrontEndScale};
@@ -33,7 +35,7 @@ use embassy_stm32::timer::low_level::{RoundTo, Timer};
 use embassy_stm32::{dma, interrupt, pac, peripherals, Peri};
 
 use super::clocks::{HCLK_HZ, TIM6_CLOCK_HZ};
-use super::interrupts::{DmaFaults, Irqs, DMA_TRANSFER_ERRORS};
+use super::interrupts::{DmaFaults, Irqs};
 use super::reset::record;
 use super::{elapsed, spin_until, stamp, BootError, SAMPLE_RATE_HZ, SCALE, SYSCLK_HZ};
 
@@ -44,7 +46,8 @@ static DAC_UNDERRUNS: AtomicU32 = AtomicU32::new(0);
 /// count the readings stall until reset.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct StreamFaults {
-    /// DMA1 transfer errors (TEIF) on channels 1–4 (ADC1, ADC2, DAC1, LPUART1 RX).
+    /// DMA1 transfer errors (TEIF) on channels 1–6 (ADC1, ADC2, DAC1, LPUART1 RX and TX, the
+    /// DAC driver's unused channel): any of them stops the stream.
     pub dma_transfer_errors: u32,
     /// DAC1 channel 1 DMA underruns (DMAUDR1).
     pub dac_underruns: u32,
@@ -53,7 +56,7 @@ pub struct StreamFaults {
 /// The stream's hardware fault counts (readable from any task).
 pub fn stream_faults() -> StreamFaults {
     StreamFaults {
-        dma_transfer_errors: DMA_TRANSFER_ERRORS.load(Ordering::Relaxed),
+        dma_transfer_errors: crate::counters::DMA_ERRORS.load(Ordering::Relaxed),
         dac_underruns: DAC_UNDERRUNS.load(Ordering::Relaxed),
     }
 }
