@@ -786,10 +786,15 @@ impl Peripherals {
         ok.ok_or_else(|| format!("{dev:?} register +{word:#x} not modelled"))
     }
 
-    /// RCC writes with the clock-switch rules (RM0440 RCC "Clock switch" and PWR "Range 1 boost
-    /// mode": the sequence to a SYSCLK above 80 MHz divides the AHB by 2 before the switch and
-    /// holds it for at least 1 µs after; the flash latency and the voltage range must allow
-    /// the new HCLK before it applies).
+    /// RCC writes with the clock-switch rules: RM0440 6.1.5 (PWR "Dynamic voltage scaling
+    /// management", the range 1 boost sequence: 1. the AHB divided by 2 before the switch to a
+    /// higher frequency, 2. R1MODE cleared, 3. the wait states for the new frequency, 4. the
+    /// switch, 5. at least 1 µs, then the AHB prescaler for the target HCLK), checked as: a switch
+    /// to the PLL above 80 MHz with HPRE /1 in force breaks it (ST's HAL, `stm32g4xx_hal_rcc.c`
+    /// `HAL_RCC_ClockConfig`, takes the same 80 MHz threshold for its intermediate /2), and so
+    /// does HPRE back to /1 sooner than 1 µs after the switch; steps 2 and 3 as the flash
+    /// latency table for range 1 normal or boost (3.3.3, Table 9), which every HCLK must
+    /// satisfy when it applies.
     fn rcc_write(&mut self, off: u32, v: u32, now: u64) -> Option<()> {
         let t = self.clock_seconds(now);
         let hclk_before = self.rcc.hclk();
@@ -812,7 +817,7 @@ impl Peripherals {
             if self.rcc.sws() != sws_before && self.rcc.sws() == 3 && sysclk > 80e6 {
                 if hpre < 2 {
                     self.violate(now, format!(
-                        "SYSCLK switched to the PLL at {:.0} MHz with HPRE /1 in force (RM0440 PWR \"Range 1 boost mode\" / RCC: divide the AHB by 2 before switching above 80 MHz and wait 1 us before /1)",
+                        "SYSCLK switched to the PLL at {:.0} MHz with HPRE /1 in force (RM0440 6.1.5, range 1 boost sequence: divide the AHB by 2 before switching above 80 MHz and wait 1 us before /1)",
                         sysclk / 1e6
                     ));
                 } else {
@@ -822,7 +827,7 @@ impl Peripherals {
                 if let Some(at) = self.pll_switch_at.take() {
                     if t - at < 1e-6 {
                         self.violate(now, format!(
-                            "AHB back to /1 {:.3} us after the switch to the PLL (RM0440: at least 1 us)",
+                            "AHB back to /1 {:.3} us after the switch to the PLL (RM0440 6.1.5 step 5: at least 1 us)",
                             (t - at) * 1e6
                         ));
                     }
