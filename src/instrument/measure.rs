@@ -287,6 +287,8 @@ mod tests {
         done: Vec<bool>,
         /// The board's DMA error count ([`Link::dma_errors`]).
         dma_errors: u32,
+        /// The events sent, in order.
+        events: Vec<Event>,
     }
 
     impl Link for &mut Script<'_> {
@@ -315,6 +317,7 @@ mod tests {
         }
         async fn report(&mut self, e: Event) {
             self.out.push(out(&e));
+            self.events.push(e);
             if let Some(l) = self.liveness {
                 self.deadlines.push(deadline(l));
             }
@@ -556,6 +559,37 @@ mod tests {
                 "stream, {errors} errors"
             );
         }
+    }
+
+    /// `air` on a stream a DMA error stopped: refused as `dma_error`, the air reference kept.
+    #[test]
+    fn air_after_a_dma_error_is_refused_as_the_dmas_failure() {
+        use crate::instrument::session::Refusal;
+        use crate::unit::store::{LoadSource, SlotState};
+        let loaded = Loaded {
+            record: crate::board::sim_factory::profile().expect("factory record"),
+            source: LoadSource::Stored {
+                slot: 0,
+                seq: 1,
+                other: SlotState::Empty,
+            },
+        };
+        let mut link = Script {
+            dma_errors: 1,
+            ..Default::default()
+        };
+        let l = Liveness::new(Millis(0));
+        let (served, kept) = with(&mut link, &l, |io| {
+            let mut s = Session::new(&loaded);
+            let served = block_on(s.handle(Command::Air, io));
+            (served, s.profile().air == loaded.record.air)
+        });
+        assert!(!served);
+        assert!(kept, "the air reference was replaced");
+        assert_eq!(
+            link.events.last(),
+            Some(&Event::Refused(Refusal::Air(Failure::DmaError)))
+        );
     }
 
     #[test]
