@@ -14,6 +14,10 @@ pub static RING: AtomicU32 = AtomicU32::new(0);
 pub static DROPPED: AtomicU32 = AtomicU32::new(0);
 /// Load-cell reads that failed (a pin error, or a conversion at a rail).
 pub static LOAD_CELL_ERRORS: AtomicU32 = AtomicU32::new(0);
+/// DMA transfer errors the board counted (its interrupt handlers, before the HAL's): the board
+/// stops its sample stream at the first, and a stalled reading is then
+/// [`Failure::DmaError`](crate::status::Failure::DmaError).
+pub static DMA_ERRORS: AtomicU32 = AtomicU32::new(0);
 /// Mean interrupt work per batch (board unit).
 pub static ISR_MEAN: AtomicU32 = AtomicU32::new(0);
 /// Largest interrupt work per batch (board unit).

@@ -34,6 +34,9 @@ coded_enum! {
         Interference: "interference" => "interference corrupts the measurement: retry away from the source";
         /// The drive does not follow the commanded waveform (DAC or amplifier fault).
         DriveFault: "drive_fault" => "drive does not follow the command";
+        /// The board's DMA failed (a transfer error on one of its channels): the sample stream
+        /// stopped. A fault of the board, not of the probe or the press.
+        DmaError: "dma_error" => "the board's DMA failed (transfer error), not the probe: power-cycle it, and report it if it comes back";
         /// The settings given were invalid.
         BadSettings: "bad_settings" => "invalid settings";
         /// The contact is not the calibrated one: the quality factor stands above the unit's
@@ -76,6 +79,7 @@ impl Failure {
                 | Failure::OpenCircuit
                 | Failure::ShortCircuit
                 | Failure::DriveFault
+                | Failure::DmaError
                 | Failure::BadSettings
                 | Failure::NoAirReference
                 | Failure::Uncalibrated
@@ -93,6 +97,19 @@ impl Failure {
                 | Failure::TooHard
                 | Failure::ForceUnstable
         )
+    }
+}
+
+impl Failure {
+    /// The failure a stalled stream ends a reading in: [`Failure::DmaError`] once the board
+    /// counted a DMA transfer error (its stream stops at the first, so every later stall is
+    /// the DMA's), else [`Failure::DriveFault`].
+    pub const fn of_stall(dma_errors: u32) -> Failure {
+        if dma_errors > 0 {
+            Failure::DmaError
+        } else {
+            Failure::DriveFault
+        }
     }
 }
 

@@ -41,7 +41,7 @@ pub const TEMPLATES: &[&str] = &[
     "rejected error={=str}",
     "stalled tag={=u16}",
     "overrun late={=u32} ring={=u32} dropped={=u32}",
-    "counters batches={=u32} late={=u32} ring={=u32} dropped={=u32} isr_mean={=u32} isr_max={=u32} unit={=str} load_cell_errors={=u32}",
+    "counters batches={=u32} late={=u32} ring={=u32} dropped={=u32} isr_mean={=u32} isr_max={=u32} unit={=str} load_cell_errors={=u32} dma_errors={=u32}",
     "status method={=str} calibration={=str} fallback={=bool} air={=bool} q_model={=bool} references={=u16} selftest={=str}",
     "status boot={=str} message={=str}",
     "help commands={=str} methods={=str} default={=str}",

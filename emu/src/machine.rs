@@ -809,8 +809,8 @@ impl Machine {
     pub fn uart_send(&mut self, bytes: &[u8]) {
         let b = self.board_mut();
         let t = b.seconds();
-        let pclk1 = b.periph.rcc.pclk1();
-        b.periph.lpuart.send(t, bytes, pclk1);
+        let f_ck = b.periph.rcc.lpuart1_kernel_hz();
+        b.periph.lpuart.send(t, bytes, f_ck);
     }
 
     /// Send the command line `line` as the host link does (`docs/protocol.md`): one

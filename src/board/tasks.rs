@@ -212,6 +212,9 @@ impl<F: rtic::Mutex<T = &'static mut ForceLog>> Link for MeasureLinks<F> {
     fn contact_force(&mut self, from: u64, to: u64, fs_hz: f32) -> Option<RawForce> {
         self.forces.lock(|f| f.over(from, to, fs_hz))
     }
+    fn dma_errors(&self) -> u32 {
+        crate::counters::DMA_ERRORS.load(Ordering::Relaxed)
+    }
 }
 
 /// The measurement task: the session served one request at a time ([`FwIo::serve`]), keeping
@@ -338,7 +341,17 @@ pub async fn link_tx(tx: &mut board::LinkTx) {
     loop {
         match board::LinkTx::take(&mut chunk) {
             0 => Mono::delay(1.millis()).await,
-            n => tx.write(&chunk[..n]).await,
+            n => {
+                // The transfer is polled every 10 ms besides its wake: embassy 0.6 wakes the
+                // writer only on half and full transfer, and a transfer a DMA error ended (the
+                // channel disabled; its frames cut, which the host's decoder skips) is seen
+                // ended only when polled.
+                let mut write = core::pin::pin!(tx.write(&chunk[..n]));
+                while Mono::timeout_after(10.millis(), write.as_mut())
+                    .await
+                    .is_err()
+                {}
+            }
         }
     }
 }

@@ -408,26 +408,19 @@ impl Tracker {
         }
     }
 
-    /// A plan's window did not come (the stream stalled): a `drive_fault` reading, and the
-    /// tracker acquires again.
+    /// A plan's window did not come (the stream stalled): a reading that failed with `failure`
+    /// (the source's [`PointSource::stall_failure`]), and the tracker acquires again.
     pub fn stalled(
         &mut self,
         now_sample: u64,
+        failure: Failure,
         scale: &FrontEndScale,
         unit: &UnitProfile,
     ) -> StreamReading {
         let took = self.seconds(now_sample.saturating_sub(self.segment_start));
         self.segment_start = now_sample;
         self.reacquire(scale, unit);
-        self.emit(
-            Err(Failure::DriveFault),
-            unit,
-            now_sample,
-            took,
-            0,
-            false,
-            None,
-        )
+        self.emit(Err(failure), unit, now_sample, took, 0, false, None)
     }
 
     fn seconds(&self, samples: u64) -> Seconds {
@@ -521,8 +514,8 @@ impl Tracker {
 
 /// Run `tracker` against `src` until `emit` returns false: plans loaded one by one (the drive
 /// never stops between them), every window waited for under the one stall rule
-/// ([`window_budget_samples`]), every reading handed to `emit`. A stall is a `drive_fault`
-/// reading and a new acquisition. The drive is stopped at the end. Returns the readings
+/// ([`window_budget_samples`]), every reading handed to `emit`. A stall is a reading that failed
+/// with the source's [`PointSource::stall_failure`] and a new acquisition. The drive is stopped at the end. Returns the readings
 /// emitted.
 pub async fn run<S: PointSource>(
     src: &mut S,
@@ -554,7 +547,10 @@ pub async fn run_with<S: PointSource>(
         for _ in 0..plan.windows.max(1) {
             let r = match src.next(&Wanted::plan(plan), budget).await {
                 Some(raw) => tracker.accept(&raw, &scale, unit, |a, b| src.contact_force(a, b)),
-                None => Some(tracker.stalled(src.now_sample(), &scale, unit)),
+                None => {
+                    let failure = src.stall_failure();
+                    Some(tracker.stalled(src.now_sample(), failure, &scale, unit))
+                }
             };
             if let Some(r) = r {
                 if !emit(src, &r) {

@@ -28,7 +28,7 @@
 //! rejected error=<str>                                     (warn)
 //! stalled tag=<u16>                                        (error)
 //! overrun late=<u32> ring=<u32> dropped=<u32>              (error; whenever a counter grew)
-//! counters batches=<u32> late=<u32> ring=<u32> dropped=<u32> isr_mean=<u32> isr_max=<u32> unit=<str> load_cell_errors=<u32>
+//! counters batches=<u32> late=<u32> ring=<u32> dropped=<u32> isr_mean=<u32> isr_max=<u32> unit=<str> load_cell_errors=<u32> dma_errors=<u32>
 //! status method=<str> calibration=<str> fallback=<bool> air=<bool> q_model=<bool> references=<u16> selftest=<str>
 //! selftest result=<str> f_hz=<f32> c_pf=<f32> c_sigma_pf=<f32> ref_c_pf=<f32> tol=<f32> ref=<str> g_s=<f32> i_a=<f32> v=<f32> probe_time_s=<f32>
 //! selftest fault=<str> message=<str>                      (error; after a failed self-test)
@@ -269,7 +269,7 @@ pub fn counters(unit: &str) {
     use crate::counters::*;
     use core::sync::atomic::Ordering::Relaxed;
     defmt::info!(
-        "counters batches={=u32} late={=u32} ring={=u32} dropped={=u32} isr_mean={=u32} isr_max={=u32} unit={=str} load_cell_errors={=u32}",
+        "counters batches={=u32} late={=u32} ring={=u32} dropped={=u32} isr_mean={=u32} isr_max={=u32} unit={=str} load_cell_errors={=u32} dma_errors={=u32}",
         BATCHES.load(Relaxed),
         LATE.load(Relaxed),
         RING.load(Relaxed),
@@ -277,7 +277,8 @@ pub fn counters(unit: &str) {
         ISR_MEAN.load(Relaxed),
         ISR_MAX.load(Relaxed),
         unit,
-        LOAD_CELL_ERRORS.load(Relaxed)
+        LOAD_CELL_ERRORS.load(Relaxed),
+        DMA_ERRORS.load(Relaxed)
     );
 }
 

@@ -17,6 +17,7 @@ use crate::instrument::session::{Event, Io, Session};
 use crate::instrument::watchdog::{self, Liveness, Millis, ALIVE, FEED};
 use crate::loadcell::RawForce;
 use crate::reading::driver::{PointSource, Wanted};
+use crate::status::Failure;
 use crate::unit::profile::UnitProfile;
 use crate::unit::store::{Loaded, Saved, Store, StoreError};
 use embedded_storage::nor_flash::NorFlash;
@@ -83,6 +84,11 @@ pub trait Link {
     fn elapsed(&self, since: u32) -> u32;
     /// The load cell's counts over the engine's samples `from..=to` at `fs_hz`.
     fn contact_force(&mut self, from: u64, to: u64, fs_hz: f32) -> Option<RawForce>;
+    /// DMA transfer errors the board counted since boot ([`crate::counters::DMA_ERRORS`]);
+    /// none on a link without DMA.
+    fn dma_errors(&self) -> u32 {
+        0
+    }
 }
 
 /// The measurement task's board: its [`Link`]s as the session's point source and event sink,
@@ -196,6 +202,9 @@ impl<L: Link, F: NorFlash> PointSource for FwIo<'_, L, F> {
     fn contact_force(&mut self, from: u64, to: u64) -> Option<RawForce> {
         self.link.contact_force(from, to, self.scale.sample_rate.0)
     }
+    fn stall_failure(&self) -> Failure {
+        Failure::of_stall(self.link.dma_errors())
+    }
     async fn point(&mut self, tag: u16, point: &SweepPoint) {
         self.link.report(Event::Point { tag, point: *point }).await;
     }
@@ -276,6 +285,10 @@ mod tests {
         delays: Vec<Millis>,
         out: Vec<Out>,
         done: Vec<bool>,
+        /// The board's DMA error count ([`Link::dma_errors`]).
+        dma_errors: u32,
+        /// The events sent, in order.
+        events: Vec<Event>,
     }
 
     impl Link for &mut Script<'_> {
@@ -304,6 +317,7 @@ mod tests {
         }
         async fn report(&mut self, e: Event) {
             self.out.push(out(&e));
+            self.events.push(e);
             if let Some(l) = self.liveness {
                 self.deadlines.push(deadline(l));
             }
@@ -339,6 +353,9 @@ mod tests {
         }
         fn contact_force(&mut self, _: u64, _: u64, _: f32) -> Option<RawForce> {
             None
+        }
+        fn dma_errors(&self) -> u32 {
+            self.dma_errors
         }
     }
 
@@ -474,6 +491,104 @@ mod tests {
                 Out::Point,
                 Out::Other
             ]
+        );
+    }
+
+    /// A reading on a stream that delivers no window stalls; it is `dma_error` once the board
+    /// counted a DMA transfer error, `drive_fault` otherwise, for each method.
+    #[test]
+    fn a_stall_after_a_dma_error_is_the_dmas_failure() {
+        use crate::reading::{driver::read, Method};
+        let unit = crate::board::sim_factory::profile().expect("factory record");
+        for method in Method::ALL {
+            for (errors, want) in [(0, Failure::DriveFault), (2, Failure::DmaError)] {
+                let mut link = Script {
+                    dma_errors: errors,
+                    ..Default::default()
+                };
+                let l = Liveness::new(Millis(0));
+                let (r, stops) = with(&mut link, &l, |io| {
+                    let mut stops = 0;
+                    let settings = method.default_settings();
+                    let r = block_on(read(
+                        io,
+                        method,
+                        &settings,
+                        &unit,
+                        |_, _| {},
+                        |_| stops += 1,
+                    ));
+                    (r, stops)
+                });
+                assert_eq!(
+                    r.status,
+                    crate::status::Status::Failed(want),
+                    "{method:?}, {errors} errors"
+                );
+                assert_eq!(stops, 1, "{method:?}: the stall is heard once");
+            }
+        }
+        // The stream's first reading on such a stream: the same failure.
+        for (errors, want) in [(0, Failure::DriveFault), (1, Failure::DmaError)] {
+            let mut link = Script {
+                dma_errors: errors,
+                ..Default::default()
+            };
+            let l = Liveness::new(Millis(0));
+            let got = with(&mut link, &l, |io| {
+                let mut slot = None;
+                crate::instrument::continuous::TrackerConfig::DEFAULT
+                    .validate_into(&io.scale(), &unit, &mut slot)
+                    .expect("default tracker");
+                let tracker = slot.as_mut().expect("tracker");
+                let mut got = None;
+                block_on(crate::instrument::continuous::run(
+                    io,
+                    tracker,
+                    &unit,
+                    |r| {
+                        got = Some(r.reading.status);
+                        false
+                    },
+                ));
+                got
+            });
+            assert_eq!(
+                got,
+                Some(crate::status::Status::Failed(want)),
+                "stream, {errors} errors"
+            );
+        }
+    }
+
+    /// `air` on a stream a DMA error stopped: refused as `dma_error`, the air reference kept.
+    #[test]
+    fn air_after_a_dma_error_is_refused_as_the_dmas_failure() {
+        use crate::instrument::session::Refusal;
+        use crate::unit::store::{LoadSource, SlotState};
+        let loaded = Loaded {
+            record: crate::board::sim_factory::profile().expect("factory record"),
+            source: LoadSource::Stored {
+                slot: 0,
+                seq: 1,
+                other: SlotState::Empty,
+            },
+        };
+        let mut link = Script {
+            dma_errors: 1,
+            ..Default::default()
+        };
+        let l = Liveness::new(Millis(0));
+        let (served, kept) = with(&mut link, &l, |io| {
+            let mut s = Session::new(&loaded);
+            let served = block_on(s.handle(Command::Air, io));
+            (served, s.profile().air == loaded.record.air)
+        });
+        assert!(!served);
+        assert!(kept, "the air reference was replaced");
+        assert_eq!(
+            link.events.last(),
+            Some(&Event::Refused(Refusal::Air(Failure::DmaError)))
         );
     }
 

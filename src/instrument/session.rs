@@ -468,7 +468,9 @@ impl Session {
             })
             .await;
         let air = match r.status {
-            Status::Failed(f @ (Failure::DriveFault | Failure::BadSettings)) => Err(f),
+            Status::Failed(
+                f @ (Failure::DriveFault | Failure::DmaError | Failure::BadSettings),
+            ) => Err(f),
             _ => profile::air_from_points(&pts),
         };
         let zero = io.contact_force(start, io.now_sample());

@@ -42,6 +42,11 @@ pub trait PointSource {
     /// The load cell's counts over the engine's samples `from..=to` (`None`: no load cell, or
     /// it was silent).
     fn contact_force(&mut self, from: u64, to: u64) -> Option<RawForce>;
+    /// The failure a stall ends a reading in ([`Failure::of_stall`]): the default, a source
+    /// without DMA, `drive_fault`; the firmware's from the board's DMA error count.
+    fn stall_failure(&self) -> Failure {
+        Failure::of_stall(0)
+    }
     /// An admittance point of the reading in progress, with its plan's tag, as it comes (the
     /// firmware logs it; the default ignores it).
     async fn point(&mut self, tag: u16, point: &SweepPoint) {
@@ -83,8 +88,8 @@ pub enum Stop {
 }
 
 /// One reading with `method` and `settings`, ended in the pipeline with `unit`. `on_point`
-/// sees every admittance point with its plan's tag. A stall ends the reading as `drive_fault`
-/// (and `on_stop` hears of it); settings the method refuses as `bad_settings`.
+/// sees every admittance point with its plan's tag. A stall ends the reading as the source's
+/// [`PointSource::stall_failure`] (`drive_fault`, or `dma_error`; `on_stop` hears of it); settings the method refuses as `bad_settings`.
 pub async fn read<S: PointSource>(
     src: &mut S,
     method: Method,
@@ -177,7 +182,7 @@ pub async fn drive<S: PointSource, M: Measurement>(
         Err((stop, points)) => {
             on_stop(stop);
             let elapsed = Seconds(src.now_sample().saturating_sub(start) as f32 / fs as f32);
-            Reading::failed(method, Failure::DriveFault, elapsed, points)
+            Reading::failed(method, src.stall_failure(), elapsed, points)
         }
     }
 }

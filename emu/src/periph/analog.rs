@@ -15,7 +15,8 @@
 //! request is unserved), SWTRIG1, DHR12R1/DHR12L1/DHR8R1 (word accesses only: narrower ones are a
 //! bus error, RM0440 DAC "DAC registers": accessed by words), the output-buffer calibration
 //! (CEN1 with OTRIM1: CAL_FLAG1 valid tTRIM = 50 µs after the trim is written; the channel's
-//! offset is the board's, 12 codes), MCR.MODE1 stored. Leaves out: channel 2, wave generation,
+//! offset is the board's, 12 codes), MCR.MODE1 stored, MCR.HFSEL against HCLK at each trigger
+//! (RM0440 DAC_MCR: 01 above 80 MHz, 10 above 160 MHz; the board checks it). Leaves out: channel 2, wave generation,
 //! sample-and-hold, the buffer's settling (DOR reaches the pin at once), the sawtooth/increment
 //! triggers, the output voltage's offset error (the trim's effect on the pin).
 //!
@@ -87,6 +88,12 @@ impl Tim6 {
         }
         let ticks = (now - self.epoch) / self.tick_cycles();
         ((self.cnt0 as u64 + ticks) % (self.arr_sh as u64 + 1)) as u32
+    }
+
+    /// Core cycles from one update event to the next: (PSC + 1) × (ARR + 1) timer clocks, from
+    /// the shadow registers in force.
+    pub fn update_period_cycles(&self) -> u64 {
+        self.tick_cycles() * (self.arr_sh as u64 + 1)
     }
 
     /// The next update event (overflow), a core cycle.
@@ -224,6 +231,20 @@ pub struct Dac {
     cal_flag_before: bool,
     /// A trigger happened with EN1 set.
     pub triggered_once: bool,
+    /// A trigger found HFSEL below what HCLK needs (flagged once).
+    pub hfsel_flagged: bool,
+}
+
+/// The DAC_MCR.HFSEL an AHB clock of `hclk` Hz needs at least (RM0440 DAC_MCR, "HFSEL: High
+/// frequency interface mode selection": 01 for AHB above 80 MHz, 10 above 160 MHz).
+pub fn dac_hfsel_needed(hclk: f64) -> u32 {
+    if hclk > 160e6 {
+        0b10
+    } else if hclk > 80e6 {
+        0b01
+    } else {
+        0
+    }
 }
 
 /// What a DAC register write means for the board.
@@ -236,6 +257,11 @@ pub struct DacWrite {
 }
 
 impl Dac {
+    /// DAC_MCR.HFSEL.
+    pub fn hfsel(&self) -> u32 {
+        (self.mcr >> 14) & 3
+    }
+
     fn cal_flag(&self, t: f64) -> bool {
         let now_flag = (self.ccr & 0x1F) >= DAC_OFFSET_TRIM;
         if t >= self.trim_valid_at {

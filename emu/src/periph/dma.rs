@@ -14,7 +14,8 @@
 //! the device data: ADC1 5, DAC1 CH1 6, ADC2 36, LPUART1 RX 34, LPUART1 TX 35. Leaves out
 //! synchronisation, event generation and the request generators (stored only).
 //!
-//! LPUART1 covers: UE/RE/TE with REACK/TEACK, BRR (baud = 256 × f_ck / BRR, f_ck = PCLK1),
+//! LPUART1 covers: UE/RE/TE with REACK/TEACK, BRR (baud = 256 × f_ck / BRR, f_ck the kernel
+//! clock CCIPR.LPUART1SEL selects),
 //! RX bytes from the harness at one frame time each (10 bits, 8N1), RDR/RXNE, ORE on a byte
 //! arriving with RXNE set (unless OVRDIS), IDLE one frame after the last byte, the RX DMA
 //! request (CR3.DMAR), the interrupt (RXNEIE, IDLEIE, EIE with ORE); TX bytes captured (TXE and TC
@@ -288,18 +289,23 @@ impl Lpuart {
         self.cr1 & 0b101 == 0b101
     }
 
-    /// The frame time at `pclk1` Hz, s (10 bits).
-    pub fn frame_s(&self, pclk1: f64) -> f64 {
+    /// The baud rate at kernel clock `f_ck` Hz (RM0440 LPUART "Baud rate generation":
+    /// 256 × f_ck / BRR; 0 with BRR 0).
+    pub fn baud(&self, f_ck: f64) -> f64 {
         if self.brr == 0 {
-            return f64::INFINITY;
+            return 0.0;
         }
-        let baud = 256.0 * pclk1 / self.brr as f64;
-        10.0 / baud
+        256.0 * f_ck / self.brr as f64
+    }
+
+    /// The frame time at kernel clock `f_ck` Hz, s (10 bits).
+    pub fn frame_s(&self, f_ck: f64) -> f64 {
+        10.0 / self.baud(f_ck)
     }
 
     /// Queue `bytes` arriving back to back from time `t0` at the present baud rate.
-    pub fn send(&mut self, t0: f64, bytes: &[u8], pclk1: f64) {
-        let frame = self.frame_s(pclk1);
+    pub fn send(&mut self, t0: f64, bytes: &[u8], f_ck: f64) {
+        let frame = self.frame_s(f_ck);
         let mut t = self.rx.back().map_or(t0, |(last, _)| last.max(t0));
         for &b in bytes {
             t += frame;
@@ -319,7 +325,7 @@ impl Lpuart {
     }
 
     /// Take the byte arriving by `t` into RDR; returns true if a DMA request is raised.
-    pub fn advance(&mut self, t: f64, pclk1: f64) -> bool {
+    pub fn advance(&mut self, t: f64, f_ck: f64) -> bool {
         let mut request = false;
         if let Some(&(at, b)) = self.rx.front() {
             if at <= t && self.receiving() {
@@ -334,7 +340,7 @@ impl Lpuart {
                         request = true;
                     }
                 }
-                self.idle_at = Some(at + self.frame_s(pclk1));
+                self.idle_at = Some(at + self.frame_s(f_ck));
             }
         }
         if let Some(at) = self.idle_at {

@@ -445,8 +445,8 @@ impl Peripherals {
                     }
                 }
                 3 => {
-                    let pclk1 = self.rcc.pclk1();
-                    if self.lpuart.advance(t, pclk1) {
+                    let f_ck = self.rcc.lpuart1_kernel_hz();
+                    if self.lpuart.advance(t, f_ck) {
                         self.request(dma::req::LPUART1_RX, at, mem);
                     }
                 }
@@ -466,6 +466,16 @@ impl Peripherals {
         let t = self.clock_seconds(at);
         let (out, req, violation) = self.dac1.trigger(analog::Trigger::Tim6Trgo);
         if let Some(v) = violation {
+            self.violate(at, v);
+        }
+        let need = analog::dac_hfsel_needed(self.rcc.hclk());
+        if out.is_some() && !self.dac1.hfsel_flagged && self.dac1.hfsel() < need {
+            self.dac1.hfsel_flagged = true;
+            let v = format!(
+                "DAC1 converting with DAC_MCR.HFSEL {:#04b} at HCLK {:.0} MHz, which needs {need:#04b} (RM0440 DAC_MCR)",
+                self.dac1.hfsel(),
+                self.rcc.hclk() / 1e6
+            );
             self.violate(at, v);
         }
         if let Some(code) = out {
@@ -776,10 +786,15 @@ impl Peripherals {
         ok.ok_or_else(|| format!("{dev:?} register +{word:#x} not modelled"))
     }
 
-    /// RCC writes with the clock-switch rules (RM0440 RCC "Clock switch" and PWR "Range 1 boost
-    /// mode": the sequence to a SYSCLK above 80 MHz divides the AHB by 2 before the switch and
-    /// holds it for at least 1 µs after; the flash latency and the voltage range must allow
-    /// the new HCLK before it applies).
+    /// RCC writes with the clock-switch rules: RM0440 6.1.5 (PWR "Dynamic voltage scaling
+    /// management", the range 1 boost sequence: 1. the AHB divided by 2 before the switch to a
+    /// higher frequency, 2. R1MODE cleared, 3. the wait states for the new frequency, 4. the
+    /// switch, 5. at least 1 µs, then the AHB prescaler for the target HCLK), checked as: a switch
+    /// to the PLL above 80 MHz with HPRE /1 in force breaks it (ST's HAL, `stm32g4xx_hal_rcc.c`
+    /// `HAL_RCC_ClockConfig`, takes the same 80 MHz threshold for its intermediate /2), and so
+    /// does HPRE back to /1 sooner than 1 µs after the switch; steps 2 and 3 as the flash
+    /// latency table for range 1 normal or boost (3.3.3, Table 9), which every HCLK must
+    /// satisfy when it applies.
     fn rcc_write(&mut self, off: u32, v: u32, now: u64) -> Option<()> {
         let t = self.clock_seconds(now);
         let hclk_before = self.rcc.hclk();
@@ -802,7 +817,7 @@ impl Peripherals {
             if self.rcc.sws() != sws_before && self.rcc.sws() == 3 && sysclk > 80e6 {
                 if hpre < 2 {
                     self.violate(now, format!(
-                        "SYSCLK switched to the PLL at {:.0} MHz with HPRE /1 in force (RM0440 PWR \"Range 1 boost mode\" / RCC: divide the AHB by 2 before switching above 80 MHz and wait 1 us before /1)",
+                        "SYSCLK switched to the PLL at {:.0} MHz with HPRE /1 in force (RM0440 6.1.5, range 1 boost sequence: divide the AHB by 2 before switching above 80 MHz and wait 1 us before /1)",
                         sysclk / 1e6
                     ));
                 } else {
@@ -812,7 +827,7 @@ impl Peripherals {
                 if let Some(at) = self.pll_switch_at.take() {
                     if t - at < 1e-6 {
                         self.violate(now, format!(
-                            "AHB back to /1 {:.3} us after the switch to the PLL (RM0440: at least 1 us)",
+                            "AHB back to /1 {:.3} us after the switch to the PLL (RM0440 6.1.5 step 5: at least 1 us)",
                             (t - at) * 1e6
                         ));
                     }
@@ -906,6 +921,85 @@ mod tests {
         assert_eq!(p.violations.len(), 2, "no new violation");
         // FLASHEN is set at reset (AHB1ENR reset value 0x100): FLASH_ACR is reachable.
         assert_eq!(p.read(0x4002_2000, 4, 14).unwrap(), 0x600);
+    }
+
+    const RCC: u32 = 0x4002_1000;
+    const CFGR: u32 = RCC + 0x08;
+    const FLASH_ACR: u32 = 0x4002_2000;
+    /// RCC_CFGR: SW = PLL (3).
+    const SW_PLL: u32 = 3;
+    /// RCC_CFGR.HPRE = /2 (code 8, bits 7:4).
+    const HPRE_DIV2: u32 = 8 << 4;
+
+    /// RM0440 6.1.5's steps 1–3 on a board at reset (HSI16): the 24 MHz HSE and the PLL at
+    /// 170 MHz ready, the AHB divided by 2, range 1 boost (R1MODE = 0), `ws` wait states; at
+    /// cycle 100.
+    fn ready_to_switch(ws: u32) -> Peripherals {
+        let mut p = Peripherals::default();
+        p.write(RCC + 0x58, 4, 1 << 28, 1).unwrap(); // APB1ENR1.PWREN
+        p.write(RCC, 4, (1 << 8) | (1 << 16), 2).unwrap(); // HSION, HSEON
+        p.write(RCC + 0x0C, 4, 3 | (5 << 4) | (85 << 8) | (1 << 24), 3)
+            .unwrap(); // HSE / 6 × 85 / 2, PLLREN
+        p.write(RCC, 4, (1 << 8) | (1 << 16) | (1 << 24), 4)
+            .unwrap(); // PLLON
+        p.write(CFGR, 4, 1 | HPRE_DIV2, 5).unwrap(); // step 1: AHB /2 on HSI16
+        p.write(0x4000_7080, 4, 0, 6).unwrap(); // step 2: PWR_CR5.R1MODE = 0 (boost)
+        p.write(FLASH_ACR, 4, 0x600 | ws, 7).unwrap(); // step 3: wait states
+        p
+    }
+
+    fn rules(p: &Peripherals) -> Vec<&str> {
+        p.violations.iter().map(|v| v.rule.as_str()).collect()
+    }
+
+    #[test]
+    fn the_switch_to_the_pll_in_one_write_with_the_ahb_at_1_breaks_the_boost_sequence() {
+        // embassy-stm32 0.6's `rcc::init` with `ahb_pre = DIV1`: 4 wait states, then SW = PLL and
+        // HPRE = /1 in one RCC_CFGR write. The AHB is never at /2 with the PLL applied.
+        let mut p = ready_to_switch(4);
+        p.write(CFGR, 4, SW_PLL, 100).unwrap();
+        assert!((p.rcc.hclk() - 170e6).abs() < 1.0);
+        let r = rules(&p);
+        assert_eq!(r.len(), 1, "{r:?}");
+        assert!(r[0].starts_with("SYSCLK switched to the PLL"), "{r:?}");
+    }
+
+    /// RM0440 6.1.5 steps 4 and 5 after [`ready_to_switch`] with 2 wait states: SYSCLK to the
+    /// PLL with the AHB at /2 at cycle 100 (HCLK 85 MHz), 4 wait states at cycle 110 if
+    /// `raise_ws`, HPRE = /1 `hold` cycles after the switch.
+    fn boost_switch(raise_ws: bool, hold: u64) -> Peripherals {
+        let mut p = ready_to_switch(2);
+        p.write(CFGR, 4, SW_PLL | HPRE_DIV2, 100).unwrap();
+        assert!((p.rcc.hclk() - 85e6).abs() < 1.0);
+        if raise_ws {
+            p.write(FLASH_ACR, 4, 0x600 | 4, 110).unwrap();
+        }
+        p.write(CFGR, 4, SW_PLL, 100 + hold).unwrap();
+        assert!((p.rcc.hclk() - 170e6).abs() < 1.0);
+        p
+    }
+
+    #[test]
+    fn the_ahb_back_to_1_within_1_us_of_the_switch_breaks_the_boost_sequence() {
+        // 42 cycles at 85 MHz: 0.49 µs.
+        let p = boost_switch(true, 42);
+        let r = rules(&p);
+        assert_eq!(r.len(), 1, "{r:?}");
+        assert!(r[0].starts_with("AHB back to /1 0.49"), "{r:?}");
+    }
+
+    #[test]
+    fn the_boost_sequence_with_the_hold_and_the_wait_states_breaks_no_rule() {
+        // As the board does it: 4 wait states, /1 1 µs (85 cycles at 85 MHz) after the switch.
+        assert_eq!(rules(&boost_switch(true, 85)), Vec::<&str>::new());
+        // With too few wait states for 170 MHz, /1 breaks the latency rule instead.
+        let p = boost_switch(false, 170);
+        let r = rules(&p);
+        assert!(
+            r.len() == 1
+                && r[0].starts_with("HCLK raised to 170000000 Hz with FLASH_ACR.LATENCY 2"),
+            "{r:?}"
+        );
     }
 
     #[test]

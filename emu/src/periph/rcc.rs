@@ -4,8 +4,8 @@
 //! RCC covers: HSI16/HSE/PLL/LSI/HSI48/LSE enables with their ready flags (ready at once, or
 //! never for an oscillator the board's fault injection removes), SW → SWS, the AHB/APB
 //! prescalers, the main PLL's R output, the peripheral clock enables and resets, CCIPR kernel
-//! clock selections, CSR's reset flags, the CSS enable. It derives HCLK and PCLK1 for the
-//! time base.
+//! clock selections (ADC12 and LPUART1 derived), CSR's reset flags, the CSS enable. It derives
+//! HCLK and PCLK1 for the time base.
 //! Leaves out: oscillator start-up times (ready at once), HSI/HSE trimming, the PLL's P and Q
 //! outputs' frequencies, MCO, the CSS detector itself (an HSE failure is a fault to inject, not
 //! modelled yet), low-power modes, the backup domain beyond LSE flags, the clock recovery
@@ -200,6 +200,17 @@ impl Rcc {
     pub fn adc12_kernel_hz(&self) -> f64 {
         match (self.ccipr >> 28) & 3 {
             2 => self.sysclk(),
+            _ => 0.0,
+        }
+    }
+
+    /// LPUART1's kernel clock selected in CCIPR.LPUART1SEL (bits 11:10), Hz: 0 PCLK1, 1 SYSCLK,
+    /// 2 HSI16, 3 LSE (not modelled: 0).
+    pub fn lpuart1_kernel_hz(&self) -> f64 {
+        match (self.ccipr >> 10) & 3 {
+            0 => self.pclk1(),
+            1 => self.sysclk(),
+            2 => HSI_HZ,
             _ => 0.0,
         }
     }

@@ -14,10 +14,12 @@
 //! (ADC1's ring) is the RTIC `sample` task; it runs embassy's DMA handler for that channel
 //! itself ([`Stream::capture`]).
 //!
-//! DMA transfer errors (TEIF on any of the four channels) are counted and cleared before
-//! embassy's DMA handler runs (embassy 0.6 panics on TEIF); DAC DMA underruns (DMAUDR1; embassy
-//! has no check) are read every batch. Either makes [`Stream::late`] true, is counted in
-//! [`stream_faults`] and stops TIM6, so readings stall rather than run on without drive.
+//! DMA transfer errors (TEIF on any of the board's six DMA1 channels) are counted and cleared
+//! before embassy's DMA handler runs (embassy 0.6 panics on TEIF); DAC DMA underruns (DMAUDR1;
+//! embassy has no check) are read every batch. Either makes [`Stream::late`] true, is counted in
+//! [`stream_faults`] and stops TIM6, so readings stall rather than run on without drive: after
+//! a transfer error they end as `dma_error` (`Failure::of_stall`), after an underrun as
+//! `drive_fault`.
 
 use crate::engine::{SampleEngine, BATCH};
 use crate::hal::{AdcFrame, FrontEndScale};
@@ -29,11 +31,11 @@ use embassy_stm32::dac::{DacChannel, Mode};
 use embassy_stm32::interrupt::typelevel::Handler;
 use embassy_stm32::mode::Async;
 use embassy_stm32::peripherals::{ADC1, ADC2, DMA1_CH1, TIM6};
-use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::{RoundTo, Timer};
 use embassy_stm32::{dma, interrupt, pac, peripherals, Peri};
 
-use super::interrupts::{DmaFaults, Irqs, DMA_TRANSFER_ERRORS};
+use super::clocks::{HCLK_HZ, TIM6_CLOCK_HZ};
+use super::interrupts::{DmaFaults, Irqs};
 use super::reset::record;
 use super::{elapsed, spin_until, stamp, BootError, SAMPLE_RATE_HZ, SCALE, SYSCLK_HZ};
 
@@ -44,7 +46,8 @@ static DAC_UNDERRUNS: AtomicU32 = AtomicU32::new(0);
 /// count the readings stall until reset.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct StreamFaults {
-    /// DMA1 transfer errors (TEIF) on channels 1–4 (ADC1, ADC2, DAC1, LPUART1 RX).
+    /// DMA1 transfer errors (TEIF) on channels 1–6 (ADC1, ADC2, DAC1, LPUART1 RX and TX, the
+    /// DAC driver's unused channel): any of them stops the stream.
     pub dma_transfer_errors: u32,
     /// DAC1 channel 1 DMA underruns (DMAUDR1).
     pub dac_underruns: u32,
@@ -53,7 +56,7 @@ pub struct StreamFaults {
 /// The stream's hardware fault counts (readable from any task).
 pub fn stream_faults() -> StreamFaults {
     StreamFaults {
-        dma_transfer_errors: DMA_TRANSFER_ERRORS.load(Ordering::Relaxed),
+        dma_transfer_errors: crate::counters::DMA_ERRORS.load(Ordering::Relaxed),
         dac_underruns: DAC_UNDERRUNS.load(Ordering::Relaxed),
     }
 }
@@ -173,7 +176,7 @@ impl Stream {
         // Gap: the DMA writes DHR12R1 only after the first trigger's request, so the first
         // trigger would move DHR's reset value 0 — a full-scale negative drive sample — to the
         // output (RM0440 22, DAC: with TEN1, DHR goes to DOR at the trigger; found by the
-        // emulated board's rule check, emu/). RAW 13/13: DAC_DHR12R1 = mid-scale (no drive)
+        // emulated board's rule check, emu/). RAW 13/16: DAC_DHR12R1 = mid-scale (no drive)
         // before the timer runs, a word write as the DAC requires.
         pac::DAC1.dhr12r(0).write(|w| w.set_dhr(DacCode::MID.0));
         hw.tim.start();
@@ -298,10 +301,22 @@ fn sync_adc2_dma() {
 /// is to be checked), at 170 MHz.
 const DAC_TRIM_CYCLES: u32 = SYSCLK_HZ / 20_000;
 
+/// DAC_MCR.HFSEL, the DAC's high-frequency interface mode, for an AHB clock of `hclk_hz`
+/// (RM0440 22, DAC: DAC_MCR): 00 up to 80 MHz, 01 above 80 MHz, 10 above 160 MHz.
+const fn dac_hfsel(hclk_hz: u32) -> u8 {
+    if hclk_hz > 160_000_000 {
+        0b10
+    } else if hclk_hz > 80_000_000 {
+        0b01
+    } else {
+        0
+    }
+}
+
 /// DAC_SR (RM0440 22, DAC: DAC_SR): CAL_FLAG1 for the calibration, DMAUDR1 for the
 /// stream. Gap: embassy-stm32 0.6's DAC driver reads neither.
 fn dac_sr() -> pac::dac::regs::Sr {
-    // RAW 9/13: DAC_SR read.
+    // RAW 9/16: DAC_SR read.
     pac::DAC1.sr().read()
 }
 
@@ -309,7 +324,7 @@ fn dac_sr() -> pac::dac::regs::Sr {
 /// 0.6 sets DMAEN1 only inside `DacChannel::write`, whose 16-bit DMA the G4's DAC refuses, and
 /// has no calibration.
 fn dac_cr(f: impl FnOnce(&mut pac::dac::regs::Cr)) {
-    // RAW 10/13: DAC_CR modify.
+    // RAW 10/16: DAC_CR modify.
     pac::DAC1.cr().modify(f);
 }
 
@@ -323,7 +338,7 @@ fn calibrate_dac() -> bool {
     dac_cr(|w| w.set_cen(0, true));
     let mut found = false;
     for trim in 0..32 {
-        // RAW 11/13: DAC_CCR.OTRIM1 (RM0440 22, DAC: DAC_CCR); OTRIM2 (channel 2, unused)
+        // RAW 11/16: DAC_CCR.OTRIM1 (RM0440 22, DAC: DAC_CCR); OTRIM2 (channel 2, unused)
         // written 0.
         pac::DAC1.ccr().write(|w| w.set_otrim(0, trim));
         cortex_m::asm::delay(DAC_TRIM_CYCLES);
@@ -355,10 +370,12 @@ pub(super) struct ConverterPins {
 /// Set up TIM6 (10 kHz TRGO, stopped), DAC1 CH1 (triggered, calibrated, its DMA channel in
 /// [`DAC_DMA`]) and the two ADC rings; [`Stream::start`] starts them.
 pub(super) fn converters(p: ConverterPins) -> Converters {
-    // TIM6: 10 kHz update, its update event as TRGO, not yet running.
+    // TIM6: 10 kHz update, its update event as TRGO, not yet running. Its period in clocks of
+    // the board's own TIM6_CLOCK_HZ: embassy's `set_frequency` would divide its record of the
+    // timer clock, which is halved (clocks.rs).
     let tim = Timer::new(p.tim6);
-    tim.set_frequency(Hertz(SAMPLE_RATE_HZ), RoundTo::Faster);
-    // Gap: embassy 0.6's low-level timer has no master-mode setter. RAW 7/13: TIM6_CR2.MMS =
+    tim.set_period_clocks(u64::from(TIM6_CLOCK_HZ / SAMPLE_RATE_HZ), RoundTo::Faster);
+    // Gap: embassy 0.6's low-level timer has no master-mode setter. RAW 7/16: TIM6_CR2.MMS =
     // update → TRGO (RM0440 "Basic timers (TIM6/TIM7)" chapter, TIMx_CR2;
     // its number unverified: docs/bringup.md).
     tim.regs_basic()
@@ -385,6 +402,10 @@ pub(super) fn converters(p: ConverterPins) -> Converters {
     // set. No trigger comes before TIM6 starts, so no DMA request before the transfer runs.
     dac.set_mode(Mode::NormalExternalBuffered);
     dac.set_triggering(true);
+    // Gap: embassy sets DAC_MCR.HFSEL from its record of HCLK, which is halved (clocks.rs): the
+    // mode for 80–160 MHz where HCLK is 170 MHz. RAW 16/16: DAC_MCR.HFSEL from the real HCLK
+    // ([`dac_hfsel`]), with the channel off.
+    pac::DAC1.mcr().modify(|w| w.set_hfsel(dac_hfsel(HCLK_HZ)));
     // A DAC whose calibration never settles is not trusted with the drive: the stream is not
     // started (readings end as `stalled`).
     let calibrated = calibrate_dac();

@@ -1,8 +1,8 @@
 //! The STM32G474RE board (NUCLEO-G474RE) on `embassy-stm32` 0.6: clocks, TIM6, DAC1, ADC1/ADC2
 //! on DMA ring buffers, the bank-2 flash of the calibration store, LPUART1 and the independent
 //! watchdog are embassy drivers, used from RTIC 2 tasks without an embassy executor. Raw
-//! register code remains only where embassy 0.6 lacks the feature: thirteen accesses, each
-//! marked `RAW n/13` with the gap and the RM0440 section, listed in `docs/bringup.md`. The
+//! register code remains only where embassy 0.6 lacks the feature: sixteen accesses, each
+//! marked `RAW n/16` with the gap and the RM0440 section, listed in `docs/bringup.md`. The
 //! HSE runs under the clock security system (CSSON with HSEON in one access); its NMI resets
 //! the core into a boot on HSI16 through the PLL ([`BootError::HseFailure`]).
 //!
@@ -17,8 +17,9 @@
 //! with a bounded wait (embassy's `rcc::init` waits for HSERDY without a bound, so it is handed
 //! the HSE only once it is known to run; otherwise the PLL runs from HSI16 and
 //! [`clock_source`] says so); `embassy_stm32::init` (PWR and FLASH clocked and reset, range 1
-//! boost, 4 wait states, PLL 170 MHz, ADC12 kernel clock = SYSCLK, DMA interrupt priority);
-//! flash prefetch; the option bytes' bank mode (embassy's `Flash::new_blocking` panics on a
+//! boost, the PLL at 170 MHz with the AHB at /2, ADC12 and LPUART1 kernel clocks = SYSCLK, DMA
+//! interrupt priority); the last step of the boost sequence (4 wait states, prefetch, 1 µs, AHB
+//! /1: HCLK 170 MHz); the option bytes' bank mode (embassy's `Flash::new_blocking` panics on a
 //! mismatch: checked first, [`BootError::FlashSingleBank`]); the converters; LPUART1 receive
 //! on a DMA ring and transmit by DMA. A failed step records a [`BootError`] (the first is kept, [`boot_error`]) and
 //! the board carries on degraded. Unverified on hardware.
@@ -28,7 +29,7 @@
 //! | module | what |
 //! |---|---|
 //! | `reset` | the first boot error, the boot-step marker a reset leaves, the reset cause, the CSS's NMI |
-//! | `clocks` | HSE or HSI16, the PLL at 170 MHz, the flash prefetch ([`clock_source`]) |
+//! | `clocks` | HSE or HSI16, the PLL at 170 MHz and the boost switch, the flash prefetch ([`clock_source`]) |
 //! | `interrupts` | DMA1 and LPUART1 bindings, the DMA transfer-error count |
 //! | `analog` | the sample stream: TIM6, DAC1, ADC1/ADC2 on DMA1 ([`Stream`], [`stream_faults`]) |
 //! | `store` | the store's bank-2 flash ([`InternalFlash`], [`STORE_BASE`]) |

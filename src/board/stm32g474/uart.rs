@@ -6,7 +6,7 @@ use embassy_stm32::mode::Async;
 use embassy_stm32::usart::{RingBufferedUartRx, Uart as Lpuart, UartTx};
 use embassy_stm32::{peripherals, Peri};
 
-use super::interrupts::Irqs;
+use super::interrupts::{take_rx_ring_failed, Irqs};
 use super::reset::record;
 use super::BootError;
 use crate::board::tx_queue;
@@ -36,8 +36,16 @@ impl Uart {
     /// The next received byte, if any (reading clears the receive interrupt). A receive error
     /// (overrun, noise, framing) is dropped and the read retried once: the lost byte shows up
     /// as a bad frame, which the host link reports.
+    ///
+    /// After a DMA transfer error stopped the ring's channel, the ring is started again first
+    /// (the error's handler pends this task's vector): embassy's ring would otherwise wait for
+    /// ever on a channel that no longer runs (its restart follows only a ring overrun it sees
+    /// itself).
     pub fn read_byte(&mut self) -> Option<u8> {
         let rx = self.0.as_mut()?;
+        if take_rx_ring_failed() {
+            rx.start_uart();
+        }
         for _ in 0..2 {
             match embedded_hal_nb::serial::Read::read(rx) {
                 Ok(b) => return Some(b),
