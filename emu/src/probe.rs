@@ -11,10 +11,28 @@
 //! whose 12-bit conversion is hal-sim's code. Periods in which the DAC is not updated (the drive
 //! stopped) run with the code held. The probe's sample rate is the front end's (10 kHz), which
 //! the image's TIM6 must match: the probe's time is counted in its own periods.
+//!
+//! The load cell: the scene's HX711 (`hal_sim::loadcell::Hx711Sim`, the chip the host and QEMU
+//! boards' firmware reads, with the cell's transfer, noise, drift and creep) on PB4 (`DOUT`, an
+//! input of the board) and PB5 (`PD_SCK`, an output), powered with the board at `t = 0` and
+//! settling before its first conversion. Its time is the core clock's: at every access of the
+//! board to port B (a read of IDR, a write that may change PB5) the chip is advanced to that
+//! instant with the probe's contact force of the moment, the time `PD_SCK` stayed high is
+//! counted (high beyond 60 µs powers it down), then the clock edge is applied. Data bits change
+//! on `PD_SCK`'s rising edge, MSB first; the 25th pulse ends the read. Left out (the chip model's
+//! own, `hal-sim/src/loadcell.rs`): the 26th and 27th pulses' channel and gain selection (every
+//! read is channel A at gain 128), the RATE pin (the cell's rate, 80 SPS), the chip's own
+//! timing limits on `PD_SCK` (minimum high and low times, data-ready to first edge), and the
+//! vibration of the probe in the cell's signal. A `PD_SCK` pin not in output mode is low.
 
+use core::cell::RefCell;
+
+use embedded_hal::delay::DelayNs;
+use embedded_hal::digital::{InputPin, OutputPin};
+use hal_sim::loadcell::{Delay, Dout, Hx711Sim, Sck};
 use hal_sim::{AdcPair, Scene, SimProbe};
 
-use crate::periph::{Analog, Pin, VREF};
+use crate::periph::{Pin, Wiring, VREF};
 
 /// hal-sim's probe wired to DAC1 OUT1, PA0 and PA1.
 pub struct HalSimProbe {
@@ -25,25 +43,72 @@ pub struct HalSimProbe {
     period_start: Option<f64>,
     period_s: f64,
     pair: AdcPair,
+    /// The scene's load cell (`None`: the scene has none; `DOUT` then reads its pull-up).
+    chip: Option<RefCell<Hx711Sim>>,
+    /// The level on `PD_SCK`.
+    sck: bool,
+    /// Time of the chip's last pin event, s.
+    pins_t: f64,
 }
+
+/// The HX711's pins: port B (index 1), `DOUT` on PB4, `PD_SCK` on PB5 (docs/firmware.md,
+/// "Load cell").
+const LOAD_CELL_PORT: usize = 1;
+const DOUT_PIN: u32 = 4;
+const SCK_PIN: u32 = 5;
 
 impl HalSimProbe {
     /// The hal-sim probe at `m`'s analog pins (`None` when another front end, or none, is wired).
     pub fn at_pins(m: &mut crate::Machine) -> Option<&mut HalSimProbe> {
-        let any: &mut dyn std::any::Any = m.board_mut().periph.analog.as_mut();
+        let any: &mut dyn std::any::Any = m.board_mut().periph.wiring.as_mut();
         any.downcast_mut::<HalSimProbe>()
     }
 
     /// The probe on `scene` with noise seed `seed`.
     pub fn new(scene: Scene, seed: u64) -> HalSimProbe {
         let period_s = scene.front_end.dt();
+        let probe = SimProbe::new(scene, seed);
+        let chip = probe.load_cell_at_power_on().map(RefCell::new);
         HalSimProbe {
-            probe: SimProbe::new(scene, seed),
+            probe,
             code: hal_sim::frontend::MID_CODE,
             period_start: None,
             period_s,
             pair: AdcPair::default(),
+            chip,
+            sck: false,
+            pins_t: 0.0,
         }
+    }
+
+    /// The scene called `name`: `free-air` (the probe lifted), a phantom of hal-sim's
+    /// (`B`: the bench scene on it, 30 mN), a phantom pressed at another force (`B@8`: at
+    /// 8 mN), or a known weight resting on the tip (`weight:10`: 10 g, as `weigh 10` expects);
+    /// `None` for any other name.
+    pub fn scene_named(name: &str) -> Option<Scene> {
+        if let Some(grams) = name.strip_prefix("weight:") {
+            let g: f64 = grams.parse().ok().filter(|g: &f64| *g > 0.0)?;
+            return Some(
+                Self::bench_scene(None)
+                    .weighing(g * 1e-3 * hal_sim::loadcell::STANDARD_GRAVITY_M_S2),
+            );
+        }
+        let (on, force) = match name.split_once('@') {
+            Some((on, mn)) => (
+                on,
+                Some(mn.parse::<f64>().ok().filter(|f| *f >= 0.0)? * 1e-3),
+            ),
+            None => (name, None),
+        };
+        let scene = if on == "free-air" {
+            Self::bench_scene(None)
+        } else {
+            Self::bench_scene(Some(&hal_sim::phantoms::by_name(on)?))
+        };
+        Some(match force {
+            Some(f) => scene.with_preload_n(f),
+            None => scene,
+        })
     }
 
     /// The QEMU board's power-on scene on phantom `p` (`None`: free air): pressed at 30 mN,
@@ -73,6 +138,20 @@ impl HalSimProbe {
         &self.probe
     }
 
+    /// The load cell's chip at time `t`: the time `PD_SCK` stayed high since the last pin event
+    /// counted, then the conversions due by `t` made with the contact force of the moment.
+    fn chip_at(&mut self, t: f64) -> Option<&RefCell<Hx711Sim>> {
+        let chip = self.chip.as_ref()?;
+        if t > self.pins_t {
+            // (Held beyond 4 s the chip is down either way: 60 µs power it down.)
+            let ns = ((t - self.pins_t) * 1e9).min(u32::MAX as f64) as u32;
+            Delay(chip).delay_ns(ns);
+            self.pins_t = t;
+        }
+        chip.borrow_mut().advance(t, self.probe.contact_force_n());
+        Some(chip)
+    }
+
     fn step(&mut self) {
         let mut pair = [AdcPair::default()];
         self.probe.exchange(&[self.code], &mut pair);
@@ -93,7 +172,7 @@ impl HalSimProbe {
     }
 }
 
-impl Analog for HalSimProbe {
+impl Wiring for HalSimProbe {
     fn dac_output(&mut self, t: f64, volts: f64) {
         self.catch_up(t);
         self.code = (volts / VREF * 4096.0).round().clamp(0.0, 4095.0) as u16;
@@ -114,5 +193,33 @@ impl Analog for HalSimProbe {
         };
         // The middle of the code's interval: the 12-bit conversion gives the code back.
         (code as f64 + 0.5) * VREF / 4096.0
+    }
+
+    fn gpio_outputs(&mut self, t: f64, port: usize, mask: u32, levels: u32) {
+        if port != LOAD_CELL_PORT {
+            return;
+        }
+        let high = mask & levels & (1 << SCK_PIN) != 0;
+        if high == self.sck {
+            return;
+        }
+        self.sck = high;
+        if let Some(chip) = self.chip_at(t) {
+            let mut sck = Sck(chip);
+            let _ = if high { sck.set_high() } else { sck.set_low() };
+        }
+    }
+
+    fn gpio_inputs(&mut self, t: f64, port: usize) -> (u32, u32) {
+        if port != LOAD_CELL_PORT {
+            return (0, 0);
+        }
+        match self.chip_at(t) {
+            Some(chip) => {
+                let high = Dout(chip).is_high().unwrap_or(true);
+                (1 << DOUT_PIN, (high as u32) << DOUT_PIN)
+            }
+            None => (0, 0),
+        }
     }
 }

@@ -17,10 +17,13 @@
 //! LPUART1 covers: UE/RE/TE with REACK/TEACK, BRR (baud = 256 × f_ck / BRR, f_ck = PCLK1),
 //! RX bytes from the harness at one frame time each (10 bits, 8N1), RDR/RXNE, ORE on a byte
 //! arriving with RXNE set (unless OVRDIS), IDLE one frame after the last byte, the RX DMA
-//! request (CR3.DMAR), the interrupt (RXNEIE, IDLEIE, EIE with ORE); TX bytes captured (TXE and TC
-//! always set). Leaves out: FIFO mode, parity, 9-bit and 7-bit words, stop bits other than
-//! one, noise/framing errors, auto baud, wake-up, the prescaler (PRESC stored, taken as 1), the
-//! TX timing.
+//! request (CR3.DMAR), the interrupt (RXNEIE, IDLEIE, EIE with ORE); TX: a byte written to TDR
+//! is captured and takes one frame time on the line, TXE and TC clear meanwhile, and with
+//! CR3.DMAT set (and TE, UE) a free transmitter requests the next byte from the DMA (LPUART1
+//! TX). Leaves out: FIFO mode, parity, 9-bit and 7-bit words, stop bits other than one,
+//! noise/framing errors, auto baud, wake-up, the prescaler (PRESC stored, taken as 1), the TX
+//! double buffering (TDR takes the next byte only once the previous one is sent: TXE and TC
+//! fall together), the TX interrupts (TXEIE, TCIE).
 
 /// DMAMUX request IDs (device data `request:`).
 pub mod req {
@@ -189,16 +192,20 @@ impl Dma {
                 let c = &mut self.ch[n];
                 let enabled = c.ccr & 1 != 0;
                 let name = ["CCR", "CNDTR", "CPAR", "CMAR", "?"][(reg / 4) as usize];
+                // A CCR write that clears EN is the channel's disable: its other bits are
+                // read-only while EN = 1 (RM0440 DMA_CCRx) and keep their values, which is no
+                // reconfiguration of an enabled channel.
                 let changed = match reg {
-                    0 => (c.ccr ^ v) & 0x7FFE != 0,
+                    0 => v & 1 != 0 && (c.ccr ^ v) & 0x7FFE != 0,
                     4 => c.ndtr != v & 0xFFFF,
                     8 => c.par != v,
                     12 => c.mar != v,
                     _ => false,
                 };
+                let before = [c.ccr, c.ndtr, c.par, c.mar, 0][(reg / 4) as usize];
                 let violation = (enabled && changed).then(|| {
                     format!(
-                        "DMA1 channel {} {name} changed while the channel is enabled (RM0440 DMA: configured only with EN = 0)",
+                        "DMA1 channel {} {name} changed from {before:#x} to {v:#x} while the channel is enabled (RM0440 DMA: configured only with EN = 0)",
                         n + 1
                     )
                 });
@@ -207,7 +214,7 @@ impl Dma {
                         if v & 1 != 0 && !enabled {
                             c.done = 0;
                         }
-                        if violation.is_none() || reg != 0 {
+                        if !enabled {
                             c.ccr = v & 0x7FFF;
                         } else {
                             // Only EN (and the interrupt enables) take effect while enabled.
@@ -276,6 +283,8 @@ pub struct Lpuart {
     pub rx: std::collections::VecDeque<(f64, u8)>,
     /// When IDLE rises (s), after the last byte.
     idle_at: Option<f64>,
+    /// The byte on the TX line is sent at this time (s); `None`: the transmitter is free.
+    tx_busy_until: Option<f64>,
     /// A DMA request for the byte in RDR, not yet served.
     pub dma_pending: bool,
     /// Bytes the image transmitted.
@@ -307,19 +316,31 @@ impl Lpuart {
         }
     }
 
-    /// The next event: a byte arriving or the idle line, s.
+    /// The next event: a byte arriving, the idle line, the TX byte sent, s.
     pub fn next_event(&self) -> Option<f64> {
-        if !self.receiving() {
-            return None;
-        }
-        [self.rx.front().map(|r| r.0), self.idle_at]
+        let rx = self
+            .receiving()
+            .then(|| [self.rx.front().map(|r| r.0), self.idle_at])
             .into_iter()
-            .flatten()
-            .reduce(f64::min)
+            .flatten();
+        rx.chain([self.tx_busy_until]).flatten().reduce(f64::min)
+    }
+
+    /// The transmitter asks the DMA for a byte: DMAT, TE and UE set, no byte on the line.
+    pub fn tx_request(&self) -> bool {
+        self.cr3 & (1 << 7) != 0 && self.cr1 & 0b1001 == 0b1001 && self.tx_busy_until.is_none()
+    }
+
+    /// The byte on the TX line sent by `t`: the transmitter is free.
+    fn tx_advance(&mut self, t: f64) {
+        if self.tx_busy_until.is_some_and(|u| u <= t) {
+            self.tx_busy_until = None;
+        }
     }
 
     /// Take the byte arriving by `t` into RDR; returns true if a DMA request is raised.
     pub fn advance(&mut self, t: f64, pclk1: f64) -> bool {
+        self.tx_advance(t);
         let mut request = false;
         if let Some(&(at, b)) = self.rx.front() {
             if at <= t && self.receiving() {
@@ -369,9 +390,10 @@ impl Lpuart {
             0x10 | 0x14 | 0x18 | 0x20 => 0,
             0x1C => {
                 let ue = self.cr1 & 1 != 0;
+                let tx_free = (self.tx_busy_until.is_none() as u32) << 7
+                    | (self.tx_busy_until.is_none() as u32) << 6;
                 self.isr
-                    | (1 << 7) // TXE
-                    | (1 << 6) // TC
+                    | tx_free // TXE, TC
                     | ((ue && self.cr1 & 8 != 0) as u32) << 21
                     | ((ue && self.cr1 & 4 != 0) as u32) << 22
             }
@@ -385,8 +407,8 @@ impl Lpuart {
         })
     }
 
-    /// Register write.
-    pub fn write(&mut self, off: u32, v: u32) -> Option<()> {
+    /// Register write at time `t` (s), PCLK1 at `pclk1` Hz.
+    pub fn write(&mut self, off: u32, v: u32, t: f64, pclk1: f64) -> Option<()> {
         match off {
             0x00 => self.cr1 = v,
             0x04 => self.cr2 = v,
@@ -399,7 +421,10 @@ impl Lpuart {
                 }
             }
             0x20 => self.isr &= !(v & ((1 << 3) | (1 << 4) | 0b111)),
-            0x28 => self.tx.push(v as u8),
+            0x28 => {
+                self.tx.push(v as u8);
+                self.tx_busy_until = Some(t + self.frame_s(pclk1));
+            }
             0x2C => self.presc = v & 0xF,
             _ => return None,
         }
@@ -447,10 +472,10 @@ mod tests {
     #[test]
     fn lpuart_bytes_arrive_a_frame_apart_then_idle() {
         let mut u = Lpuart::default();
-        u.write(0x0C, 0x369).unwrap(); // BRR for 115 200 Bd at ~42.5 MHz? any value
-        u.write(0x08, 1 << 6).unwrap();
-        u.write(0x00, 0b101 | (1 << 4)).unwrap();
         let pclk = 170e6;
+        u.write(0x0C, 0x369, 0.0, pclk).unwrap(); // BRR for 115 200 Bd at ~42.5 MHz? any value
+        u.write(0x08, 1 << 6, 0.0, pclk).unwrap();
+        u.write(0x00, 0b101 | (1 << 4), 0.0, pclk).unwrap();
         let frame = u.frame_s(pclk);
         u.send(0.0, b"ab", pclk);
         assert!((u.next_event().unwrap() - frame).abs() < 1e-15);
@@ -460,5 +485,31 @@ mod tests {
         assert!(!u.irq(), "no idle yet");
         assert!(!u.advance(3.0 * frame, pclk));
         assert!(u.irq(), "IDLE with IDLEIE");
+    }
+
+    /// RM0440 LPUART "Transmission using DMA": with DMAT, TE and UE the free transmitter
+    /// requests a byte; a byte written to TDR takes one frame (10 bits at 256 × f_ck / BRR baud)
+    /// during which TXE and TC read clear and nothing is requested.
+    #[test]
+    fn lpuart_sends_a_byte_per_frame_time_on_dma_requests() {
+        let mut u = Lpuart::default();
+        let pclk = 170e6;
+        // BRR for 115 200 Bd: 256 × 170 MHz / 115 200.
+        let brr = (256.0 * pclk / 115_200.0_f64).round() as u32;
+        u.write(0x0C, brr, 0.0, pclk).unwrap();
+        u.write(0x00, 0b1001, 0.0, pclk).unwrap();
+        assert!(!u.tx_request(), "no DMAT: no request");
+        u.write(0x08, 1 << 7, 0.0, pclk).unwrap();
+        assert!(u.tx_request());
+        u.write(0x28, 0x5A, 1e-3, pclk).unwrap();
+        let frame = 10.0 / 115_200.0;
+        assert!(!u.tx_request());
+        assert_eq!(u.read(0x1C).unwrap() & (3 << 6), 0, "TXE and TC clear");
+        let sent = u.next_event().unwrap();
+        assert!((sent - (1e-3 + frame)).abs() < 1e-9, "{sent}");
+        u.advance(sent, pclk);
+        assert!(u.tx_request());
+        assert_eq!(u.read(0x1C).unwrap() & (3 << 6), 3 << 6);
+        assert_eq!(u.tx, [0x5A]);
     }
 }
