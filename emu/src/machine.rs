@@ -829,8 +829,7 @@ impl Machine {
     pub fn uart_send(&mut self, bytes: &[u8]) {
         let b = self.board_mut();
         let t = b.seconds();
-        let pclk1 = b.periph.rcc.pclk1();
-        b.periph.lpuart.send(t, bytes, pclk1);
+        b.periph.lpuart.send(t, bytes);
     }
 
     /// Send the command line `line` as the host link does (`docs/protocol.md`): one

@@ -469,6 +469,9 @@ impl Peripherals {
                     if self.lpuart.advance(t, pclk1) {
                         self.request(dma::req::LPUART1_RX, at, mem);
                     }
+                    if let Some(rule) = self.lpuart.rate_mismatch.take() {
+                        self.violate(at, rule);
+                    }
                     if self.lpuart.tx_request() {
                         self.request(dma::req::LPUART1_TX, at, mem);
                     }
