@@ -157,7 +157,7 @@ pub(crate) fn stream_readings(
     let start = origin.or(end.start_s).unwrap_or(0.0);
     if !json {
         println!(
-            "  the firmware: {} readings, {} ok, {} dropped (report channel full), most work from a window to the next plan {} instructions",
+            "  the firmware: {} readings, {} ok, {} dropped (report channel full), most work from a window to the next plan {} (the image's counter unit: instructions in QEMU, cycles on the STM32)",
             end.readings, end.ok, end.dropped, end.plan_work
         );
     }

@@ -852,19 +852,27 @@ mod tests {
         assert_eq!(a.isr & 1, 1, "ADRDY");
     }
 
-    #[test]
-    fn adc_converts_on_trigger_with_sampling_plus_12_5_clocks() {
-        let hz = 42.5e6;
+    /// CFGR of the board's rings: EXTSEL 13 (TIM6_TRGO) rising, DMA circular.
+    const RING_CFGR: u32 = (ADC_EXTSEL_TIM6_TRGO << 5) | (1 << 10) | 3;
+
+    /// An ADC enabled at `hz` converting IN1 with SMP = 47.5 clocks, CFGR `cfgr`, started
+    /// (ADSTART) at 1 ms, triggered by TIM6 at 2 ms.
+    fn triggered_adc(hz: f64, cfgr: u32) -> Adc {
         let mut a = Adc::default();
         a.write(0x08, 1 << 28, 0.0, hz).unwrap();
         a.write(0x08, (1 << 28) | 1, 1e-3, hz).unwrap();
-        // IN1, SMP = 47.5 clocks, EXTSEL 13 rising, DMA circular.
         a.write(0x30, 1 << 6, 1e-3, hz).unwrap();
         a.write(0x14, 4 << 3, 1e-3, hz).unwrap();
-        a.write(0x0C, (ADC_EXTSEL_TIM6_TRGO << 5) | (1 << 10) | 3, 1e-3, hz)
-            .unwrap();
+        a.write(0x0C, cfgr, 1e-3, hz).unwrap();
         a.write(0x08, (1 << 28) | 4, 1e-3, hz).unwrap();
         a.trigger(Trigger::Tim6Trgo, 2e-3, hz);
+        a
+    }
+
+    #[test]
+    fn adc_converts_on_trigger_with_sampling_plus_12_5_clocks() {
+        let hz = 42.5e6;
+        let mut a = triggered_adc(hz, RING_CFGR);
         let (s, e) = a.converting.unwrap();
         assert!((s - (2e-3 + 47.5 / hz)).abs() < 1e-15);
         assert!((e - (2e-3 + 60.0 / hz)).abs() < 1e-15);
@@ -879,15 +887,8 @@ mod tests {
     #[test]
     fn adc_resolution_sets_the_code_and_the_conversion_time() {
         let hz = 42.5e6;
-        let mut a = Adc::default();
-        a.write(0x08, 1 << 28, 0.0, hz).unwrap();
-        a.write(0x08, (1 << 28) | 1, 1e-3, hz).unwrap();
-        a.write(0x30, 1 << 6, 1e-3, hz).unwrap();
-        a.write(0x14, 4 << 3, 1e-3, hz).unwrap();
-        let cfgr = (ADC_EXTSEL_TIM6_TRGO << 5) | (1 << 10) | 3;
-        a.write(0x0C, cfgr | (1 << 3), 1e-3, hz).unwrap();
-        a.write(0x08, (1 << 28) | 4, 1e-3, hz).unwrap();
-        a.trigger(Trigger::Tim6Trgo, 2e-3, hz);
+        let cfgr = RING_CFGR;
+        let mut a = triggered_adc(hz, cfgr | (1 << 3));
         let (_, e) = a.converting.unwrap();
         assert!((e - (2e-3 + 58.0 / hz)).abs() < 1e-15);
         assert!(a.finish(0xABC, hz));
