@@ -36,15 +36,7 @@ use pzt_probe::Siemens;
 const FREE_HZ: f32 = 232.3;
 
 fn truth() -> ContactLaw {
-    ContactLaw {
-        free_hz: FREE_HZ as f64,
-        p: [13.44, 9.26, 4.88],
-        cov: [[0.0; 3]; 3],
-        model_sigma_hz: 0.0,
-        min_kpa: 100.0,
-        max_kpa: 3000.0,
-        force_n: 0.030,
-    }
+    ContactLaw::exact(FREE_HZ as f64, [13.44, 9.26, 4.88], (100.0, 3000.0), 0.030)
 }
 
 /// A small deterministic generator in [-1, 1).

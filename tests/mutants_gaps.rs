@@ -144,14 +144,16 @@ fn contact_condition_holds_within_twenty_percent() {
     let m = q_model();
     assert!((m.q_at(1000.0, None, None) - 20.0).abs() < 1e-12);
     assert!((m.q_at(100.0, None, None) - 10.0).abs() < 1e-12);
-    assert!(m.holds(1000.0, None, 20.0, None));
-    assert!(m.holds(1000.0, None, 23.9, None)); // +19.5 %
-    assert!(m.holds(1000.0, None, 16.1, None)); // −19.5 %
-    assert!(!m.holds(1000.0, None, 24.1, None)); // +20.5 %
-    assert!(!m.holds(1000.0, None, 15.9, None)); // −20.5 %
-                                                 // Where the model expects no positive Q (E below e^1 = 2.7 kPa here), nothing holds.
+    assert!(m.deviation(1000.0, None, 20.0, None).holds());
+    assert!(m.deviation(1000.0, None, 23.9, None).holds()); // +19.5 %
+    assert!(m.deviation(1000.0, None, 16.1, None).holds()); // −19.5 %
+    assert!(!m.deviation(1000.0, None, 24.1, None).holds()); // +20.5 %
+    assert!(!m.deviation(1000.0, None, 15.9, None).holds()); // −20.5 %
+                                                             // Where the model expects no positive Q (E below e^1 = 2.7 kPa here), nothing holds.
     assert!(m.q_at(2.0, None, None) < 0.0);
-    assert!(!m.holds(2.0, None, m.q_at(2.0, None, None), None));
+    assert!(!m
+        .deviation(2.0, None, m.q_at(2.0, None, None), None)
+        .holds());
 
     // Through the pipeline: off-condition contact is `bad_contact`, not a modulus.
     let f = f_of(1000.0);

@@ -18,6 +18,7 @@
 //! the sweep is kept with it. `boot` and `stalled` abandon a sweep in progress.
 #![allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > y)` also rejects NaN, deliberately
 
+use probe_proto::ReadingMsg;
 use std::fmt;
 
 /// The firmware's log formats (defmt format strings), one per message kind.
@@ -194,6 +195,14 @@ pub struct Message {
 }
 
 impl Message {
+    /// The message as logged: its kind and values (`kind key=value ...`).
+    pub fn text(&self) -> String {
+        let mut t = self.kind.clone();
+        for (k, v) in &self.fields {
+            t += &format!(" {k}={}", v.render());
+        }
+        t
+    }
     /// The value of `key`.
     pub fn get(&self, key: &str) -> Option<&Value> {
         self.fields.iter().find(|(k, _)| k == key).map(|(_, v)| v)
@@ -459,30 +468,13 @@ pub struct LoggedPoint {
     pub sigma_s: f32,
 }
 
-/// Sweep settings in force.
-#[derive(Clone, Debug, PartialEq)]
-pub struct LoggedSettings {
-    /// Line of the `settings` message.
-    pub line: usize,
-    /// Method.
-    pub method: String,
-    /// Start, Hz.
-    pub start_hz: Option<f32>,
-    /// Stop, Hz.
-    pub stop_hz: Option<f32>,
-    /// Step, Hz.
-    pub step_hz: Option<f32>,
-    /// Drive, V.
-    pub drive_v: Option<f32>,
-}
-
 /// The points one measurement logged.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LoggedSweep {
     /// Line of its first point.
     pub first_line: usize,
-    /// Settings in force when it started.
-    pub settings: Option<LoggedSettings>,
+    /// The `settings` message in force when it started (`method`, `start_hz`, ...).
+    pub settings: Option<Message>,
     /// Points, in log order.
     pub points: Vec<LoggedPoint>,
     /// Index of the reading that closed it (`None`: abandoned or the log ended).
@@ -496,49 +488,11 @@ pub struct LoggedReading {
     pub line: usize,
     /// Timestamp, s.
     pub time_s: Option<f64>,
-    /// `ok` or the failure code.
-    pub status: String,
-    /// Resonance, Hz.
-    pub f_hz: Option<f32>,
-    /// Its standard uncertainty, Hz.
-    pub f_sigma_hz: Option<f32>,
-    /// Modulus, kPa.
-    pub e_kpa: Option<f32>,
-    /// Its standard uncertainty, kPa.
-    pub e_sigma_kpa: Option<f32>,
-    /// Its repeatability part, kPa.
-    pub e_repeat_kpa: Option<f32>,
-    /// Quality factor.
-    pub q: Option<f32>,
-    /// Probe time, s.
-    pub probe_time_s: Option<f32>,
-    /// Points.
-    pub points: u32,
-    /// Method.
-    pub method: String,
-    /// Contact force, N.
-    pub force_n: Option<f32>,
-    /// Its standard uncertainty, N.
-    pub force_sigma_n: Option<f32>,
-    /// The tissue's loss tangent.
-    pub loss: Option<f32>,
-    /// Its standard uncertainty.
-    pub loss_sigma: Option<f32>,
+    /// Its fields, as the link's reading message carries them: a value the line has not (or
+    /// logged as `NaN`) `None`, a missing probe time `NaN`, a missing point count 0.
+    pub msg: ReadingMsg<String>,
     /// Index of its sweep, when points were logged.
     pub sweep: Option<usize>,
-}
-
-/// A notable event (warnings and errors of the firmware).
-#[derive(Clone, Debug, PartialEq)]
-pub struct LoggedEvent {
-    /// Line.
-    pub line: usize,
-    /// Timestamp, s.
-    pub time_s: Option<f64>,
-    /// Level.
-    pub level: Option<Level>,
-    /// The message as logged (kind and values).
-    pub text: String,
 }
 
 /// One logged reading of a continuous stream (`stream seq=…` line).
@@ -599,15 +553,18 @@ impl LoggedStream {
     pub fn ok(&self) -> usize {
         self.readings
             .iter()
-            .filter(|r| r.reading.status == "ok")
+            .filter(|r| r.reading.msg.status == "ok")
             .count()
     }
     /// Probe time of the start (the end line's) or of the first reading's start, s.
     pub fn start_s(&self) -> Option<f32> {
         self.end.as_ref().and_then(|e| e.start_s).or_else(|| {
-            self.readings
-                .first()
-                .map(|r| r.t_s - r.reading.probe_time_s.unwrap_or(0.0))
+            self.readings.first().map(|r| {
+                r.t_s
+                    - Some(r.reading.msg.probe_time_s)
+                        .filter(|p| p.is_finite())
+                        .unwrap_or(0.0)
+            })
         })
     }
     /// `ok` readings per second of probe time from `after_s` past the start to the last
@@ -618,7 +575,7 @@ impl LoggedStream {
         let n = self
             .readings
             .iter()
-            .filter(|r| r.t_s > from && r.reading.status == "ok")
+            .filter(|r| r.t_s > from && r.reading.msg.status == "ok")
             .count();
         (last > from).then(|| n as f64 / (last - from) as f64)
     }
@@ -633,8 +590,8 @@ pub struct Session {
     pub streams: Vec<LoggedStream>,
     /// Sweeps in order.
     pub sweeps: Vec<LoggedSweep>,
-    /// Warnings and errors, and boots.
-    pub events: Vec<LoggedEvent>,
+    /// Notable messages: warnings and errors, rejections, overruns, stalls, and boots.
+    pub events: Vec<Message>,
     /// Messages recognised.
     pub messages: usize,
     /// Lines that were no firmware message.
@@ -648,22 +605,7 @@ impl LoggedReading {
     /// through the same JSON as a host reading); `None` when its status or method is unknown.
     /// The same conversion as a reading received on the link ([`crate::link::reading_of`]).
     pub fn to_reading(&self) -> Option<pzt_probe::Reading> {
-        crate::link::reading_of(&probe_proto::ReadingMsg {
-            status: &self.status,
-            method: &self.method,
-            f_hz: self.f_hz,
-            f_sigma_hz: self.f_sigma_hz,
-            e_kpa: self.e_kpa,
-            e_sigma_kpa: self.e_sigma_kpa,
-            e_repeat_kpa: self.e_repeat_kpa,
-            q: self.q,
-            loss_tangent: self.loss,
-            loss_tangent_sigma: self.loss_sigma,
-            force_n: self.force_n,
-            force_sigma_n: self.force_sigma_n,
-            probe_time_s: self.probe_time_s.unwrap_or(f32::NAN),
-            points: self.points.min(u16::MAX as u32) as u16,
-        })
+        crate::link::reading_of(&self.msg)
     }
 }
 
@@ -672,20 +614,24 @@ fn reading_of(m: &Message, sweep: Option<usize>) -> LoggedReading {
     LoggedReading {
         line: m.line,
         time_s: m.time_s,
-        status: m.str("status").unwrap_or_default().to_owned(),
-        f_hz: m.f32("f_hz"),
-        f_sigma_hz: m.f32("f_sigma_hz"),
-        e_kpa: m.f32("e_kpa"),
-        e_sigma_kpa: m.f32("e_sigma_kpa"),
-        e_repeat_kpa: m.f32("e_repeat_kpa"),
-        q: m.f32("q"),
-        probe_time_s: m.f32("probe_time_s"),
-        points: m.uint("points").unwrap_or(0),
-        method: m.str("method").unwrap_or_default().to_owned(),
-        force_n: m.f32("force_n"),
-        force_sigma_n: m.f32("force_sigma_n"),
-        loss: m.f32("loss"),
-        loss_sigma: m.f32("loss_sigma"),
+        msg: ReadingMsg {
+            status: m.str("status").unwrap_or_default().to_owned(),
+            method: m.str("method").unwrap_or_default().to_owned(),
+            f_hz: m.f32("f_hz"),
+            f_sigma_hz: m.f32("f_sigma_hz"),
+            e_kpa: m.f32("e_kpa"),
+            e_sigma_kpa: m.f32("e_sigma_kpa"),
+            e_repeat_kpa: m.f32("e_repeat_kpa"),
+            q: m.f32("q"),
+            loss_tangent: m.f32("loss"),
+            loss_tangent_sigma: m.f32("loss_sigma"),
+            force_n: m.f32("force_n"),
+            force_sigma_n: m.f32("force_sigma_n"),
+            probe_time_s: m.f32("probe_time_s").unwrap_or(f32::NAN),
+            points: m
+                .uint("points")
+                .map_or(0, |n| n.min(u16::MAX as u32) as u16),
+        },
         sweep,
     }
 }
@@ -694,7 +640,7 @@ fn reading_of(m: &Message, sweep: Option<usize>) -> LoggedReading {
 pub fn parse_log(text: &str) -> Session {
     let templates = compiled();
     let mut s = Session::default();
-    let mut settings: Option<LoggedSettings> = None;
+    let mut settings: Option<Message> = None;
     let mut open: Option<LoggedSweep> = None;
     for (k, raw) in text.lines().enumerate() {
         let line = k + 1;
@@ -712,23 +658,9 @@ pub fn parse_log(text: &str) -> Session {
             }
         };
         s.messages += 1;
-        let text_of = |m: &Message| {
-            let mut t = m.kind.clone();
-            for (k, v) in &m.fields {
-                t += &format!(" {k}={}", v.render());
-            }
-            t
-        };
         match m.kind.as_str() {
             "settings" => {
-                settings = Some(LoggedSettings {
-                    line,
-                    method: m.str("method").unwrap_or_default().to_owned(),
-                    start_hz: m.f32("start_hz"),
-                    stop_hz: m.f32("stop_hz"),
-                    step_hz: m.f32("step_hz"),
-                    drive_v: m.f32("drive_v"),
-                });
+                settings = Some(m.clone());
             }
             "point" => {
                 let p = LoggedPoint {
@@ -796,23 +728,13 @@ pub fn parse_log(text: &str) -> Session {
                 if let Some(sw) = open.take() {
                     s.sweeps.push(sw);
                 }
-                s.events.push(LoggedEvent {
-                    line,
-                    time_s: m.time_s,
-                    level: m.level,
-                    text: text_of(&m),
-                });
+                s.events.push(m.clone());
             }
             _ => {
                 let notable = matches!(m.level, Some(Level::Warn | Level::Error))
                     || matches!(m.kind.as_str(), "rejected" | "overrun" | "stalled");
                 if notable {
-                    s.events.push(LoggedEvent {
-                        line,
-                        time_s: m.time_s,
-                        level: m.level,
-                        text: text_of(&m),
-                    });
+                    s.events.push(m.clone());
                 }
             }
         }

@@ -78,15 +78,15 @@ pub enum Received {
 }
 
 /// A reading of the link as the bench's [`Reading`] (`None`: an unknown status or method).
-pub fn reading_of(m: &ReadingMsg) -> Option<Reading> {
+pub fn reading_of<S: AsRef<str>>(m: &ReadingMsg<S>) -> Option<Reading> {
     use pzt_probe::units::{Hz, KPa, Newtons, Seconds};
-    let status = match m.status {
+    let status = match m.status.as_ref() {
         "ok" => pzt_probe::Status::Ok,
         code => pzt_probe::Status::Failed(pzt_probe::Failure::from_code(code)?),
     };
     Some(Reading {
         status,
-        method: pzt_probe::Method::from_name(m.method)?,
+        method: pzt_probe::Method::from_name(m.method.as_ref())?,
         resonance: m.f_hz.map(Hz),
         resonance_sigma: m.f_sigma_hz.map(Hz),
         modulus: m.e_kpa.map(KPa),

@@ -6,14 +6,13 @@
 //! the same parser as `probe-bench log`, and each logged reading prints through the same JSON
 //! and line as a host reading.
 
-use crate::cmd::measure::MeasureArgs;
+use crate::cmd::measure::Request;
 use crate::defmt_log;
 use crate::report;
 use crate::scene::{SceneArgs, Target};
 use anyhow::{bail, Context, Result};
 use hal_sim::NoiseScene;
 use pzt_probe::instrument::command::SettingsLine;
-use pzt_probe::reading::{Method, Settings};
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -113,18 +112,13 @@ fn run_lines(
 /// The `stream` options an image can take (`board`: `--qemu` or `--stm32`, for the message):
 /// its default tracker, no knocks, a lift-off as a step, the command's range of seconds.
 pub(crate) fn check_stream_args(a: &crate::cmd::stream::StreamArgs, board: &str) -> Result<()> {
-    use pzt_probe::instrument::continuous::TrackerConfig;
-    let d = TrackerConfig::DEFAULT;
-    if a.segment_s != d.segment.0 as f64
-        || a.dither != d.dither as f64
-        || a.q_prior != d.q_prior as f64
-    {
+    if !a.tracker.is_default() {
         bail!("with {board} the image streams with its default tracker (no --segment-s, --dither, --q-prior)");
     }
     if a.knocks_hz.is_some() {
         bail!("with {board} there are no knocks (the image's board has no knock)");
     }
-    if a.lift_off_ramp_s != 0.0 {
+    if a.lift.lift_off_ramp_s != 0.0 {
         bail!("with {board} the lift-off is a step (no --lift-off-ramp-s)");
     }
     let (lo, hi) = pzt_probe::instrument::command::STREAM_SECONDS;
@@ -188,17 +182,17 @@ pub fn stream(
     check_stream_args(a, "--qemu")?;
     let mut lines = scene_lines(target, &a.scene, noise);
     lines.push(format!("sim seed {}", a.noise.seed));
-    if let (Some(p), Some(t)) = (&a.step_to, a.step_at_s) {
+    if let (Some(p), Some(t)) = (&a.step.step_to, a.step.step_at_s) {
         lines.push(format!("sim step {p} {t}"));
     }
-    if let Some(t) = a.lift_off_at_s {
+    if let Some(t) = a.lift.lift_off_at_s {
         lines.push(format!("sim lift-off {t}"));
     }
-    if let (Some(f), Some(t)) = (a.press_to, a.press_at_s) {
+    if let (Some(f), Some(t)) = (a.press.press_to, a.press.press_at_s) {
         // The image's press is a step.
         lines.push(format!("sim press {f} {t}"));
     }
-    if let Some(t) = a.touch_at_s {
+    if let Some(t) = a.lift.touch_at_s {
         match target {
             Target::Phantom(p) => lines.push(format!("sim step {} {t}", p.name)),
             _ => bail!("with --qemu --touch-at-s needs a --phantom"),
@@ -210,13 +204,8 @@ pub fn stream(
 }
 
 /// `measure --qemu`.
-pub fn measure(
-    a: &MeasureArgs,
-    target: &Target,
-    method: Method,
-    settings: &Settings,
-    noise: NoiseScene,
-) -> Result<()> {
+pub fn measure(request: Request) -> Result<()> {
+    let (a, method, settings) = (request.args, request.method, request.settings);
     if a.out.plot.is_some() {
         bail!("--plot is not available with --qemu (use probe-bench log --plot on the log)");
     }
@@ -225,7 +214,7 @@ pub fn measure(
             "with --qemu the image reads with its own factory profile (src/board/sim_factory.rs)"
         );
     }
-    let mut lines = scene_lines(target, &a.scene, noise);
+    let mut lines = scene_lines(request.target, &a.scene, request.noise);
     lines.push(format!("method {}", method.name()));
     if *settings != method.default_settings() {
         match SettingsLine::of(settings) {
@@ -240,7 +229,7 @@ pub fn measure(
         lines.push(format!("sim seed {}", a.seed + k as u64));
         lines.push("measure".to_owned());
     }
-    let (log, session) = run_lines("measure", target, &lines, a.out.json)?;
+    let (log, session) = run_lines("measure", request.target, &lines, a.out.json)?;
     if session.readings.len() != a.repeat as usize {
         bail!(
             "the image logged {} readings of {}:\n{log}",

@@ -12,7 +12,7 @@
 //! parser as `probe-bench log`, and each reading prints through the same JSON and line as a host
 //! reading (a stream through the same summary as `stream --qemu`).
 
-use crate::cmd::measure::MeasureArgs;
+use crate::cmd::measure::Request;
 use crate::cmd::stream::StreamArgs;
 use crate::defmt_log;
 use crate::qemu::{self, root, target_dir};
@@ -193,13 +193,14 @@ fn run(events: &Schedule, seed: u64, json: bool) -> Result<Run> {
 }
 
 /// `measure --stm32`.
-pub fn measure(
-    a: &MeasureArgs,
-    target: &Target,
-    method: Method,
-    settings: &Settings,
-    noise: NoiseScene,
-) -> Result<()> {
+pub fn measure(request: Request) -> Result<()> {
+    let Request {
+        args: a,
+        target,
+        method,
+        settings,
+        noise,
+    } = request;
     check_scene(&a.scene, noise)?;
     let on = scene_name(target, a.scene.preload_n)?;
     if a.out.plot.is_some() || a.profile.is_some() || a.calibration != "unit" {
@@ -247,27 +248,23 @@ pub fn stream(a: &StreamArgs, target: &Target, noise: NoiseScene) -> Result<Vec<
     let on = scene_name(target, preload)?;
     // The scene changes, in stream time (s): (time, scene name).
     let mut changes: Vec<(f64, String)> = Vec::new();
-    let step = match (&a.step_to, a.step_at_s) {
-        (Some(p), Some(t)) => {
-            let p = hal_sim::phantoms::by_name(p).with_context(|| format!("no phantom {p}"))?;
-            changes.push((t, scene_name(&Target::Phantom(p), preload)?));
-            Some((t, p))
-        }
-        _ => None,
-    };
-    if let Some(t) = a.lift_off_at_s {
+    let step = a.step.step()?;
+    if let Some((p, t)) = step {
+        changes.push((t, scene_name(&Target::Phantom(p), preload)?));
+    }
+    if let Some(t) = a.lift.lift_off_at_s {
         changes.push((t, "free-air".into()));
     }
-    if let Some(t) = a.touch_at_s {
+    if let Some(t) = a.lift.touch_at_s {
         changes.push((t, on.clone()));
     }
-    if let (Some(f), Some(t)) = (a.press_to, a.press_at_s) {
+    if let Some(p) = a.press.change()? {
         // The press on what is under the probe then; a step, as on the QEMU image.
         let under = match step {
-            Some((at, p)) if at <= t => Target::Phantom(p),
+            Some((ph, at)) if at <= p.at_s => Target::Phantom(ph),
             _ => *target,
         };
-        changes.push((t, scene_name(&under, f * preload)?));
+        changes.push((p.at_s, scene_name(&under, p.to_fraction * preload)?));
     }
     changes.sort_by(|x, y| x.0.total_cmp(&y.0));
     let mut events = user_path(Method::Auto, &Method::Auto.default_settings())?;

@@ -167,13 +167,13 @@ fn qemu_log_reconstructs_the_firmwares_reading() {
     // read it: no admittance points), then one by sweep-G over a sweep of the script's own.
     assert_eq!(s.readings.len(), 2);
     assert_eq!(s.sweeps.len(), 1);
-    assert_eq!(s.readings[0].method, "hold");
+    assert_eq!(s.readings[0].msg.method, "hold");
     let r = &s.readings[1];
     let w = &s.sweeps[0];
-    assert_eq!(r.status, "ok");
-    assert_eq!(r.method, "sweep-g");
+    assert_eq!(r.msg.status, "ok");
+    assert_eq!(r.msg.method, "sweep-g");
     assert_eq!(w.reading, Some(1));
-    assert_eq!(r.points as usize, w.points.len());
+    assert_eq!(r.msg.points as usize, w.points.len());
     assert!(w
         .points
         .iter()
@@ -181,7 +181,10 @@ fn qemu_log_reconstructs_the_firmwares_reading() {
         .all(|(k, p)| p.tag as usize == k + 1));
     // The settings in force were the second `settings` line (200–260 Hz).
     let set = w.settings.as_ref().unwrap();
-    assert_eq!((set.start_hz, set.stop_hz), (Some(200.0), Some(260.0)));
+    assert_eq!(
+        (set.f32("start_hz"), set.f32("stop_hz")),
+        (Some(200.0), Some(260.0))
+    );
     // The firmware's estimator on the logged points gives the logged resonance again.
     let pts: Vec<SweepPoint> = w
         .points
@@ -199,25 +202,26 @@ fn qemu_log_reconstructs_the_firmwares_reading() {
         })
         .collect();
     let est = Method::SweepG.estimate(&pts).unwrap();
-    let f = r.f_hz.unwrap();
+    let f = r.msg.f_hz.unwrap();
     assert!(
         (est.resonance.0 - f).abs() < 1e-3,
         "{} vs {f}",
         est.resonance.0
     );
-    assert!((est.sigma.0 / r.f_sigma_hz.unwrap() - 1.0).abs() < 1e-3);
+    assert!((est.sigma.0 / r.msg.f_sigma_hz.unwrap() - 1.0).abs() < 1e-3);
     // And the image's calibration (its factory profile: its curve at the logged contact
     // force) maps it to the logged modulus.
     let unit = pzt_probe::board::sim_factory::profile().expect("factory record");
     let force = r.to_reading().and_then(|x| x.force);
     assert!(force.is_some(), "the reading logs its contact force");
-    let t = pzt_probe::Seconds(r.probe_time_s.unwrap());
+    let t = pzt_probe::Seconds(r.msg.probe_time_s);
+    assert!(t.0.is_finite(), "no probe time logged");
     let m = unit.invert(Hz(f), Hz(0.0), force.as_ref(), t).unwrap();
     assert!(
-        (m.value.0 / r.e_kpa.unwrap() - 1.0).abs() < 1e-4,
+        (m.value.0 / r.msg.e_kpa.unwrap() - 1.0).abs() < 1e-4,
         "{} vs {:?}",
         m.value.0,
-        r.e_kpa
+        r.msg.e_kpa
     );
 }
 
@@ -275,14 +279,14 @@ fn readings_sweeps_and_events_of_a_longer_log() {
     assert_eq!(
         s.readings
             .iter()
-            .map(|r| r.status.as_str())
+            .map(|r| r.msg.status.as_str())
             .collect::<Vec<_>>(),
         ["ok", "no_contact", "out_of_band"]
     );
     assert_eq!(s.readings[0].time_s, Some(1.5));
-    assert_eq!(s.readings[0].e_kpa, Some(280.0));
-    assert_eq!(s.readings[1].f_hz, None);
-    assert_eq!(s.readings[1].e_kpa, None);
+    assert_eq!(s.readings[0].msg.e_kpa, Some(280.0));
+    assert_eq!(s.readings[1].msg.f_hz, None);
+    assert_eq!(s.readings[1].msg.e_kpa, None);
     assert_eq!(s.readings[1].sweep, None);
     // Sweeps: 3 points (reading 1), 1 abandoned by the stall, 2 points (reading 3).
     assert_eq!(s.sweeps.len(), 3);
@@ -292,7 +296,7 @@ fn readings_sweeps_and_events_of_a_longer_log() {
     assert_eq!(s.sweeps[2].reading, Some(2));
     assert_eq!(s.readings[2].sweep, Some(2));
     // Events: boot, rejected (its message with spaces), stalled.
-    let ev: Vec<&str> = s.events.iter().map(|e| e.text.as_str()).collect();
+    let ev: Vec<String> = s.events.iter().map(|e| e.text()).collect();
     assert_eq!(ev.len(), 3, "{ev:?}");
     assert!(ev[1].ends_with("error=stop frequency must be above start frequency"));
     assert_eq!(s.other_lines, 1);
@@ -358,9 +362,9 @@ fn qemu_stream_log_gives_streams_their_rate_and_no_missing_readings() {
         .all(|(k, r)| r.seq as usize == k));
     assert!(c.ok_per_s(0.5).unwrap() >= 20.0, "{:?}", c.ok_per_s(0.5));
     for r in &c.readings {
-        let e = r.reading.e_kpa.unwrap() as f64;
+        let e = r.reading.msg.e_kpa.unwrap() as f64;
         assert!((e / 414.0 - 1.0).abs() < 0.03, "{r:?}");
-        assert!(r.locked && r.reading.method == "hold");
+        assert!(r.locked && r.reading.msg.method == "hold");
         assert!(r.reading.to_reading().is_some());
     }
     // The lift-off 0.5 s into the scene (which starts before the stream): nothing ok after.
@@ -370,7 +374,7 @@ fn qemu_stream_log_gives_streams_their_rate_and_no_missing_readings() {
     assert!(l
         .readings
         .iter()
-        .all(|r| r.reading.status != "ok" || r.t_s <= lift + 0.1));
+        .all(|r| r.reading.msg.status != "ok" || r.t_s <= lift + 0.1));
 }
 
 /// Readings lost on the link (lines cut out of the log) are counted from the gaps in `seq`,

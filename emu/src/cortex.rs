@@ -586,16 +586,22 @@ impl Scs {
 mod tests {
     use super::*;
 
+    /// IRQ `n` at priority `prio` (its NVIC_IPR byte) and enabled (its NVIC_ISER bit), written
+    /// through the registers as the firmware writes them.
+    fn enable_at(scs: &mut Scs, n: u32, prio: u32) {
+        scs.write(0xE000_E400 + n, 1, prio, 0).unwrap();
+        scs.write(0xE000_E100 + 4 * (n / 32), 4, 1 << (n % 32), 0)
+            .unwrap();
+    }
+
     #[test]
     fn priorities_decide_preemption() {
         // ARMv7-M B1.5.4: a pending exception preempts only with a group priority more
         // urgent (numerically lower) than the execution priority.
         let mut scs = Scs::default();
         // IRQ 11 at priority 0x30, IRQ 36 at 0x10.
-        scs.write(0xE000_E400 + 11, 1, 0x30, 0).unwrap();
-        scs.write(0xE000_E400 + 36, 1, 0x10, 0).unwrap();
-        scs.write(0xE000_E100, 4, 1 << 11, 0).unwrap();
-        scs.write(0xE000_E104, 4, 1 << (36 - 32), 0).unwrap();
+        enable_at(&mut scs, 11, 0x30);
+        enable_at(&mut scs, 36, 0x10);
         // Pend both through ISPR and STIR.
         scs.write(0xE000_E200, 4, 1 << 11, 0).unwrap();
         scs.write(0xE000_EF00, 4, 36, 0).unwrap();
@@ -615,9 +621,8 @@ mod tests {
     #[test]
     fn active_exception_blocks_equal_and_lower_priority() {
         let mut scs = Scs::default();
-        scs.write(0xE000_E400 + 11, 1, 0x20, 0).unwrap();
-        scs.write(0xE000_E400 + 12, 1, 0x20, 0).unwrap();
-        scs.write(0xE000_E100, 4, 3 << 11, 0).unwrap();
+        enable_at(&mut scs, 11, 0x20);
+        enable_at(&mut scs, 12, 0x20);
         scs.nvic.pend_irq(11);
         let exc = scs.nvic.takable(0, false, false, 0).unwrap();
         scs.nvic.activate(exc);

@@ -3,7 +3,7 @@
 //!
 //! Leaves out: relocations, section flags, anything but 32-bit little-endian files.
 
-use std::fmt;
+use crate::Error;
 
 /// A loadable segment: `data` goes at physical address `paddr`.
 #[derive(Clone, Debug)]
@@ -23,38 +23,26 @@ pub struct Elf {
     symbols: Vec<(String, u32)>,
 }
 
-/// A malformed or unsupported file.
-#[derive(Debug)]
-pub struct ElfError(pub String);
-
-impl fmt::Display for ElfError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "ELF: {}", self.0)
-    }
-}
-
-impl std::error::Error for ElfError {}
-
-fn u16_at(b: &[u8], o: usize) -> Result<u16, ElfError> {
+fn u16_at(b: &[u8], o: usize) -> Result<u16, Error> {
     b.get(o..o + 2)
         .map(|s| u16::from_le_bytes([s[0], s[1]]))
-        .ok_or_else(|| ElfError(format!("truncated at {o:#x}")))
+        .ok_or_else(|| Error::Elf(format!("truncated at {o:#x}")))
 }
 
-fn u32_at(b: &[u8], o: usize) -> Result<u32, ElfError> {
+fn u32_at(b: &[u8], o: usize) -> Result<u32, Error> {
     b.get(o..o + 4)
         .map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
-        .ok_or_else(|| ElfError(format!("truncated at {o:#x}")))
+        .ok_or_else(|| Error::Elf(format!("truncated at {o:#x}")))
 }
 
 impl Elf {
     /// Parse an ELF32 little-endian file.
-    pub fn parse(b: &[u8]) -> Result<Elf, ElfError> {
+    pub fn parse(b: &[u8]) -> Result<Elf, Error> {
         if b.len() < 52 || &b[..4] != b"\x7fELF" {
-            return Err(ElfError("not an ELF file".into()));
+            return Err(Error::Elf("not an ELF file".into()));
         }
         if b[4] != 1 || b[5] != 1 {
-            return Err(ElfError("not ELF32 little-endian".into()));
+            return Err(Error::Elf("not ELF32 little-endian".into()));
         }
         let phoff = u32_at(b, 28)? as usize;
         let shoff = u32_at(b, 32)? as usize;
@@ -78,7 +66,7 @@ impl Elf {
             }
             let data = b
                 .get(offset..offset + filesz)
-                .ok_or_else(|| ElfError(format!("segment {i} beyond the file")))?
+                .ok_or_else(|| Error::Elf(format!("segment {i} beyond the file")))?
                 .to_vec();
             segments.push(Segment { paddr, data });
         }
@@ -105,7 +93,7 @@ impl Elf {
                     .iter()
                     .position(|&c| c == 0)
                     .map(|n| start + n)
-                    .ok_or_else(|| ElfError("unterminated symbol name".into()))?;
+                    .ok_or_else(|| Error::Elf("unterminated symbol name".into()))?;
                 if end > start {
                     symbols.push((String::from_utf8_lossy(&b[start..end]).into_owned(), value));
                 }

@@ -17,3 +17,25 @@ pub mod probe;
 pub mod rtt;
 
 pub use machine::{Exit, Machine};
+
+use std::fmt;
+
+/// What keeps the emulator from running an image, in words.
+#[derive(Debug)]
+pub enum Error {
+    /// A malformed or unsupported ELF file.
+    Elf(String),
+    /// A failure to set the machine up.
+    Setup(String),
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Error::Elf(m) => write!(f, "ELF: {m}"),
+            Error::Setup(m) => write!(f, "{m}"),
+        }
+    }
+}
+
+impl std::error::Error for Error {}

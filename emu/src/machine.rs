@@ -26,13 +26,12 @@
 //! (faults escalate to HardFault; an access to an address nothing answers stops the run, as a
 //! missing model more likely than a bus error the image expects), lockup, debug halting.
 
-use std::fmt;
-
 use unicorn_engine::{Arch, ArmCpuModel, HookType, MemType, Mode, Prot, RegisterARM, Unicorn};
 
 use crate::cortex::{self, Scs, EXC_HARDFAULT, EXC_IRQ0};
 use crate::elf::Elf;
 use crate::periph::{Mem, Peripherals, SysClock};
+use crate::Error;
 
 /// Flash: 512 KiB at 0x0800_0000 (RM0440 3.3.1, two banks of 256 KiB in dual-bank mode).
 pub const FLASH_BASE: u32 = 0x0800_0000;
@@ -59,21 +58,9 @@ pub enum Exit {
     Fault(String),
 }
 
-/// A failure to set the machine up.
-#[derive(Debug)]
-pub struct SetupError(pub String);
-
-impl fmt::Display for SetupError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}", self.0)
-    }
-}
-
-impl std::error::Error for SetupError {}
-
-impl From<unicorn_engine::uc_error> for SetupError {
+impl From<unicorn_engine::uc_error> for Error {
     fn from(e: unicorn_engine::uc_error) -> Self {
-        SetupError(format!("unicorn: {e:?}"))
+        Error::Setup(format!("unicorn: {e:?}"))
     }
 }
 
@@ -270,13 +257,13 @@ fn frame_words(fp: bool) -> u32 {
 
 impl Machine {
     /// A board with `elf` programmed into its flash, powered on (reset, not yet run).
-    pub fn new(elf: &Elf) -> Result<Machine, SetupError> {
+    pub fn new(elf: &Elf) -> Result<Machine, Error> {
         let mut board = Board::new();
         for s in &elf.segments {
             let start = s.paddr.wrapping_sub(FLASH_BASE) as usize;
             let end = start + s.data.len();
             if end > FLASH_SIZE {
-                return Err(SetupError(format!(
+                return Err(Error::Setup(format!(
                     "segment at {:#010x} ({} B) is not in flash: a flash programmer writes only flash",
                     s.paddr,
                     s.data.len()
@@ -287,7 +274,7 @@ impl Machine {
         Self::with_board(board)
     }
 
-    fn with_board(board: Board) -> Result<Machine, SetupError> {
+    fn with_board(board: Board) -> Result<Machine, Error> {
         let mut uc = Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, board)?;
         uc.ctl_set_cpu_model(ArmCpuModel::CORTEX_M4 as i32)?;
         // Memory: the board's buffers, mapped in place (the flash model and the DMA write
@@ -452,7 +439,7 @@ impl Machine {
     /// The CPU's reset (ARMv7-M B1.5.5): MSP and PC from the vector table at 0 — flash, as
     /// BOOT0 = 0 with nBOOT1 = 1 maps it (RM0440 2.6 "Boot configuration") — thread mode,
     /// privileged, masks clear, FPU context inactive. The SCS is reset too.
-    fn reset_cpu(&mut self) -> Result<(), SetupError> {
+    fn reset_cpu(&mut self) -> Result<(), Error> {
         let (sp, pc) = {
             let b = self.uc.get_data();
             let w = |o: usize| u32::from_le_bytes(b.flash[o..o + 4].try_into().unwrap());
@@ -474,7 +461,7 @@ impl Machine {
         rebuild_hflags(&mut self.uc);
         set(&mut self.uc, RegisterARM::PC, pc | 1);
         if pc & 1 == 0 {
-            return Err(SetupError(format!(
+            return Err(Error::Setup(format!(
                 "reset vector {pc:#010x} is not a Thumb address"
             )));
         }
@@ -484,7 +471,7 @@ impl Machine {
     /// A system reset (AIRCR.SYSRESETREQ, the IWDG): CPU, SCS and peripherals reset; SRAM and
     /// flash keep their contents (RM0440 7.1.2 "System reset": SRAM is not erased); the RCC's
     /// reset flags record `cause`.
-    pub fn system_reset(&mut self, cause: crate::periph::ResetCause) -> Result<(), SetupError> {
+    pub fn system_reset(&mut self, cause: crate::periph::ResetCause) -> Result<(), Error> {
         self.resets += 1;
         let b = self.uc.get_data_mut();
         let now = b.now;
@@ -735,13 +722,13 @@ impl Machine {
             }
             if let Some(cause) = b.periph.reset_cause_pending() {
                 if let Err(e) = self.system_reset(cause) {
-                    return Exit::Fault(e.0);
+                    return Exit::Fault(e.to_string());
                 }
                 continue;
             }
             if b.scs.scb.reset_requested {
                 if let Err(e) = self.system_reset(crate::periph::ResetCause::Software) {
-                    return Exit::Fault(e.0);
+                    return Exit::Fault(e.to_string());
                 }
                 continue;
             }

@@ -73,7 +73,7 @@ pub enum DeviceMsg<'a> {
         error: crate::FrameError,
     },
     /// A reading ended (`measure`, `calibrate add`).
-    Reading(#[serde(borrow)] ReadingMsg<'a>),
+    Reading(#[serde(borrow)] ReadingMsg<&'a str>),
     /// A reading of a stream (`stream <seconds>`).
     Stream {
         /// The stream's reading number from 0; a gap is a reading the probe could not queue.
@@ -85,7 +85,7 @@ pub enum DeviceMsg<'a> {
         locked: bool,
         /// The reading.
         #[serde(borrow)]
-        reading: ReadingMsg<'a>,
+        reading: ReadingMsg<&'a str>,
     },
     /// A stream ended.
     StreamEnd {
@@ -297,13 +297,15 @@ pub enum Outcome<'a> {
     },
 }
 
-/// A reading: the fields of `probe-bench`'s JSON, named by unit.
+/// A reading: the fields of `probe-bench`'s JSON, named by unit. `S` is its text: `&str` on
+/// the link (borrowed from the frame); the bench keeps a reading parsed from the firmware's
+/// log, whose `reading` line carries the same fields, with `String`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ReadingMsg<'a> {
+pub struct ReadingMsg<S> {
     /// `ok` or a failure code.
-    pub status: &'a str,
+    pub status: S,
     /// The method that read it.
-    pub method: &'a str,
+    pub method: S,
     /// Resonance, Hz.
     pub f_hz: Option<f32>,
     /// Its standard uncertainty, Hz.

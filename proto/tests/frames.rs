@@ -21,7 +21,7 @@ impl Rng {
     }
 }
 
-fn reading(status: &str) -> ReadingMsg<'_> {
+fn reading(status: &str) -> ReadingMsg<&str> {
     ReadingMsg {
         status,
         method: "auto",

@@ -35,30 +35,31 @@ systick_monotonic!(Mono, 1_000);
 /// The measurement task's liveness promise, kept by `measure`, read by `guard`.
 pub static LIVENESS: Liveness = Liveness::new(BOOT);
 
-/// Plans to the sample interrupt.
-pub type PlanTx = Sender<'static, EngineCmd, PLAN_CAP>;
-/// The sample interrupt's plans.
-pub type PlanRx = Receiver<'static, EngineCmd, PLAN_CAP>;
-/// Points to the measurement task.
-pub type PointTx = Sender<'static, PointRaw, POINT_CAP>;
-/// The measurement task's points.
-pub type PointRx = Receiver<'static, PointRaw, POINT_CAP>;
-/// Requests to the measurement task.
-pub type RequestTx = Sender<'static, Command, REQUEST_CAP>;
-/// The measurement task's requests.
-pub type RequestRx = Receiver<'static, Command, REQUEST_CAP>;
-/// Reports to the report task.
-pub type ReportTx = Sender<'static, Report, REPORT_CAP>;
-/// The report task's reports.
-pub type ReportRx = Receiver<'static, Report, REPORT_CAP>;
-/// Completions to the command task.
-pub type DoneTx = Sender<'static, bool, DONE_CAP>;
-/// The command task's completions.
-pub type DoneRx = Receiver<'static, bool, DONE_CAP>;
-/// Host bytes to the command task.
-pub type ByteTx = Sender<'static, u8, RX_CAP>;
-/// The command task's host bytes.
-pub type ByteRx = Receiver<'static, u8, RX_CAP>;
+/// Each channel's two ends, `Tx` sending up to the capacity's items to `Rx`, with the doc that
+/// names what goes through it and from whom to whom.
+macro_rules! channels {
+    ($($(#[$doc:meta])* $tx:ident, $rx:ident: $item:ty, $cap:ident;)*) => {$(
+        $(#[$doc])*
+        pub type $tx = Sender<'static, $item, $cap>;
+        $(#[$doc])*
+        pub type $rx = Receiver<'static, $item, $cap>;
+    )*};
+}
+
+channels! {
+    /// Plans, from the measurement task to the sample interrupt.
+    PlanTx, PlanRx: EngineCmd, PLAN_CAP;
+    /// Points, from the sample interrupt to the measurement task.
+    PointTx, PointRx: PointRaw, POINT_CAP;
+    /// Requests, from the command task to the measurement task.
+    RequestTx, RequestRx: Command, REQUEST_CAP;
+    /// Reports, from the measurement and command tasks to the report task.
+    ReportTx, ReportRx: Report, REPORT_CAP;
+    /// Completions, from the measurement task to the command task.
+    DoneTx, DoneRx: bool, DONE_CAP;
+    /// Host bytes, from the UART's receive interrupt to the command task.
+    ByteTx, ByteRx: u8, RX_CAP;
+}
 
 /// Start the monotonic (SysTick at 1 kHz) below the sample interrupt, so that the timer queue
 /// never delays a batch. Call once, from `init`, before any task runs.

@@ -318,7 +318,7 @@ fn some(v: f32) -> Option<f32> {
 }
 
 /// A reading's message: the fields of the bench's JSON.
-pub fn reading_msg(r: &Reading) -> ReadingMsg<'static> {
+pub fn reading_msg(r: &Reading) -> ReadingMsg<&'static str> {
     let fin = |v: Option<f32>| some(nan_or(v));
     ReadingMsg {
         status: r.status.code(),

@@ -48,6 +48,7 @@
 //! and `isr_max` are the sample interrupt's work per batch (plan intake, demodulation, DAC
 //! refill, point hand-off) in `unit`: instructions under QEMU, core cycles on the STM32.
 
+use crate::instrument::link::reading_msg;
 pub use crate::instrument::link::{
     nan_or, settings_fields, slot_name, store_error_name, Report, COMMANDS,
 };
@@ -56,27 +57,28 @@ use crate::instrument::session::Event;
 /// A `reading` or `stream` line: `$format` (written out whole: a defmt format string is one
 /// literal, and the line is a wire format), the arguments `$pre` its own fields before
 /// `status=` take, then the reading `$r`'s fields from `status=` to `loss_sigma=` (the tissue's
-/// loss tangent and its σ), which both lines end with.
+/// loss tangent and its σ), which both lines end with: the host link's message of the reading
+/// ([`reading_msg`]), its missing values `NaN`.
 macro_rules! reading_line {
     ($format:tt, $r:expr $(, $pre:expr)*) => {{
-        let r = $r;
+        let m = reading_msg(&$r);
         defmt::info!(
             $format,
             $($pre,)*
-            r.status.code(),
-            nan_or(r.resonance.map(|v| v.0)),
-            nan_or(r.resonance_sigma.map(|v| v.0)),
-            nan_or(r.modulus.map(|v| v.0)),
-            nan_or(r.modulus_sigma.map(|v| v.0)),
-            nan_or(r.modulus_sigma_repeat.map(|v| v.0)),
-            nan_or(r.q),
-            r.probe_time.0,
-            r.points,
-            r.method.name(),
-            nan_or(r.force.map(|w| w.mean.0)),
-            nan_or(r.force.map(|w| w.sigma.0)),
-            nan_or(r.loss_tangent),
-            nan_or(r.loss_tangent_sigma)
+            m.status,
+            nan_or(m.f_hz),
+            nan_or(m.f_sigma_hz),
+            nan_or(m.e_kpa),
+            nan_or(m.e_sigma_kpa),
+            nan_or(m.e_repeat_kpa),
+            nan_or(m.q),
+            m.probe_time_s,
+            m.points,
+            m.method,
+            nan_or(m.force_n),
+            nan_or(m.force_sigma_n),
+            nan_or(m.loss_tangent),
+            nan_or(m.loss_tangent_sigma)
         )
     }};
 }

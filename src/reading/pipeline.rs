@@ -148,9 +148,10 @@ pub fn conclude(
     let force_n = force.map(|w| w.mean.0 as f64);
     let (e_kpa, q) = (m.value.0 as f64, q as f64);
     let law = unit.contact.as_ref();
+    let deviation = q_model.deviation(e_kpa, force_n, q, law);
     let contact_unlike = match force_n {
-        Some(_) => q_model.exceeded(e_kpa, force_n, q, law),
-        None => !q_model.holds(e_kpa, force_n, q, law),
+        Some(_) => deviation.exceeded(),
+        None => !deviation.holds(),
     };
     if contact_unlike {
         r.status = Status::Failed(Failure::BadContact);

@@ -195,45 +195,17 @@ impl QModel {
         }
     }
 
-    /// True when `q` at `e_kpa` (and `force_n`) is within [`Self::TOLERANCE`] of the curve
-    /// ([`Self::q_at`] with `law`).
-    pub fn holds(
-        &self,
-        e_kpa: f64,
-        force_n: Option<f64>,
-        q: f64,
-        law: Option<&ContactLaw>,
-    ) -> bool {
-        self.deviation(e_kpa, force_n, q, law)
-            .is_some_and(|d| libm::fabs(d) <= Self::TOLERANCE)
-    }
-
-    /// True when `q` at `e_kpa` (and `force_n`) stands more than [`Self::TOLERANCE`] above the
-    /// curve ([`Self::q_at`] with `law`): a contact narrower or looser than the calibration's (a
-    /// tip touching on its edge radiates less into the tissue). Tissue loss only ever lowers Q,
-    /// so unlike [`Self::holds`] no lossy tissue can trigger it.
-    pub fn exceeded(
-        &self,
-        e_kpa: f64,
-        force_n: Option<f64>,
-        q: f64,
-        law: Option<&ContactLaw>,
-    ) -> bool {
-        self.deviation(e_kpa, force_n, q, law)
-            .is_none_or(|d| d > Self::TOLERANCE)
-    }
-
     /// `q`'s relative deviation from the curve at `e_kpa` (and `force_n`), `q / q_at - 1`
-    /// ([`Self::q_at`] with `law`); `None` where the curve is not positive (or NaN).
-    fn deviation(
+    /// ([`Self::q_at`] with `law`), for [`QDeviation::holds`] and [`QDeviation::exceeded`].
+    pub fn deviation(
         &self,
         e_kpa: f64,
         force_n: Option<f64>,
         q: f64,
         law: Option<&ContactLaw>,
-    ) -> Option<f64> {
+    ) -> QDeviation {
         let expect = self.q_at(e_kpa, force_n, law);
-        (expect > 0.0).then(|| q / expect - 1.0)
+        QDeviation((expect > 0.0).then(|| q / expect - 1.0))
     }
 
     /// True when every coefficient is finite and the scatter not negative.
@@ -244,6 +216,26 @@ impl QModel {
             && self.sigma_rel.is_finite()
             && self.sigma_rel >= 0.0
             && self.damping.is_none_or(|d| d.is_valid())
+    }
+}
+
+/// A Q's relative deviation from a [`QModel`]'s curve, `q / q_at - 1` ([`QModel::deviation`]);
+/// `None` where the curve is not positive (or NaN).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct QDeviation(pub Option<f64>);
+
+impl QDeviation {
+    /// True when the Q is within [`QModel::TOLERANCE`] of the curve.
+    pub fn holds(self) -> bool {
+        self.0.is_some_and(|d| libm::fabs(d) <= QModel::TOLERANCE)
+    }
+
+    /// True when the Q stands more than [`QModel::TOLERANCE`] above the curve (or the curve
+    /// is not positive): a contact narrower or looser than the calibration's (a tip touching on
+    /// its edge radiates less into the tissue). Tissue loss only ever lowers Q, so unlike
+    /// [`Self::holds`] no lossy tissue can trigger it.
+    pub fn exceeded(self) -> bool {
+        self.0.is_none_or(|d| d > QModel::TOLERANCE)
     }
 }
 
@@ -391,19 +383,12 @@ mod tests {
             &mech,
         );
         let m0 = mech.mass_kg;
-        let law = ContactLaw {
-            free_hz: mech.free_resonance_hz,
-            p: [
-                libm::log(mech.coupling_stiffness_n_m / m0),
-                libm::log(el.stiffness_n_m / (m0 * 100.0)),
-                libm::log(el.mass_kg * 1000.0 / m0),
-            ],
-            cov: [[0.0; 3]; 3],
-            model_sigma_hz: 0.0,
-            min_kpa: 100.0,
-            max_kpa: 3000.0,
-            force_n: 0.030,
-        };
+        let p = [
+            libm::log(mech.coupling_stiffness_n_m / m0),
+            libm::log(el.stiffness_n_m / (m0 * 100.0)),
+            libm::log(el.mass_kg * 1000.0 / m0),
+        ];
+        let law = ContactLaw::exact(mech.free_resonance_hz, p, (100.0, 3000.0), 0.030);
         (law, mech)
     }
 
@@ -550,11 +535,17 @@ mod tests {
         assert_eq!(m.scatter(Some(&law)), 0.002);
         assert_eq!(m.q_at(600.0, Some(0.030), None), 5.0);
         assert_eq!(m.scatter(None), 0.04);
-        assert!(!m.exceeded(600.0, Some(0.030), 1.19 * q, Some(&law)));
-        assert!(m.exceeded(600.0, Some(0.030), 1.21 * q, Some(&law)));
-        assert!(!m.exceeded(600.0, Some(0.030), 0.3 * q, Some(&law)));
-        assert!(m.holds(600.0, None, 1.19 * q, Some(&law)));
-        assert!(!m.holds(600.0, None, 0.79 * q, Some(&law)));
+        assert!(!m
+            .deviation(600.0, Some(0.030), 1.19 * q, Some(&law))
+            .exceeded());
+        assert!(m
+            .deviation(600.0, Some(0.030), 1.21 * q, Some(&law))
+            .exceeded());
+        assert!(!m
+            .deviation(600.0, Some(0.030), 0.3 * q, Some(&law))
+            .exceeded());
+        assert!(m.deviation(600.0, None, 1.19 * q, Some(&law)).holds());
+        assert!(!m.deviation(600.0, None, 0.79 * q, Some(&law)).holds());
     }
 
     /// The damping curve belongs to the contact law it was fitted through: a profile keeps it

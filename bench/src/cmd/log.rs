@@ -57,17 +57,17 @@ pub fn table(s: &Session) -> Vec<String> {
         "method"
     )];
     for (k, r) in s.readings.iter().enumerate() {
-        let f = match (r.f_hz, r.f_sigma_hz) {
+        let f = match (r.msg.f_hz, r.msg.f_sigma_hz) {
             (Some(f), Some(sf)) => format!("{f:.3} ± {sf:.3}"),
             (Some(f), None) => format!("{f:.3}"),
             _ => "—".into(),
         };
-        let e = match (r.e_kpa, r.e_sigma_kpa) {
+        let e = match (r.msg.e_kpa, r.msg.e_sigma_kpa) {
             (Some(e), Some(se)) => format!("{e:.1} ± {se:.1}"),
             (Some(e), None) => format!("{e:.1}"),
             _ => "—".into(),
         };
-        let force = match (r.force_n, r.force_sigma_n) {
+        let force = match (r.msg.force_n, r.msg.force_sigma_n) {
             (Some(f), Some(sf)) if f.is_finite() => {
                 format!("{:.2} ± {:.2}", f * 1e3, sf * 1e3)
             }
@@ -77,13 +77,13 @@ pub fn table(s: &Session) -> Vec<String> {
             "{:>3}  {:<12} {:<13} {:>20} {:>18} {:>6} {:>14} {:>6}  {}",
             k + 1,
             when(r),
-            r.status,
+            r.msg.status,
             f,
             e,
-            fmt_opt(r.q, 2),
+            fmt_opt(r.msg.q, 2),
             force,
-            r.points,
-            r.method
+            r.msg.points,
+            r.msg.method
         ));
     }
     out
@@ -102,8 +102,8 @@ pub fn stream_table(s: &Session) -> Vec<String> {
         let e: Vec<f64> = x
             .readings
             .iter()
-            .filter(|r| r.reading.status == "ok")
-            .filter_map(|r| r.reading.e_kpa.map(f64::from))
+            .filter(|r| r.reading.msg.status == "ok")
+            .filter_map(|r| r.reading.msg.e_kpa.map(f64::from))
             .collect();
         let modulus = if e.is_empty() {
             "—".to_owned()
@@ -146,11 +146,11 @@ fn streams_json(s: &Session) -> Value {
                     })),
                     "readings": x.readings.iter().map(|r| json!({
                         "seq": r.seq, "t_s": r.t_s, "locked": r.locked,
-                        "line": r.reading.line, "status": r.reading.status,
-                        "resonance_hz": r.reading.f_hz, "modulus_kpa": r.reading.e_kpa,
-                        "modulus_sigma_kpa": r.reading.e_sigma_kpa, "q_factor": r.reading.q,
-                        "loss_tangent": r.reading.loss, "loss_tangent_sigma": r.reading.loss_sigma,
-                        "force_n": r.reading.force_n,
+                        "line": r.reading.line, "status": r.reading.msg.status,
+                        "resonance_hz": r.reading.msg.f_hz, "modulus_kpa": r.reading.msg.e_kpa,
+                        "modulus_sigma_kpa": r.reading.msg.e_sigma_kpa, "q_factor": r.reading.msg.q,
+                        "loss_tangent": r.reading.msg.loss_tangent, "loss_tangent_sigma": r.reading.msg.loss_tangent_sigma,
+                        "force_n": r.reading.msg.force_n,
                     })).collect::<Vec<_>>(),
                 })
             })
@@ -164,14 +164,14 @@ fn session_json(s: &Session) -> Value {
         .iter()
         .map(|r| {
             json!({
-                "line": r.line, "time_s": r.time_s, "status": r.status,
-                "resonance_hz": r.f_hz, "resonance_sigma_hz": r.f_sigma_hz,
-                "modulus_kpa": r.e_kpa, "modulus_sigma_kpa": r.e_sigma_kpa,
-                "modulus_repeatability_kpa": r.e_repeat_kpa,
-                "q_factor": r.q, "probe_time_s": r.probe_time_s,
-                "points": r.points, "method": r.method, "sweep": r.sweep,
-                "contact_force_n": r.force_n, "contact_force_sigma_n": r.force_sigma_n,
-                "loss_tangent": r.loss, "loss_tangent_sigma": r.loss_sigma,
+                "line": r.line, "time_s": r.time_s, "status": r.msg.status,
+                "resonance_hz": r.msg.f_hz, "resonance_sigma_hz": r.msg.f_sigma_hz,
+                "modulus_kpa": r.msg.e_kpa, "modulus_sigma_kpa": r.msg.e_sigma_kpa,
+                "modulus_repeatability_kpa": r.msg.e_repeat_kpa,
+                "q_factor": r.msg.q, "probe_time_s": r.msg.probe_time_s,
+                "points": r.msg.points, "method": r.msg.method, "sweep": r.sweep,
+                "contact_force_n": r.msg.force_n, "contact_force_sigma_n": r.msg.force_sigma_n,
+                "loss_tangent": r.msg.loss_tangent, "loss_tangent_sigma": r.msg.loss_tangent_sigma,
             })
         })
         .collect();
@@ -181,7 +181,7 @@ fn session_json(s: &Session) -> Value {
         .map(|w| {
             json!({
                 "first_line": w.first_line,
-                "method": w.settings.as_ref().map(|x| x.method.clone()),
+                "method": w.settings.as_ref().map(|x| x.str("method").unwrap_or_default()),
                 "reading": w.reading,
                 "points": w.points.iter().map(|p| json!({
                     "tag": p.tag, "f_hz": p.f_hz, "g_s": p.g_s, "b_s": p.b_s, "sigma_s": p.sigma_s
@@ -192,7 +192,7 @@ fn session_json(s: &Session) -> Value {
     let events: Vec<Value> = s
         .events
         .iter()
-        .map(|e| json!({"line": e.line, "time_s": e.time_s, "text": e.text}))
+        .map(|e| json!({"line": e.line, "time_s": e.time_s, "text": e.text()}))
         .collect();
     json!({
         "messages": s.messages,
@@ -254,7 +254,7 @@ pub fn run(a: LogArgs) -> Result<()> {
                     Some(Level::Trace) => "TRACE",
                     None => "     ",
                 };
-                println!("    line {:>5}  {lvl}  {}", e.line, e.text);
+                println!("    line {:>5}  {lvl}  {}", e.line, e.text());
             }
         }
     }
@@ -320,8 +320,8 @@ fn draw<DB: Backend>(root: &Area<DB>, title: &str, s: &Session) -> Result<()> {
             Some(r) => format!(
                 "reading {}: {} {}",
                 w.reading.unwrap_or(0) + 1,
-                r.status,
-                r.f_hz.map(|f| format!("{f:.2} Hz")).unwrap_or_default()
+                r.msg.status,
+                r.msg.f_hz.map(|f| format!("{f:.2} Hz")).unwrap_or_default()
             ),
             None => format!("sweep at line {} (no reading)", w.first_line),
         };
@@ -335,7 +335,7 @@ fn draw<DB: Backend>(root: &Area<DB>, title: &str, s: &Session) -> Result<()> {
         if let Some(f) = w
             .reading
             .and_then(|r| s.readings.get(r))
-            .and_then(|r| r.f_hz)
+            .and_then(|r| r.msg.f_hz)
         {
             let f = f as f64;
             if f > f0 && f < f1 {
@@ -358,7 +358,7 @@ fn draw<DB: Backend>(root: &Area<DB>, title: &str, s: &Session) -> Result<()> {
     let timed = s.readings.iter().all(|r| r.time_s.is_some());
     let (x0, x1) = padded_range(rs.iter().map(|(x, _)| *x), 0.05, (0.0, 1.0));
     let (y0, y1) = padded_range(
-        rs.iter().filter_map(|(_, r)| r.f_hz.map(|f| f as f64)),
+        rs.iter().filter_map(|(_, r)| r.msg.f_hz.map(|f| f as f64)),
         0.15,
         (200.0, 260.0),
     );
@@ -374,11 +374,11 @@ fn draw<DB: Backend>(root: &Area<DB>, title: &str, s: &Session) -> Result<()> {
     )
     .map_err(err)?;
     for (x, r) in &rs {
-        let Some(f) = r.f_hz else { continue };
+        let Some(f) = r.msg.f_hz else { continue };
         let f = f as f64;
-        let ok = r.status == "ok";
+        let ok = r.msg.status == "ok";
         let c = if ok { BLUE } else { RED };
-        let sf = r.f_sigma_hz.unwrap_or(0.0) as f64;
+        let sf = r.msg.f_sigma_hz.unwrap_or(0.0) as f64;
         // Error bar: the ±σ segment with caps a hundredth of the axis wide.
         let cap = 0.01 * (x1 - x0);
         for seg in [

@@ -2,13 +2,14 @@
 
 use super::{progress, MethodArgs, OutputArgs};
 use crate::calfile;
-use crate::scene::{parse_noise, print_scene_header, SceneArgs};
+use crate::scene::{parse_noise, print_scene_header, SceneArgs, Target};
 use crate::{plot, report};
 use anyhow::{bail, Result};
 use clap::Args;
+use hal_sim::NoiseScene;
 use pzt_probe::board::sim as simboard;
 use pzt_probe::engine::sweep::SweepPoint;
-use pzt_probe::reading::{Procedure, Settings};
+use pzt_probe::reading::{Method, Procedure, Settings};
 use pzt_probe::unit::profile::UnitProfile;
 use std::path::PathBuf;
 
@@ -52,6 +53,22 @@ pub struct MeasureArgs {
     pub stm32: bool,
 }
 
+/// A measurement the command line asks for, parsed and validated: what `--qemu` and `--stm32`
+/// take it to their image with.
+#[derive(Clone, Copy)]
+pub struct Request<'a> {
+    /// The arguments as given.
+    pub args: &'a MeasureArgs,
+    /// What the probe is on.
+    pub target: &'a Target,
+    /// The method.
+    pub method: Method,
+    /// Its settings.
+    pub settings: &'a Settings,
+    /// The front end's noise.
+    pub noise: NoiseScene,
+}
+
 /// Run the subcommand.
 pub fn run(a: MeasureArgs) -> Result<()> {
     let method = a.m.method()?;
@@ -65,11 +82,18 @@ pub fn run(a: MeasureArgs) -> Result<()> {
     let scale = simboard::scale_of(&scene.front_end);
     Procedure::new(method, &settings, &scale, 0, &UnitProfile::fallback())
         .map_err(|e| anyhow::anyhow!("bad settings: {e}"))?;
+    let request = Request {
+        args: &a,
+        target: &target,
+        method,
+        settings: &settings,
+        noise,
+    };
     if a.qemu {
-        return crate::qemu::measure(&a, &target, method, &settings, noise);
+        return crate::qemu::measure(request);
     }
     if a.stm32 {
-        return crate::stm32::measure(&a, &target, method, &settings, noise);
+        return crate::stm32::measure(request);
     }
     // The simulated unit's profile is made as a unit's profile is made once: with the
     // method's own default settings at bench noise, whatever this reading's settings and noise

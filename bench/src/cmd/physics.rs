@@ -2,7 +2,7 @@
 
 use anyhow::Result;
 use clap::Args;
-use hal_sim::{phantoms, Scene};
+use hal_sim::{phantoms, Phantom, Scene};
 use pzt_probe::unit::calibration::PowerLaw;
 
 #[derive(Args)]
@@ -53,28 +53,26 @@ pub fn run(a: PhysicsArgs) -> Result<()> {
 /// List the phantoms, then the named tissues (with their loss tangent and the loaded Q).
 pub fn list_phantoms() {
     for p in phantoms::all() {
-        let s = Scene::on_phantom(&p);
-        println!(
-            "{:>15}  {:>8.2} kPa  nu {:.3}  rho {:>6.0} kg/m3  resonance {:.2} Hz  ({})",
-            p.name,
-            p.modulus_kpa,
-            p.poisson,
-            p.density_kg_m3,
-            s.resonance_hz(),
-            p.source
-        );
+        let material = format!("nu {:.3}  rho {:>6.0} kg/m3", p.poisson, p.density_kg_m3);
+        phantom_row(15, &p, &material, |_| String::new());
     }
     println!("named tissues (viscoelastic; docs/physics.md, \"Viscoelastic tissue\"):");
     for p in phantoms::tissues() {
-        let s = Scene::on_phantom(&p);
-        println!(
-            "{:>20}  {:>8.2} kPa  tan d {:.2}  resonance {:.2} Hz  Q {:.1}  ({})",
-            p.name,
-            p.modulus_kpa,
-            p.loss_tangent,
-            s.resonance_hz(),
-            s.kelvin().q(),
-            p.source
-        );
+        let material = format!("tan d {:.2}", p.loss_tangent);
+        phantom_row(20, &p, &material, |s| format!("  Q {:.1}", s.kelvin().q()));
     }
+}
+
+/// One row of [`list_phantoms`]: the name right-aligned in `width`, the modulus, what the list
+/// says of the material, the probe's resonance on it and `more` of that scene, the source.
+fn phantom_row(width: usize, p: &Phantom, material: &str, more: impl Fn(&Scene) -> String) {
+    let s = Scene::on_phantom(p);
+    println!(
+        "{:>width$}  {:>8.2} kPa  {material}  resonance {:.2} Hz{}  ({})",
+        p.name,
+        p.modulus_kpa,
+        s.resonance_hz(),
+        more(&s),
+        p.source
+    );
 }

@@ -8,7 +8,7 @@ use crate::scene::{parse_noise, print_scene_header, NoiseArgs, SceneArgs};
 use crate::stream::{self, settled_after, summarize, StreamScene, Truth};
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use hal_sim::{phantoms, ForceChange, LiftOff};
+use hal_sim::{phantoms, ForceChange, LiftOff, Phantom};
 use plotters::prelude::*;
 use pzt_probe::instrument::continuous::{StreamReading, TrackerConfig, METHOD};
 use pzt_probe::{Seconds, Status};
@@ -24,45 +24,22 @@ pub struct StreamArgs {
     /// Probe time to stream for, s.
     #[arg(long, default_value_t = 3.0)]
     pub seconds: f64,
-    /// Slide onto this phantom (A–E, ..., or a named tissue) at `--step-at-s`.
-    #[arg(long)]
-    pub step_to: Option<String>,
-    /// Time of the step in stiffness, s.
-    #[arg(long)]
-    pub step_at_s: Option<f64>,
-    /// Lift the probe off the tissue at this time, s.
-    #[arg(long)]
-    pub lift_off_at_s: Option<f64>,
-    /// Time the preload takes to fall to zero at the lift-off, s (0: the tip leaves at once).
-    #[arg(long, default_value_t = 0.0)]
-    pub lift_off_ramp_s: f64,
-    /// Put the probe down again on the same tissue at this time, s (after `--lift-off-at-s`).
-    #[arg(long)]
-    pub touch_at_s: Option<f64>,
-    /// The hand presses harder or lighter (the tip slides down an edge): the preload moves to
-    /// this fraction of itself from `--press-at-s` over `--press-ramp-s` (hal-sim ForceChange).
-    #[arg(long)]
-    pub press_to: Option<f64>,
-    /// Time the press starts to change, s.
-    #[arg(long)]
-    pub press_at_s: Option<f64>,
-    /// Time the press takes to change, s.
-    #[arg(long, default_value_t = stream::DEFAULT_PRESS_RAMP_S)]
-    pub press_ramp_s: f64,
+    /// A slide onto another tissue.
+    #[command(flatten)]
+    pub step: StepArgs,
+    /// The probe lifted off, and put down again.
+    #[command(flatten)]
+    pub lift: LiftArgs,
+    /// The hand's press changing.
+    #[command(flatten)]
+    pub press: PressArgs,
     /// Random knocks at this mean rate, per s (mechanical 15 mm/s, electrical 0.8 nC, as the
     /// stability catalogue's `knocks` scene).
     #[arg(long)]
     pub knocks_hz: Option<f64>,
-    /// Length of one tracking segment (one reading each), s.
-    #[arg(long, default_value_t = TrackerConfig::DEFAULT.segment.0 as f64)]
-    pub segment_s: f64,
-    /// Offset of the drive from the resonance, alternately above and below, in
-    /// half-linewidths f0/(2Q) (0: on the resonance).
-    #[arg(long, default_value_t = TrackerConfig::DEFAULT.dither as f64)]
-    pub dither: f64,
-    /// Relative standard uncertainty of the previous segment's Q as the next fit's prior.
-    #[arg(long, default_value_t = TrackerConfig::DEFAULT.q_prior as f64)]
-    pub q_prior: f64,
+    /// The tracker's settings.
+    #[command(flatten)]
+    pub tracker: TrackerArgs,
     /// The front end's noise and its seed.
     #[command(flatten)]
     pub noise: NoiseArgs,
@@ -86,35 +63,131 @@ pub struct StreamArgs {
     pub stm32: bool,
 }
 
+/// A slide onto another tissue during the stream (hal-sim `Step`).
+#[derive(Args)]
+pub struct StepArgs {
+    /// Slide onto this phantom (A–E, ..., or a named tissue) at `--step-at-s`.
+    #[arg(long)]
+    pub step_to: Option<String>,
+    /// Time of the step in stiffness, s.
+    #[arg(long)]
+    pub step_at_s: Option<f64>,
+}
+
+impl StepArgs {
+    /// The phantom slid onto and the time of the slide, s; `None` without a step.
+    pub fn step(&self) -> Result<Option<(Phantom, f64)>> {
+        Ok(match (&self.step_to, self.step_at_s) {
+            (Some(p), Some(at)) => Some((
+                phantoms::by_name(p).with_context(|| format!("unknown phantom `{p}`"))?,
+                at,
+            )),
+            (None, None) => None,
+            _ => bail!("--step-to and --step-at-s go together"),
+        })
+    }
+}
+
+/// The probe lifted off the tissue and put down again (hal-sim `LiftOff`).
+#[derive(Args)]
+pub struct LiftArgs {
+    /// Lift the probe off the tissue at this time, s.
+    #[arg(long)]
+    pub lift_off_at_s: Option<f64>,
+    /// Time the preload takes to fall to zero at the lift-off, s (0: the tip leaves at once).
+    #[arg(long, default_value_t = 0.0)]
+    pub lift_off_ramp_s: f64,
+    /// Put the probe down again on the same tissue at this time, s (after `--lift-off-at-s`).
+    #[arg(long)]
+    pub touch_at_s: Option<f64>,
+}
+
+impl LiftArgs {
+    /// The lift-off; `None` without one.
+    pub fn lift_off(&self) -> Option<LiftOff> {
+        self.lift_off_at_s.map(|at_s| LiftOff {
+            at_s,
+            ramp_s: self.lift_off_ramp_s,
+        })
+    }
+}
+
+/// The hand's press changing during the stream (hal-sim `ForceChange`).
+#[derive(Args)]
+pub struct PressArgs {
+    /// The hand presses harder or lighter (the tip slides down an edge): the preload moves to
+    /// this fraction of itself from `--press-at-s` over `--press-ramp-s` (hal-sim ForceChange).
+    #[arg(long)]
+    pub press_to: Option<f64>,
+    /// Time the press starts to change, s.
+    #[arg(long)]
+    pub press_at_s: Option<f64>,
+    /// Time the press takes to change, s.
+    #[arg(long, default_value_t = stream::DEFAULT_PRESS_RAMP_S)]
+    pub press_ramp_s: f64,
+}
+
+impl PressArgs {
+    /// The change of the press; `None` without one.
+    pub fn change(&self) -> Result<Option<ForceChange>> {
+        Ok(match (self.press_to, self.press_at_s) {
+            (Some(f), Some(at)) => Some(ForceChange {
+                at_s: at,
+                ramp_s: self.press_ramp_s,
+                to_fraction: f,
+            }),
+            (None, None) => None,
+            _ => bail!("--press-to and --press-at-s go together"),
+        })
+    }
+}
+
+/// The tracker's settings (the core's `TrackerConfig`).
+#[derive(Args)]
+pub struct TrackerArgs {
+    /// Length of one tracking segment (one reading each), s.
+    #[arg(long, default_value_t = TrackerConfig::DEFAULT.segment.0 as f64)]
+    pub segment_s: f64,
+    /// Offset of the drive from the resonance, alternately above and below, in
+    /// half-linewidths f0/(2Q) (0: on the resonance).
+    #[arg(long, default_value_t = TrackerConfig::DEFAULT.dither as f64)]
+    pub dither: f64,
+    /// Relative standard uncertainty of the previous segment's Q as the next fit's prior.
+    #[arg(long, default_value_t = TrackerConfig::DEFAULT.q_prior as f64)]
+    pub q_prior: f64,
+}
+
+impl TrackerArgs {
+    /// The tracker's configuration: the default with these settings.
+    pub fn config(&self) -> TrackerConfig {
+        TrackerConfig {
+            segment: Seconds(self.segment_s as f32),
+            dither: self.dither as f32,
+            q_prior: self.q_prior as f32,
+            ..TrackerConfig::DEFAULT
+        }
+    }
+
+    /// True when every setting is the default's, as given (not rounded to the core's `f32`).
+    pub fn is_default(&self) -> bool {
+        let d = TrackerConfig::DEFAULT;
+        self.segment_s == d.segment.0 as f64
+            && self.dither == d.dither as f64
+            && self.q_prior == d.q_prior as f64
+    }
+}
+
 /// Run the subcommand.
 pub fn run(a: StreamArgs) -> Result<()> {
     let noise = parse_noise(&a.noise.noise)?;
     let (target, _) = a.scene.scene(noise, false)?;
-    let step = match (&a.step_to, a.step_at_s) {
-        (Some(p), Some(at)) => Some((
-            phantoms::by_name(p).with_context(|| format!("unknown phantom `{p}`"))?,
-            at,
-        )),
-        (None, None) => None,
-        _ => bail!("--step-to and --step-at-s go together"),
-    };
-    let press = match (a.press_to, a.press_at_s) {
-        (Some(f), Some(at)) => Some(ForceChange {
-            at_s: at,
-            ramp_s: a.press_ramp_s,
-            to_fraction: f,
-        }),
-        (None, None) => None,
-        _ => bail!("--press-to and --press-at-s go together"),
-    };
+    let step = a.step.step()?;
+    let press = a.press.change()?;
     let stream_scene = StreamScene {
         preload_n: a.scene.preload_n,
         step,
-        lift_off: a.lift_off_at_s.map(|at_s| LiftOff {
-            at_s,
-            ramp_s: a.lift_off_ramp_s,
-        }),
-        touch_at_s: a.touch_at_s,
+        lift_off: a.lift.lift_off(),
+        touch_at_s: a.lift.touch_at_s,
         press,
         knocks_hz: a.knocks_hz,
         ..StreamScene::on(target, noise)
@@ -122,20 +195,15 @@ pub fn run(a: StreamArgs) -> Result<()> {
     // The events and the seconds are checked before anything is printed or run.
     let (scene, truth) = stream_scene.build()?;
     stream::check_seconds(a.seconds)?;
-    let config = TrackerConfig {
-        segment: Seconds(a.segment_s as f32),
-        dither: a.dither as f32,
-        q_prior: a.q_prior as f32,
-        ..TrackerConfig::DEFAULT
-    };
+    let config = a.tracker.config();
     let unit = crate::unit::default_for(METHOD)?;
     if !a.out.json {
         print_scene_header("stream", &target, a.scene.preload_n, noise, &scene);
         if !(a.qemu || a.stm32) {
             println!(
             "  tracker: segments of {:.0} ms, drive ±{} half-linewidths off the resonance; unit profile of the simulated unit ({} calibration)",
-            a.segment_s * 1e3,
-            a.dither,
+            a.tracker.segment_s * 1e3,
+            a.tracker.dither,
             METHOD.name()
         );
         }

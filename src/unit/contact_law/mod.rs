@@ -323,6 +323,22 @@ const SEARCH_KPA: (f64, f64) = (1.0, 1.0e6);
 const SEARCH_CUBE_ROOT: (f64, f64) = (1.0, 100.0);
 
 impl ContactLaw {
+    /// A law known rather than calibrated (a model's own, a test's truth): constants `p` with
+    /// no covariance and no misfit, for a probe of free resonance `free_hz` (Hz), vouched for
+    /// over `span_kpa` (lowest, highest modulus, kPa), referred to the force `force_n` (N; 0:
+    /// none).
+    pub fn exact(free_hz: f64, p: [f64; 3], span_kpa: (f64, f64), force_n: f64) -> Self {
+        Self {
+            free_hz,
+            p,
+            cov: [[0.0; 3]; 3],
+            model_sigma_hz: 0.0,
+            min_kpa: span_kpa.0,
+            max_kpa: span_kpa.1,
+            force_n,
+        }
+    }
+
     /// The law as the numbers the store's record and the bench's profile file keep, in this
     /// order: `free_hz`, `p` (3), `cov` (9, row major), `model_sigma_hz`, `min_kpa`, `max_kpa`,
     /// `force_n`.

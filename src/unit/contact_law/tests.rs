@@ -4,15 +4,7 @@ use super::*;
 /// A law of the simulated probe's size (free resonance 232.3 Hz) over 100–3000 kPa, exact
 /// (no covariance, no misfit), without a reference force.
 fn law() -> ContactLaw {
-    ContactLaw {
-        free_hz: 232.3,
-        p: [13.44, 9.26, 4.88],
-        cov: [[0.0; 3]; 3],
-        model_sigma_hz: 0.0,
-        min_kpa: 100.0,
-        max_kpa: 3000.0,
-        force_n: 0.0,
-    }
+    ContactLaw::exact(232.3, [13.44, 9.26, 4.88], (100.0, 3000.0), 0.0)
 }
 
 /// The analytic slopes against central differences of the law in E and in each constant.
