@@ -223,3 +223,87 @@ impl Wiring for HalSimProbe {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::periph::Peripherals;
+
+    const GPIOB: u32 = 0x4800_0400;
+    /// Core cycles per µs on HSI16 (the clock at reset).
+    const US: u64 = 16;
+
+    /// The board's pins at reset with GPIOB clocked, PB5 an output (low), PB4 an input with
+    /// its pull-up, the probe on phantom B at 30 mN with a quiet load cell (its offset only).
+    fn board() -> (Peripherals, hal_sim::loadcell::LoadCell) {
+        let cell = hal_sim::loadcell::LoadCell::quiet();
+        let scene = hal_sim::Scene {
+            load_cell: Some(cell),
+            ..hal_sim::Scene::on_phantom(&hal_sim::phantoms::B).with_preload_n(0.030)
+        };
+        let mut p = Peripherals::default();
+        p.wiring = Box::new(HalSimProbe::new(scene, 1));
+        p.write(0x4002_1000 + crate::periph::rcc::AHB2ENR, 4, 1 << 1, 0)
+            .unwrap();
+        // MODER: PB4 input, PB5 output (the rest at reset); PUPDR: PB4 pull-up.
+        let moder = p.read(GPIOB, 4, 0).unwrap();
+        let moder = (moder & !(0xF << 8)) | (1 << 10);
+        p.write(GPIOB, 4, moder, 1).unwrap();
+        p.write(GPIOB + 0x0C, 4, 1 << 8, 2).unwrap();
+        (p, cell)
+    }
+
+    fn dout(p: &mut Peripherals, at: u64) -> bool {
+        p.read(GPIOB + 0x10, 4, at).unwrap() >> 4 & 1 == 1
+    }
+
+    fn sck(p: &mut Peripherals, at: u64, high: bool) {
+        let v = if high { 1 << 5 } else { 1 << 21 };
+        p.write(GPIOB + 0x18, 4, v, at).unwrap();
+    }
+
+    /// One read as the HX711 datasheet's timing diagram has it, through the GPIO registers at
+    /// core-clock times from `at`: 24 pulses of 1 µs high and low, bits read after each falling
+    /// edge, a 25th pulse; the sign-extended value and the cycle after it.
+    fn read(p: &mut Peripherals, mut at: u64) -> (i32, u64) {
+        let mut v = 0u32;
+        for k in 0..25 {
+            sck(p, at, true);
+            sck(p, at + US, false);
+            if k < 24 {
+                v = (v << 1) | dout(p, at + US + 1) as u32;
+            }
+            at += 2 * US;
+        }
+        (((v << 8) as i32) >> 8, at)
+    }
+
+    /// The HX711 at PB4/PB5 in core-clock time: settling after power-up (no conversion at
+    /// 49 ms, one at 51 ms: four periods at 80 SPS), the conversion the cell's transfer of the
+    /// scene's force to the count (`round((F + offset) × counts/N)`), `DOUT` high once read,
+    /// `PD_SCK` held high 70 µs powers it down, and after it goes low a settling time again.
+    #[test]
+    fn the_load_cell_converts_the_scenes_force_on_its_pins() {
+        let (mut p, cell) = board();
+        let ms = 1000 * US;
+        assert!(dout(&mut p, 49 * ms), "settling at 49 ms");
+        assert!(!dout(&mut p, 51 * ms), "a conversion at 51 ms");
+        let (v, end) = read(&mut p, 51 * ms);
+        let want = ((0.030 + cell.offset_n) * cell.counts_per_n).round() as i32;
+        assert_eq!(v, want);
+        assert!(
+            dout(&mut p, end + US),
+            "read: DOUT high until the next conversion"
+        );
+        // Power-down: 70 µs high, then low at 100 ms; settled again 50 ms later.
+        let t = 100 * ms;
+        assert!(
+            !dout(&mut p, t - 70 * US),
+            "the conversion of 87.5 ms waits"
+        );
+        sck(&mut p, t - 70 * US, true);
+        sck(&mut p, t, false);
+        assert!(dout(&mut p, t + 49 * ms), "settling after the power-down");
+        assert!(!dout(&mut p, t + 51 * ms));
+    }
+}
