@@ -109,6 +109,68 @@ fn run_lines(
     Ok((log, session))
 }
 
+/// The `stream` options an image can take (`board`: `--qemu` or `--stm32`, for the message):
+/// its default tracker, no knocks, a lift-off as a step, the command's range of seconds.
+pub(crate) fn check_stream_args(a: &crate::cmd::stream::StreamArgs, board: &str) -> Result<()> {
+    if !a.tracker.is_default() {
+        bail!("with {board} the image streams with its default tracker (no --segment-s, --dither, --q-prior)");
+    }
+    if a.knocks_hz.is_some() {
+        bail!("with {board} there are no knocks (the image's board has no knock)");
+    }
+    if a.lift.lift_off_ramp_s != 0.0 {
+        bail!("with {board} the lift-off is a step (no --lift-off-ramp-s)");
+    }
+    let (lo, hi) = pzt_probe::instrument::command::STREAM_SECONDS;
+    if !(lo as f64..=hi as f64).contains(&a.seconds) {
+        bail!("with {board} --seconds must be in [{lo}, {hi}]");
+    }
+    Ok(())
+}
+
+/// The one stream an image logged, its readings with `t_s` from `origin` (probe time, s: when
+/// the scene's clock started) or, without one, from the stream's start (as the host's stream,
+/// which starts at probe time 0); the firmware's own counts printed unless `json`.
+pub(crate) fn stream_readings(
+    log: &str,
+    session: &defmt_log::Session,
+    json: bool,
+    origin: Option<f32>,
+) -> Result<Vec<pzt_probe::instrument::continuous::StreamReading>> {
+    use pzt_probe::instrument::continuous::StreamReading;
+    let [x] = session.streams.as_slice() else {
+        bail!(
+            "the image logged {} streams, not one:\n{log}",
+            session.streams.len()
+        );
+    };
+    let end = x
+        .end
+        .as_ref()
+        .context("the image's stream has no end line")?;
+    let start = origin.or(end.start_s).unwrap_or(0.0);
+    if !json {
+        println!(
+            "  the firmware: {} readings, {} ok, {} dropped (report channel full), most work from a window to the next plan {} (the image's counter unit: instructions in QEMU, cycles on the STM32)",
+            end.readings, end.ok, end.dropped, end.plan_work
+        );
+    }
+    x.readings
+        .iter()
+        .map(|r| {
+            Ok(StreamReading {
+                seq: r.seq,
+                t_s: pzt_probe::Seconds(r.t_s - start),
+                locked: r.locked,
+                reading: r
+                    .reading
+                    .to_reading()
+                    .with_context(|| format!("unknown status or method in {r:?}"))?,
+            })
+        })
+        .collect()
+}
+
 /// `stream --qemu`: the image's `stream` command on the scene and its events (`sim` lines,
 /// which count from the scene's start, 10 ms before the stream's), its readings with `t_s`
 /// from the stream's start (as the host's stream, which starts at probe time 0).
@@ -117,22 +179,7 @@ pub fn stream(
     target: &Target,
     noise: NoiseScene,
 ) -> Result<Vec<pzt_probe::instrument::continuous::StreamReading>> {
-    use pzt_probe::instrument::continuous::StreamReading;
-    if !a.tracker.is_default() {
-        bail!("with --qemu the image streams with its default tracker (no --segment-s, --dither, --q-prior)");
-    }
-    if a.knocks_hz.is_some() {
-        bail!("with --qemu there are no knocks (the image's script has no knock line)");
-    }
-    if a.lift.lift_off_ramp_s != 0.0 {
-        bail!("with --qemu the lift-off is a step (no --lift-off-ramp-s)");
-    }
-    if !(pzt_probe::instrument::command::STREAM_SECONDS.0 as f64
-        ..=pzt_probe::instrument::command::STREAM_SECONDS.1 as f64)
-        .contains(&a.seconds)
-    {
-        bail!("with --qemu --seconds must be in [0.1, 600]");
-    }
+    check_stream_args(a, "--qemu")?;
     let mut lines = scene_lines(target, &a.scene, noise);
     lines.push(format!("sim seed {}", a.noise.seed));
     if let (Some(p), Some(t)) = (&a.step.step_to, a.step.step_at_s) {
@@ -153,37 +200,7 @@ pub fn stream(
     }
     lines.push(format!("stream {}", a.seconds));
     let (log, session) = run_lines("stream", target, &lines, a.out.json)?;
-    let [x] = session.streams.as_slice() else {
-        bail!(
-            "the image logged {} streams, not one:\n{log}",
-            session.streams.len()
-        );
-    };
-    let end = x
-        .end
-        .as_ref()
-        .context("the image's stream has no end line")?;
-    let start = end.start_s.unwrap_or(0.0);
-    if !a.out.json {
-        println!(
-            "  the firmware: {} readings, {} ok, {} dropped (report channel full), most work from a window to the next plan {} instructions",
-            end.readings, end.ok, end.dropped, end.plan_work
-        );
-    }
-    x.readings
-        .iter()
-        .map(|r| {
-            Ok(StreamReading {
-                seq: r.seq,
-                t_s: pzt_probe::Seconds(r.t_s - start),
-                locked: r.locked,
-                reading: r
-                    .reading
-                    .to_reading()
-                    .with_context(|| format!("unknown status or method in {r:?}"))?,
-            })
-        })
-        .collect()
+    stream_readings(&log, &session, a.out.json, None)
 }
 
 /// `measure --qemu`.

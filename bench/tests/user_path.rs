@@ -231,3 +231,45 @@ fn the_json_reports_the_contact_force() {
     assert_eq!(r["status"], "too_hard", "{r}");
     assert!(r["modulus_kpa"].is_null());
 }
+
+/// `measure --stm32` (issue 26): the STM32 image on the emulated board, after its user's path
+/// (air, `weigh 10`, calibration on A–E with the method asked for), reads as the host does. With
+/// a method other than the default (`fit`, whose calibration and readings take their own time:
+/// each step waits for the image's reply): B `ok` within 1 % of 279 kPa, and its contact force
+/// the scene's 30 mN within the load cell's terms (0.5 % creep of the 10 g weighing and of the
+/// force, 10 µN/s drift over the session's ~30 s, 4 σ; `hal_sim::loadcell::LoadCell`). The
+/// force checks: B at 8 mN, B at 80 mN and free air get the host's verdicts (`too_light`,
+/// `too_hard`, `no_contact`), with the host's force within 1 mN.
+#[test]
+fn stm32_reads_with_its_load_cell_and_any_method_as_the_host_does() {
+    let cell = hal_sim::loadcell::LoadCell::default();
+    let weight_n = 0.010 * hal_sim::loadcell::STANDARD_GRAVITY_M_S2;
+    let r = measure(&["--phantom", "B", "--method", "fit", "--stm32"]);
+    eprintln!("stm32 fit: {r}");
+    assert_eq!(r["status"], "ok", "{r}");
+    assert_eq!(r["method"], "fit", "{r}");
+    let e = r["modulus_kpa"].as_f64().unwrap();
+    assert!((e / 279.0 - 1.0).abs() <= 0.01, "{e} kPa");
+    let f = r["contact_force_n"].as_f64().unwrap();
+    let sigma = r["contact_force_sigma_n"].as_f64().unwrap();
+    let tol = cell.creep_fraction * (weight_n + 0.030) + cell.drift_n_per_s * 30.0 + 4.0 * sigma;
+    assert!((f - 0.030).abs() <= tol, "force {f} N ± {tol}");
+    for s in [
+        &["--phantom", "B", "--preload-n", "0.008"][..],
+        &["--phantom", "B", "--preload-n", "0.08"][..],
+        &["--free-air"][..],
+    ] {
+        let host = measure(s);
+        let stm32 = measure(&[s, &["--stm32"]].concat());
+        eprintln!("{s:?}: host {} stm32 {}", host["status"], stm32["status"]);
+        assert_eq!(stm32["status"], host["status"], "{s:?}: {stm32} vs {host}");
+        let (hf, sf) = (
+            host["contact_force_n"].as_f64().unwrap(),
+            stm32["contact_force_n"].as_f64().unwrap(),
+        );
+        assert!(
+            (hf - sf).abs() <= 1e-3,
+            "{s:?}: force {sf} N vs host {hf} N"
+        );
+    }
+}

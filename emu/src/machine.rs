@@ -213,6 +213,10 @@ pub struct Machine {
     pub resets: u32,
     /// The host's number for the next command frame (`probe_proto::HostMsg::Command::id`).
     next_command_id: u32,
+    /// LPUART1 TX bytes read by [`Machine::last_reply`] so far, and its frame decoder.
+    tx_read: usize,
+    tx_frames: Box<probe_proto::Decoder<{ probe_proto::MAX_DEVICE_FRAME }>>,
+    last_reply: Option<u32>,
 }
 
 fn reg<R: Into<i32>>(uc: &Unicorn<'_, Board>, r: R) -> u32 {
@@ -404,6 +408,9 @@ impl Machine {
             uc,
             resets: 0,
             next_command_id: 0,
+            tx_read: 0,
+            tx_frames: Box::default(),
+            last_reply: None,
         };
         m.reset_cpu()?;
         Ok(m)
@@ -809,8 +816,7 @@ impl Machine {
     pub fn uart_send(&mut self, bytes: &[u8]) {
         let b = self.board_mut();
         let t = b.seconds();
-        let f_ck = b.periph.rcc.lpuart1_kernel_hz();
-        b.periph.lpuart.send(t, bytes, f_ck);
+        b.periph.lpuart.send(t, bytes);
     }
 
     /// Send the command line `line` as the host link does (`docs/protocol.md`): one
@@ -831,6 +837,32 @@ impl Machine {
         let frame = frame.to_vec();
         self.uart_send(&frame);
         Ok(id)
+    }
+
+    /// The number of the last command frame sent ([`Machine::send_command`]; 0 before the first).
+    pub fn last_command(&self) -> u32 {
+        self.next_command_id
+    }
+
+    /// The highest command number the image has replied to so far (`DeviceMsg::Reply`, sent
+    /// once a command is served or refused, `docs/protocol.md`), read from the frames on LPUART1
+    /// TX as the host decodes them; `None` before the first reply.
+    pub fn last_reply(&mut self) -> Option<u32> {
+        let tx = &self.uc.get_data().periph.lpuart.tx;
+        let new = tx.get(self.tx_read..).unwrap_or_default().to_vec();
+        self.tx_read = tx.len();
+        for b in new {
+            if let Some(Ok(body)) = self.tx_frames.feed(b) {
+                if let Ok(probe_proto::DeviceFrame {
+                    msg: probe_proto::DeviceMsg::Reply { id, .. },
+                    ..
+                }) = probe_proto::decode_device(body)
+                {
+                    self.last_reply = Some(self.last_reply.map_or(id, |r| r.max(id)));
+                }
+            }
+        }
+        self.last_reply
     }
 
     /// Seconds of emulated time since power-on.

@@ -51,22 +51,19 @@ fn decode(elf: &Path, bytes: &[u8]) -> Vec<String> {
 }
 
 /// What happens to the board at a time: a line typed on the virtual COM port, the probe moved
-/// (onto a phantom, or `None`: lifted into free air), the reset button, a fault injected into
+/// (to the scene of that name, [`HalSimProbe::scene_named`]), the reset button, a fault injected into
 /// the board (a peripheral's state set; at time 0, before the first instruction).
 #[derive(Clone, Copy, Debug)]
 enum Event {
     Send(&'static str),
-    Scene(Option<&'static str>),
+    Scene(&'static str),
     Reset,
     Fault(fn(&mut Machine)),
 }
 
-/// The bench scene (hal-sim's probe at bench noise, 30 mN) on phantom `name`, or in free air.
-fn scene(name: Option<&str>) -> hal_sim::Scene {
-    HalSimProbe::bench_scene(
-        name.map(|n| hal_sim::phantoms::by_name(n).unwrap())
-            .as_ref(),
-    )
+/// The scene called `name` ([`HalSimProbe::scene_named`]: `B`, `B@8`, `free-air`, `weight:10`).
+fn scene(name: &str) -> hal_sim::Scene {
+    HalSimProbe::scene_named(name).unwrap_or_else(|| panic!("no scene {name}"))
 }
 
 /// A run of the image: the board as it ended and the decoded log.
@@ -104,7 +101,7 @@ fn run(elf: &Path, seconds: f64, on: hal_sim::Scene, events: &[(f64, Event)]) ->
     let image = Elf::parse(&bytes).unwrap();
     let cb = image.symbol("_SEGGER_RTT").expect("_SEGGER_RTT");
     let mut m = Machine::new(&image).unwrap();
-    m.board_mut().periph.analog = Box::new(HalSimProbe::new(on, 1));
+    m.board_mut().periph.wiring = Box::new(HalSimProbe::new(on, 1));
     let wall = std::time::Instant::now();
     let mut log = Vec::new();
     let mut pending = events.to_vec();
@@ -144,12 +141,7 @@ fn run(elf: &Path, seconds: f64, on: hal_sim::Scene, events: &[(f64, Event)]) ->
 #[test]
 fn stm32_image_boots_and_passes_its_self_test_on_phantom_b() {
     let elf = build_image();
-    let run = run(
-        &elf,
-        3.0,
-        scene(Some("B")),
-        &[(1.0, Event::Send("measure"))],
-    );
+    let run = run(&elf, 3.0, scene("B"), &[(1.0, Event::Send("measure"))]);
     // RM0440's sequences (the emulator's rule checks), the range 1 boost switch among them:
     // none broken.
     let rules = run.rules();
@@ -210,23 +202,25 @@ fn stm32_image_calibrates_stores_survives_a_reset_and_reads_phantom_b() {
     let elf = build_image();
     let events = [
         (1.0, Send("air")),
-        (13.0, Scene(Some("A"))),
-        (13.5, Send("calibrate add 157.5")),
-        (15.0, Scene(Some("B"))),
-        (15.5, Send("calibrate add 279")),
-        (17.0, Scene(Some("C"))),
-        (17.5, Send("calibrate add 414")),
-        (19.0, Scene(Some("D"))),
-        (19.5, Send("calibrate add 1146")),
-        (21.0, Scene(Some("E"))),
-        (21.5, Send("calibrate add 2465")),
-        (23.0, Send("calibrate fit")),
-        (26.0, Send("store")),
-        (28.0, Scene(Some("B"))),
-        (29.0, Reset),
-        (33.0, Send("measure")),
+        (12.5, Scene("weight:10")),
+        (12.7, Send("weigh 10")),
+        (14.0, Scene("A")),
+        (14.5, Send("calibrate add 157.5")),
+        (16.0, Scene("B")),
+        (16.5, Send("calibrate add 279")),
+        (18.0, Scene("C")),
+        (18.5, Send("calibrate add 414")),
+        (20.0, Scene("D")),
+        (20.5, Send("calibrate add 1146")),
+        (22.0, Scene("E")),
+        (22.5, Send("calibrate add 2465")),
+        (24.0, Send("calibrate fit")),
+        (27.0, Send("store")),
+        (29.0, Scene("B")),
+        (30.0, Reset),
+        (34.0, Send("measure")),
     ];
-    let run = run(&elf, 36.0, scene(None), &events);
+    let run = run(&elf, 37.0, scene("free-air"), &events);
     let rules = run.rules();
     assert!(rules.is_empty(), "rules broken: {rules:?}");
     let parsed = run.parsed();
@@ -277,6 +271,108 @@ fn stm32_image_calibrates_stores_survives_a_reset_and_reads_phantom_b() {
         "B read {e} kPa, phantom 279 kPa"
     );
     assert_eq!(num(&last(&parsed, "counters"), "late"), 0.0);
+    // The load cell, weighed with 10 g before the calibration, kept through the store and the
+    // reset: the reading's contact force is the scene's.
+    let cal = named("loadcell");
+    assert!(cal.iter().any(|c| c["present"] == "true"), "{cal:?}");
+    assert_force(&r, 0.030, 35.0);
+}
+
+/// The 10 g weight of the sessions' `weigh 10`, N (the heaviest load the cell carries).
+const WEIGHT_N: f64 = 0.010 * hal_sim::loadcell::STANDARD_GRAVITY_M_S2;
+
+/// The largest error of a contact force the unit reads at `t_s` emulated seconds, `scene_n`
+/// newtons being the truth, by the terms of hal-sim's load cell (`hal_sim::loadcell::LoadCell`'s
+/// default, the bench scenes' cell) and of the unit's calibration of it: the creep the reading
+/// carries (at most `creep_fraction` of the heaviest load carried before it, the 10 g weight,
+/// since creep relaxes with its time constant after a load leaves), the creep the weighing
+/// carried into the sensitivity (at most `creep_fraction` of the force), the offset drift since
+/// the tare (the air reference, after 1 s), 4 σ of the window's mean (the reading's own
+/// `force_sigma_n`) and a count's rounding.
+fn force_tolerance(scene_n: f64, t_s: f64, sigma_n: f64) -> f64 {
+    let cell = hal_sim::loadcell::LoadCell::default();
+    cell.creep_fraction * (WEIGHT_N.max(scene_n) + scene_n)
+        + cell.drift_n_per_s * (t_s - 1.0)
+        + 4.0 * sigma_n
+        + 1.0 / cell.counts_per_n
+}
+
+/// The reading `r` (taken by `t_s` emulated seconds) reports the contact force `scene_n` within
+/// [`force_tolerance`].
+fn assert_force(r: &std::collections::HashMap<String, String>, scene_n: f64, t_s: f64) {
+    let f = num(r, "force_n");
+    let tol = force_tolerance(scene_n, t_s, num(r, "force_sigma_n"));
+    println!(
+        "force {:.3} mN, scene {:.3} mN, tolerance {:.3} mN",
+        f * 1e3,
+        scene_n * 1e3,
+        tol * 1e3
+    );
+    assert!(
+        (f - scene_n).abs() <= tol,
+        "force {f} N, the scene's {scene_n} N ± {tol}: {r:?}"
+    );
+}
+
+/// The load cell's HX711 on PB4/PB5 of the emulated board (issue 26): after the air reference
+/// and `weigh 10` with 10 g on the tip, the unit reads the scene's contact force, and judges
+/// the press by it as the firmware's force window (the `loadcell` line's `min_n`, `max_n`) and
+/// no-contact threshold (3 mN, `NO_CONTACT_FORCE`) say: on B at 8 mN `too_light`, at 80 mN
+/// `too_hard`, in free air `no_contact`, at 30 mN the press passes (the unit is not calibrated
+/// on phantoms: `uncalibrated`). Without the weighing the unit has no load cell calibration.
+#[test]
+fn stm32_image_reads_the_contact_force_from_its_load_cell() {
+    use Event::*;
+    let elf = build_image();
+    let presses: [(&str, f64, &str); 4] = [
+        ("B@8", 0.008, "too_light"),
+        ("B@80", 0.080, "too_hard"),
+        ("free-air", 0.0, "no_contact"),
+        ("B", 0.030, "uncalibrated"),
+    ];
+    let mut events = vec![
+        (1.0, Send("measure")),
+        (1.5, Send("air")),
+        (13.0, Scene("weight:10")),
+        (13.2, Send("weigh 10")),
+    ];
+    let at = |k: usize| 14.0 + 1.5 * k as f64;
+    for (k, (name, _, _)) in presses.iter().enumerate() {
+        events.push((at(k), Scene(name)));
+        events.push((at(k) + 0.5, Send("measure")));
+    }
+    let run = run(&elf, at(presses.len()), scene("free-air"), &events);
+    let parsed = run.parsed();
+    let readings = all(&parsed, "reading");
+    assert_eq!(readings.len(), 1 + presses.len(), "{:?}", run.lines);
+    // Before the weighing the unit has no load cell: no force in the reading.
+    assert_eq!(readings[0]["status"], "no_air_reference");
+    assert!(
+        readings[0].get("force_n").is_none_or(|f| f == "NaN"),
+        "{:?}",
+        readings[0]
+    );
+    let cal = all(&parsed, "loadcell");
+    let cal = cal.last().expect("a loadcell line after `weigh`");
+    assert_eq!(cal["present"], "true", "{cal:?}");
+    let (min_n, max_n) = (num(cal, "min_n"), num(cal, "max_n"));
+    for (k, (name, scene_n, status)) in presses.iter().enumerate() {
+        let r = readings[1 + k];
+        println!("{name}: {} at {} N", r["status"], r["force_n"]);
+        assert_force(r, *scene_n, at(k) + 1.5);
+        // The verdict the window gives the scene's force (an independent check of the status).
+        let expected = if *scene_n < 0.003 {
+            "no_contact"
+        } else if *scene_n < min_n {
+            "too_light"
+        } else if *scene_n > max_n {
+            "too_hard"
+        } else {
+            "uncalibrated"
+        };
+        assert_eq!(expected, *status, "the test's table");
+        assert_eq!(r["status"], *status, "{name}: {r:?}");
+    }
 }
 
 /// A fault the bring-up must survive (issue 26, point 6): ADC1 never becomes ready. embassy's
@@ -287,7 +383,7 @@ fn stm32_image_calibrates_stores_survives_a_reset_and_reads_phantom_b() {
 fn stm32_image_survives_an_adc_that_never_becomes_ready() {
     let elf = build_image();
     let never_ready = Event::Fault(|m| m.board_mut().periph.adc[0].never_ready = true);
-    let run = run(&elf, 2.0, scene(Some("B")), &[(0.0, never_ready)]);
+    let run = run(&elf, 2.0, scene("B"), &[(0.0, never_ready)]);
     assert_eq!(run.m.resets, 1, "one watchdog reset, no loop");
     // (RCC_CSR's IWDGRSTF is not looked at here: the image reads and clears it with RMVF.)
     assert!(run.booted_with("converter_hang"), "{:?}", run.lines);
@@ -303,7 +399,7 @@ fn stm32_image_runs_from_hsi16_when_the_hse_never_starts() {
     let elf = build_image();
     let no_hse = Event::Fault(|m| m.board_mut().periph.rcc.hse_present = false);
     let events = [(0.0, no_hse), (1.5, Event::Send("status"))];
-    let run = run(&elf, 2.0, scene(Some("B")), &events);
+    let run = run(&elf, 2.0, scene("B"), &events);
     assert_eq!(run.m.resets, 0);
     // RM0440 RCC: the PLL from HSI16 (PLLSRC = 10) and SYSCLK from it at 170 MHz.
     let rcc = &run.m.board().periph.rcc;
@@ -345,7 +441,7 @@ fn stm32_image_survives_a_dma_transfer_error() {
     let elf = build_image();
     let error = Event::Fault(|m| m.board_mut().periph.dma.error(0));
     let events = [(1.0, error), (1.2, Event::Send("measure"))];
-    let run = run(&elf, 3.0, scene(Some("B")), &events);
+    let run = run(&elf, 3.0, scene("B"), &events);
     assert_eq!(run.m.resets, 0, "no panic, no watchdog reset");
     // The channel is off (the hardware disabled it) and TIM6 stopped by the image.
     assert_eq!(run.m.board().periph.dma.ch[0].ccr & 1, 0);
@@ -380,7 +476,7 @@ fn stm32_image_ends_a_dma_error_on_any_of_its_channels_typed() {
     for (name, error) in errors {
         println!("--- {name}");
         let events = [(1.0, Event::Fault(error)), (1.2, Event::Send("measure"))];
-        let run = run(&elf, 2.5, scene(Some("B")), &events);
+        let run = run(&elf, 2.5, scene("B"), &events);
         assert_eq!(run.m.resets, 0, "{name}: no panic, no watchdog reset");
         let parsed = run.parsed();
         let r = first(&parsed, "reading");
@@ -399,7 +495,7 @@ fn stm32_image_survives_a_flash_stuck_busy() {
     let elf = build_image();
     let stuck = Event::Fault(|m| m.board_mut().periph.flash.stuck_busy = true);
     let events = [(0.0, stuck), (1.0, Event::Send("store"))];
-    let run = run(&elf, 6.0, scene(Some("B")), &events);
+    let run = run(&elf, 6.0, scene("B"), &events);
     assert_eq!(run.m.resets, 1, "one watchdog reset, no loop");
     assert!(run.booted_with("flash_hang"), "{:?}", run.lines);
 }
@@ -418,7 +514,7 @@ fn stm32_image_names_each_probe_fault_in_its_self_test() {
         (hal_sim::Fault::AdcRail, "adc_rail_current"),
     ] {
         println!("--- {}", fault.name());
-        let on = fault.apply(scene(Some("B")));
+        let on = fault.apply(scene("B"));
         let run = run(&elf, 2.5, on, &[(1.5, Event::Send("measure"))]);
         let parsed = run.parsed();
         let t = first(&parsed, "selftest");

@@ -78,6 +78,9 @@ impl LoadCell {
     }
 }
 
+/// Standard gravity, m/s² (the conventional value of the CGPM, 1901): the weight of a known mass.
+pub const STANDARD_GRAVITY_M_S2: f64 = 9.806_65;
+
 /// Longest time `PD_SCK` may stay high before the chip powers down, s (datasheet: 60 µs).
 pub const POWER_DOWN_S: f64 = 60e-6;
 /// Conversion periods from power-up (or reset) to the first conversion at 80 SPS (datasheet:

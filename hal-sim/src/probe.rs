@@ -175,6 +175,16 @@ impl SimProbe {
             .map(|c| Hx711Sim::running(c, self.seed ^ LOAD_CELL_STREAM, self.contact_force_n()))
     }
 
+    /// The load cell as a board that powers up with it sees it (`None`: the scene has none): the
+    /// HX711 powered at `t = 0` and settling before its first conversion, its noise the same
+    /// stream as [`SimProbe::load_cell`]'s. The emulated STM32 board advances it in its own
+    /// (core clock) time.
+    pub fn load_cell_at_power_on(&self) -> Option<Hx711Sim> {
+        self.base
+            .load_cell
+            .map(|c| Hx711Sim::new(c, self.seed ^ LOAD_CELL_STREAM))
+    }
+
     /// The force the tip presses on the tissue now, N (the truth the load cell measures).
     pub fn contact_force_n(&self) -> f64 {
         self.scene.contact_force_n()

@@ -261,6 +261,16 @@ impl Scene {
         self.contact.preload_n = preload_n;
         self
     }
+    /// A known weight of `weight_n` newtons resting on the tip instead of tissue, as a load
+    /// cell's sensitivity is taken: the weight sits on a steel stud (the "tissue" rigid, 200 GPa),
+    /// the contact force is the weight.
+    pub fn weighing(self, weight_n: f64) -> Self {
+        Self {
+            tissue: Some(Tissue::with_modulus_kpa(2.0e8)),
+            ..self
+        }
+        .with_preload_n(weight_n)
+    }
     /// With the tissue's viscoelastic loss tangent (no effect in free air).
     pub fn with_loss_tangent(mut self, loss_tangent: f64) -> Self {
         if let Some(t) = self.tissue.as_mut() {

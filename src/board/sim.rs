@@ -272,7 +272,7 @@ pub const CALIBRATION_FORCES: [f64; 3] = [0.030, 0.015, 0.050];
 
 /// The known weight the load cell's sensitivity is taken with: 10 g (98.1 mN), within the
 /// 100 g cell's range and above the force window.
-pub const CALIBRATION_WEIGHT_N: f64 = 0.010 * 9.806_65;
+pub const CALIBRATION_WEIGHT_N: f64 = 0.010 * hal_sim::loadcell::STANDARD_GRAVITY_M_S2;
 
 /// Noise stream of the simulated unit's air reference.
 pub const AIR_SEED: u64 = 77;
@@ -429,11 +429,7 @@ pub fn air_reference_on(
 /// (a weight on a steel stud: the tissue rigid), the drive off, over 0.5 s: the factory's
 /// sensitivity step ([`LoadCellCal::weighed`]). `None` without a load cell.
 pub fn weigh(hardware: &Scene, weight_n: f64, seed: u64) -> Option<RawForce> {
-    let scene = Scene {
-        tissue: Some(hal_sim::Tissue::with_modulus_kpa(2.0e8)),
-        ..*hardware
-    }
-    .with_preload_n(weight_n);
+    let scene = hardware.weighing(weight_n);
     let mut board = SimBoard::new(SimProbe::new(scene, seed));
     let dac = [DacCode::MID; crate::engine::BATCH];
     let mut adc = [AdcFrame::default(); crate::engine::BATCH];

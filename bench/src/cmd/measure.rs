@@ -45,9 +45,10 @@ pub struct MeasureArgs {
     #[arg(long)]
     pub qemu: bool,
     /// Take the readings with the STM32 image (`cargo fw`) on the emulated NUCLEO-G474RE
-    /// (`emu/`, run as a subprocess): the unit takes its air reference, is calibrated on A–E
-    /// with its default method, then reads the phantom. Needs the thumbv7em-none-eabihf
-    /// target, flip-link, defmt-print, cmake and libclang (scripts/setup).
+    /// (`emu/`, run as a subprocess): the unit takes its air reference, weighs its load cell
+    /// with 10 g, is calibrated on A–E with the method and settings asked for, then reads the
+    /// target (a phantom at the preload, or free air). Needs the thumbv7em-none-eabihf target,
+    /// flip-link, defmt-print, cmake and libclang (scripts/setup).
     #[arg(long, conflicts_with = "qemu")]
     pub stm32: bool,
 }

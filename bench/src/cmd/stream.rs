@@ -53,6 +53,14 @@ pub struct StreamArgs {
     /// the thumbv7em-none-eabihf target.
     #[arg(long)]
     pub qemu: bool,
+    /// Stream on the STM32 image (`cargo fw`) on the emulated NUCLEO-G474RE instead (`emu/`,
+    /// run as a subprocess): the unit takes its air reference, weighs its load cell and is
+    /// calibrated on A–E, then streams on the target with its default tracker; the scene's
+    /// events are the emulator's scene changes (steps). The same output, `t_s` counted from
+    /// the stream's start. Needs the thumbv7em-none-eabihf target, flip-link, defmt-print,
+    /// cmake and libclang (scripts/setup).
+    #[arg(long, conflicts_with = "qemu")]
+    pub stm32: bool,
 }
 
 /// A slide onto another tissue during the stream (hal-sim `Step`).
@@ -191,7 +199,7 @@ pub fn run(a: StreamArgs) -> Result<()> {
     let unit = crate::unit::default_for(METHOD)?;
     if !a.out.json {
         print_scene_header("stream", &target, a.scene.preload_n, noise, &scene);
-        if !a.qemu {
+        if !(a.qemu || a.stm32) {
             println!(
             "  tracker: segments of {:.0} ms, drive ±{} half-linewidths off the resonance; unit profile of the simulated unit ({} calibration)",
             a.tracker.segment_s * 1e3,
@@ -223,8 +231,12 @@ pub fn run(a: StreamArgs) -> Result<()> {
             );
         }
     };
-    let readings = if a.qemu {
-        let v = crate::qemu::stream(&a, &target, noise)?;
+    let readings = if a.qemu || a.stm32 {
+        let v = if a.qemu {
+            crate::qemu::stream(&a, &target, noise)?
+        } else {
+            crate::stm32::stream(&a, &target, noise)?
+        };
         v.iter().for_each(&mut each);
         v
     } else {

@@ -23,13 +23,15 @@
 //! ADC1/ADC2 cover: deep power-down (DEEPPWD), the regulator (ADVREGEN, 20 µs start-up
 //! tADCVREG_STUP), calibration (ADCAL, 116 ADC clocks, single-ended and differential CALFACT),
 //! ADEN/ADDIS with ADRDY, ADSTART/ADSTP, one regular channel (SQR1.L = 0) with its sampling time
-//! (SMPR) and 12.5 clocks of conversion, the external trigger (EXTSEL/EXTEN, rising/falling
+//! (SMPR) and the successive approximation's 12.5, 10.5, 8.5 or 6.5 clocks at the resolution
+//! (CFGR.RES: 12, 10, 8, 6 bits; the code the resolution's, right- or left-aligned by
+//! CFGR.ALIGN, RM0440 ADC "Data management": left-aligned 12/10/8-bit data end at bit 15, 6-bit
+//! data at bit 7), the external trigger (EXTSEL/EXTEN, rising/falling
 //! edge of a pulse), CONT, DR with EOC/EOS/OVR (OVRMOD), the DMA request (DMAEN, DMACFG), IER
 //! as the ADC1_2 interrupt; the common CCR (CKMODE, PRESC, DUAL stored), the ADC kernel clock
 //! (CCIPR.ADC12SEL: SYSCLK) or HCLK/1,/2,/4. Leaves out: sequences of more than one channel,
 //! injected conversions, dual modes' coupling (DUAL is stored and checked against the rules
-//! only), oversampling, analog watchdogs, offsets, the resolution's effect on timing (12 bits),
-//! auto-delay, differential inputs, the internal channels (VREFINT, temperature, VBAT).
+//! only), oversampling, analog watchdogs, offsets (and their sign extension), auto-delay, differential inputs, the internal channels (VREFINT, temperature, VBAT).
 
 /// Trigger sources the models know.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -554,19 +556,40 @@ impl Adc {
         self.start(t, adc_hz);
     }
 
+    /// The resolution, bits (CFGR.RES).
+    pub fn resolution_bits(&self) -> u32 {
+        [12, 10, 8, 6][((self.cfgr >> 3) & 3) as usize]
+    }
+
+    /// DR's value for the 12-bit conversion `code12` at the resolution and alignment.
+    fn data(&self, code12: u32) -> u32 {
+        let bits = self.resolution_bits();
+        let code = code12 >> (12 - bits);
+        match (self.cfgr & (1 << 15) != 0, bits) {
+            (false, _) => code,
+            (true, 6) => code << 2,
+            (true, _) => code << (16 - bits),
+        }
+    }
+
     fn start(&mut self, t: f64, adc_hz: f64) {
         let (_, smp) = self.channel();
         let sampling = SMP_CYCLES[smp as usize] / adc_hz;
-        let total = (SMP_CYCLES[smp as usize] + CONVERSION_CYCLES) / adc_hz;
+        // tSAR: 12.5 clocks at 12 bits, two fewer for each two bits less (RM0440 ADC
+        // "Programmable resolution (RES) - fast conversion mode").
+        let sar = CONVERSION_CYCLES - (12 - self.resolution_bits()) as f64;
+        let total = (SMP_CYCLES[smp as usize] + sar) / adc_hz;
         self.converting = Some((t + sampling, t + total));
     }
 
-    /// Finish the conversion (its end is due) with `code`; returns true if a DMA request is
-    /// raised. Restarts in continuous mode or for a software-started sequence.
-    pub fn finish(&mut self, code: u32, adc_hz: f64) -> bool {
+    /// Finish the conversion (its end is due) of the voltage whose 12-bit code is `code12`;
+    /// returns true if a DMA request is raised. Restarts in continuous mode or for a
+    /// software-started sequence.
+    pub fn finish(&mut self, code12: u32, adc_hz: f64) -> bool {
         let Some((_, end)) = self.converting.take() else {
             return false;
         };
+        let code = self.data(code12);
         if self.isr & (1 << 2) != 0 {
             // DR not read since the last EOC: overrun.
             self.isr |= 1 << 4;
@@ -855,24 +878,50 @@ mod tests {
         assert_eq!(a.isr & 1, 1, "ADRDY");
     }
 
-    #[test]
-    fn adc_converts_on_trigger_with_sampling_plus_12_5_clocks() {
-        let hz = 42.5e6;
+    /// CFGR of the board's rings: EXTSEL 13 (TIM6_TRGO) rising, DMA circular.
+    const RING_CFGR: u32 = (ADC_EXTSEL_TIM6_TRGO << 5) | (1 << 10) | 3;
+
+    /// An ADC enabled at `hz` converting IN1 with SMP = 47.5 clocks, CFGR `cfgr`, started
+    /// (ADSTART) at 1 ms, triggered by TIM6 at 2 ms.
+    fn triggered_adc(hz: f64, cfgr: u32) -> Adc {
         let mut a = Adc::default();
         a.write(0x08, 1 << 28, 0.0, hz).unwrap();
         a.write(0x08, (1 << 28) | 1, 1e-3, hz).unwrap();
-        // IN1, SMP = 47.5 clocks, EXTSEL 13 rising, DMA circular.
         a.write(0x30, 1 << 6, 1e-3, hz).unwrap();
         a.write(0x14, 4 << 3, 1e-3, hz).unwrap();
-        a.write(0x0C, (ADC_EXTSEL_TIM6_TRGO << 5) | (1 << 10) | 3, 1e-3, hz)
-            .unwrap();
+        a.write(0x0C, cfgr, 1e-3, hz).unwrap();
         a.write(0x08, (1 << 28) | 4, 1e-3, hz).unwrap();
         a.trigger(Trigger::Tim6Trgo, 2e-3, hz);
+        a
+    }
+
+    #[test]
+    fn adc_converts_on_trigger_with_sampling_plus_12_5_clocks() {
+        let hz = 42.5e6;
+        let mut a = triggered_adc(hz, RING_CFGR);
         let (s, e) = a.converting.unwrap();
         assert!((s - (2e-3 + 47.5 / hz)).abs() < 1e-15);
         assert!((e - (2e-3 + 60.0 / hz)).abs() < 1e-15);
         assert!(a.finish(0x123, hz));
         assert_eq!(a.dr, 0x123);
         assert!(a.converting.is_none(), "waits for the next trigger");
+    }
+
+    /// RM0440 ADC "Programmable resolution": RES = 10 bits converts in 10.5 clocks after the
+    /// sampling, and DR holds the 10-bit code right-aligned, or left-aligned at bit 15 with
+    /// ALIGN; 6 bits left-aligned end at bit 7.
+    #[test]
+    fn adc_resolution_sets_the_code_and_the_conversion_time() {
+        let hz = 42.5e6;
+        let cfgr = RING_CFGR;
+        let mut a = triggered_adc(hz, cfgr | (1 << 3));
+        let (_, e) = a.converting.unwrap();
+        assert!((e - (2e-3 + 58.0 / hz)).abs() < 1e-15);
+        assert!(a.finish(0xABC, hz));
+        assert_eq!(a.dr, 0xABC >> 2);
+        a.cfgr = cfgr | (1 << 3) | (1 << 15);
+        assert_eq!(a.data(0xABC), (0xABC >> 2) << 6);
+        a.cfgr = cfgr | (3 << 3) | (1 << 15);
+        assert_eq!(a.data(0xABC), (0xABC >> 6) << 2);
     }
 }

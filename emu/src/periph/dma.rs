@@ -14,14 +14,21 @@
 //! the device data: ADC1 5, DAC1 CH1 6, ADC2 36, LPUART1 RX 34, LPUART1 TX 35. Leaves out
 //! synchronisation, event generation and the request generators (stored only).
 //!
-//! LPUART1 covers: UE/RE/TE with REACK/TEACK, BRR (baud = 256 × f_ck / BRR, f_ck the kernel
-//! clock CCIPR.LPUART1SEL selects),
-//! RX bytes from the harness at one frame time each (10 bits, 8N1), RDR/RXNE, ORE on a byte
+//! LPUART1 covers: UE/RE/TE with REACK/TEACK, BRR and PRESC (baud = 256 × f_ck / PRESC / BRR,
+//! f_ck the kernel clock CCIPR.LPUART1SEL selects),
+//! RX bytes from the harness on a line at the host's rate ([`LINE_BAUD`], 10 bits, 8N1), each
+//! sampled by the receiver at the middles of its own bit times from the start edge (a receiver
+//! off the line's rate misreads bits, sees no start bit or a framing error, FE; beyond the 8N1
+//! frame's tolerance the run records the rule, RM0440 LPUART "Tolerance of the LPUART receiver
+//! to clock deviation"), RDR/RXNE, ORE on a byte
 //! arriving with RXNE set (unless OVRDIS), IDLE one frame after the last byte, the RX DMA
-//! request (CR3.DMAR), the interrupt (RXNEIE, IDLEIE, EIE with ORE); TX bytes captured (TXE and TC
-//! always set). Leaves out: FIFO mode, parity, 9-bit and 7-bit words, stop bits other than
-//! one, noise/framing errors, auto baud, wake-up, the prescaler (PRESC stored, taken as 1), the
-//! TX timing.
+//! request (CR3.DMAR), the interrupt (RXNEIE, IDLEIE, EIE with ORE); TX: a byte written to TDR
+//! is captured and takes one frame time on the line, TXE and TC clear meanwhile, and with
+//! CR3.DMAT set (and TE, UE) a free transmitter requests the next byte from the DMA (LPUART1
+//! TX). Leaves out: FIFO mode, parity, 9-bit and 7-bit words, stop bits other than one,
+//! noise errors, auto baud, wake-up, a receiver still in one frame when the next starts, the
+//! TX double buffering (TDR takes the next byte only once the previous one is sent: TXE and TC
+//! fall together), the TX interrupts (TXEIE, TCIE).
 
 /// DMAMUX request IDs (device data `request:`).
 pub mod req {
@@ -190,16 +197,20 @@ impl Dma {
                 let c = &mut self.ch[n];
                 let enabled = c.ccr & 1 != 0;
                 let name = ["CCR", "CNDTR", "CPAR", "CMAR", "?"][(reg / 4) as usize];
+                // A CCR write that clears EN is the channel's disable: its other bits are
+                // read-only while EN = 1 (RM0440 DMA_CCRx) and keep their values, which is no
+                // reconfiguration of an enabled channel.
                 let changed = match reg {
-                    0 => (c.ccr ^ v) & 0x7FFE != 0,
+                    0 => v & 1 != 0 && (c.ccr ^ v) & 0x7FFE != 0,
                     4 => c.ndtr != v & 0xFFFF,
                     8 => c.par != v,
                     12 => c.mar != v,
                     _ => false,
                 };
+                let before = [c.ccr, c.ndtr, c.par, c.mar, 0][(reg / 4) as usize];
                 let violation = (enabled && changed).then(|| {
                     format!(
-                        "DMA1 channel {} {name} changed while the channel is enabled (RM0440 DMA: configured only with EN = 0)",
+                        "DMA1 channel {} {name} changed from {before:#x} to {v:#x} while the channel is enabled (RM0440 DMA: configured only with EN = 0)",
                         n + 1
                     )
                 });
@@ -208,7 +219,7 @@ impl Dma {
                         if v & 1 != 0 && !enabled {
                             c.done = 0;
                         }
-                        if violation.is_none() || reg != 0 {
+                        if !enabled {
                             c.ccr = v & 0x7FFF;
                         } else {
                             // Only EN (and the interrupt enables) take effect while enabled.
@@ -261,6 +272,38 @@ impl Dma {
     }
 }
 
+/// The RX line's rate, Bd: the host's, as the ST-LINK virtual COM port sends it
+/// (docs/protocol.md: 115 200 Bd, 8N1).
+pub const LINE_BAUD: f64 = 115_200.0;
+
+/// The largest relative deviation of the receiver's rate from the line's at which an 8N1
+/// frame's stop bit, sampled at its middle 9.5 bit times after the start edge, still falls
+/// inside its bit: 0.5 / 9.5. Ours, from the frame's geometry: RM0440's table of the
+/// receiver's tolerance (which adds the oversampling's quantisation) is tighter, so the model
+/// errs on the lenient side.
+pub const RX_TOLERANCE: f64 = 0.5 / 9.5;
+
+/// What a receiver at `rx_baud` makes of `byte` sent 8N1 at [`LINE_BAUD`]: each of its bits
+/// sampled at the middle of the receiver's own bit time from the start edge (the start bit,
+/// the data LSB first, the stop bit; the line idles high after it). `None` when the start bit
+/// does not read low (no frame); else (data, stop bit read high).
+pub fn sample_frame(byte: u8, rx_baud: f64) -> Option<(u8, bool)> {
+    let line_bits_per_rx_bit = LINE_BAUD / rx_baud;
+    let line = |k: u32| -> bool {
+        let i = ((k as f64 + 0.5) * line_bits_per_rx_bit).floor();
+        match i as i64 {
+            0 => false,
+            i @ 1..=8 => byte >> (i - 1) & 1 == 1,
+            _ => true,
+        }
+    };
+    if line(0) {
+        return None;
+    }
+    let data = (0..8).fold(0u8, |d, k| d | (line(k + 1) as u8) << k);
+    Some((data, line(9)))
+}
+
 /// LPUART1.
 #[derive(Clone, Debug, Default)]
 pub struct Lpuart {
@@ -277,10 +320,16 @@ pub struct Lpuart {
     pub rx: std::collections::VecDeque<(f64, u8)>,
     /// When IDLE rises (s), after the last byte.
     idle_at: Option<f64>,
+    /// The byte on the TX line is sent at this time (s); `None`: the transmitter is free.
+    tx_busy_until: Option<f64>,
     /// A DMA request for the byte in RDR, not yet served.
     pub dma_pending: bool,
     /// Bytes the image transmitted.
     pub tx: Vec<u8>,
+    /// The receiver's rate off the line's beyond [`RX_TOLERANCE`]: the rule, for the
+    /// peripherals' violation list to take (once per reset).
+    pub rate_mismatch: Option<String>,
+    rate_mismatch_found: bool,
 }
 
 impl Lpuart {
@@ -290,12 +339,17 @@ impl Lpuart {
     }
 
     /// The baud rate at kernel clock `f_ck` Hz (RM0440 LPUART "Baud rate generation":
-    /// 256 × f_ck / BRR; 0 with BRR 0).
+    /// 256 × f_ck / PRESC / BRR; 0 with BRR unset).
     pub fn baud(&self, f_ck: f64) -> f64 {
         if self.brr == 0 {
             return 0.0;
         }
-        256.0 * f_ck / self.brr as f64
+        // RM0440 LPUART_PRESC: /1, 2, 4, 6, 8, 10, 12, 16, 32, 64, 128, 256 (and 256 above).
+        const DIV: [f64; 12] = [
+            1.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 16.0, 32.0, 64.0, 128.0, 256.0,
+        ];
+        let div = DIV[(self.presc as usize).min(11)];
+        256.0 * f_ck / div / self.brr as f64
     }
 
     /// The frame time at kernel clock `f_ck` Hz, s (10 bits).
@@ -303,9 +357,9 @@ impl Lpuart {
         10.0 / self.baud(f_ck)
     }
 
-    /// Queue `bytes` arriving back to back from time `t0` at the present baud rate.
-    pub fn send(&mut self, t0: f64, bytes: &[u8], f_ck: f64) {
-        let frame = self.frame_s(f_ck);
+    /// Queue `bytes` arriving back to back on the line from time `t0` ([`LINE_BAUD`]).
+    pub fn send(&mut self, t0: f64, bytes: &[u8]) {
+        let frame = 10.0 / LINE_BAUD;
         let mut t = self.rx.back().map_or(t0, |(last, _)| last.max(t0));
         for &b in bytes {
             t += frame;
@@ -313,31 +367,62 @@ impl Lpuart {
         }
     }
 
-    /// The next event: a byte arriving or the idle line, s.
+    /// The next event: a byte arriving, the idle line, the TX byte sent, s.
     pub fn next_event(&self) -> Option<f64> {
-        if !self.receiving() {
-            return None;
-        }
-        [self.rx.front().map(|r| r.0), self.idle_at]
+        let rx = self
+            .receiving()
+            .then(|| [self.rx.front().map(|r| r.0), self.idle_at])
             .into_iter()
-            .flatten()
-            .reduce(f64::min)
+            .flatten();
+        rx.chain([self.tx_busy_until]).flatten().reduce(f64::min)
     }
 
-    /// Take the byte arriving by `t` into RDR; returns true if a DMA request is raised.
+    /// The transmitter asks the DMA for a byte: DMAT, TE and UE set, no byte on the line.
+    pub fn tx_request(&self) -> bool {
+        self.cr3 & (1 << 7) != 0 && self.cr1 & 0b1001 == 0b1001 && self.tx_busy_until.is_none()
+    }
+
+    /// The byte on the TX line sent by `t`: the transmitter is free.
+    fn tx_advance(&mut self, t: f64) {
+        if self.tx_busy_until.is_some_and(|u| u <= t) {
+            self.tx_busy_until = None;
+        }
+    }
+
+    /// Take the byte arriving by `t` into RDR, as the receiver at its own rate reads it;
+    /// returns true if a DMA request is raised.
     pub fn advance(&mut self, t: f64, f_ck: f64) -> bool {
+        self.tx_advance(t);
         let mut request = false;
         if let Some(&(at, b)) = self.rx.front() {
             if at <= t && self.receiving() {
                 self.rx.pop_front();
-                if self.isr & (1 << 5) != 0 && self.cr3 & (1 << 12) == 0 {
-                    self.isr |= 1 << 3; // ORE: the new byte is lost
-                } else {
-                    self.rdr = b as u32;
-                    self.isr |= 1 << 5;
-                    if self.cr3 & (1 << 6) != 0 {
-                        self.dma_pending = true;
-                        request = true;
+                let baud = self.baud(f_ck);
+                let deviation = baud / LINE_BAUD - 1.0;
+                // (A NaN deviation, BRR unset, is beyond any tolerance.)
+                let within = deviation.abs() <= RX_TOLERANCE;
+                if !within && !self.rate_mismatch_found {
+                    self.rate_mismatch_found = true;
+                    self.rate_mismatch = Some(format!(
+                        "LPUART1 receives at {baud:.0} Bd, the line runs at {LINE_BAUD:.0} Bd ({:+.1} %, beyond the 8N1 frame's ±{:.1} %): RM0440 LPUART \"Tolerance of the LPUART receiver to clock deviation\"",
+                        100.0 * deviation,
+                        100.0 * RX_TOLERANCE
+                    ));
+                }
+                let frame = sample_frame(b, baud);
+                if frame.is_some_and(|(_, stop)| !stop) {
+                    self.isr |= 1 << 1; // FE
+                }
+                if let Some((b, _)) = frame {
+                    if self.isr & (1 << 5) != 0 && self.cr3 & (1 << 12) == 0 {
+                        self.isr |= 1 << 3; // ORE: the new byte is lost
+                    } else {
+                        self.rdr = b as u32;
+                        self.isr |= 1 << 5;
+                        if self.cr3 & (1 << 6) != 0 {
+                            self.dma_pending = true;
+                            request = true;
+                        }
                     }
                 }
                 self.idle_at = Some(at + self.frame_s(f_ck));
@@ -362,7 +447,7 @@ impl Lpuart {
     pub fn irq(&self) -> bool {
         (self.cr1 & (1 << 5) != 0 && self.isr & (1 << 5 | 1 << 3) != 0)
             || (self.cr1 & (1 << 4) != 0 && self.isr & (1 << 4) != 0)
-            || (self.cr3 & 1 != 0 && self.isr & (1 << 3) != 0)
+            || (self.cr3 & 1 != 0 && self.isr & (1 << 3 | 1 << 1) != 0)
     }
 
     /// Register read (RDR clears RXNE).
@@ -375,9 +460,10 @@ impl Lpuart {
             0x10 | 0x14 | 0x18 | 0x20 => 0,
             0x1C => {
                 let ue = self.cr1 & 1 != 0;
+                let tx_free = (self.tx_busy_until.is_none() as u32) << 7
+                    | (self.tx_busy_until.is_none() as u32) << 6;
                 self.isr
-                    | (1 << 7) // TXE
-                    | (1 << 6) // TC
+                    | tx_free // TXE, TC
                     | ((ue && self.cr1 & 8 != 0) as u32) << 21
                     | ((ue && self.cr1 & 4 != 0) as u32) << 22
             }
@@ -391,8 +477,8 @@ impl Lpuart {
         })
     }
 
-    /// Register write.
-    pub fn write(&mut self, off: u32, v: u32) -> Option<()> {
+    /// Register write at time `t` (s), the kernel clock at `f_ck` Hz.
+    pub fn write(&mut self, off: u32, v: u32, t: f64, f_ck: f64) -> Option<()> {
         match off {
             0x00 => self.cr1 = v,
             0x04 => self.cr2 = v,
@@ -405,7 +491,10 @@ impl Lpuart {
                 }
             }
             0x20 => self.isr &= !(v & ((1 << 3) | (1 << 4) | 0b111)),
-            0x28 => self.tx.push(v as u8),
+            0x28 => {
+                self.tx.push(v as u8);
+                self.tx_busy_until = Some(t + self.frame_s(f_ck));
+            }
             0x2C => self.presc = v & 0xF,
             _ => return None,
         }
@@ -453,18 +542,82 @@ mod tests {
     #[test]
     fn lpuart_bytes_arrive_a_frame_apart_then_idle() {
         let mut u = Lpuart::default();
-        u.write(0x0C, 0x369).unwrap(); // BRR for 115 200 Bd at ~42.5 MHz? any value
-        u.write(0x08, 1 << 6).unwrap();
-        u.write(0x00, 0b101 | (1 << 4)).unwrap();
         let pclk = 170e6;
-        let frame = u.frame_s(pclk);
-        u.send(0.0, b"ab", pclk);
+        // BRR for the line's 115 200 Bd: 256 × 170 MHz / 115 200.
+        let brr = (256.0 * pclk / LINE_BAUD).round() as u32;
+        u.write(0x0C, brr, 0.0, pclk).unwrap();
+        u.write(0x08, 1 << 6, 0.0, pclk).unwrap();
+        u.write(0x00, 0b101 | (1 << 4), 0.0, pclk).unwrap();
+        let frame = 10.0 / LINE_BAUD;
+        u.send(0.0, b"ab");
         assert!((u.next_event().unwrap() - frame).abs() < 1e-15);
         assert!(u.advance(frame, pclk));
         u.dma_served();
         assert!(u.advance(2.0 * frame, pclk));
         assert!(!u.irq(), "no idle yet");
-        assert!(!u.advance(3.0 * frame, pclk));
+        // (The receiver's own frame time: BRR rounds its rate by 2 ppm.)
+        assert!(!u.advance(3.0 * frame * 1.000_01, pclk));
         assert!(u.irq(), "IDLE with IDLEIE");
+        assert_eq!(u.rdr, b'b' as u32);
+        assert!(u.rate_mismatch.is_none());
+    }
+
+    /// A receiver at the line's rate reads every byte as sent; within the 8N1 frame's
+    /// tolerance (0.5/9.5) too; at 9600 Bd on a 115 200 Bd line (the line's bits twelve to the
+    /// receiver's one) it reads the bits of the wrong times, and the rule is recorded with the
+    /// rates.
+    #[test]
+    fn lpuart_reads_the_line_at_its_own_rate() {
+        for b in 0..=255u8 {
+            assert_eq!(sample_frame(b, LINE_BAUD), Some((b, true)));
+            assert_eq!(sample_frame(b, LINE_BAUD * 1.05), Some((b, true)), "{b}");
+            assert_eq!(sample_frame(b, LINE_BAUD / 1.05), Some((b, true)), "{b}");
+        }
+        // 12 line bits per receiver bit: the start bit is sampled at line bit 6 (data bit 5),
+        // the data past the frame (idle, high).
+        assert_eq!(sample_frame(0b0010_0000, 9600.0), None);
+        assert_eq!(sample_frame(0x00, 9600.0), Some((0xFF, true)));
+        let mut u = Lpuart::default();
+        let pclk = 170e6;
+        // PRESC /6 (BRR is 20 bits): 256 × 170 MHz / 6 / 9600.
+        u.write(0x2C, 3, 0.0, pclk).unwrap();
+        let brr = (256.0 * pclk / 6.0 / 9600.0_f64).round() as u32;
+        u.write(0x0C, brr, 0.0, pclk).unwrap();
+        u.write(0x08, 1 << 6, 0.0, pclk).unwrap();
+        u.write(0x00, 0b101, 0.0, pclk).unwrap();
+        u.send(0.0, &[0x00]);
+        u.advance(1.0, pclk);
+        assert_eq!(u.rdr, 0xFF);
+        let rule = u.rate_mismatch.expect("the rule");
+        assert!(
+            rule.contains("9600 Bd") && rule.contains("115200 Bd"),
+            "{rule}"
+        );
+    }
+
+    /// RM0440 LPUART "Transmission using DMA": with DMAT, TE and UE the free transmitter
+    /// requests a byte; a byte written to TDR takes one frame (10 bits at 256 × f_ck / BRR baud)
+    /// during which TXE and TC read clear and nothing is requested.
+    #[test]
+    fn lpuart_sends_a_byte_per_frame_time_on_dma_requests() {
+        let mut u = Lpuart::default();
+        let pclk = 170e6;
+        // BRR for 115 200 Bd: 256 × 170 MHz / 115 200.
+        let brr = (256.0 * pclk / 115_200.0_f64).round() as u32;
+        u.write(0x0C, brr, 0.0, pclk).unwrap();
+        u.write(0x00, 0b1001, 0.0, pclk).unwrap();
+        assert!(!u.tx_request(), "no DMAT: no request");
+        u.write(0x08, 1 << 7, 0.0, pclk).unwrap();
+        assert!(u.tx_request());
+        u.write(0x28, 0x5A, 1e-3, pclk).unwrap();
+        let frame = 10.0 / 115_200.0;
+        assert!(!u.tx_request());
+        assert_eq!(u.read(0x1C).unwrap() & (3 << 6), 0, "TXE and TC clear");
+        let sent = u.next_event().unwrap();
+        assert!((sent - (1e-3 + frame)).abs() < 1e-9, "{sent}");
+        u.advance(sent, pclk);
+        assert!(u.tx_request());
+        assert_eq!(u.read(0x1C).unwrap() & (3 << 6), 3 << 6);
+        assert_eq!(u.tx, [0x5A]);
     }
 }

@@ -2,8 +2,10 @@
 //! and the debug MCU block (RM0440 "Debug support (DBG)"; `dbgmcu_g4`).
 //!
 //! GPIO covers: the register file with the reset values of RM0440 (port A's SWD pins in AF,
-//! pulls), BSRR set/reset of ODR, IDR from ODR for outputs and from the pull (or an external
-//! level the harness sets) for inputs. Leaves out: speed/drive effects, the lock sequence
+//! pulls), BSRR set/reset of ODR, IDR from ODR for outputs and from the pull or the level a
+//! device wired to the pin drives (`Wiring::gpio_inputs`) for inputs; the outputs' levels go to
+//! the wiring (`Wiring::gpio_outputs`). Leaves out: open-drain outputs (OTYPER stored; an
+//! output drives both levels), speed/drive effects, the lock sequence
 //! (LCKR stored), alternate-function signal routing (AFR stored; the peripherals do not look at
 //! the pins' modes), analog switches, EXTI.
 //! DBGMCU covers the ID code (DEV_ID 0x469, the G47x/G48x) and the freeze registers as storage.
@@ -43,6 +45,14 @@ impl Gpio {
             afr: [0; 2],
             external: (0, 0),
         }
+    }
+
+    /// The pins in output mode (MODER = 01) and the levels they drive (ODR): (mask, levels).
+    pub fn outputs(&self) -> (u32, u32) {
+        let mask = (0..16).fold(0, |m, pin| {
+            m | (((self.moder >> (2 * pin)) & 3 == 1) as u32) << pin
+        });
+        (mask, self.odr & mask)
     }
 
     /// Input data: outputs read their ODR, inputs an external level, else their pull

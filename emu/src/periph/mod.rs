@@ -115,19 +115,29 @@ pub enum Pin {
 /// VREF+ = VDDA on the NUCLEO-G474RE, V.
 pub const VREF: f64 = 3.3;
 
-/// What is wired to the analog pins: DAC1 OUT1 (PA4) drives it, the ADCs sample it.
-pub trait Analog: std::any::Any {
+/// What is wired to the board's pins: DAC1 OUT1 (PA4) drives it, the ADCs sample it, and the
+/// GPIO ports' outputs drive it and their inputs read it.
+pub trait Wiring: std::any::Any {
     /// DAC1 channel 1's output became `volts` at time `t` (s).
     fn dac_output(&mut self, t: f64, volts: f64);
     /// The voltage on `pin` at time `t` (s).
     fn pin_voltage(&mut self, t: f64, pin: Pin) -> f64;
+    /// GPIO port `port` (0 = A) drives its output pins `mask` to `levels` at time `t` (s); pins
+    /// outside `mask` are not driven by the port (input, analog or alternate-function mode).
+    /// Called at every write that may change them (ODR, BSRR, BRR, MODER) and at resets.
+    fn gpio_outputs(&mut self, _t: f64, _port: usize, _mask: u32, _levels: u32) {}
+    /// The pins of GPIO port `port` that something outside drives at time `t` (s): (mask,
+    /// levels); the others read their pull. Nothing by default.
+    fn gpio_inputs(&mut self, _t: f64, _port: usize) -> (u32, u32) {
+        (0, 0)
+    }
 }
 
 /// Nothing connected: the board without the probe's front end; both inputs at 0 V.
 #[derive(Clone, Debug, Default)]
 pub struct Unconnected;
 
-impl Analog for Unconnected {
+impl Wiring for Unconnected {
     fn dac_output(&mut self, _t: f64, _volts: f64) {}
     fn pin_voltage(&mut self, _t: f64, _pin: Pin) -> f64 {
         0.0
@@ -211,8 +221,8 @@ pub struct Peripherals {
     /// swapped). Leaves out: the memory remap's effect, bank swap, CCM SRAM protection and
     /// erase, EXTI line routing (EXTICR stored), the FPU interrupt enables.
     pub syscfg: [u32; 10],
-    /// The analog world at the pins.
-    pub analog: Box<dyn Analog>,
+    /// What is wired to the pins: the analog front end and the digital devices.
+    pub wiring: Box<dyn Wiring>,
     /// The documented rules the image broke.
     pub violations: Vec<Violation>,
     /// The CPU stored into the flash mapping; the array is to be restored.
@@ -245,7 +255,7 @@ impl Default for Peripherals {
             dma: dma::Dma::default(),
             lpuart: dma::Lpuart::default(),
             syscfg: [0; 10],
-            analog: Box::new(Unconnected),
+            wiring: Box::new(Unconnected),
             violations: Vec::new(),
             flash_restore_pending: false,
             clock: ClockSegment {
@@ -277,7 +287,7 @@ impl Peripherals {
         let mut flash = self.flash.clone();
         flash.reset();
         let violations = std::mem::take(&mut self.violations);
-        let analog = std::mem::replace(&mut self.analog, Box::new(Unconnected));
+        let wiring = std::mem::replace(&mut self.wiring, Box::new(Unconnected));
         let rx = std::mem::take(&mut self.lpuart.rx);
         let tx = std::mem::take(&mut self.lpuart.tx);
         let trace = std::mem::take(&mut self.dac_trace);
@@ -285,7 +295,7 @@ impl Peripherals {
         *self = Peripherals {
             flash,
             violations,
-            analog,
+            wiring,
             dac_trace: trace,
             ..Peripherals::default()
         };
@@ -306,6 +316,16 @@ impl Peripherals {
             seconds,
             hz: rcc::HSI_HZ,
         };
+        // The ports are back in their reset modes: what the outputs drove is released.
+        for n in 0..self.gpio.len() {
+            self.gpio_drive(n, seconds);
+        }
+    }
+
+    /// Tell the wiring what port `n` drives now (at `t` s).
+    fn gpio_drive(&mut self, n: usize, t: f64) {
+        let (mask, levels) = self.gpio[n].outputs();
+        self.wiring.gpio_outputs(t, n, mask, levels);
     }
 
     /// Seconds since power-on at core cycle `now`.
@@ -429,7 +449,7 @@ impl Peripherals {
                             };
                             let code = match pin {
                                 Some(p) => {
-                                    let v = self.analog.pin_voltage(sample_t, p);
+                                    let v = self.wiring.pin_voltage(sample_t, p);
                                     ((v / VREF * 4096.0).floor()).clamp(0.0, 4095.0) as u32
                                 }
                                 None => {
@@ -448,6 +468,12 @@ impl Peripherals {
                     let f_ck = self.rcc.lpuart1_kernel_hz();
                     if self.lpuart.advance(t, f_ck) {
                         self.request(dma::req::LPUART1_RX, at, mem);
+                    }
+                    if let Some(rule) = self.lpuart.rate_mismatch.take() {
+                        self.violate(at, rule);
+                    }
+                    if self.lpuart.tx_request() {
+                        self.request(dma::req::LPUART1_TX, at, mem);
                     }
                 }
                 4 => self.flash.advance(t, mem.flash),
@@ -491,7 +517,7 @@ impl Peripherals {
     }
 
     fn dac_out(&mut self, t: f64, code: u32) {
-        self.analog.dac_output(t, code as f64 * VREF / 4096.0);
+        self.wiring.dac_output(t, code as f64 * VREF / 4096.0);
         if self.dac_trace.len() < DAC_TRACE_MAX {
             self.dac_trace.push((t, code));
         }
@@ -509,6 +535,9 @@ impl Peripherals {
         }
         if self.lpuart.dma_pending {
             self.request(dma::req::LPUART1_RX, now, mem);
+        }
+        if self.lpuart.tx_request() {
+            self.request(dma::req::LPUART1_TX, now, mem);
         }
     }
 
@@ -632,7 +661,12 @@ impl Peripherals {
             Dev::Flash => self.flash.read(word),
             Dev::Iwdg => self.iwdg.read(word, t),
             Dev::Dbgmcu => self.dbgmcu.read(word),
-            Dev::Gpio(n) => self.gpio[n].read(word),
+            Dev::Gpio(n) => {
+                if word == 0x10 {
+                    self.gpio[n].external = self.wiring.gpio_inputs(t, n);
+                }
+                self.gpio[n].read(word)
+            }
             Dev::Otp => Some(match 0x1FFF_7000 + word {
                 // FLASHSIZE_BASE (0x1FFF_75E0): 512 KiB; package data, UID: zeros.
                 0x1FFF_75E0 => 0x0200,
@@ -713,7 +747,11 @@ impl Peripherals {
             }
             Dev::Iwdg => self.iwdg.write(word, full, t),
             Dev::Dbgmcu => self.dbgmcu.write(word, full),
-            Dev::Gpio(n) => self.gpio[n].write(word, full),
+            Dev::Gpio(n) => self.gpio[n].write(word, full).map(|()| {
+                if matches!(word, 0x00 | 0x14 | 0x18 | 0x28) {
+                    self.gpio_drive(n, t);
+                }
+            }),
             Dev::Otp => None,
             Dev::Tim6 => {
                 self.retime(now);
@@ -724,7 +762,13 @@ impl Peripherals {
                 }
                 trgo.map(|_| ())
             }
-            Dev::Lpuart1 => self.lpuart.write(word, full),
+            Dev::Lpuart1 => {
+                let f_ck = self.rcc.lpuart1_kernel_hz();
+                let r = self.lpuart.write(word, full, t, f_ck);
+                // DMAT set, or TE/UE: a free transmitter asks for its first byte.
+                self.stop_requested |= self.lpuart.tx_request();
+                r
+            }
             Dev::Dma1 => self.dma.write(word, full).map(|v| {
                 if let Some(v) = v {
                     self.violate(now, v);
@@ -835,13 +879,13 @@ impl Peripherals {
             }
         }
         if let Some((reg, bits)) = r {
-            self.peripheral_reset(reg, bits);
+            self.peripheral_reset(reg, bits, t);
         }
         self.retime(now);
         Some(())
     }
 
-    fn peripheral_reset(&mut self, reg: u32, bits: u32) {
+    fn peripheral_reset(&mut self, reg: u32, bits: u32, t: f64) {
         match reg {
             // AHB1RSTR: DMA1RST (0), DMAMUX1RST (2), FLASHRST (8).
             0x28 => {
@@ -862,6 +906,7 @@ impl Peripherals {
                 for n in 0..7 {
                     if bits & (1 << n) != 0 {
                         self.gpio[n] = gpio::Gpio::new(n);
+                        self.gpio_drive(n, t);
                     }
                 }
                 if bits & (1 << 13) != 0 {
