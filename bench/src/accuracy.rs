@@ -267,15 +267,23 @@ pub struct LossRow {
     pub loss_within: [usize; 3],
 }
 
-/// The whole budget.
+/// What a reading is off by, source by source: the front end's noise, the calibration's bias
+/// between its phantoms, the preload, the load cell's noise and the air reference's age.
 #[derive(Clone, Debug)]
-pub struct Budget {
-    pub options: Options,
+pub struct Sources {
     pub noise: Vec<NoiseRow>,
     pub bias: Vec<Cell>,
     pub preload: Vec<Cell>,
     pub force: Vec<ForceRow>,
     pub drift: Vec<DriftRow>,
+}
+
+/// The whole budget.
+#[derive(Clone, Debug)]
+pub struct Budget {
+    pub options: Options,
+    /// What a reading is off by, source by source.
+    pub sources: Sources,
     /// Under the stated conditions: the free resonance off the air reference's by a normal
     /// draw of standard deviation `FREE_RESONANCE_ALLOWANCE` per reading.
     pub coverage: Coverage,
@@ -524,11 +532,13 @@ pub fn measure(opts: &Options, mut tick: impl FnMut()) -> Result<Budget> {
     }
     Ok(Budget {
         options: opts.clone(),
-        noise: noise_rows,
-        bias,
-        preload,
-        force,
-        drift,
+        sources: Sources {
+            noise: noise_rows,
+            bias,
+            preload,
+            force,
+            drift,
+        },
         coverage,
         clean,
         loss,
