@@ -176,13 +176,20 @@ pub enum Level {
     Error,
 }
 
-/// One recognised message.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Message {
+/// Where a message stands in the log.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Stamp {
     /// 1-based line in the input.
     pub line: usize,
     /// Timestamp printed by the decoder, s (when the firmware has one).
     pub time_s: Option<f64>,
+}
+
+/// One recognised message.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Message {
+    /// Where it stands in the log.
+    pub at: Stamp,
     /// Level, when printed.
     pub level: Option<Level>,
     /// The message kind: the template's words before its first key (`point`, `store loaded`,
@@ -444,8 +451,10 @@ fn parse_with(
         }
     }
     Ok(Some(Message {
-        line: line_no,
-        time_s,
+        at: Stamp {
+            line: line_no,
+            time_s,
+        },
         level,
         kind: t.kind.clone(),
         template: k,
@@ -484,10 +493,8 @@ pub struct LoggedSweep {
 /// A logged reading.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LoggedReading {
-    /// Line.
-    pub line: usize,
-    /// Timestamp, s.
-    pub time_s: Option<f64>,
+    /// Where it stands in the log.
+    pub at: Stamp,
     /// Its fields, as the link's reading message carries them: a value the line has not (or
     /// logged as `NaN`) `None`, a missing probe time `NaN`, a missing point count 0.
     pub msg: ReadingMsg<String>,
@@ -612,8 +619,7 @@ impl LoggedReading {
 /// The reading fields of a `reading` or `stream` message.
 fn reading_of(m: &Message, sweep: Option<usize>) -> LoggedReading {
     LoggedReading {
-        line: m.line,
-        time_s: m.time_s,
+        at: m.at,
         msg: ReadingMsg {
             status: m.str("status").unwrap_or_default().to_owned(),
             method: m.str("method").unwrap_or_default().to_owned(),
