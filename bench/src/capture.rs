@@ -383,6 +383,17 @@ pub enum SweepShape {
     Continuous,
 }
 
+/// How a time-domain capture was sampled and split into points.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TimeDomain {
+    /// Sample rate, Hz.
+    pub sample_rate_hz: f64,
+    /// Stepped or continuous.
+    pub shape: SweepShape,
+    /// Steps skipped as shorter than two cycles after settling.
+    pub skipped_steps: usize,
+}
+
 /// A capture turned into admittance points.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Capture {
@@ -390,12 +401,8 @@ pub struct Capture {
     pub layout: Layout,
     /// One point per frequency (frequency-domain) or per demodulation window (time domain).
     pub points: Vec<SweepPoint>,
-    /// Sample rate of a time-domain capture, Hz.
-    pub sample_rate_hz: Option<f64>,
-    /// Stepped or continuous (time domain only).
-    pub shape: Option<SweepShape>,
-    /// Steps skipped as shorter than two cycles after settling (time domain only).
-    pub skipped_steps: usize,
+    /// How a time-domain capture was sampled and split (`None`: a frequency-domain capture).
+    pub time_domain: Option<TimeDomain>,
     /// Per-component noise estimated for a frequency-domain capture, S.
     pub noise_sigma_s: Option<f64>,
     /// Data rows read.
@@ -529,9 +536,7 @@ fn frequency_capture(
     Ok(Capture {
         layout,
         points,
-        sample_rate_hz: None,
-        shape: None,
-        skipped_steps: 0,
+        time_domain: None,
         noise_sigma_s: Some(sigma),
         rows: rows.len(),
         source,
@@ -828,9 +833,11 @@ fn demodulate(
     Ok(Capture {
         layout: Layout::TimeDomain,
         points,
-        sample_rate_hz: Some(fs),
-        shape: Some(shape),
-        skipped_steps: skipped,
+        time_domain: Some(TimeDomain {
+            sample_rate_hz: fs,
+            shape,
+            skipped_steps: skipped,
+        }),
         noise_sigma_s: None,
         rows: n,
         source: None,
