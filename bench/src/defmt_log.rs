@@ -18,7 +18,7 @@
 //! the sweep is kept with it. `boot` and `stalled` abandon a sweep in progress.
 #![allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > y)` also rejects NaN, deliberately
 
-use probe_proto::ReadingMsg;
+use probe_proto::{PointMsg, ReadingMsg};
 use std::fmt;
 
 /// The firmware's log formats (defmt format strings), one per message kind.
@@ -227,6 +227,10 @@ impl Message {
             Some(Value::Uint(x)) => Some(*x),
             _ => None,
         }
+    }
+    /// An unsigned value that the firmware logs as `u16` (saturated).
+    pub fn u16(&self, key: &str) -> Option<u16> {
+        self.uint(key).map(|n| n.min(u16::MAX as u32) as u16)
     }
     /// A string value.
     pub fn str(&self, key: &str) -> Option<&str> {
@@ -462,21 +466,6 @@ fn parse_with(
     }))
 }
 
-/// One point of a logged sweep.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct LoggedPoint {
-    /// Point tag (1-based order in the reading).
-    pub tag: u32,
-    /// Frequency, Hz.
-    pub f_hz: f32,
-    /// Conductance, S.
-    pub g_s: f32,
-    /// Susceptance, S.
-    pub b_s: f32,
-    /// Standard uncertainty of each component, S.
-    pub sigma_s: f32,
-}
-
 /// The points one measurement logged.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LoggedSweep {
@@ -485,7 +474,7 @@ pub struct LoggedSweep {
     /// The `settings` message in force when it started (`method`, `start_hz`, ...).
     pub settings: Option<Message>,
     /// Points, in log order.
-    pub points: Vec<LoggedPoint>,
+    pub points: Vec<PointMsg>,
     /// Index of the reading that closed it (`None`: abandoned or the log ended).
     pub reading: Option<usize>,
 }
@@ -634,9 +623,7 @@ fn reading_of(m: &Message, sweep: Option<usize>) -> LoggedReading {
             force_n: m.f32("force_n"),
             force_sigma_n: m.f32("force_sigma_n"),
             probe_time_s: m.f32("probe_time_s").unwrap_or(f32::NAN),
-            points: m
-                .uint("points")
-                .map_or(0, |n| n.min(u16::MAX as u32) as u16),
+            points: m.u16("points").unwrap_or(0),
         },
         sweep,
     }
@@ -669,8 +656,8 @@ pub fn parse_log(text: &str) -> Session {
                 settings = Some(m.clone());
             }
             "point" => {
-                let p = LoggedPoint {
-                    tag: m.uint("tag").unwrap_or(0),
+                let p = PointMsg {
+                    tag: m.u16("tag").unwrap_or(0),
                     f_hz: m.f32("f_hz").unwrap_or(f32::NAN),
                     g_s: m.f32("g_s").unwrap_or(f32::NAN),
                     b_s: m.f32("b_s").unwrap_or(f32::NAN),

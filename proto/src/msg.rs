@@ -176,18 +176,7 @@ pub enum DeviceMsg<'a> {
         drive_v: Option<f32>,
     },
     /// An admittance point of the reading in progress.
-    Point {
-        /// The plan's tag.
-        tag: u16,
-        /// Frequency, Hz.
-        f_hz: f32,
-        /// Conductance, S.
-        g_s: f32,
-        /// Susceptance, S.
-        b_s: f32,
-        /// Standard uncertainty of each, S.
-        sigma_s: f32,
-    },
+    Point(PointMsg),
     /// The air reference was taken.
     Air {
         /// Free resonance, Hz.
@@ -295,6 +284,22 @@ pub enum Outcome<'a> {
         /// One line for a human.
         message: &'a str,
     },
+}
+
+/// An admittance point of a reading in progress. The bench keeps the points parsed from the
+/// firmware's log, whose `point` line carries the same fields, as this.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PointMsg {
+    /// The plan's tag.
+    pub tag: u16,
+    /// Frequency, Hz.
+    pub f_hz: f32,
+    /// Conductance, S.
+    pub g_s: f32,
+    /// Susceptance, S.
+    pub b_s: f32,
+    /// Standard uncertainty of each, S.
+    pub sigma_s: f32,
 }
 
 /// A reading: the fields of `probe-bench`'s JSON, named by unit. `S` is its text: `&str` on
