@@ -394,6 +394,35 @@ pub struct TimeDomain {
     pub skipped_steps: usize,
 }
 
+/// What a capture's domain tells beside its points.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Domain {
+    /// A frequency-domain capture.
+    Frequency {
+        /// Per-component noise estimated from local cubic fits, S.
+        noise_sigma_s: f64,
+    },
+    /// A time-domain capture.
+    Time(TimeDomain),
+}
+
+impl Domain {
+    /// Per-component noise of a frequency-domain capture, S.
+    pub fn noise_sigma_s(&self) -> Option<f64> {
+        match self {
+            Domain::Frequency { noise_sigma_s } => Some(*noise_sigma_s),
+            Domain::Time(_) => None,
+        }
+    }
+    /// How a time-domain capture was sampled and split.
+    pub fn time(&self) -> Option<TimeDomain> {
+        match self {
+            Domain::Frequency { .. } => None,
+            Domain::Time(t) => Some(*t),
+        }
+    }
+}
+
 /// A capture turned into admittance points.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Capture {
@@ -401,10 +430,8 @@ pub struct Capture {
     pub layout: Layout,
     /// One point per frequency (frequency-domain) or per demodulation window (time domain).
     pub points: Vec<SweepPoint>,
-    /// How a time-domain capture was sampled and split (`None`: a frequency-domain capture).
-    pub time_domain: Option<TimeDomain>,
-    /// Per-component noise estimated for a frequency-domain capture, S.
-    pub noise_sigma_s: Option<f64>,
+    /// What its domain tells beside the points.
+    pub domain: Domain,
     /// Data rows read.
     pub rows: usize,
     /// For an analyser's export: which traces and columns were read, for humans.
@@ -536,8 +563,9 @@ fn frequency_capture(
     Ok(Capture {
         layout,
         points,
-        time_domain: None,
-        noise_sigma_s: Some(sigma),
+        domain: Domain::Frequency {
+            noise_sigma_s: sigma,
+        },
         rows: rows.len(),
         source,
     })
@@ -833,12 +861,11 @@ fn demodulate(
     Ok(Capture {
         layout: Layout::TimeDomain,
         points,
-        time_domain: Some(TimeDomain {
+        domain: Domain::Time(TimeDomain {
             sample_rate_hz: fs,
             shape,
             skipped_steps: skipped,
         }),
-        noise_sigma_s: None,
         rows: n,
         source: None,
     })

@@ -193,7 +193,7 @@ fn paper_method_finds_the_closed_form_impedance_dip() {
 fn estimated_noise_matches_the_noise_added() {
     // bvd_300kpa_y.csv carries white noise of 0.5 nS per component.
     let a = run("bvd_300kpa_y.csv", Method::SweepG);
-    let s = a.capture.noise_sigma_s.unwrap();
+    let s = a.capture.domain.noise_sigma_s().unwrap();
     assert!((s / 0.5e-9 - 1.0).abs() < 0.15, "estimated {s:e} S");
     assert!(a
         .capture
@@ -290,7 +290,7 @@ fn demodulation_uses_the_recorded_drive() {
         }
     }
     let c = capture::parse(&text, 3, &DemodOptions::default()).unwrap();
-    let t = c.time_domain.unwrap();
+    let t = c.domain.time().unwrap();
     assert_eq!(t.shape, SweepShape::Stepped);
     assert_eq!(c.points.len(), 4);
     assert!((t.sample_rate_hz - fs).abs() < 1e-6);
@@ -332,7 +332,7 @@ fn continuous_sweep_reads_the_resonance() {
         )
         .unwrap();
         assert_eq!(
-            a.capture.time_domain.map(|t| t.shape),
+            a.capture.domain.time().map(|t| t.shape),
             Some(SweepShape::Continuous)
         );
         // Windows must come out in increasing frequency for the estimators: a down chirp reads

@@ -446,7 +446,7 @@ pub fn analyze(
         let (est, red) = estimate_in_band(method, pts);
         (method, est, red)
     };
-    let probe_time = match (capture.time_domain, capture.layout) {
+    let probe_time = match (capture.domain.time(), capture.layout) {
         (Some(t), Layout::TimeDomain) => Seconds(capture.rows as f32 / t.sample_rate_hz as f32),
         _ => Seconds(0.0),
     };
@@ -561,16 +561,17 @@ pub fn analysis_json(a: &Analysis, file: &str) -> Value {
         o.insert("rows".into(), json!(c.rows));
         o.insert(
             "noise_sigma_s".into(),
-            c.noise_sigma_s.map_or(Value::Null, |s| json!(s)),
+            c.domain.noise_sigma_s().map_or(Value::Null, |s| json!(s)),
         );
         o.insert(
             "sample_rate_hz".into(),
-            c.time_domain
+            c.domain
+                .time()
                 .map_or(Value::Null, |t| json!(t.sample_rate_hz)),
         );
         o.insert(
             "sweep".into(),
-            match c.time_domain.map(|t| t.shape) {
+            match c.domain.time().map(|t| t.shape) {
                 Some(SweepShape::Stepped) => json!("stepped"),
                 Some(SweepShape::Continuous) => json!("continuous"),
                 None => Value::Null,
@@ -637,13 +638,13 @@ pub fn run(a: AnalyzeArgs) -> Result<()> {
         if let (Some(f), Some(l)) = (c.points.first(), c.points.last()) {
             println!("  band {:.3}–{:.3} Hz", f.freq.0, l.freq.0);
         }
-        if let Some(s) = c.noise_sigma_s {
+        if let Some(s) = c.domain.noise_sigma_s() {
             println!(
                 "  noise per component (estimated from local cubic fits): {:.3e} S",
                 s
             );
         }
-        if let Some(t) = c.time_domain {
+        if let Some(t) = c.domain.time() {
             println!(
                 "  sample rate {:.2} Hz, {} sweep{}",
                 t.sample_rate_hz,
