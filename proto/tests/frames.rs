@@ -76,12 +76,12 @@ fn every_device_msg() -> Vec<DeviceMsg<'static>> {
             locked: true,
             reading: reading("too_light"),
         },
-        DeviceMsg::StreamEnd {
+        DeviceMsg::StreamEnd(StreamEndMsg {
             start_s: 1.25,
             readings: 80,
             ok: 79,
             dropped: 0,
-        },
+        }),
         DeviceMsg::Hint {
             code: "too_light",
             message: "pressed too lightly",

@@ -21,7 +21,7 @@ use crate::reading::Settings;
 use crate::unit::store::{LoadSource, SlotState, StoreError};
 use probe_proto::{
     encode_device, Decoder, DeviceFrame, DeviceMsg, FrameError, HostMsg, Outcome, PointMsg,
-    ReadingMsg, MAX_DEVICE_FRAME, MAX_HOST_FRAME, MAX_LINE, VERSION,
+    ReadingMsg, StreamEndMsg, MAX_DEVICE_FRAME, MAX_HOST_FRAME, MAX_LINE, VERSION,
 };
 
 /// What the link's receive side made of a frame.
@@ -467,12 +467,12 @@ pub fn event_msg(e: &Event) -> Option<DeviceMsg<'static>> {
             ok,
             dropped,
             ..
-        } => DeviceMsg::StreamEnd {
+        } => DeviceMsg::StreamEnd(StreamEndMsg {
             start_s: start.0,
             readings,
             ok,
             dropped,
-        },
+        }),
         Event::Status(s) => DeviceMsg::Status {
             method: s.method.name(),
             calibration: s.calibration.source.name(),
