@@ -16,7 +16,7 @@ use pzt_probe::reading::{Method, Reading};
 use pzt_probe::unit::profile::{
     drift_allowance, UnitProfile, FREE_RESONANCE_ALLOWANCE, FREE_RESONANCE_DRIFT_HZ_S,
 };
-use pzt_probe::{Hz, Newtons};
+use pzt_probe::{Hz, KPa, Newtons};
 
 /// What the budget measures, and on how many readings.
 #[derive(Clone, Debug)]
@@ -267,15 +267,23 @@ pub struct LossRow {
     pub loss_within: [usize; 3],
 }
 
-/// The whole budget.
+/// What a reading is off by, source by source: the front end's noise, the calibration's bias
+/// between its phantoms, the preload, the load cell's noise and the air reference's age.
 #[derive(Clone, Debug)]
-pub struct Budget {
-    pub options: Options,
+pub struct Sources {
     pub noise: Vec<NoiseRow>,
     pub bias: Vec<Cell>,
     pub preload: Vec<Cell>,
     pub force: Vec<ForceRow>,
     pub drift: Vec<DriftRow>,
+}
+
+/// The whole budget.
+#[derive(Clone, Debug)]
+pub struct Budget {
+    pub options: Options,
+    /// What a reading is off by, source by source.
+    pub sources: Sources,
     /// Under the stated conditions: the free resonance off the air reference's by a normal
     /// draw of standard deviation `FREE_RESONANCE_ALLOWANCE` per reading.
     pub coverage: Coverage,
@@ -290,6 +298,11 @@ pub fn scene(e_kpa: f64, force_n: f64, noise: NoiseScene) -> Scene {
     Scene::on_modulus_kpa(e_kpa)
         .with_noise(noise)
         .with_preload_n(force_n)
+}
+
+/// The modulus of a reading that is `ok`.
+fn ok_modulus(r: &Reading) -> Option<KPa> {
+    r.modulus.filter(|_| r.status.is_ok())
 }
 
 /// One reading by the default strategy with the unit's profile.
@@ -313,7 +326,7 @@ fn cell(unit: &UnitProfile, s: &Scene, e: f64, seeds: usize, seed0: u64) -> Cell
         let Some(r) = read_auto(unit, s, seed0 + k as u64) else {
             continue;
         };
-        let Some(m) = r.modulus.filter(|_| r.status.is_ok()) else {
+        let Some(m) = ok_modulus(&r) else {
             continue;
         };
         let err = (m.0 as f64 - e) / e;
@@ -405,8 +418,8 @@ pub fn measure(opts: &Options, mut tick: impl FnMut()) -> Result<Budget> {
                 continue;
             };
             let (Some(ma), Some(mb), Some(f), Some(fs), Some(w)) = (
-                a.modulus.filter(|_| a.status.is_ok()),
-                b.modulus.filter(|_| b.status.is_ok()),
+                ok_modulus(&a),
+                ok_modulus(&b),
                 a.resonance,
                 a.resonance_sigma,
                 a.force,
@@ -456,8 +469,7 @@ pub fn measure(opts: &Options, mut tick: impl FnMut()) -> Result<Budget> {
                 let seed = s0 + j as u64;
                 let m = |s: &Scene| {
                     read_auto(&unit, s, seed)
-                        .filter(|r| r.status.is_ok())
-                        .and_then(|r| r.modulus)
+                        .and_then(|r| ok_modulus(&r))
                         .map(|m| m.0 as f64)
                 };
                 if let (Some(a), Some(b)) = (m(&moved), m(&base)) {
@@ -495,7 +507,7 @@ pub fn measure(opts: &Options, mut tick: impl FnMut()) -> Result<Budget> {
                     row.broad += 1;
                 }
                 let (Some(m), Some(sm), Some(l), Some(sl)) = (
-                    r.modulus.filter(|_| r.status.is_ok()),
+                    ok_modulus(&r),
                     r.modulus_sigma,
                     r.loss_tangent,
                     r.loss_tangent_sigma,
@@ -524,11 +536,13 @@ pub fn measure(opts: &Options, mut tick: impl FnMut()) -> Result<Budget> {
     }
     Ok(Budget {
         options: opts.clone(),
-        noise: noise_rows,
-        bias,
-        preload,
-        force,
-        drift,
+        sources: Sources {
+            noise: noise_rows,
+            bias,
+            preload,
+            force,
+            drift,
+        },
         coverage,
         clean,
         loss,
@@ -582,8 +596,7 @@ fn coverage_of(
                 let Some(r) = read_auto(unit, &s, seed) else {
                     continue;
                 };
-                let (Some(m), Some(sg)) = (r.modulus.filter(|_| r.status.is_ok()), r.modulus_sigma)
-                else {
+                let (Some(m), Some(sg)) = (ok_modulus(&r), r.modulus_sigma) else {
                     continue;
                 };
                 let err = m.0 as f64 - e;

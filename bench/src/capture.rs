@@ -383,6 +383,46 @@ pub enum SweepShape {
     Continuous,
 }
 
+/// How a time-domain capture was sampled and split into points.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TimeDomain {
+    /// Sample rate, Hz.
+    pub sample_rate_hz: f64,
+    /// Stepped or continuous.
+    pub shape: SweepShape,
+    /// Steps skipped as shorter than two cycles after settling.
+    pub skipped_steps: usize,
+}
+
+/// What a capture's domain tells beside its points.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Domain {
+    /// A frequency-domain capture.
+    Frequency {
+        /// Per-component noise estimated from local cubic fits, S.
+        noise_sigma_s: f64,
+    },
+    /// A time-domain capture.
+    Time(TimeDomain),
+}
+
+impl Domain {
+    /// Per-component noise of a frequency-domain capture, S.
+    pub fn noise_sigma_s(&self) -> Option<f64> {
+        match self {
+            Domain::Frequency { noise_sigma_s } => Some(*noise_sigma_s),
+            Domain::Time(_) => None,
+        }
+    }
+    /// How a time-domain capture was sampled and split.
+    pub fn time(&self) -> Option<TimeDomain> {
+        match self {
+            Domain::Frequency { .. } => None,
+            Domain::Time(t) => Some(*t),
+        }
+    }
+}
+
 /// A capture turned into admittance points.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Capture {
@@ -390,14 +430,8 @@ pub struct Capture {
     pub layout: Layout,
     /// One point per frequency (frequency-domain) or per demodulation window (time domain).
     pub points: Vec<SweepPoint>,
-    /// Sample rate of a time-domain capture, Hz.
-    pub sample_rate_hz: Option<f64>,
-    /// Stepped or continuous (time domain only).
-    pub shape: Option<SweepShape>,
-    /// Steps skipped as shorter than two cycles after settling (time domain only).
-    pub skipped_steps: usize,
-    /// Per-component noise estimated for a frequency-domain capture, S.
-    pub noise_sigma_s: Option<f64>,
+    /// What its domain tells beside the points.
+    pub domain: Domain,
     /// Data rows read.
     pub rows: usize,
     /// For an analyser's export: which traces and columns were read, for humans.
@@ -529,10 +563,9 @@ fn frequency_capture(
     Ok(Capture {
         layout,
         points,
-        sample_rate_hz: None,
-        shape: None,
-        skipped_steps: 0,
-        noise_sigma_s: Some(sigma),
+        domain: Domain::Frequency {
+            noise_sigma_s: sigma,
+        },
         rows: rows.len(),
         source,
     })
@@ -828,10 +861,11 @@ fn demodulate(
     Ok(Capture {
         layout: Layout::TimeDomain,
         points,
-        sample_rate_hz: Some(fs),
-        shape: Some(shape),
-        skipped_steps: skipped,
-        noise_sigma_s: None,
+        domain: Domain::Time(TimeDomain {
+            sample_rate_hz: fs,
+            shape,
+            skipped_steps: skipped,
+        }),
         rows: n,
         source: None,
     })

@@ -18,7 +18,7 @@
 //! the sweep is kept with it. `boot` and `stalled` abandon a sweep in progress.
 #![allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > y)` also rejects NaN, deliberately
 
-use probe_proto::ReadingMsg;
+use probe_proto::{PointMsg, ReadingMsg};
 use std::fmt;
 
 /// The firmware's log formats (defmt format strings), one per message kind.
@@ -176,13 +176,20 @@ pub enum Level {
     Error,
 }
 
-/// One recognised message.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Message {
+/// Where a message stands in the log.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Stamp {
     /// 1-based line in the input.
     pub line: usize,
     /// Timestamp printed by the decoder, s (when the firmware has one).
     pub time_s: Option<f64>,
+}
+
+/// One recognised message.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Message {
+    /// Where it stands in the log.
+    pub at: Stamp,
     /// Level, when printed.
     pub level: Option<Level>,
     /// The message kind: the template's words before its first key (`point`, `store loaded`,
@@ -220,6 +227,10 @@ impl Message {
             Some(Value::Uint(x)) => Some(*x),
             _ => None,
         }
+    }
+    /// An unsigned value that the firmware logs as `u16` (saturated).
+    pub fn u16(&self, key: &str) -> Option<u16> {
+        self.uint(key).map(|n| n.min(u16::MAX as u32) as u16)
     }
     /// A string value.
     pub fn str(&self, key: &str) -> Option<&str> {
@@ -444,28 +455,15 @@ fn parse_with(
         }
     }
     Ok(Some(Message {
-        line: line_no,
-        time_s,
+        at: Stamp {
+            line: line_no,
+            time_s,
+        },
         level,
         kind: t.kind.clone(),
         template: k,
         fields,
     }))
-}
-
-/// One point of a logged sweep.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct LoggedPoint {
-    /// Point tag (1-based order in the reading).
-    pub tag: u32,
-    /// Frequency, Hz.
-    pub f_hz: f32,
-    /// Conductance, S.
-    pub g_s: f32,
-    /// Susceptance, S.
-    pub b_s: f32,
-    /// Standard uncertainty of each component, S.
-    pub sigma_s: f32,
 }
 
 /// The points one measurement logged.
@@ -476,7 +474,7 @@ pub struct LoggedSweep {
     /// The `settings` message in force when it started (`method`, `start_hz`, ...).
     pub settings: Option<Message>,
     /// Points, in log order.
-    pub points: Vec<LoggedPoint>,
+    pub points: Vec<PointMsg>,
     /// Index of the reading that closed it (`None`: abandoned or the log ended).
     pub reading: Option<usize>,
 }
@@ -484,10 +482,8 @@ pub struct LoggedSweep {
 /// A logged reading.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LoggedReading {
-    /// Line.
-    pub line: usize,
-    /// Timestamp, s.
-    pub time_s: Option<f64>,
+    /// Where it stands in the log.
+    pub at: Stamp,
     /// Its fields, as the link's reading message carries them: a value the line has not (or
     /// logged as `NaN`) `None`, a missing probe time `NaN`, a missing point count 0.
     pub msg: ReadingMsg<String>,
@@ -612,8 +608,7 @@ impl LoggedReading {
 /// The reading fields of a `reading` or `stream` message.
 fn reading_of(m: &Message, sweep: Option<usize>) -> LoggedReading {
     LoggedReading {
-        line: m.line,
-        time_s: m.time_s,
+        at: m.at,
         msg: ReadingMsg {
             status: m.str("status").unwrap_or_default().to_owned(),
             method: m.str("method").unwrap_or_default().to_owned(),
@@ -628,9 +623,7 @@ fn reading_of(m: &Message, sweep: Option<usize>) -> LoggedReading {
             force_n: m.f32("force_n"),
             force_sigma_n: m.f32("force_sigma_n"),
             probe_time_s: m.f32("probe_time_s").unwrap_or(f32::NAN),
-            points: m
-                .uint("points")
-                .map_or(0, |n| n.min(u16::MAX as u32) as u16),
+            points: m.u16("points").unwrap_or(0),
         },
         sweep,
     }
@@ -663,8 +656,8 @@ pub fn parse_log(text: &str) -> Session {
                 settings = Some(m.clone());
             }
             "point" => {
-                let p = LoggedPoint {
-                    tag: m.uint("tag").unwrap_or(0),
+                let p = PointMsg {
+                    tag: m.u16("tag").unwrap_or(0),
                     f_hz: m.f32("f_hz").unwrap_or(f32::NAN),
                     g_s: m.f32("g_s").unwrap_or(f32::NAN),
                     b_s: m.f32("b_s").unwrap_or(f32::NAN),

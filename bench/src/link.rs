@@ -5,7 +5,7 @@
 use anyhow::{bail, Context, Result};
 use probe_proto::{
     decode_device, encode_host, Decoder, DeviceFrame, DeviceMsg, FrameError, HostMsg, Outcome,
-    ReadingMsg, MAX_DEVICE_FRAME, MAX_HOST_FRAME, MAX_LINE, VERSION,
+    ReadingMsg, StreamEndMsg, MAX_DEVICE_FRAME, MAX_HOST_FRAME, MAX_LINE, VERSION,
 };
 use pzt_probe::instrument::continuous::StreamReading;
 use pzt_probe::reading::Reading;
@@ -40,15 +40,8 @@ pub enum Kind {
     Reading(Reading),
     /// A stream's reading (`t_s` as the probe sends it: probe time since power-on).
     Stream(StreamReading),
-    /// A stream ended: its start (probe time, s) and the readings the probe dropped.
-    StreamEnd {
-        /// Probe time at the start, s.
-        start_s: f32,
-        /// Readings made.
-        readings: u32,
-        /// Dropped before the link.
-        dropped: u32,
-    },
+    /// A stream ended: its start (probe time, s) and its counts.
+    StreamEnd(StreamEndMsg),
     /// Any other message.
     Other,
 }
@@ -142,16 +135,7 @@ pub fn frame_of(f: &DeviceFrame) -> Frame {
                 reading: r,
             })
         }),
-        DeviceMsg::StreamEnd {
-            start_s,
-            readings,
-            dropped,
-            ..
-        } => Kind::StreamEnd {
-            start_s: *start_s,
-            readings: *readings,
-            dropped: *dropped,
-        },
+        DeviceMsg::StreamEnd(e) => Kind::StreamEnd(*e),
         _ => Kind::Other,
     };
     Frame {

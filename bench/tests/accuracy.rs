@@ -42,7 +42,7 @@ fn the_reported_sigma_covers_the_truth_at_68_and_95_percent() {
 #[test]
 fn the_budget_terms_add_up_to_the_reported_sigma() {
     let b = budget();
-    for x in &b.bias {
+    for x in &b.sources.bias {
         let t = &x.terms_pct;
         let sum2 = t.repeat.powi(2) + t.cov.powi(2) + t.misfit.powi(2) + t.drift.powi(2);
         assert!(
@@ -57,6 +57,7 @@ fn the_budget_terms_add_up_to_the_reported_sigma() {
         // The allowance is what the reading moves by for the free resonance's allowance: 0.12 Hz
         // and 0.3 Hz/s over the default reading's 0.33–0.40 s in quadrature, 0.155–0.164 Hz.
         let d = b
+            .sources
             .drift
             .iter()
             .find(|d| d.e_kpa == x.e_kpa)
@@ -87,18 +88,18 @@ fn the_budget_terms_add_up_to_the_reported_sigma() {
 #[test]
 fn measured_terms_agree_with_their_predictions() {
     let b = budget();
-    for f in &b.force {
+    for f in &b.sources.force {
         assert!(
             f.measured_pct <= 1.5 * f.predicted_pct + 1e-4
                 && f.measured_pct >= 0.5 * f.predicted_pct - 1e-4,
             "{f:?}"
         );
     }
-    for d in &b.drift {
+    for d in &b.sources.drift {
         // Softer reads stiffer as the free resonance rises: positive, a few % per Hz.
         assert!(d.pct_per_hz.iter().all(|v| *v > 0.5 && *v < 20.0), "{d:?}");
     }
-    for p in &b.preload {
+    for p in &b.sources.preload {
         assert!(p.mean_err_pct.abs() < 0.5, "{p:?}");
     }
 }

@@ -193,7 +193,7 @@ fn paper_method_finds_the_closed_form_impedance_dip() {
 fn estimated_noise_matches_the_noise_added() {
     // bvd_300kpa_y.csv carries white noise of 0.5 nS per component.
     let a = run("bvd_300kpa_y.csv", Method::SweepG);
-    let s = a.capture.noise_sigma_s.unwrap();
+    let s = a.capture.domain.noise_sigma_s().unwrap();
     assert!((s / 0.5e-9 - 1.0).abs() < 0.15, "estimated {s:e} S");
     assert!(a
         .capture
@@ -290,9 +290,10 @@ fn demodulation_uses_the_recorded_drive() {
         }
     }
     let c = capture::parse(&text, 3, &DemodOptions::default()).unwrap();
-    assert_eq!(c.shape, Some(SweepShape::Stepped));
+    let t = c.domain.time().unwrap();
+    assert_eq!(t.shape, SweepShape::Stepped);
     assert_eq!(c.points.len(), 4);
-    assert!((c.sample_rate_hz.unwrap() - fs).abs() < 1e-6);
+    assert!((t.sample_rate_hz - fs).abs() < 1e-6);
     for (p, f) in c.points.iter().zip(freqs) {
         assert!((p.freq.0 as f64 - f).abs() < 1e-9);
         assert!((p.g_s as f64 / g - 1.0).abs() < 1e-5, "G {}", p.g_s);
@@ -330,7 +331,10 @@ fn continuous_sweep_reads_the_resonance() {
             NOMINAL_FORCE,
         )
         .unwrap();
-        assert_eq!(a.capture.shape, Some(SweepShape::Continuous));
+        assert_eq!(
+            a.capture.domain.time().map(|t| t.shape),
+            Some(SweepShape::Continuous)
+        );
         // Windows must come out in increasing frequency for the estimators: a down chirp reads
         // as a capture whose frequency decreases.
         let f = match a.reading.status {

@@ -107,11 +107,7 @@ fn a_three_second_stream_of_phantom_c_over_the_link_has_no_gap() {
     let (start, made, dropped) = frames
         .iter()
         .find_map(|f| match f.kind {
-            Kind::StreamEnd {
-                start_s,
-                readings,
-                dropped,
-            } => Some((start_s as f64, readings, dropped)),
+            Kind::StreamEnd(e) => Some((e.start_s as f64, e.readings, e.dropped)),
             _ => None,
         })
         .expect("a stream end");

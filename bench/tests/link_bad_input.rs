@@ -264,9 +264,7 @@ fn a_command_flood_during_a_stream_gets_one_reply_each_and_no_reading_vanishes()
     let (made, dropped) = fs
         .iter()
         .find_map(|f| match f.kind {
-            Kind::StreamEnd {
-                readings, dropped, ..
-            } => Some((readings, dropped)),
+            Kind::StreamEnd(e) => Some((e.readings, e.dropped)),
             _ => None,
         })
         .expect("a stream end");

@@ -130,8 +130,8 @@ fn firmware_lines_round_trip_through_the_parser() {
                 .unwrap_or_else(|e| panic!("{line}: {e}"))
                 .unwrap_or_else(|| panic!("not recognised: {line}"));
             assert_eq!(TEMPLATES[m.template], *t, "{line}");
-            assert_eq!(m.line, 7);
-            assert_eq!(m.time_s, time, "{line}");
+            assert_eq!(m.at.line, 7);
+            assert_eq!(m.at.time_s, time, "{line}");
             assert_eq!(m.fields.len(), values.len());
             for ((_, got), want) in m.fields.iter().zip(&values) {
                 assert!(same(got, want), "{line}: {got:?} vs {want:?}");
@@ -283,7 +283,7 @@ fn readings_sweeps_and_events_of_a_longer_log() {
             .collect::<Vec<_>>(),
         ["ok", "no_contact", "out_of_band"]
     );
-    assert_eq!(s.readings[0].time_s, Some(1.5));
+    assert_eq!(s.readings[0].at.time_s, Some(1.5));
     assert_eq!(s.readings[0].msg.e_kpa, Some(280.0));
     assert_eq!(s.readings[1].msg.f_hz, None);
     assert_eq!(s.readings[1].msg.e_kpa, None);

@@ -92,23 +92,44 @@ pub fn mechanics(mech: &Kelvin, dt: f64) -> Discrete<2> {
     discretize::<2, 3>(&a, &[0.0, 1.0 / m], dt)
 }
 
-/// Number of states of the full chain.
-pub const CHAIN_STATES: usize = 8;
+/// The chain's states in the order of the state vector, `[v1, v, q, q', a1, y_i, b1, y_v, q2,
+/// q2']` (module documentation): one name per index of [`Discrete::x`] and of the matrices.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum State {
+    /// Inner node of the reconstruction filter, V.
+    V1,
+    /// The PZT voltage, V.
+    V,
+    /// Modal displacement, m.
+    Q,
+    /// Modal velocity, m/s.
+    Velocity,
+    /// Inner node of the sense current's anti-alias filter, A. A charge `Q` entering the sense
+    /// input at once steps it by `w_a Q`.
+    A1,
+    /// The filtered sense current, A.
+    YI,
+    /// Inner node of the PZT voltage's anti-alias filter, V.
+    B1,
+    /// The filtered PZT voltage, V.
+    YV,
+    /// The second mode's displacement, m (two-mode chain only).
+    Q2,
+    /// The second mode's velocity, m/s (two-mode chain only).
+    Velocity2,
+}
+
+impl State {
+    /// Its index in the state vector.
+    pub const fn at(self) -> usize {
+        self as usize
+    }
+}
+
+/// Number of states of the full chain (those before the second mode's).
+pub const CHAIN_STATES: usize = State::Q2.at();
 /// Number of states of the full chain with a second mechanical mode.
-pub const CHAIN2_STATES: usize = 10;
-/// Index of the PZT voltage in the chain state.
-pub const V: usize = 1;
-/// Index of the modal velocity in the chain state.
-pub const VELOCITY: usize = 3;
-/// Index of the first anti-alias section of the sense current (its inner node) in the chain
-/// state. A charge `Q` entering the sense input at once steps it by `w_a Q`.
-pub const A1: usize = 4;
-/// Index of the filtered sense current in the chain state.
-pub const Y_I: usize = 5;
-/// Index of the filtered PZT voltage in the chain state.
-pub const Y_V: usize = 7;
-/// Index of the second mode's velocity in the two-mode chain state.
-pub const VELOCITY2: usize = 9;
+pub const CHAIN2_STATES: usize = State::Velocity2.at() + 1;
 
 /// Continuous-time model of the chain with an optional second motional branch (`mode2` and its
 /// force factor): states `[v1, v, q, q', a1, y_i, b1, y_v, q2, q2']`. Without a second mode the
@@ -120,6 +141,7 @@ fn chain_continuous(
     reconstruction_hz: f64,
     antialias_hz: f64,
 ) -> (Mat<CHAIN2_STATES>, [f64; CHAIN2_STATES]) {
+    use State::*;
     let wr = 2.0 * PI * reconstruction_hz;
     let wa = 2.0 * PI * antialias_hz;
     let m = mech.mass_kg;
@@ -128,36 +150,37 @@ fn chain_continuous(
     let c0 = pzt.c0_f;
     let gd = pzt.leakage_s;
     let mut a = [[0.0; CHAIN2_STATES]; CHAIN2_STATES];
+    let mut set = |row: State, col: State, v: f64| a[row.at()][col.at()] = v;
     // Reconstruction filter: v1' = wr (u - v1), v' = wr (v1 - v).
-    a[0][0] = -wr;
-    a[1][0] = wr;
-    a[1][1] = -wr;
+    set(V1, V1, -wr);
+    set(V, V1, wr);
+    set(V, V, -wr);
     // Mode 1: q'' = (alpha v - c q' - k q) / m.
-    a[2][3] = 1.0;
-    a[3][1] = al / m;
-    a[3][2] = -k / m;
-    a[3][3] = -c / m;
+    set(Q, Velocity, 1.0);
+    set(Velocity, V, al / m);
+    set(Velocity, Q, -k / m);
+    set(Velocity, Velocity, -c / m);
     // a1' = wa (i - a1), i = C0 wr (v1 - v) + alpha q' + G_d v (+ alpha2 q2').
-    a[4][0] = wa * c0 * wr;
-    a[4][1] = wa * (gd - c0 * wr);
-    a[4][3] = wa * al;
-    a[4][4] = -wa;
-    a[5][4] = wa;
-    a[5][5] = -wa;
-    a[6][1] = wa;
-    a[6][6] = -wa;
-    a[7][6] = wa;
-    a[7][7] = -wa;
-    a[8][9] = 1.0;
+    set(A1, V1, wa * c0 * wr);
+    set(A1, V, wa * (gd - c0 * wr));
+    set(A1, Velocity, wa * al);
+    set(A1, A1, -wa);
+    set(YI, A1, wa);
+    set(YI, YI, -wa);
+    set(B1, V, wa);
+    set(B1, B1, -wa);
+    set(YV, B1, wa);
+    set(YV, YV, -wa);
+    set(Q2, Velocity2, 1.0);
     if let Some((k2, al2)) = mode2 {
         let m2 = k2.mass_kg;
-        a[9][1] = al2 / m2;
-        a[9][8] = -k2.stiffness_n_m / m2;
-        a[9][9] = -k2.damping_n_s_m / m2;
-        a[4][9] = wa * al2;
+        set(Velocity2, V, al2 / m2);
+        set(Velocity2, Q2, -k2.stiffness_n_m / m2);
+        set(Velocity2, Velocity2, -k2.damping_n_s_m / m2);
+        set(A1, Velocity2, wa * al2);
     }
     let mut b = [0.0; CHAIN2_STATES];
-    b[0] = wr;
+    b[V1.at()] = wr;
     (a, b)
 }
 

@@ -4,9 +4,7 @@
 use crate::events::{Knock, KnockTrain, SCHEDULE_STEP_S};
 use crate::frontend::{AdcChannel, FrontEnd, StuckAdc, MAX_CODE, MID_CODE};
 use crate::loadcell::Hx711Sim;
-use crate::plant::{
-    chain, chain_two_modes, Discrete, A1, CHAIN2_STATES, CHAIN_STATES, VELOCITY, Y_I, Y_V,
-};
+use crate::plant::{chain, chain_two_modes, Discrete, State, CHAIN2_STATES, CHAIN_STATES};
 use crate::scenes::Scene;
 use crate::tissue::Tissue;
 use core::f64::consts::PI;
@@ -155,12 +153,12 @@ impl SimProbe {
     }
     /// Modal velocity now, m/s.
     pub fn velocity_m_s(&self) -> f64 {
-        self.plant.x(VELOCITY)
+        self.plant.x(State::Velocity.at())
     }
     /// Filtered sense current now (the anti-alias filter's output, before noise, mains and the
     /// ADC), A.
     pub fn sense_current_a(&self) -> f64 {
-        self.plant.x(Y_I)
+        self.plant.x(State::YI.at())
     }
 
     /// The load cell beside this probe's resonator (`None`: the scene has none): an HX711 that
@@ -258,10 +256,10 @@ impl SimProbe {
                 break;
             };
             match k {
-                Knock::Mechanical(dv) => self.plant.add(VELOCITY, dv),
+                Knock::Mechanical(dv) => self.plant.add(State::Velocity.at(), dv),
                 Knock::Electrical(q) => {
                     let wa = 2.0 * PI * self.scene.front_end.antialias_hz;
-                    self.plant.add(A1, wa * q);
+                    self.plant.add(State::A1.at(), wa * q);
                 }
             }
             self.plan_knock();
@@ -335,7 +333,7 @@ impl Run<'_> {
         let fe = self.fe;
         let dt = fe.dt();
         for (code, out) in dac.iter().zip(adc.iter_mut()) {
-            let mut i = plant.x[Y_I];
+            let mut i = plant.x[State::YI.at()];
             if self.noise_sigma_a > 0.0 {
                 i += self.noise_sigma_a * self.rng.normal();
             }
@@ -352,7 +350,7 @@ impl Run<'_> {
             }
             *out = AdcPair {
                 current: fe.adc_code(i * fe.tia_ohm),
-                monitor: fe.adc_code(plant.x[Y_V] * fe.monitor_gain),
+                monitor: fe.adc_code(plant.x[State::YV.at()] * fe.monitor_gain),
             };
             match self.stuck_adc {
                 Some(StuckAdc {

@@ -79,7 +79,7 @@ pub enum DeviceMsg<'a> {
         /// The stream's reading number from 0; a gap is a reading the probe could not queue.
         stream_seq: u32,
         /// Probe time (the sample clock since power-on) when the reading ended, s; the
-        /// stream started at [`DeviceMsg::StreamEnd`]'s `start_s`.
+        /// stream started at [`StreamEndMsg::start_s`].
         t_s: f32,
         /// The tracker held the resonance.
         locked: bool,
@@ -88,16 +88,7 @@ pub enum DeviceMsg<'a> {
         reading: ReadingMsg<&'a str>,
     },
     /// A stream ended.
-    StreamEnd {
-        /// Probe time when the stream started, s.
-        start_s: f32,
-        /// Readings the stream made.
-        readings: u32,
-        /// Of those, `ok`.
-        ok: u32,
-        /// Of those, dropped before the link (the probe's report queue was full).
-        dropped: u32,
-    },
+    StreamEnd(StreamEndMsg),
     /// What to do about the failed reading just sent.
     Hint {
         /// The failure's code.
@@ -176,18 +167,7 @@ pub enum DeviceMsg<'a> {
         drive_v: Option<f32>,
     },
     /// An admittance point of the reading in progress.
-    Point {
-        /// The plan's tag.
-        tag: u16,
-        /// Frequency, Hz.
-        f_hz: f32,
-        /// Conductance, S.
-        g_s: f32,
-        /// Susceptance, S.
-        b_s: f32,
-        /// Standard uncertainty of each, S.
-        sigma_s: f32,
-    },
+    Point(PointMsg),
     /// The air reference was taken.
     Air {
         /// Free resonance, Hz.
@@ -295,6 +275,35 @@ pub enum Outcome<'a> {
         /// One line for a human.
         message: &'a str,
     },
+}
+
+/// The end of a stream: its start and its counts. The bench keeps it as the link delivered it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StreamEndMsg {
+    /// Probe time when the stream started, s.
+    pub start_s: f32,
+    /// Readings the stream made.
+    pub readings: u32,
+    /// Of those, `ok`.
+    pub ok: u32,
+    /// Of those, dropped before the link (the probe's report queue was full).
+    pub dropped: u32,
+}
+
+/// An admittance point of a reading in progress. The bench keeps the points parsed from the
+/// firmware's log, whose `point` line carries the same fields, as this.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PointMsg {
+    /// The plan's tag.
+    pub tag: u16,
+    /// Frequency, Hz.
+    pub f_hz: f32,
+    /// Conductance, S.
+    pub g_s: f32,
+    /// Susceptance, S.
+    pub b_s: f32,
+    /// Standard uncertainty of each, S.
+    pub sigma_s: f32,
 }
 
 /// A reading: the fields of `probe-bench`'s JSON, named by unit. `S` is its text: `&str` on

@@ -76,12 +76,12 @@ fn every_device_msg() -> Vec<DeviceMsg<'static>> {
             locked: true,
             reading: reading("too_light"),
         },
-        DeviceMsg::StreamEnd {
+        DeviceMsg::StreamEnd(StreamEndMsg {
             start_s: 1.25,
             readings: 80,
             ok: 79,
             dropped: 0,
-        },
+        }),
         DeviceMsg::Hint {
             code: "too_light",
             message: "pressed too lightly",
@@ -123,13 +123,13 @@ fn every_device_msg() -> Vec<DeviceMsg<'static>> {
             integrate_s: Some(0.03),
             drive_v: Some(5.0),
         },
-        DeviceMsg::Point {
+        DeviceMsg::Point(PointMsg {
             tag: 3,
             f_hz: 230.0,
             g_s: 1e-6,
             b_s: 2e-6,
             sigma_s: 1e-9,
-        },
+        }),
         DeviceMsg::Air {
             f_hz: 232.1,
             q: 40.0,
@@ -419,4 +419,31 @@ fn garbage_then_good_frames_resynchronise() {
             .collect();
         assert_eq!(got, msgs);
     }
+}
+
+/// A point's body is its fields in the order `docs/protocol.md` gives them (the frame's `seq`
+/// and `dropped`, variant index 11, then `tag`, `f_hz`, `g_s`, `b_s`, `sigma_s`), built here by
+/// hand from postcard's rules: unsigned integers as LEB128 varints, `f32` little-endian.
+#[test]
+fn a_point_is_its_documented_fields_in_order() {
+    let p = PointMsg {
+        tag: 300,
+        f_hz: 230.5,
+        g_s: 1e-6,
+        b_s: -2e-6,
+        sigma_s: 1e-9,
+    };
+    let f = DeviceFrame {
+        seq: 5,
+        dropped: 0,
+        msg: DeviceMsg::Point(p),
+    };
+    // seq 5, dropped 0, variant 11, tag 300 = 0b10_0101100 → 0xAC 0x02.
+    let mut want = vec![5, 0, 11, 0xAC, 0x02];
+    for x in [p.f_hz, p.g_s, p.b_s, p.sigma_s] {
+        want.extend_from_slice(&x.to_le_bytes());
+    }
+    let mut buf = [0u8; MAX_DEVICE_FRAME];
+    assert_eq!(postcard::to_slice(&f, &mut buf).unwrap(), &want[..]);
+    assert_eq!(decode_device(&want), Ok(f));
 }

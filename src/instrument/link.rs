@@ -20,8 +20,8 @@ use crate::reading::Reading;
 use crate::reading::Settings;
 use crate::unit::store::{LoadSource, SlotState, StoreError};
 use probe_proto::{
-    encode_device, Decoder, DeviceFrame, DeviceMsg, FrameError, HostMsg, Outcome, ReadingMsg,
-    MAX_DEVICE_FRAME, MAX_HOST_FRAME, MAX_LINE, VERSION,
+    encode_device, Decoder, DeviceFrame, DeviceMsg, FrameError, HostMsg, Outcome, PointMsg,
+    ReadingMsg, StreamEndMsg, MAX_DEVICE_FRAME, MAX_HOST_FRAME, MAX_LINE, VERSION,
 };
 
 /// What the link's receive side made of a frame.
@@ -406,13 +406,13 @@ pub fn event_msg(e: &Event) -> Option<DeviceMsg<'static>> {
                 drive_v: drive,
             }
         }
-        Event::Point { tag, point } => DeviceMsg::Point {
+        Event::Point { tag, point } => DeviceMsg::Point(PointMsg {
             tag,
             f_hz: point.freq.0,
             g_s: point.g_s,
             b_s: point.b_s,
             sigma_s: point.sigma_s,
-        },
+        }),
         Event::Reading(r) => DeviceMsg::Reading(reading_msg(&r)),
         Event::SelfTest(r) => selftest_msg(&r),
         Event::Hint(f) => DeviceMsg::Hint {
@@ -467,12 +467,12 @@ pub fn event_msg(e: &Event) -> Option<DeviceMsg<'static>> {
             ok,
             dropped,
             ..
-        } => DeviceMsg::StreamEnd {
+        } => DeviceMsg::StreamEnd(StreamEndMsg {
             start_s: start.0,
             readings,
             ok,
             dropped,
-        },
+        }),
         Event::Status(s) => DeviceMsg::Status {
             method: s.method.name(),
             calibration: s.calibration.source.name(),

@@ -172,7 +172,7 @@ pub fn markdown(b: &Budget, a: &AccuracyArgs) -> String {
          |---|---|---|---|---|---|---|---|---|---|",
         o.seeds
     );
-    for x in &b.bias {
+    for x in &b.sources.bias {
         let t = &x.terms_pct;
         let _ = writeln!(
             md,
@@ -210,7 +210,7 @@ pub fn markdown(b: &Budget, a: &AccuracyArgs) -> String {
         "---|".repeat(o.forces.len())
     );
     for e in &o.preload_moduli {
-        let row: Vec<_> = b.preload.iter().filter(|x| x.e_kpa == *e).collect();
+        let row: Vec<_> = b.sources.preload.iter().filter(|x| x.e_kpa == *e).collect();
         let rms = (row.iter().map(|x| x.mean_err_pct.powi(2)).sum::<f64>()
             / row.len().max(1) as f64)
             .sqrt();
@@ -239,7 +239,7 @@ pub fn markdown(b: &Budget, a: &AccuracyArgs) -> String {
          It is part of σ repeat above.\n\n\
          | modulus kPa | ∂E/∂F %/mN | σ_F mN | ∂E/∂F·σ_F % | measured % |\n|---|---|---|---|---|\n",
     );
-    for x in &b.force {
+    for x in &b.sources.force {
         let _ = writeln!(
             md,
             "| {} | {:+.3} | {:.4} | {:.4} | {:.4} |",
@@ -267,7 +267,7 @@ pub fn markdown(b: &Budget, a: &AccuracyArgs) -> String {
             .join(" | "),
         "---|".repeat(o.drifts_hz.len())
     );
-    for x in &b.drift {
+    for x in &b.sources.drift {
         let mean = x.pct_per_hz.iter().map(|v| v.abs()).sum::<f64>() / x.pct_per_hz.len() as f64;
         let _ = writeln!(
             md,
@@ -291,7 +291,7 @@ pub fn markdown(b: &Budget, a: &AccuracyArgs) -> String {
          | method | modulus kPa | probe time ms | ok | scatter % | σ repeat % |\n|---|---|---|---|---|---|",
         o.noise_seeds
     );
-    for x in &b.noise {
+    for x in &b.sources.noise {
         let _ = writeln!(
             md,
             "| {} | {} | {:.0} | {}/{} | {:.4} | {:.4} |",

@@ -446,8 +446,8 @@ pub fn analyze(
         let (est, red) = estimate_in_band(method, pts);
         (method, est, red)
     };
-    let probe_time = match (capture.sample_rate_hz, capture.layout) {
-        (Some(fs), Layout::TimeDomain) => Seconds(capture.rows as f32 / fs as f32),
+    let probe_time = match (capture.domain.time(), capture.layout) {
+        (Some(t), Layout::TimeDomain) => Seconds(capture.rows as f32 / t.sample_rate_hz as f32),
         _ => Seconds(0.0),
     };
     let n = pts.len().min(u16::MAX as usize) as u16;
@@ -561,15 +561,17 @@ pub fn analysis_json(a: &Analysis, file: &str) -> Value {
         o.insert("rows".into(), json!(c.rows));
         o.insert(
             "noise_sigma_s".into(),
-            c.noise_sigma_s.map_or(Value::Null, |s| json!(s)),
+            c.domain.noise_sigma_s().map_or(Value::Null, |s| json!(s)),
         );
         o.insert(
             "sample_rate_hz".into(),
-            c.sample_rate_hz.map_or(Value::Null, |s| json!(s)),
+            c.domain
+                .time()
+                .map_or(Value::Null, |t| json!(t.sample_rate_hz)),
         );
         o.insert(
             "sweep".into(),
-            match c.shape {
+            match c.domain.time().map(|t| t.shape) {
                 Some(SweepShape::Stepped) => json!("stepped"),
                 Some(SweepShape::Continuous) => json!("continuous"),
                 None => Value::Null,
@@ -636,21 +638,22 @@ pub fn run(a: AnalyzeArgs) -> Result<()> {
         if let (Some(f), Some(l)) = (c.points.first(), c.points.last()) {
             println!("  band {:.3}–{:.3} Hz", f.freq.0, l.freq.0);
         }
-        if let Some(s) = c.noise_sigma_s {
+        if let Some(s) = c.domain.noise_sigma_s() {
             println!(
                 "  noise per component (estimated from local cubic fits): {:.3e} S",
                 s
             );
         }
-        if let (Some(fs), Some(shape)) = (c.sample_rate_hz, c.shape) {
+        if let Some(t) = c.domain.time() {
             println!(
-                "  sample rate {fs:.2} Hz, {} sweep{}",
-                match shape {
+                "  sample rate {:.2} Hz, {} sweep{}",
+                t.sample_rate_hz,
+                match t.shape {
                     SweepShape::Stepped => "stepped",
                     SweepShape::Continuous => "continuous",
                 },
-                if c.skipped_steps > 0 {
-                    format!(", {} short steps skipped", c.skipped_steps)
+                if t.skipped_steps > 0 {
+                    format!(", {} short steps skipped", t.skipped_steps)
                 } else {
                     String::new()
                 }

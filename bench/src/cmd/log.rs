@@ -36,9 +36,9 @@ fn fmt_opt(v: Option<f32>, digits: usize) -> String {
 }
 
 fn when(r: &LoggedReading) -> String {
-    match r.time_s {
+    match r.at.time_s {
         Some(t) => format!("{t:.3} s"),
-        None => format!("line {}", r.line),
+        None => format!("line {}", r.at.line),
     }
 }
 
@@ -94,7 +94,7 @@ pub fn table(s: &Session) -> Vec<String> {
 pub fn stream_table(s: &Session) -> Vec<String> {
     let mut out = Vec::new();
     for (k, x) in s.streams.iter().enumerate() {
-        let first = x.readings.first().map_or(0, |r| r.reading.line);
+        let first = x.readings.first().map_or(0, |r| r.reading.at.line);
         let span = match (x.start_s(), x.readings.last()) {
             (Some(a), Some(b)) => format!("{a:.3}–{:.3} s", b.t_s),
             _ => "—".into(),
@@ -146,7 +146,7 @@ fn streams_json(s: &Session) -> Value {
                     })),
                     "readings": x.readings.iter().map(|r| json!({
                         "seq": r.seq, "t_s": r.t_s, "locked": r.locked,
-                        "line": r.reading.line, "status": r.reading.msg.status,
+                        "line": r.reading.at.line, "status": r.reading.msg.status,
                         "resonance_hz": r.reading.msg.f_hz, "modulus_kpa": r.reading.msg.e_kpa,
                         "modulus_sigma_kpa": r.reading.msg.e_sigma_kpa, "q_factor": r.reading.msg.q,
                         "loss_tangent": r.reading.msg.loss_tangent, "loss_tangent_sigma": r.reading.msg.loss_tangent_sigma,
@@ -164,7 +164,7 @@ fn session_json(s: &Session) -> Value {
         .iter()
         .map(|r| {
             json!({
-                "line": r.line, "time_s": r.time_s, "status": r.msg.status,
+                "line": r.at.line, "time_s": r.at.time_s, "status": r.msg.status,
                 "resonance_hz": r.msg.f_hz, "resonance_sigma_hz": r.msg.f_sigma_hz,
                 "modulus_kpa": r.msg.e_kpa, "modulus_sigma_kpa": r.msg.e_sigma_kpa,
                 "modulus_repeatability_kpa": r.msg.e_repeat_kpa,
@@ -192,7 +192,7 @@ fn session_json(s: &Session) -> Value {
     let events: Vec<Value> = s
         .events
         .iter()
-        .map(|e| json!({"line": e.line, "time_s": e.time_s, "text": e.text()}))
+        .map(|e| json!({"line": e.at.line, "time_s": e.at.time_s, "text": e.text()}))
         .collect();
     json!({
         "messages": s.messages,
@@ -254,7 +254,7 @@ pub fn run(a: LogArgs) -> Result<()> {
                     Some(Level::Trace) => "TRACE",
                     None => "     ",
                 };
-                println!("    line {:>5}  {lvl}  {}", e.line, e.text());
+                println!("    line {:>5}  {lvl}  {}", e.at.line, e.text());
             }
         }
     }
@@ -353,9 +353,9 @@ fn draw<DB: Backend>(root: &Area<DB>, title: &str, s: &Session) -> Result<()> {
         .readings
         .iter()
         .enumerate()
-        .map(|(k, r)| (r.time_s.unwrap_or((k + 1) as f64), r))
+        .map(|(k, r)| (r.at.time_s.unwrap_or((k + 1) as f64), r))
         .collect();
-    let timed = s.readings.iter().all(|r| r.time_s.is_some());
+    let timed = s.readings.iter().all(|r| r.at.time_s.is_some());
     let (x0, x1) = padded_range(rs.iter().map(|(x, _)| *x), 0.05, (0.0, 1.0));
     let (y0, y1) = padded_range(
         rs.iter().filter_map(|(_, r)| r.msg.f_hz.map(|f| f as f64)),
