@@ -138,6 +138,20 @@ fn run(elf: &Path, seconds: f64, on: hal_sim::Scene, events: &[(f64, Event)]) ->
     Run { m, lines }
 }
 
+/// The image built once, run on phantom B for `seconds` with `fault` injected at `fault_at` s
+/// and then the command `send` (time s, line): a fault the bring-up or a session must survive.
+fn run_faulted(
+    seconds: f64,
+    fault_at: f64,
+    fault: fn(&mut Machine),
+    send: Option<(f64, &'static str)>,
+) -> Run {
+    let elf = build_image();
+    let mut events = vec![(fault_at, Event::Fault(fault))];
+    events.extend(send.map(|(t, line)| (t, Event::Send(line))));
+    run(&elf, seconds, scene("B"), &events)
+}
+
 #[test]
 fn stm32_image_boots_and_passes_its_self_test_on_phantom_b() {
     let elf = build_image();
@@ -381,9 +395,8 @@ fn stm32_image_reads_the_contact_force_from_its_load_cell() {
 /// runs without converters — no hang, no reset loop (`docs/firmware.md`, "Boot").
 #[test]
 fn stm32_image_survives_an_adc_that_never_becomes_ready() {
-    let elf = build_image();
-    let never_ready = Event::Fault(|m| m.board_mut().periph.adc[0].never_ready = true);
-    let run = run(&elf, 2.0, scene("B"), &[(0.0, never_ready)]);
+    let never_ready = |m: &mut Machine| m.board_mut().periph.adc[0].never_ready = true;
+    let run = run_faulted(2.0, 0.0, never_ready, None);
     assert_eq!(run.m.resets, 1, "one watchdog reset, no loop");
     // (RCC_CSR's IWDGRSTF is not looked at here: the image reads and clears it with RMVF.)
     assert!(run.booted_with("converter_hang"), "{:?}", run.lines);
@@ -396,10 +409,8 @@ fn stm32_image_survives_an_adc_that_never_becomes_ready() {
 /// error.
 #[test]
 fn stm32_image_runs_from_hsi16_when_the_hse_never_starts() {
-    let elf = build_image();
-    let no_hse = Event::Fault(|m| m.board_mut().periph.rcc.hse_present = false);
-    let events = [(0.0, no_hse), (1.5, Event::Send("status"))];
-    let run = run(&elf, 2.0, scene("B"), &events);
+    let no_hse = |m: &mut Machine| m.board_mut().periph.rcc.hse_present = false;
+    let run = run_faulted(2.0, 0.0, no_hse, Some((1.5, "status")));
     assert_eq!(run.m.resets, 0);
     // RM0440 RCC: the PLL from HSI16 (PLLSRC = 10) and SYSCLK from it at 170 MHz.
     let rcc = &run.m.board().periph.rcc;
@@ -438,10 +449,8 @@ fn stm32_image_runs_from_hsi16_when_the_hse_never_starts() {
 /// ends as `dma_error`, the count in the `counters` line — no panic, no hang.
 #[test]
 fn stm32_image_survives_a_dma_transfer_error() {
-    let elf = build_image();
-    let error = Event::Fault(|m| m.board_mut().periph.dma.error(0));
-    let events = [(1.0, error), (1.2, Event::Send("measure"))];
-    let run = run(&elf, 3.0, scene("B"), &events);
+    let error = |m: &mut Machine| m.board_mut().periph.dma.error(0);
+    let run = run_faulted(3.0, 1.0, error, Some((1.2, "measure")));
     assert_eq!(run.m.resets, 0, "no panic, no watchdog reset");
     // The channel is off (the hardware disabled it) and TIM6 stopped by the image.
     assert_eq!(run.m.board().periph.dma.ch[0].ccr & 1, 0);
@@ -465,7 +474,6 @@ fn stm32_image_survives_a_dma_transfer_error() {
 /// reset.
 #[test]
 fn stm32_image_ends_a_dma_error_on_any_of_its_channels_typed() {
-    let elf = build_image();
     type Inject = fn(&mut Machine);
     let errors: [(&str, Inject); 4] = [
         ("CH2 ADC2", |m| m.board_mut().periph.dma.error(1)),
@@ -475,8 +483,7 @@ fn stm32_image_ends_a_dma_error_on_any_of_its_channels_typed() {
     ];
     for (name, error) in errors {
         println!("--- {name}");
-        let events = [(1.0, Event::Fault(error)), (1.2, Event::Send("measure"))];
-        let run = run(&elf, 2.5, scene("B"), &events);
+        let run = run_faulted(2.5, 1.0, error, Some((1.2, "measure")));
         assert_eq!(run.m.resets, 0, "{name}: no panic, no watchdog reset");
         let parsed = run.parsed();
         let r = first(&parsed, "reading");
@@ -492,10 +499,8 @@ fn stm32_image_ends_a_dma_error_on_any_of_its_channels_typed() {
 /// next boot names the step (`flash_hang`) and refuses the store instead of hanging again.
 #[test]
 fn stm32_image_survives_a_flash_stuck_busy() {
-    let elf = build_image();
-    let stuck = Event::Fault(|m| m.board_mut().periph.flash.stuck_busy = true);
-    let events = [(0.0, stuck), (1.0, Event::Send("store"))];
-    let run = run(&elf, 6.0, scene("B"), &events);
+    let stuck = |m: &mut Machine| m.board_mut().periph.flash.stuck_busy = true;
+    let run = run_faulted(6.0, 0.0, stuck, Some((1.0, "store")));
     assert_eq!(run.m.resets, 1, "one watchdog reset, no loop");
     assert!(run.booted_with("flash_hang"), "{:?}", run.lines);
 }

@@ -1,6 +1,6 @@
 //! `probe-bench measure`: one or more readings on the simulated probe.
 
-use super::{progress, MethodArgs, OutputArgs};
+use super::{progress, ImageArgs, MethodArgs, OutputArgs};
 use crate::calfile;
 use crate::scene::{parse_noise, print_scene_header, SceneArgs, Target};
 use crate::{plot, report};
@@ -38,19 +38,9 @@ pub struct MeasureArgs {
     /// JSON and the plot (the first reading's admittance sweep).
     #[command(flatten)]
     pub out: OutputArgs,
-    /// Take the readings with the firmware image in QEMU on the same scene (the scene, noise,
-    /// seed, method and settings go to the image as its command script; the image reads with
-    /// its factory profile, `src/board/sim_factory.rs`). Needs qemu-system-arm, defmt-print
-    /// and the thumbv7em-none-eabihf target.
-    #[arg(long)]
-    pub qemu: bool,
-    /// Take the readings with the STM32 image (`cargo fw`) on the emulated NUCLEO-G474RE
-    /// (`emu/`, run as a subprocess): the unit takes its air reference, weighs its load cell
-    /// with 10 g, is calibrated on A–E with the method and settings asked for, then reads the
-    /// target (a phantom at the preload, or free air). Needs the thumbv7em-none-eabihf target,
-    /// flip-link, defmt-print, cmake and libclang (scripts/setup).
-    #[arg(long, conflicts_with = "qemu")]
-    pub stm32: bool,
+    /// The firmware image to read with instead of the host's simulated probe.
+    #[command(flatten)]
+    pub image: ImageArgs,
 }
 
 /// A measurement the command line asks for, parsed and validated: what `--qemu` and `--stm32`
@@ -89,10 +79,10 @@ pub fn run(a: MeasureArgs) -> Result<()> {
         settings: &settings,
         noise,
     };
-    if a.qemu {
+    if a.image.qemu {
         return crate::qemu::measure(request);
     }
-    if a.stm32 {
+    if a.image.stm32 {
         return crate::stm32::measure(request);
     }
     // The simulated unit's profile is made as a unit's profile is made once: with the

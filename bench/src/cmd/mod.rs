@@ -23,6 +23,28 @@ use pzt_probe::reading::Settings;
 use pzt_probe::{Hz, Method, Seconds, Volts};
 use std::path::{Path, PathBuf};
 
+/// Where `measure` and `stream` run: on the host's simulated probe (neither flag), or with a
+/// firmware image on its emulated board, on the same scene and with the same output.
+#[derive(Args, Clone, Copy, Debug, Default)]
+pub struct ImageArgs {
+    /// Run on the firmware image in QEMU instead: the scene, its events, noise, seed, method and
+    /// settings go to the image as its command script (`sim` lines); the image reads with its
+    /// factory profile (`src/board/sim_factory.rs`) and streams with its default tracker; a
+    /// stream's `t_s` is counted from its start. Needs qemu-system-arm, defmt-print and the
+    /// thumbv7em-none-eabihf target.
+    #[arg(long)]
+    pub qemu: bool,
+    /// Run on the STM32 image (`cargo fw`) on the emulated NUCLEO-G474RE instead (`emu/`, run as
+    /// a subprocess): the unit takes its air reference, weighs its load cell with 10 g and is
+    /// calibrated on A–E (with the method and settings asked for), then reads the target (a
+    /// phantom at the preload, or free air) or streams on it with its default tracker, the
+    /// scene's events as the emulator's scene changes; a stream's `t_s` is counted from its
+    /// start. Needs the thumbv7em-none-eabihf target, flip-link, defmt-print, cmake and
+    /// libclang (scripts/setup).
+    #[arg(long, conflicts_with = "qemu")]
+    pub stm32: bool,
+}
+
 /// The output options of the commands that report a result (`measure`, `stream`, `analyze`,
 /// `log`): JSON for a program in place of the report for a person, and a plot.
 #[derive(Args, Clone, Debug, Default)]

@@ -1,7 +1,7 @@
 //! `probe-bench stream`: continuous reading on the simulated probe (the core's tracker,
 //! `pzt_probe::instrument::continuous`), with a step in stiffness, a lift-off and a new contact on the way.
 
-use super::OutputArgs;
+use super::{ImageArgs, OutputArgs};
 use crate::plot::{Area, Backend};
 use crate::report;
 use crate::scene::{parse_noise, print_scene_header, NoiseArgs, SceneArgs};
@@ -47,20 +47,9 @@ pub struct StreamArgs {
     /// time).
     #[command(flatten)]
     pub out: OutputArgs,
-    /// Stream on the firmware image in QEMU instead (its `stream` command with the default
-    /// tracker and its factory profile, the scene and events as `sim` lines): the same
-    /// output, `t_s` counted from the stream's start. Needs qemu-system-arm, defmt-print and
-    /// the thumbv7em-none-eabihf target.
-    #[arg(long)]
-    pub qemu: bool,
-    /// Stream on the STM32 image (`cargo fw`) on the emulated NUCLEO-G474RE instead (`emu/`,
-    /// run as a subprocess): the unit takes its air reference, weighs its load cell and is
-    /// calibrated on A–E, then streams on the target with its default tracker; the scene's
-    /// events are the emulator's scene changes (steps). The same output, `t_s` counted from
-    /// the stream's start. Needs the thumbv7em-none-eabihf target, flip-link, defmt-print,
-    /// cmake and libclang (scripts/setup).
-    #[arg(long, conflicts_with = "qemu")]
-    pub stm32: bool,
+    /// The firmware image to stream on instead of the host's simulated probe.
+    #[command(flatten)]
+    pub image: ImageArgs,
 }
 
 /// A slide onto another tissue during the stream (hal-sim `Step`).
@@ -199,7 +188,7 @@ pub fn run(a: StreamArgs) -> Result<()> {
     let unit = crate::unit::default_for(METHOD)?;
     if !a.out.json {
         print_scene_header("stream", &target, a.scene.preload_n, noise, &scene);
-        if !(a.qemu || a.stm32) {
+        if !(a.image.qemu || a.image.stm32) {
             println!(
             "  tracker: segments of {:.0} ms, drive ±{} half-linewidths off the resonance; unit profile of the simulated unit ({} calibration)",
             a.tracker.segment_s * 1e3,
@@ -231,8 +220,8 @@ pub fn run(a: StreamArgs) -> Result<()> {
             );
         }
     };
-    let readings = if a.qemu || a.stm32 {
-        let v = if a.qemu {
+    let readings = if a.image.qemu || a.image.stm32 {
+        let v = if a.image.qemu {
             crate::qemu::stream(&a, &target, noise)?
         } else {
             crate::stm32::stream(&a, &target, noise)?

@@ -850,22 +850,25 @@ mod tests {
     fn adc_bring_up_rules() {
         // RM0440 ADC: DEEPPWD off, ADVREGEN, 20 us, ADCAL (116 clocks), >= 4 clocks, ADEN.
         let hz = 42.5e6;
-        let mut a = Adc::default();
-        a.write(0x08, 0, 0.0, hz).unwrap();
-        a.write(0x08, 1 << 28, 0.0, hz).unwrap();
-        // Too early.
-        assert!(a
-            .write(0x08, (1 << 28) | (1 << 31), 10e-6, hz)
-            .unwrap()
-            .violation
-            .is_some());
-        let mut a = Adc::default();
-        a.write(0x08, 1 << 28, 0.0, hz).unwrap();
-        assert!(a
-            .write(0x08, (1 << 28) | (1 << 31), 20e-6, hz)
-            .unwrap()
-            .violation
-            .is_none());
+        // An ADC out of deep power-down with its regulator on at 0, ADCAL set at `t_cal` s:
+        // the ADC and whether that write broke the regulator's start-up rule.
+        let calibrate_at = |t_cal: f64| {
+            let mut a = Adc::default();
+            a.write(0x08, 0, 0.0, hz).unwrap();
+            a.write(0x08, 1 << 28, 0.0, hz).unwrap();
+            let broken = a
+                .write(0x08, (1 << 28) | (1 << 31), t_cal, hz)
+                .unwrap()
+                .violation
+                .is_some();
+            (a, broken)
+        };
+        assert!(
+            calibrate_at(10e-6).1,
+            "ADCAL 10 us after ADVREGEN: too early"
+        );
+        let (mut a, broken) = calibrate_at(20e-6);
+        assert!(!broken, "ADCAL 20 us after ADVREGEN");
         let done = 20e-6 + CAL_CYCLES / hz;
         a.advance_calibration(done);
         assert_eq!(a.cr >> 31, 0, "ADCAL cleared by hardware");
