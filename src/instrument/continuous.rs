@@ -42,13 +42,14 @@ use crate::engine::{PointPlan, PointRaw};
 use crate::estimate::conductance::GROSS_CHI2;
 use crate::estimate::hold::{Hold, HoldSettings};
 use crate::estimate::resonator::{self, HoldWindow, MAX_WINDOWS};
+use crate::estimate::track::{Measurement, Process, Sym2, Track, Update};
 use crate::estimate::Estimate;
 use crate::hal::FrontEndScale;
 use crate::loadcell::RawForce;
 use crate::reading::driver::{PointSource, Wanted};
 use crate::reading::{Method, Reading};
 use crate::status::{Failure, Status};
-use crate::unit::profile::UnitProfile;
+use crate::unit::profile::{UnitProfile, FREE_RESONANCE_DRIFT_HZ_S};
 use crate::units::bounded;
 use crate::units::{Hz, Seconds, Volts};
 use core::f64::consts::PI;
@@ -81,6 +82,12 @@ pub struct TrackerConfig {
     pub q_prior: f32,
     /// Segments in a row without lock before the tracker acquires again (1–20).
     pub lost_after: u8,
+    /// How fast the resonance may move between segments, Hz/s (0.01–100): the tracker's
+    /// process model ([`crate::estimate::track`]) takes a random step of this rate times the
+    /// time between segments; the larger it is, the fewer segments a reading pools.
+    pub drift: f32,
+    /// How fast `Q` may move between segments, as a fraction of it per s (0.01–100).
+    pub q_drift: f32,
     /// Drive amplitude at the PZT.
     pub drive: Volts,
 }
@@ -100,6 +107,8 @@ impl TrackerConfig {
         dither: 0.25,
         q_prior: 0.5,
         lost_after: 3,
+        drift: FREE_RESONANCE_DRIFT_HZ_S,
+        q_drift: 0.2,
         drive: Volts(5.0),
     };
 
@@ -148,6 +157,8 @@ impl TrackerConfig {
             self.dither,
             self.q_prior,
             self.acquire_hold.0,
+            self.drift,
+            self.q_drift,
         ]
         .iter()
         .all(|x| x.is_finite());
@@ -158,6 +169,8 @@ impl TrackerConfig {
             && (0.0..=2.0).contains(&self.dither)
             && (0.05..=2.0).contains(&self.q_prior)
             && (1..=20).contains(&self.lost_after)
+            && (0.01..=100.0).contains(&self.drift)
+            && (0.01..=100.0).contains(&self.q_drift)
             && self.acquire_hold.0 >= 0.1;
         if !knobs_ok {
             return Err(SettingsError::KnobOutOfRange);
@@ -185,6 +198,7 @@ impl TrackerConfig {
             misses: 0,
             seq: 0,
             segment_start: 0,
+            track: Track::EMPTY,
         })
     }
 }
@@ -242,6 +256,7 @@ pub struct Tracker {
     misses: u8,
     seq: u32,
     segment_start: u64,
+    track: Track,
 }
 
 /// The one place a stream's estimate becomes a reading: the pipeline with the unit's profile
@@ -351,6 +366,23 @@ impl Tracker {
                     Ok(e) => {
                         self.f_est = e.resonance.0 as f64;
                         self.q_est = bounded(e.q.map_or(10.0, |q| q as f64), 2.0, 200.0);
+                        // The filter starts from the acquisition (its `Q`'s σ, when it has one).
+                        self.track.clear();
+                        let sq = e.q_sigma.map_or(0.0, |s| s as f64);
+                        let sf = e.sigma.0 as f64;
+                        self.track.update(
+                            &Measurement {
+                                f0: self.f_est,
+                                q: self.q_est,
+                                cov: Sym2 {
+                                    a: sf * sf,
+                                    b: 0.0,
+                                    c: sq * sq,
+                                },
+                                t: t as f64 / self.fs,
+                            },
+                            &self.process(),
+                        );
                         self.mode = Mode::Track;
                         self.plan = None;
                         self.misses = 0;
@@ -388,7 +420,7 @@ impl Tracker {
                     return None;
                 }
                 self.plan = None;
-                let est = self.segment_estimate(scale);
+                let est = self.segment_estimate(scale, t as f64 / self.fs);
                 let locked = est.is_ok();
                 self.misses = if locked {
                     0
@@ -474,10 +506,23 @@ impl Tracker {
         }
         self.plan = None;
         self.misses = 0;
+        self.track.clear();
     }
 
-    /// The finished segment's estimate; moves the estimate the drive follows.
-    fn segment_estimate(&mut self, scale: &FrontEndScale) -> Result<Estimate, Failure> {
+    /// The filter's process model: the configured rates, and the gate at the χ² of two degrees
+    /// of freedom that a measurement consistent with the prediction exceeds once in a thousand
+    /// (`−2 ln 10⁻³`).
+    fn process(&self) -> Process {
+        Process {
+            f0_rate: self.cfg.drift as f64,
+            q_rate: self.cfg.q_drift as f64,
+            gate: 13.8155,
+        }
+    }
+
+    /// The finished segment's estimate (ending at `t_end`, s), pooled with what the tracker
+    /// knows ([`Track`]); moves the estimate the drive follows.
+    fn segment_estimate(&mut self, scale: &FrontEndScale, t_end: f64) -> Result<Estimate, Failure> {
         if self.clipped {
             return Err(Failure::Clipped);
         }
@@ -509,13 +554,46 @@ impl Tracker {
             return Err(Failure::OutOfBand);
         }
         let moved = libm::fabs(f0 - self.f_est);
-        // Follow the estimate either way; a jump of more than a linewidth is no lock.
+        // Follow the estimate either way; a jump of more than a linewidth is no lock, and what
+        // the filter knew is of another resonance.
         self.f_est = f0;
         self.q_est = q;
         if moved > f0 / q {
+            self.track.clear();
             return Err(Failure::NotLocked);
         }
-        Ok(e)
+        let sf = e.sigma.0 as f64;
+        let m = Measurement {
+            f0,
+            q,
+            cov: Sym2 {
+                a: sf * sf,
+                b: h.cov_f0_q,
+                c: h.sigma_q * h.sigma_q,
+            },
+            t: t_end,
+        };
+        let pooled = match self.track.update(&m, &self.process()) {
+            Update::Refused => None,
+            Update::Pooled | Update::Restarted => self.track.estimate(),
+        };
+        let Some(p) = pooled else {
+            self.track.clear();
+            return Ok(e);
+        };
+        if !(lo..=hi).contains(&p.f0) || !(2.0..=200.0).contains(&p.q) {
+            self.track.clear();
+            return Ok(e);
+        }
+        self.f_est = p.f0;
+        self.q_est = p.q;
+        Ok(Estimate {
+            resonance: Hz(p.f0 as f32),
+            sigma: Hz(libm::sqrt(p.cov.a.max(0.0)) as f32),
+            q: Some(p.q as f32),
+            q_sigma: Some(libm::sqrt(p.cov.c.max(0.0)) as f32),
+            ..e
+        })
     }
 }
 
