@@ -71,10 +71,17 @@ pub struct TrackerConfig {
     pub seed: Hz,
     /// The acquisition's hold in all (first half on the seed, second on its estimate).
     pub acquire_hold: Seconds,
-    /// Length of one tracking segment: one reading each (25–1000 ms). A segment is at least
+    /// Length of one tracking segment: one reading each (8–1000 ms). A segment is at least
     /// four windows of one cycle (the resonator's fit needs four windows; an engine window must
     /// span half a batch), 17 ms at 238 Hz.
     pub segment: Seconds,
+    /// Segments a plan holds (1–8): the drive moves only between plans, so the segments after
+    /// a plan's first see no retuning and lose nothing to the DAC's pipeline (the two batches
+    /// and the wait for a cycle boundary between plans are spent once a plan); each is fitted
+    /// with the plan's windows so far and adds what they know beyond the previous fit. The
+    /// first segment takes at least four windows, a later one at least two; a plan at most 16
+    /// (fewer segments when they do not fit).
+    pub plan_segments: u8,
     /// Offset of the drive from the estimate, alternately above and below, in half-linewidths
     /// `f0/(2Q)` (0–2).
     pub dither: f32,
@@ -104,6 +111,7 @@ impl TrackerConfig {
         seed: Hz(230.0),
         acquire_hold: Seconds(0.1),
         segment: Seconds(0.03),
+        plan_segments: 1,
         dither: 0.25,
         q_prior: 0.5,
         lost_after: 3,
@@ -165,7 +173,8 @@ impl TrackerConfig {
         if !finite {
             return Err(SettingsError::NotFinite);
         }
-        let knobs_ok = (0.025..=1.0).contains(&self.segment.0)
+        let knobs_ok = (0.008..=1.0).contains(&self.segment.0)
+            && (1..=8).contains(&self.plan_segments)
             && (0.0..=2.0).contains(&self.dither)
             && (0.05..=2.0).contains(&self.q_prior)
             && (1..=20).contains(&self.lost_after)
@@ -199,6 +208,10 @@ impl TrackerConfig {
             seq: 0,
             segment_start: 0,
             track: Track::EMPTY,
+            first_segment: 0,
+            per_segment: 0,
+            plan_prior: (0.0, 0.0, 0.0),
+            plan_fit: None,
         })
     }
 }
@@ -257,6 +270,14 @@ pub struct Tracker {
     seq: u32,
     segment_start: u64,
     track: Track,
+    /// Windows of the plan in progress's first segment, and of each later one.
+    first_segment: u16,
+    per_segment: u16,
+    /// The plan's fits start from: `f0`, and `Q` with its prior's σ (the estimate when the plan
+    /// was made: the same prior for every fit of the plan, so that their difference is data).
+    plan_prior: (f64, f64, f64),
+    /// The last fit of the plan in progress (of all its windows until then).
+    plan_fit: Option<Measurement>,
 }
 
 /// The one place a stream's estimate becomes a reading: the pipeline with the unit's profile
@@ -290,6 +311,12 @@ impl Tracker {
         matches!(self.mode, Mode::Acquire(_))
     }
 
+    /// True while a tracking plan has windows to come (a reading ended one of its segments,
+    /// not the plan).
+    pub fn plan_running(&self) -> bool {
+        matches!(self.mode, Mode::Track) && self.plan.is_some()
+    }
+
     /// Readings emitted so far (the next reading's `seq`).
     pub fn emitted(&self) -> u32 {
         self.seq
@@ -314,27 +341,35 @@ impl Tracker {
                 let ftw = tuning_word(f, self.fs);
                 self.f_h = frequency_hz(ftw, self.fs);
                 // Windows of whole cycles, the shortest the engine passes on (one cycle in the
-                // band), at most MAX_WINDOWS of them.
+                // band; longer for a single long segment), at most MAX_WINDOWS a plan: its first
+                // segment at least four (the fit's fewest), each later one at least two (its
+                // fit takes the plan's windows so far).
                 let per_cycle = 1.0 / self.f_h.max(1.0);
                 let seg = self.cfg.segment.0 as f64;
-                let cycles = libm::ceil(seg / per_cycle / MAX_WINDOWS as f64)
-                    .max(resonator::first_cycles(self.f_h, self.fs));
-                let n = bounded(
-                    libm::floor(seg / (cycles * per_cycle)),
-                    4.0,
-                    MAX_WINDOWS as f64,
-                );
+                let most = MAX_WINDOWS as f64;
+                let mut cycles = resonator::first_cycles(self.f_h, self.fs);
+                if self.cfg.plan_segments <= 1 {
+                    cycles = cycles.max(libm::ceil(seg / per_cycle / most));
+                }
+                let n = bounded(libm::floor(seg / (cycles * per_cycle)), 2.0, most) as u16;
+                let first = n.max(4);
+                let later = (self.cfg.plan_segments.max(1) as u16 - 1)
+                    .min((MAX_WINDOWS as u16).saturating_sub(first) / n);
+                self.per_segment = n;
+                self.first_segment = first;
                 self.tag = self.tag.wrapping_add(1);
                 let plan = PointPlan {
                     ftw,
                     amplitude_codes: self.amplitude,
                     settle_samples: 0,
                     cycles: cycles as u32,
-                    windows: n as u16,
+                    windows: first + later * n,
                     open: false,
                     tag: TRACK_TAG | (self.tag & 0xff),
                 };
                 self.plan = Some(plan);
+                self.plan_prior = (self.f_est, self.q_est, self.cfg.q_prior as f64 * self.q_est);
+                self.plan_fit = None;
                 self.windows.clear();
                 self.monitor = Default::default();
                 self.clipped = false;
@@ -416,10 +451,16 @@ impl Tracker {
                         var: p.variance * ai * ai,
                     });
                 }
-                if raw.window + 1 < plan.windows {
+                let done = raw.window + 1;
+                let ends_segment = done == self.first_segment
+                    || (done > self.first_segment
+                        && (done - self.first_segment).is_multiple_of(self.per_segment.max(1)));
+                if !ends_segment && done < plan.windows {
                     return None;
                 }
-                self.plan = None;
+                if done >= plan.windows {
+                    self.plan = None;
+                }
                 let est = self.segment_estimate(scale, t as f64 / self.fs);
                 let locked = est.is_ok();
                 self.misses = if locked {
@@ -430,7 +471,11 @@ impl Tracker {
                 let took = self.seconds(t.saturating_sub(self.segment_start));
                 let (from, to) = force_window(self.segment_start, t, self.fs);
                 self.segment_start = t;
-                let points = self.windows.len() as u16;
+                let points = if self.plan_fit.is_some() && done > self.first_segment {
+                    self.per_segment
+                } else {
+                    self.first_segment
+                };
                 let r = self.emit(est, unit, t, took, points, locked, force(from, to));
                 if self.misses >= self.cfg.lost_after {
                     self.reacquire(scale, unit);
@@ -529,19 +574,26 @@ impl Tracker {
         let (m, r) = &self.monitor;
         let pv = solve(m, r).ok_or(Failure::DriveFault)?;
         let drive = Drive::from_monitor(&pv, scale).ok_or(Failure::DriveFault)?;
-        for x in self.windows.iter_mut() {
+        // The plan's windows so far, as admittances with the drive phasor measured so far.
+        let mut w = [HoldWindow::default(); MAX_WINDOWS];
+        let n = self.windows.len().min(MAX_WINDOWS);
+        for (o, x) in w.iter_mut().zip(self.windows.iter()) {
             let y = drive.admittance(x.y, x.var);
-            (x.y, x.var) = (y.y, y.var);
+            *o = HoldWindow {
+                y: y.y,
+                var: y.var,
+                ..*x
+            };
         }
         let y_s = C64::new(self.static_g, 2.0 * PI * self.f_h * self.static_c);
-        let q_sd = self.cfg.q_prior as f64 * self.q_est;
+        let (f_start, q_start, q_sd) = self.plan_prior;
         let seg = resonator::Segment {
-            windows: &self.windows,
+            windows: &w[..n],
             f_h: self.f_h,
             y_s,
             mirror: resonator::mirror(drive.v),
         };
-        let h = resonator::fit(seg, self.f_est, (self.q_est, q_sd))?;
+        let h = resonator::fit(seg, f_start, (q_start, q_sd))?;
         // A segment the resonator's model does not explain (a knock, a tone) is no reading,
         // and the drive does not follow it: the next segment (30 ms on by default) will be clean.
         if h.reduced_chi2 > GROSS_CHI2 {
@@ -563,7 +615,7 @@ impl Tracker {
             return Err(Failure::NotLocked);
         }
         let sf = e.sigma.0 as f64;
-        let m = Measurement {
+        let fit = Measurement {
             f0,
             q,
             cov: Sym2 {
@@ -573,7 +625,15 @@ impl Tracker {
             },
             t: t_end,
         };
-        let pooled = match self.track.update(&m, &self.process()) {
+        // A plan's later segments are fitted with all its windows so far (their starting state
+        // is the plan's, not a free one); what they add is the information the earlier fit did
+        // not have: `Y = C⁻¹ − C_prev⁻¹`, `Y z = C⁻¹ x − C_prev⁻¹ x_prev`.
+        let m = match self.plan_fit.replace(fit) {
+            None => Some(fit),
+            Some(prev) => added_information(&fit, &prev),
+        };
+        let update = m.map_or(Update::Refused, |m| self.track.update(&m, &self.process()));
+        let pooled = match update {
             Update::Refused => None,
             Update::Pooled | Update::Restarted => self.track.estimate(),
         };
@@ -595,6 +655,30 @@ impl Tracker {
             ..e
         })
     }
+}
+
+/// What `now` (a fit of a plan's windows so far) knows beyond `before` (the fit of fewer of
+/// them), as a measurement: the difference of their information matrices over `(f0, Q)` and of
+/// their information vectors; `None` when the difference is not positive definite (nothing
+/// added that the linearised fits can tell apart).
+fn added_information(now: &Measurement, before: &Measurement) -> Option<Measurement> {
+    let (a, b) = (now.cov.inverse()?, before.cov.inverse()?);
+    let info = Sym2 {
+        a: a.a - b.a,
+        b: a.b - b.b,
+        c: a.c - b.c,
+    };
+    let cov = info.inverse()?;
+    let y = [
+        a.a * now.f0 + a.b * now.q - (b.a * before.f0 + b.b * before.q),
+        a.b * now.f0 + a.c * now.q - (b.b * before.f0 + b.c * before.q),
+    ];
+    Some(Measurement {
+        f0: cov.a * y[0] + cov.b * y[1],
+        q: cov.b * y[0] + cov.c * y[1],
+        cov,
+        t: now.t,
+    })
 }
 
 /// Run `tracker` against `src` until `emit` returns false: plans loaded one by one (the drive
@@ -638,9 +722,11 @@ pub async fn run_with<S: PointSource>(
                 if !emit(src, &r) {
                     break 'outer;
                 }
-                // A reading ends its plan (a segment's last window, the acquisition's end, a
+                // A reading that ends its plan (a plan's last segment, the acquisition's end, a
                 // stall): the next plan follows at once.
-                continue 'outer;
+                if !tracker.plan_running() {
+                    continue 'outer;
+                }
             }
         }
     }
@@ -669,6 +755,76 @@ mod tests {
         }
     }
 
+    /// What a fit of more windows adds to one of fewer is what the new windows measure: two
+    /// independent measurements `A`, `B` fused in covariance form (`x = x_A + K (x_B − x_A)`,
+    /// `K = C_A (C_A + C_B)⁻¹`, `C = (I − K) C_A`) are the fit of all; the difference with `A`
+    /// gives back `B`.
+    #[test]
+    fn added_information_is_the_new_windows_measurement() {
+        let a = Measurement {
+            f0: 238.10,
+            q: 10.4,
+            cov: Sym2 {
+                a: 4e-3,
+                b: 0.02,
+                c: 0.25,
+            },
+            t: 1.0,
+        };
+        let b = Measurement {
+            f0: 238.16,
+            q: 10.1,
+            cov: Sym2 {
+                a: 9e-4,
+                b: -0.004,
+                c: 0.36,
+            },
+            t: 1.0,
+        };
+        let m = |s: &Sym2| [[s.a, s.b], [s.b, s.c]];
+        let (ca, cb) = (m(&a.cov), m(&b.cov));
+        let s = [
+            [ca[0][0] + cb[0][0], ca[0][1] + cb[0][1]],
+            [ca[1][0] + cb[1][0], ca[1][1] + cb[1][1]],
+        ];
+        let det = s[0][0] * s[1][1] - s[0][1] * s[1][0];
+        let si = [
+            [s[1][1] / det, -s[0][1] / det],
+            [-s[1][0] / det, s[0][0] / det],
+        ];
+        let k: [[f64; 2]; 2] = core::array::from_fn(|i| {
+            core::array::from_fn(|j| ca[i][0] * si[0][j] + ca[i][1] * si[1][j])
+        });
+        let d = [b.f0 - a.f0, b.q - a.q];
+        let x = [
+            a.f0 + k[0][0] * d[0] + k[0][1] * d[1],
+            a.q + k[1][0] * d[0] + k[1][1] * d[1],
+        ];
+        let c: [[f64; 2]; 2] = core::array::from_fn(|i| {
+            core::array::from_fn(|j| ca[i][j] - (k[i][0] * ca[0][j] + k[i][1] * ca[1][j]))
+        });
+        let all = Measurement {
+            f0: x[0],
+            q: x[1],
+            cov: Sym2 {
+                a: c[0][0],
+                b: 0.5 * (c[0][1] + c[1][0]),
+                c: c[1][1],
+            },
+            t: 1.0,
+        };
+        let got = added_information(&all, &a).unwrap();
+        assert!(
+            (got.f0 - b.f0).abs() < 1e-9 && (got.q - b.q).abs() < 1e-9,
+            "{got:?}"
+        );
+        assert!((got.cov.a / b.cov.a - 1.0).abs() < 1e-6, "{got:?}");
+        assert!((got.cov.b / b.cov.b - 1.0).abs() < 1e-6, "{got:?}");
+        assert!((got.cov.c / b.cov.c - 1.0).abs() < 1e-6, "{got:?}");
+        // Nothing added (the same fit twice): no measurement.
+        assert!(added_information(&a, &a).is_none());
+    }
+
     #[test]
     fn knobs_out_of_range_are_refused() {
         let scale = FrontEndScale::PROBE;
@@ -680,7 +836,20 @@ mod tests {
                 ..d
             },
             TrackerConfig {
-                segment: Seconds(0.02),
+                segment: Seconds(0.005),
+                ..d
+            },
+            TrackerConfig {
+                plan_segments: 0,
+                ..d
+            },
+            TrackerConfig {
+                plan_segments: 9,
+                ..d
+            },
+            TrackerConfig { drift: 0.0, ..d },
+            TrackerConfig {
+                q_drift: f32::INFINITY,
                 ..d
             },
             TrackerConfig { dither: 2.5, ..d },
@@ -704,9 +873,22 @@ mod tests {
     /// from 0 without gaps, each concluded (a failure or a reading with a resonance).
     #[test]
     fn arbitrary_windows_never_panic_and_readings_have_no_gaps() {
+        for cfg in [
+            TrackerConfig::DEFAULT,
+            TrackerConfig {
+                segment: Seconds(0.012),
+                plan_segments: 4,
+                ..TrackerConfig::DEFAULT
+            },
+        ] {
+            arbitrary_windows(cfg);
+        }
+    }
+
+    fn arbitrary_windows(cfg: TrackerConfig) {
         let scale = FrontEndScale::PROBE;
         let unit = unit();
-        let mut t = TrackerConfig::DEFAULT.validate(&scale, &unit).unwrap();
+        let mut t = cfg.validate(&scale, &unit).unwrap();
         let mut next = xorshift(0x9e37_79b9_7f4a_7c15);
         let mut sample = 0u64;
         let mut expect = 0u32;
@@ -720,7 +902,9 @@ mod tests {
                     expect += 1;
                     assert!(r.t_s.0 >= 0.0);
                     assert!(r.reading.status != Status::Ok || r.reading.modulus.is_some());
-                    break;
+                    if !t.plan_running() {
+                        break;
+                    }
                 }
             }
         }
