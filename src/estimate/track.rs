@@ -112,6 +112,10 @@ pub struct Track {
     info: Sym2,
     y: [f64; 2],
     t: f64,
+    /// The last update's gain on the resonance's own innovation (`K[f0][f0]`, 0–1; 1 after a
+    /// restart) and the time it stepped over, s.
+    gain: f64,
+    dt: f64,
 }
 
 /// The filter's estimate: `(f0, Q)` and their covariance.
@@ -135,6 +139,8 @@ impl Track {
         },
         y: [0.0, 0.0],
         t: 0.0,
+        gain: 1.0,
+        dt: 0.0,
     };
 
     /// Forget everything (the next measurement is taken as it is).
@@ -170,6 +176,19 @@ impl Track {
         })
     }
 
+    /// How far behind a steady drift of `rate` (Hz/s) the estimate settles when every update
+    /// is like the last: the random walk's filter follows a ramp with the lag
+    /// `rate dt (1 − K)/K` (`K` the gain on the resonance's innovation, `dt` the step), which
+    /// its covariance does not hold (Hz; 0 after a restart).
+    pub fn drift_lag(&self, rate: f64) -> f64 {
+        let k = self.gain;
+        if k > 0.0 && k < 1.0 && self.dt.is_finite() {
+            libm::fabs(rate) * self.dt * (1.0 - k) / k
+        } else {
+            0.0
+        }
+    }
+
     /// Take one measurement: predict to its time, gate its innovation, pool it (or restart
     /// from it).
     pub fn update(&mut self, m: &Measurement, process: &Process) -> Update {
@@ -182,16 +201,22 @@ impl Track {
             s.info = r_inv;
             s.y = r_inv.mul(z);
             s.t = m.t;
+            s.gain = 1.0;
+            s.dt = 0.0;
             Update::Restarted
         };
         let Some(pred) = self.predicted(m.t, process) else {
             return restart(self);
         };
         let nu = [z[0] - pred.f0, z[1] - pred.q];
-        let d2 = pred.cov.add(&m.cov).inverse().map(|s| s.quad(nu));
-        if !d2.is_some_and(|d| d <= process.gate) {
+        let s_inv = pred.cov.add(&m.cov).inverse();
+        let d2 = s_inv.map(|s| s.quad(nu));
+        let Some(s_inv) = s_inv.filter(|_| d2.is_some_and(|d| d <= process.gate)) else {
             return restart(self);
-        }
+        };
+        // K = P S⁻¹; its (f0, f0) element.
+        self.gain = pred.cov.a * s_inv.a + pred.cov.b * s_inv.b;
+        self.dt = (m.t - self.t).max(0.0);
         let Some(info) = pred.cov.inverse() else {
             return restart(self);
         };
@@ -411,6 +436,36 @@ mod tests {
         }
         let (single, pooled) = ((single / n as f64).sqrt(), (pooled / n as f64).sqrt());
         assert!(pooled < 0.25 * single, "{pooled} vs {single}");
+    }
+
+    /// The lag the estimate settles at behind a steady ramp (no noise, measurements on the
+    /// ramp) is what [`Track::drift_lag`] states from the last gain.
+    #[test]
+    fn the_lag_behind_a_ramp_is_stated() {
+        let (rate, dt) = (0.3, 0.038);
+        let cov = Sym2 {
+            a: 4e-4,
+            b: 0.0,
+            c: 1e-4,
+        };
+        let mut t = Track::EMPTY;
+        let mut lag = 0.0;
+        for k in 0..400 {
+            let at = dt * k as f64;
+            let m = Measurement {
+                f0: 238.0 + rate * at,
+                q: 10.0,
+                cov,
+                t: at,
+            };
+            assert_ne!(t.update(&m, &PROCESS), Update::Refused);
+            lag = m.f0 - t.estimate().unwrap().f0;
+        }
+        let stated = t.drift_lag(rate);
+        assert!(
+            lag > 0.0 && (stated / lag - 1.0).abs() < 1e-3,
+            "{lag} vs {stated}"
+        );
     }
 
     /// A step far outside the prediction restarts the filter from the measurement; one inside

@@ -647,9 +647,11 @@ impl Tracker {
         }
         self.f_est = p.f0;
         self.q_est = p.q;
+        // The σ states the lag behind a drift at the configured rate besides the covariance.
+        let lag = self.track.drift_lag(self.cfg.drift as f64);
         Ok(Estimate {
             resonance: Hz(p.f0 as f32),
-            sigma: Hz(libm::sqrt(p.cov.a.max(0.0)) as f32),
+            sigma: Hz(libm::sqrt(p.cov.a.max(0.0) + lag * lag) as f32),
             q: Some(p.q as f32),
             q_sigma: Some(libm::sqrt(p.cov.c.max(0.0)) as f32),
             ..e
