@@ -123,8 +123,10 @@ pub fn stream(
     if a.segment_s != d.segment.0 as f64
         || a.dither != d.dither as f64
         || a.q_prior != d.q_prior as f64
+        || a.plan_segments != d.plan_segments
+        || a.drift_hz_s != d.drift as f64
     {
-        bail!("with --qemu the image streams with its default tracker (no --segment-s, --dither, --q-prior)");
+        bail!("with --qemu the image streams with its default tracker (no --segment-s, --plan-segments, --drift-hz-s, --dither, --q-prior)");
     }
     if a.knocks_hz.is_some() {
         bail!("with --qemu there are no knocks (the image's script has no knock line)");

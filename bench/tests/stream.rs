@@ -262,13 +262,13 @@ fn qemu_streams_the_same_json_and_follows_lift_off_and_new_contact() {
     ]));
 }
 
-/// Issue 14 point 6, from the library (`pareto::evaluate_stream`, the study's function): at the
-/// default segment length the tracker gives ≥ 20 ok readings per second after the first 0.5 s
-/// within 1 % RMS of phantom C, and its error from noise sits above the steady-state Cramér–Rao
-/// bound for one reading's probe time — finite, never below it (a bound cannot be beaten), and
-/// no more than 8× (measured 4.3× on these seeds, 23.0 ok/s, 44.1 ms a reading with the DAC's
-/// two-batch pipeline; the single-shot hold is within 2×). Five 3 s streams at 20/s after 0.5 s
-/// make at least 250 readings.
+/// Issue 28, from the library (`pareto::evaluate_stream`, the study's function), five 3 s
+/// streams a scene (at least 250 readings after the first 0.5 s): at the default setting the
+/// tracker gives ≥ 25 ok readings per second whose error from noise is within 1.5× of the
+/// steady-state Cramér–Rao bound for one reading's probe time (`pareto::steady_crb_pct`), on
+/// phantom C (noise seeds 0–4) and on 1000 kPa and phantom A (other seeds); RMS within 1 % of
+/// the truth. The bound is one segment's; a reading that pools segments may go below it, so
+/// only its ceiling is asserted (docs/methods.md, "Continuous reading").
 #[test]
 fn the_trackers_speed_accuracy_point_on_phantom_c() {
     use hal_sim::{phantoms, NoiseScene};
@@ -276,26 +276,81 @@ fn the_trackers_speed_accuracy_point_on_phantom_c() {
     use probe_bench::scene::Target;
     use pzt_probe::instrument::continuous::TrackerConfig;
     let unit = stream_unit(NoiseScene::Bench).unwrap();
-    let c = Target::Phantom(phantoms::by_name("C").unwrap());
-    let seg = TrackerConfig::DEFAULT.segment.0 as f64;
-    let s = evaluate_stream(c, NoiseScene::Bench, seg, &unit, 5, 0).unwrap();
-    let x = &s.cell;
-    eprintln!(
-        "{:.0} ms: {:.1} ok/s ({} of {} ok), {:.1} ms a reading, RMS {:.3} % vs truth, {:.3} % from noise, CRB {:.4} %, ratio {:.2}",
-        seg * 1e3,
-        s.ok_per_s,
-        x.ok,
-        x.n,
-        x.time_ms,
-        x.rms_pct(),
-        x.noise_rms_pct(),
-        s.crb_pct,
-        s.ratio()
-    );
-    assert!(s.ok_per_s >= 20.0, "{} ok/s", s.ok_per_s);
-    assert!(x.ok >= 250, "{} ok readings", x.ok);
-    assert!(x.rms_pct() <= 1.0, "RMS {} %", x.rms_pct());
-    assert!(s.crb_pct.is_finite() && s.crb_pct > 0.0, "{}", s.crb_pct);
-    assert!(s.ratio().is_finite() && s.ratio() >= 1.0, "{}", s.ratio());
-    assert!(s.ratio() <= 8.0, "{}", s.ratio());
+    let d = TrackerConfig::DEFAULT;
+    for (target, seed0) in [
+        (Target::Phantom(phantoms::by_name("C").unwrap()), 0),
+        (Target::Modulus(1000.0), 40),
+        (Target::Phantom(phantoms::by_name("A").unwrap()), 80),
+    ] {
+        let seg = d.segment.0 as f64;
+        let s = evaluate_stream(
+            target,
+            NoiseScene::Bench,
+            seg,
+            d.plan_segments,
+            &unit,
+            5,
+            seed0,
+        )
+        .unwrap();
+        let x = &s.cell;
+        let name = target.describe();
+        eprintln!(
+            "{name}: {} ms: {:.1} ok/s ({} of {} ok), {:.1} ms a reading, RMS {:.3} % vs truth, {:.3} % from noise, CRB {:.4} %, ratio {:.2}",
+            s.setting(),
+            s.ok_per_s,
+            x.ok,
+            x.n,
+            x.time_ms,
+            x.rms_pct(),
+            x.noise_rms_pct(),
+            s.crb_pct,
+            s.ratio()
+        );
+        assert!(s.ok_per_s >= 25.0, "{name}: {} ok/s", s.ok_per_s);
+        assert!(x.ok >= 250, "{name}: {} ok readings", x.ok);
+        assert!(x.rms_pct() <= 1.0, "{name}: RMS {} %", x.rms_pct());
+        assert!(s.crb_pct.is_finite() && s.crb_pct > 0.0, "{}", s.crb_pct);
+        assert!(
+            s.ratio().is_finite() && s.ratio() <= 1.5,
+            "{name}: {}",
+            s.ratio()
+        );
+    }
+}
+
+/// Issue 28's fast setting (`pareto::FAST_STREAM`: segments of 12 ms, four a plan): at least
+/// 50 ok readings per second within 0.5 % RMS of the truth, on phantom C (noise seeds 0–4),
+/// phantoms A and E and 2000 kPa (other seeds).
+#[test]
+fn the_fast_setting_reads_fifty_a_second_within_half_a_percent() {
+    use hal_sim::{phantoms, NoiseScene};
+    use probe_bench::pareto::{evaluate_stream, stream_unit, FAST_STREAM};
+    use probe_bench::scene::Target;
+    let unit = stream_unit(NoiseScene::Bench).unwrap();
+    let (seg, per) = FAST_STREAM;
+    for (target, seed0) in [
+        (Target::Phantom(phantoms::by_name("C").unwrap()), 0),
+        (Target::Phantom(phantoms::by_name("A").unwrap()), 20),
+        (Target::Phantom(phantoms::by_name("E").unwrap()), 60),
+        (Target::Modulus(2000.0), 100),
+    ] {
+        let s = evaluate_stream(target, NoiseScene::Bench, seg, per, &unit, 5, seed0).unwrap();
+        let x = &s.cell;
+        let name = target.describe();
+        eprintln!(
+            "{name}: {} ms: {:.1} ok/s ({} of {} ok), {:.1} ms a reading, RMS {:.3} % vs truth, {:.3} % from noise, CRB {:.4} %, ratio {:.2}",
+            s.setting(),
+            s.ok_per_s,
+            x.ok,
+            x.n,
+            x.time_ms,
+            x.rms_pct(),
+            x.noise_rms_pct(),
+            s.crb_pct,
+            s.ratio()
+        );
+        assert!(s.ok_per_s >= 50.0, "{name}: {} ok/s", s.ok_per_s);
+        assert!(x.rms_pct() <= 0.5, "{name}: RMS {} %", x.rms_pct());
+    }
 }

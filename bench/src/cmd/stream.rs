@@ -56,6 +56,15 @@ pub struct StreamArgs {
     /// Length of one tracking segment (one reading each), s.
     #[arg(long, default_value_t = TrackerConfig::DEFAULT.segment.0 as f64)]
     pub segment_s: f64,
+    /// Segments a plan holds (1–8): the drive moves only between plans; a plan's later
+    /// segments are fitted with its windows so far (`--segment-s 0.012 --plan-segments 4`:
+    /// more than 50 readings a second).
+    #[arg(long, default_value_t = TrackerConfig::DEFAULT.plan_segments)]
+    pub plan_segments: u8,
+    /// How fast the resonance may drift between segments, Hz/s: the tracker's process model
+    /// (what it pools over, and the lag its σ states).
+    #[arg(long, default_value_t = TrackerConfig::DEFAULT.drift as f64)]
+    pub drift_hz_s: f64,
     /// Offset of the drive from the resonance, alternately above and below, in
     /// half-linewidths f0/(2Q) (0: on the resonance).
     #[arg(long, default_value_t = TrackerConfig::DEFAULT.dither as f64)]
@@ -116,6 +125,8 @@ pub fn run(a: StreamArgs) -> Result<()> {
     stream::check_seconds(a.seconds)?;
     let config = TrackerConfig {
         segment: Seconds(a.segment_s as f32),
+        plan_segments: a.plan_segments,
+        drift: a.drift_hz_s as f32,
         dither: a.dither as f32,
         q_prior: a.q_prior as f32,
         ..TrackerConfig::DEFAULT
@@ -125,9 +136,11 @@ pub fn run(a: StreamArgs) -> Result<()> {
         print_scene_header("stream", &target, a.scene.preload_n, noise, &scene);
         if !a.qemu {
             println!(
-            "  tracker: segments of {:.0} ms, drive ±{} half-linewidths off the resonance; unit profile of the simulated unit ({} calibration)",
+            "  tracker: segments of {:.0} ms, {} a plan, drive ±{} half-linewidths off the resonance, drift {} Hz/s; unit profile of the simulated unit ({} calibration)",
             a.segment_s * 1e3,
+            a.plan_segments,
             a.dither,
+            a.drift_hz_s,
             METHOD.name()
         );
         }
