@@ -262,6 +262,23 @@ fn qemu_streams_the_same_json_and_follows_lift_off_and_new_contact() {
     ]));
 }
 
+/// One speed–accuracy point's figures, on stderr.
+fn print_point(name: &str, s: &probe_bench::pareto::StreamCell) {
+    let x = &s.cell;
+    eprintln!(
+        "{name}: {} ms: {:.1} ok/s ({} of {} ok), {:.1} ms a reading, RMS {:.3} % vs truth, {:.3} % from noise, CRB {:.4} %, ratio {:.2}",
+        s.setting(),
+        s.ok_per_s,
+        x.ok,
+        x.n,
+        x.time_ms,
+        x.rms_pct(),
+        x.noise_rms_pct(),
+        s.crb_pct,
+        s.ratio()
+    );
+}
+
 /// Issue 28, from the library (`pareto::evaluate_stream`, the study's function), five 3 s
 /// streams a scene (at least 250 readings after the first 0.5 s): at the default setting the
 /// tracker gives ≥ 25 ok readings per second whose error from noise is within 1.5× of the
@@ -295,18 +312,7 @@ fn the_trackers_speed_accuracy_point_on_phantom_c() {
         .unwrap();
         let x = &s.cell;
         let name = target.describe();
-        eprintln!(
-            "{name}: {} ms: {:.1} ok/s ({} of {} ok), {:.1} ms a reading, RMS {:.3} % vs truth, {:.3} % from noise, CRB {:.4} %, ratio {:.2}",
-            s.setting(),
-            s.ok_per_s,
-            x.ok,
-            x.n,
-            x.time_ms,
-            x.rms_pct(),
-            x.noise_rms_pct(),
-            s.crb_pct,
-            s.ratio()
-        );
+        print_point(&name, &s);
         assert!(s.ok_per_s >= 25.0, "{name}: {} ok/s", s.ok_per_s);
         assert!(x.ok >= 250, "{name}: {} ok readings", x.ok);
         assert!(x.rms_pct() <= 1.0, "{name}: RMS {} %", x.rms_pct());
@@ -338,18 +344,7 @@ fn the_fast_setting_reads_fifty_a_second_within_half_a_percent() {
         let s = evaluate_stream(target, NoiseScene::Bench, seg, per, &unit, 5, seed0).unwrap();
         let x = &s.cell;
         let name = target.describe();
-        eprintln!(
-            "{name}: {} ms: {:.1} ok/s ({} of {} ok), {:.1} ms a reading, RMS {:.3} % vs truth, {:.3} % from noise, CRB {:.4} %, ratio {:.2}",
-            s.setting(),
-            s.ok_per_s,
-            x.ok,
-            x.n,
-            x.time_ms,
-            x.rms_pct(),
-            x.noise_rms_pct(),
-            s.crb_pct,
-            s.ratio()
-        );
+        print_point(&name, &s);
         assert!(s.ok_per_s >= 50.0, "{name}: {} ok/s", s.ok_per_s);
         assert!(x.rms_pct() <= 0.5, "{name}: RMS {} %", x.rms_pct());
     }
