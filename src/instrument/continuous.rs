@@ -5,6 +5,7 @@
 //! acquire (hold: ring-down seed + short hold) ──ok──▶ track: segment k at f_h,k
 //!    ▲                                                   │ windows → Y − (G0 + j2πf C0)
 //!    │ lost (misses in a row, stall)                      │ resonator fit (f0, Q, g, z)
+//!    │                                                    │ filter (f0, Q) ← fit, covariance
 //!    └───────────────────────────────────────────────────┤ pipeline::conclude → reading seq k
 //!                                                        └ f_h,k+1 = f0 ± dither · f0/(2Q)
 //! ```
@@ -25,6 +26,16 @@
 //! transient when it is retuned by a small fraction of a linewidth, so `Q` — which the pipeline
 //! needs for its contact checks (`no_contact` on lift-off, the Q model) — would rest on the prior
 //! alone; the alternating offset makes every segment's transient measure it.
+//!
+//! **What the tracker carries** ([`crate::estimate::track`]): each segment's fit, with its
+//! covariance of `f0` and `Q`, is one measurement of a Kalman filter over `(f0, Q)` whose
+//! process model lets them drift at [`TrackerConfig::drift`] and [`TrackerConfig::q_drift`];
+//! the reading is the filter's estimate, and its σ adds the lag behind that drift. Off the
+//! resonance a segment's `f0` error follows its `Q` error (the offset drive measures the
+//! detuning through `Q`); the pooled `Q` takes that part out. An innovation past the gate (a
+//! step, a new contact) restarts the filter from the segment. A plan may hold several segments
+//! ([`TrackerConfig::plan_segments`]): the later ones are fitted with the plan's windows so far
+//! and give the filter what they add.
 //!
 //! **Lock**: a segment whose fit fails, leaves the band, or moves the resonance by more than one
 //! linewidth `f0/Q` from the estimate it was driven from is not locked (its reading fails
@@ -102,9 +113,11 @@ pub struct TrackerConfig {
 impl TrackerConfig {
     /// Band 170–290 Hz seeded at 230 Hz, acquisition 20 + 20 ms seed and 100 ms hold, segments
     /// of 30 ms (seven one-cycle windows at 240 Hz; with the two batches every plan waits in the
-    /// DAC's pipeline and the wait for a cycle boundary, a reading every 44 ms: 23 readings/s,
-    /// docs/methods.md) with the drive a quarter half-linewidth off the resonance alternately,
-    /// Q prior ±50 %, re-acquire after three unlocked segments in a row, 5 V.
+    /// DAC's pipeline and the wait for a cycle boundary, a reading every 38 ms, docs/methods.md),
+    /// one a plan, with the drive a quarter half-linewidth off the resonance alternately, Q prior
+    /// ±50 %, the resonance drifting at the probe's specified thermal drift
+    /// ([`FREE_RESONANCE_DRIFT_HZ_S`]) and `Q` at 20 %/s (ours: `Q` follows the contact; faster
+    /// changes are the gate's), re-acquire after three unlocked segments in a row, 5 V.
     pub const DEFAULT: Self = Self {
         band_start: Hz(170.0),
         band_stop: Hz(290.0),
