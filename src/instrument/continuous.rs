@@ -647,7 +647,9 @@ impl Tracker {
         };
         let update = m.map_or(Update::Refused, |m| self.track.update(&m, &self.process()));
         let pooled = match update {
-            Update::Refused => None,
+            // Nothing the filter can take (a later segment that adds no information the
+            // linearised fits tell apart): what it knows, predicted to the segment's end.
+            Update::Refused => self.track.predicted(t_end, &self.process()),
             Update::Pooled | Update::Restarted => self.track.estimate(),
         };
         let Some(p) = pooled else {
