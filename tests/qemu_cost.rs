@@ -246,6 +246,7 @@ fn every_method_fits_its_budget_on_target() {
 
     print_tables(&cases);
     check_fits(&parsed);
+    check_streams(&parsed);
     assert_eq!(last(&parsed, "exit")["ok"], "true");
     assert!(exited_ok, "QEMU exit status");
 }
@@ -364,6 +365,65 @@ fn check_fits(parsed: &[(String, HashMap<String, String>)]) {
             f["case"],
             num(f, "instructions") / 1e9,
             f["contact"]
+        );
+    }
+}
+
+/// The continuous tracker's known excess over the budget: (setting, ceiling of the measurement
+/// side's work, % of the core, why). A reading every segment does a resonator fit and the
+/// pipeline's contact-law inversion (0.16 M instructions, as in every `finish`) — a single
+/// reading's work every 38 ms (default) or 13 ms (fast, whose later segments also fit the plan's
+/// windows so far): measured 7.1 % and 18.7 % on 2026-11-27. A ceiling a tenth above, so that
+/// a change that costs more fails here.
+const STREAM_OVER_BUDGET: &[(&str, f64, &str)] = &[
+    (
+        "default",
+        7.8,
+        "a fit and an inversion every 38 ms: 0.45 M instructions a reading",
+    ),
+    (
+        "fast",
+        20.6,
+        "a fit of up to 16 windows and an inversion every 13 ms: 0.39 M a reading",
+    ),
+];
+
+/// The continuous tracker on the M4 (`stream` lines): the default setting and the fast one
+/// (12 ms × 4) each streamed 1 s on 500 kPa, every tracking reading ok, and the measurement
+/// side's work from the first tracking reading to the last (all but the sample engine's and the
+/// plant's: the tracker, the pipeline and the plan loop) against the budget's 2 % of a 170 MHz
+/// core over that probe time — both over it, held to the ceilings of [`STREAM_OVER_BUDGET`].
+fn check_streams(parsed: &[(String, HashMap<String, String>)]) {
+    let streams = all(parsed, "stream");
+    let names: Vec<&str> = streams.iter().map(|f| f["setting"].as_str()).collect();
+    assert_eq!(names, ["default", "fast"]);
+    println!(
+        "\n| tracker setting | readings | ok | probe time (s) | instructions | share of 170 MHz |"
+    );
+    println!("|---|---|---|---|---|---|");
+    for f in streams {
+        let (work, t) = (num(f, "work"), num(f, "probe_time_s"));
+        assert!(num(f, "readings") >= 10.0, "{f:?}");
+        assert_eq!(num(f, "ok"), num(f, "readings"), "{f:?}");
+        assert!(
+            agrees(num(f, "work_pct"), work / (t * CORE_HZ) * 100.0),
+            "{f:?}"
+        );
+        let pct = num(f, "work_pct");
+        match STREAM_OVER_BUDGET.iter().find(|k| k.0 == f["setting"]) {
+            None => assert!(pct <= BUDGET_PCT, "over budget: {f:?}"),
+            Some((_, ceiling, why)) => {
+                assert!(pct <= *ceiling, "above its ceiling {ceiling} %: {f:?}");
+                println!("known over budget ({pct:.2} % of the core): {why}");
+            }
+        }
+        println!(
+            "| {} | {} | {} | {t:.3} | {:.1} M | {:.2} % |",
+            f["setting"],
+            f["readings"],
+            f["ok"],
+            work / 1e6,
+            num(f, "work_pct")
         );
     }
 }

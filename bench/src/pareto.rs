@@ -308,9 +308,22 @@ impl Cell {
     }
 }
 
-/// Segment lengths of the continuous tracker's curve, s: the shortest the tracker takes (25
-/// ms), the default (30 ms) and longer ones.
-pub const STREAM_SEGMENTS_S: [f64; 7] = [0.025, 0.03, 0.035, 0.045, 0.06, 0.09, 0.15];
+/// Settings of the continuous tracker's curve: (segment length s, segments a plan): the fast
+/// setting (12 ms segments, four a plan: more than 50 readings a second), single-segment plans
+/// from 25 ms, the default (30 ms) and longer ones.
+pub const STREAM_SETTINGS: [(f64, u8); 8] = [
+    (0.012, 4),
+    (0.025, 1),
+    (0.03, 1),
+    (0.035, 1),
+    (0.045, 1),
+    (0.06, 1),
+    (0.09, 1),
+    (0.15, 1),
+];
+
+/// The fast setting of [`STREAM_SETTINGS`]: segments of 12 ms, four a plan.
+pub const FAST_STREAM: (f64, u8) = STREAM_SETTINGS[0];
 
 /// Probe time of each of the tracker's streams, s.
 pub const STREAM_SECONDS: f64 = 3.0;
@@ -323,6 +336,8 @@ pub use crate::stream::SETTLE_S as STREAM_SETTLE_S;
 pub struct StreamCell {
     /// Length of a tracking segment (one reading each), s.
     pub segment_s: f64,
+    /// Segments a plan holds (`TrackerConfig::plan_segments`).
+    pub plan_segments: u8,
     /// The readings after [`STREAM_SETTLE_S`] as a single-reading cell: `n` readings, `ok` of
     /// them ok, `time_ms` the mean probe time of one (a segment from the previous reading's end
     /// to its own), errors against the truth and against the same stream in the quiet scene.
@@ -337,6 +352,17 @@ pub struct StreamCell {
 }
 
 impl StreamCell {
+    /// The setting as the tables write it: the segment in ms, and `× n` for plans of `n`
+    /// segments.
+    pub fn setting(&self) -> String {
+        let ms = self.segment_s * 1e3;
+        if self.plan_segments > 1 {
+            format!("{ms:.0} × {}", self.plan_segments)
+        } else {
+            format!("{ms:.0}")
+        }
+    }
+
     /// Probe time per ok reading, ms (1000 / ok readings per second).
     pub fn ms_per_ok(&self) -> f64 {
         1e3 / self.ok_per_s.max(1e-9)
@@ -357,6 +383,7 @@ pub fn stream_unit(noise: NoiseScene) -> Option<UnitProfile> {
 }
 
 /// Stream `target` under `noise` with the default tracker but segments of `segment_s` seconds,
+/// `plan_segments` a plan,
 /// `seeds` streams of [`STREAM_SECONDS`] (noise seeds from `seed0`) with the unit `unit`, and
 /// once in the quiet scene: each reading after [`STREAM_SETTLE_S`] counted against the truth
 /// and against the quiet stream's reading of the same `seq` (ending within a millisecond of
@@ -366,6 +393,7 @@ pub fn evaluate_stream(
     target: crate::scene::Target,
     noise: NoiseScene,
     segment_s: f64,
+    plan_segments: u8,
     unit: &UnitProfile,
     seeds: usize,
     seed0: u64,
@@ -375,6 +403,7 @@ pub fn evaluate_stream(
     let e = target.modulus_kpa()?;
     let config = TrackerConfig {
         segment: Seconds(segment_s as f32),
+        plan_segments,
         ..TrackerConfig::DEFAULT
     };
     let after =
@@ -438,6 +467,7 @@ pub fn evaluate_stream(
     );
     Some(StreamCell {
         segment_s,
+        plan_segments,
         cell,
         ok_per_s: ok / span.max(1e-9),
         crb_pct,

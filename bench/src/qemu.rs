@@ -113,7 +113,7 @@ fn run_lines(
 /// its default tracker, no knocks, a lift-off as a step, the command's range of seconds.
 pub(crate) fn check_stream_args(a: &crate::cmd::stream::StreamArgs, board: &str) -> Result<()> {
     if !a.tracker.is_default() {
-        bail!("with {board} the image streams with its default tracker (no --segment-s, --dither, --q-prior)");
+        bail!("with {board} the image streams with its default tracker (no --segment-s, --plan-segments, --drift-hz-s, --dither, --q-prior)");
     }
     if a.knocks_hz.is_some() {
         bail!("with {board} there are no knocks (the image's board has no knock)");

@@ -331,27 +331,12 @@ fn stm32_streams_phantom_c_as_the_host_does() {
     );
 }
 
-/// Issue 14 point 6, from the library (`pareto::evaluate_stream`, the study's function): at the
-/// default segment length the tracker gives ≥ 20 ok readings per second after the first 0.5 s
-/// within 1 % RMS of phantom C, and its error from noise sits above the steady-state Cramér–Rao
-/// bound for one reading's probe time — finite, never below it (a bound cannot be beaten), and
-/// no more than 8× (measured 4.3× on these seeds, 23.0 ok/s, 44.1 ms a reading with the DAC's
-/// two-batch pipeline; the single-shot hold is within 2×). Five 3 s streams at 20/s after 0.5 s
-/// make at least 250 readings.
-#[test]
-fn the_trackers_speed_accuracy_point_on_phantom_c() {
-    use hal_sim::{phantoms, NoiseScene};
-    use probe_bench::pareto::{evaluate_stream, stream_unit};
-    use probe_bench::scene::Target;
-    use pzt_probe::instrument::continuous::TrackerConfig;
-    let unit = stream_unit(NoiseScene::Bench).unwrap();
-    let c = Target::Phantom(phantoms::by_name("C").unwrap());
-    let seg = TrackerConfig::DEFAULT.segment.0 as f64;
-    let s = evaluate_stream(c, NoiseScene::Bench, seg, &unit, 5, 0).unwrap();
+/// One speed–accuracy point's figures, on stderr.
+fn print_point(name: &str, s: &probe_bench::pareto::StreamCell) {
     let x = &s.cell;
     eprintln!(
-        "{:.0} ms: {:.1} ok/s ({} of {} ok), {:.1} ms a reading, RMS {:.3} % vs truth, {:.3} % from noise, CRB {:.4} %, ratio {:.2}",
-        seg * 1e3,
+        "{name}: {} ms: {:.1} ok/s ({} of {} ok), {:.1} ms a reading, RMS {:.3} % vs truth, {:.3} % from noise, CRB {:.4} %, ratio {:.2}",
+        s.setting(),
         s.ok_per_s,
         x.ok,
         x.n,
@@ -361,10 +346,213 @@ fn the_trackers_speed_accuracy_point_on_phantom_c() {
         s.crb_pct,
         s.ratio()
     );
-    assert!(s.ok_per_s >= 20.0, "{} ok/s", s.ok_per_s);
-    assert!(x.ok >= 250, "{} ok readings", x.ok);
-    assert!(x.rms_pct() <= 1.0, "RMS {} %", x.rms_pct());
-    assert!(s.crb_pct.is_finite() && s.crb_pct > 0.0, "{}", s.crb_pct);
-    assert!(s.ratio().is_finite() && s.ratio() >= 1.0, "{}", s.ratio());
-    assert!(s.ratio() <= 8.0, "{}", s.ratio());
+}
+
+/// Issue 28, from the library (`pareto::evaluate_stream`, the study's function), five 3 s
+/// streams a scene (at least 250 readings after the first 0.5 s): at the default setting the
+/// tracker gives ≥ 25 ok readings per second whose error from noise is within 1.5× of the
+/// steady-state Cramér–Rao bound for one reading's probe time (`pareto::steady_crb_pct`), on
+/// phantom C (noise seeds 0–4) and on 1000 kPa and phantom A (other seeds); RMS within 1 % of
+/// the truth. The bound is one segment's; a reading that pools segments may go below it, so
+/// only its ceiling is asserted (docs/methods.md, "Continuous reading").
+#[test]
+fn the_trackers_speed_accuracy_point_on_phantom_c() {
+    use hal_sim::{phantoms, NoiseScene};
+    use probe_bench::pareto::{evaluate_stream, stream_unit};
+    use probe_bench::scene::Target;
+    use pzt_probe::instrument::continuous::TrackerConfig;
+    let unit = stream_unit(NoiseScene::Bench).unwrap();
+    let d = TrackerConfig::DEFAULT;
+    for (target, seed0) in [
+        (Target::Phantom(phantoms::by_name("C").unwrap()), 0),
+        (Target::Modulus(1000.0), 40),
+        (Target::Phantom(phantoms::by_name("A").unwrap()), 80),
+    ] {
+        let seg = d.segment.0 as f64;
+        let s = evaluate_stream(
+            target,
+            NoiseScene::Bench,
+            seg,
+            d.plan_segments,
+            &unit,
+            5,
+            seed0,
+        )
+        .unwrap();
+        let x = &s.cell;
+        let name = target.describe();
+        print_point(&name, &s);
+        assert!(s.ok_per_s >= 25.0, "{name}: {} ok/s", s.ok_per_s);
+        assert!(x.ok >= 250, "{name}: {} ok readings", x.ok);
+        assert!(x.rms_pct() <= 1.0, "{name}: RMS {} %", x.rms_pct());
+        assert!(s.crb_pct.is_finite() && s.crb_pct > 0.0, "{}", s.crb_pct);
+        assert!(
+            s.ratio().is_finite() && s.ratio() <= 1.5,
+            "{name}: {}",
+            s.ratio()
+        );
+    }
+}
+
+/// Issue 28's fast setting (`pareto::FAST_STREAM`: segments of 12 ms, four a plan): at least
+/// 50 ok readings per second within 0.5 % RMS of the truth, on phantom C (noise seeds 0–4),
+/// phantoms A and E and 2000 kPa (other seeds).
+#[test]
+fn the_fast_setting_reads_fifty_a_second_within_half_a_percent() {
+    use hal_sim::{phantoms, NoiseScene};
+    use probe_bench::pareto::{evaluate_stream, stream_unit, FAST_STREAM};
+    use probe_bench::scene::Target;
+    let unit = stream_unit(NoiseScene::Bench).unwrap();
+    let (seg, per) = FAST_STREAM;
+    for (target, seed0) in [
+        (Target::Phantom(phantoms::by_name("C").unwrap()), 0),
+        (Target::Phantom(phantoms::by_name("A").unwrap()), 20),
+        (Target::Phantom(phantoms::by_name("E").unwrap()), 60),
+        (Target::Modulus(2000.0), 100),
+    ] {
+        let s = evaluate_stream(target, NoiseScene::Bench, seg, per, &unit, 5, seed0).unwrap();
+        let x = &s.cell;
+        let name = target.describe();
+        print_point(&name, &s);
+        assert!(s.ok_per_s >= 50.0, "{name}: {} ok/s", s.ok_per_s);
+        assert!(x.rms_pct() <= 0.5, "{name}: RMS {} %", x.rms_pct());
+    }
+}
+
+/// Issue 28: the reading's σ covers the truth as a single reading's does under the stated drift
+/// (docs/accuracy.md: the probe's free resonance drifting at a rate drawn from N(0, 0.3 Hz/s),
+/// `profile::FREE_RESONANCE_DRIFT_HZ_S`). 20 streams of 3 s on phantom C at the default
+/// setting, each with its own rate (`probe_rng`, seed 28) and noise seed; every ok reading after
+/// 0.5 s against the scene's closed-form resonance at the reading's time, less the tracker's
+/// constant offset from it (the mean error of five streams without drift on other seeds, which
+/// the calibration absorbs): within 1σ 60–80 % and within 2σ 90–99 % (measured 75.3 % and
+/// 97.5 % of 1340; successive readings are correlated, so the tolerance is a few times a
+/// binomial σ). Without drift the σ over-covers (more than 90 % within 1σ), as a single
+/// reading's does without its drift.
+#[test]
+fn the_trackers_sigma_covers_the_truth_under_the_stated_drift() {
+    use hal_sim::{phantoms, Drift, Scene};
+    use pzt_probe::instrument::continuous::TrackerConfig;
+    let unit = default_for(METHOD).unwrap();
+    let base = Scene::on_phantom(&phantoms::by_name("C").unwrap()).with_noise(NoiseScene::Bench);
+    let errors = |scene: &Scene, seed: u64| {
+        let mut v = Vec::new();
+        pzt_probe::board::sim::stream(scene, seed, &TrackerConfig::DEFAULT, &unit, 3.0, |r| {
+            v.push(*r)
+        })
+        .unwrap();
+        v.iter()
+            .filter(|r| r.t_s.0 > 0.5 && r.reading.status.is_ok())
+            .filter_map(|r| {
+                let f = r.reading.resonance?.0 as f64;
+                let s = r.reading.resonance_sigma?.0 as f64;
+                Some((f - scene.at(r.t_s.0 as f64).resonance_hz(), s))
+            })
+            .collect::<Vec<_>>()
+    };
+    let still: Vec<(f64, f64)> = (100..105).flat_map(|seed| errors(&base, seed)).collect();
+    let offset = still.iter().map(|e| e.0).sum::<f64>() / still.len() as f64;
+    let within = |v: &[(f64, f64)], k: f64| {
+        v.iter()
+            .filter(|(e, s)| (e - offset).abs() <= k * s)
+            .count() as f64
+            / v.len() as f64
+    };
+    let mut rates = probe_rng::Rng::new(28);
+    let drifting: Vec<(f64, f64)> = (0..20)
+        .flat_map(|seed| {
+            let rate_hz_s = 0.3 * rates.normal();
+            errors(&base.with_drift(Drift { rate_hz_s }), seed)
+        })
+        .collect();
+    let (one, two) = (within(&drifting, 1.0), within(&drifting, 2.0));
+    eprintln!(
+        "offset {offset:+.4} Hz; under drift {} readings: {:.1} % within 1σ, {:.1} % within 2σ; without: {:.1} %",
+        drifting.len(),
+        100.0 * one,
+        100.0 * two,
+        100.0 * within(&still, 1.0)
+    );
+    assert!(drifting.len() >= 1000, "{}", drifting.len());
+    assert!((0.60..=0.80).contains(&one), "{one}");
+    assert!((0.90..=0.99).contains(&two), "{two}");
+    assert!(within(&still, 1.0) > 0.9, "{}", within(&still, 1.0));
+}
+
+/// Issue 28's diagnosis (docs/methods.md, "Why the tracker carries `Q`, and then `f0`"): with
+/// nothing carried between segments (`drift` and `q_drift` at 100, the filter forgets at once),
+/// a segment's `f0` error follows its `Q` error times the offset drive's sign (correlation above
+/// 0.7: measured 0.85), and successive readings' errors are uncorrelated (|ρ| < 0.2: −0.05); the
+/// default tracker, which carries both, reads `f0` with less than half that error (measured
+/// 0.009 against 0.037 Hz). Phantom C, noise seeds 0–4, the readings after 0.5 s, errors against
+/// the scene's closed-form resonance and `Q` (each less its mean).
+#[test]
+fn a_segment_alone_ties_its_f0_to_its_q_through_the_offset_drive() {
+    use hal_sim::{phantoms, Scene};
+    use pzt_probe::instrument::continuous::TrackerConfig;
+    let unit = default_for(METHOD).unwrap();
+    let scene = Scene::on_phantom(&phantoms::by_name("C").unwrap()).with_noise(NoiseScene::Bench);
+    let (f_true, q_true) = (scene.resonance_hz(), scene.q());
+    // (f0 error Hz, Q error relative × the offset's sign, previous reading's f0 error).
+    let errors = |cfg: &TrackerConfig| {
+        let mut out = Vec::new();
+        for seed in 0..5 {
+            let mut v = Vec::new();
+            pzt_probe::board::sim::stream(&scene, seed, cfg, &unit, 3.0, |r| v.push(*r)).unwrap();
+            let mut prev = None;
+            for r in v.iter().filter(|r| r.t_s.0 > 0.5) {
+                let (Some(f), Some(q)) = (r.reading.resonance, r.reading.q) else {
+                    prev = None;
+                    continue;
+                };
+                // The first tracking segment (seq 1) drives above the estimate, then alternately.
+                let side = if r.seq % 2 == 1 { 1.0 } else { -1.0 };
+                let df = f.0 as f64 - f_true;
+                out.push((df, side * (q as f64 / q_true - 1.0), prev));
+                prev = Some(df);
+            }
+        }
+        out
+    };
+    fn corr(a: &[f64], b: &[f64]) -> f64 {
+        let n = a.len() as f64;
+        let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
+        let c: f64 = a.iter().zip(b).map(|(x, y)| (x - ma) * (y - mb)).sum();
+        let va: f64 = a.iter().map(|x| (x - ma).powi(2)).sum();
+        let vb: f64 = b.iter().map(|y| (y - mb).powi(2)).sum();
+        c / (va * vb).sqrt()
+    }
+    fn sd(a: &[f64]) -> f64 {
+        let n = a.len() as f64;
+        let m = a.iter().sum::<f64>() / n;
+        (a.iter().map(|x| (x - m).powi(2)).sum::<f64>() / n).sqrt()
+    }
+    let alone = errors(&TrackerConfig {
+        drift: 100.0,
+        q_drift: 100.0,
+        ..TrackerConfig::DEFAULT
+    });
+    let df: Vec<f64> = alone.iter().map(|e| e.0).collect();
+    let dq: Vec<f64> = alone.iter().map(|e| e.1).collect();
+    let (now, before): (Vec<f64>, Vec<f64>) =
+        alone.iter().filter_map(|e| Some((e.0, e.2?))).unzip();
+    let carried: Vec<f64> = errors(&TrackerConfig::DEFAULT)
+        .iter()
+        .map(|e| e.0)
+        .collect();
+    let (rho, lag) = (corr(&df, &dq), corr(&now, &before));
+    eprintln!(
+        "alone: f0 sd {:.4} Hz, ρ(f0, ±Q) {rho:.2}, ρ(successive) {lag:.2}; carried: f0 sd {:.4} Hz",
+        sd(&df),
+        sd(&carried)
+    );
+    assert!(df.len() >= 250, "{}", df.len());
+    assert!(rho > 0.7, "{rho}");
+    assert!(lag.abs() < 0.2, "{lag}");
+    assert!(
+        sd(&carried) < 0.5 * sd(&df),
+        "{} vs {}",
+        sd(&carried),
+        sd(&df)
+    );
 }

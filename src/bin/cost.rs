@@ -148,6 +148,9 @@ mod harness {
         pub call_max_in: Call,
         /// Instructions per kind of call, indexed by `Call as usize` (declaration order).
         pub split: [u64; 5],
+        /// The simulated plant's instructions (the stream's exchange and the load cell): not the
+        /// firmware's work, counted only to be left out of a stream's.
+        pub plant: u64,
     }
 
     impl Cost {
@@ -161,6 +164,7 @@ mod harness {
                 call_max: 0,
                 call_max_in: Call::New,
                 split: [0; 5],
+                plant: 0,
             }
         }
 
@@ -223,10 +227,15 @@ mod harness {
         /// read (neither counted), then the engine's counted work — plan intake, demodulation,
         /// DAC refill.
         fn batch(&mut self) -> Result<Option<Points>, StreamError> {
+            compiler_fence(Ordering::SeqCst);
+            let p0 = board::stamp();
+            compiler_fence(Ordering::SeqCst);
             let (adc, dac) = self.stream.capture();
             if let Some(Ok(Some(c))) = self.load_cell.as_mut().map(|hx| hx.read()) {
                 self.forces.push(self.engine.samples(), c);
             }
+            compiler_fence(Ordering::SeqCst);
+            self.cost.borrow_mut().plant += board::elapsed(p0) as u64;
             compiler_fence(Ordering::SeqCst);
             let t0 = board::stamp();
             compiler_fence(Ordering::SeqCst);
@@ -391,6 +400,83 @@ mod harness {
             finish
         );
         status == case.expect
+    }
+
+    /// The continuous tracker's settings whose work the image measures: (name, segment s,
+    /// segments a plan) — the default and the fast setting (`probe_bench::pareto::FAST_STREAM`).
+    pub const STREAM_CASES: [(&str, f32, u8); 2] = [("default", 0.03, 1), ("fast", 0.012, 4)];
+    /// Modulus and probe time of each measured stream.
+    pub const STREAM_KPA: f32 = 500.0;
+    /// Probe time of each measured stream, s (the acquisition, then tracking).
+    pub const STREAM_SECONDS: f32 = 1.0;
+
+    /// Stream [`STREAM_KPA`] with the tracker's setting `(name, segment, plan_segments)` through
+    /// the firmware's loop (`continuous::run_with`) and log the measurement side's work from the
+    /// first tracking reading to the last: everything but the engine's (counted per sample) and
+    /// the plant's, as a share of a [`CORE_HZ`] core over that probe time. True when every
+    /// tracking reading was ok.
+    pub fn stream_cost(case: (&str, f32, u8), unit: &UnitProfile) -> bool {
+        use pzt_probe::instrument::continuous::{run_with, TrackerConfig};
+        let cell = RefCell::new(Cost::new());
+        let scene = Scene::on_modulus_kpa(STREAM_KPA as f64).with_noise(NoiseScene::Bench);
+        let mut src = CostSource {
+            stream: board::Stream::new(SimProbe::new(scene, SEED)),
+            engine: SampleEngine::new(),
+            intake: None,
+            held: None,
+            cost: &cell,
+            load_cell: board::load_cell(),
+            forces: ForceLog::new(),
+        };
+        src.stream.prefill(&mut src.engine);
+        let cfg = TrackerConfig {
+            segment: Seconds(case.1),
+            plan_segments: case.2,
+            ..TrackerConfig::DEFAULT
+        };
+        let Ok(mut tracker) = cfg.validate(&src.scale(), unit) else {
+            return false;
+        };
+        // At the first tracking reading and at the last: (stamp, engine + plant instructions,
+        // probe time s).
+        let mut first: Option<(u32, u64, f32)> = None;
+        let mut last = (0u32, 0u64, 0.0f32);
+        let (mut readings, mut ok) = (0u32, 0u32);
+        block_on(run_with(&mut src, &mut tracker, unit, |s, r| {
+            compiler_fence(Ordering::SeqCst);
+            let now = board::stamp();
+            let c = s.cost.borrow();
+            let at = (now, c.engine_sum + c.plant, r.t_s.0);
+            if r.seq > 0 {
+                if first.is_none() {
+                    first = Some(at);
+                } else {
+                    readings += 1;
+                    ok += r.reading.status.is_ok() as u32;
+                }
+                last = at;
+            }
+            r.t_s.0 < STREAM_SECONDS
+        }));
+        let Some(first) = first else {
+            return false;
+        };
+        // The timer counts down: instructions from `first` to `last`.
+        let total = first.0.wrapping_sub(last.0) as u64 * board::INSTRUCTIONS_PER_TICK as u64;
+        let work = total.saturating_sub(last.1 - first.1);
+        let probe_time = last.2 - first.2;
+        let work_pct = work as f32 / (probe_time * CORE_HZ as f32) * 100.0;
+        defmt::info!(
+            "stream setting={=str} e_kpa={=f32} readings={=u32} ok={=u32} probe_time_s={=f32} work={=u64} work_pct={=f32}",
+            case.0,
+            STREAM_KPA,
+            readings,
+            ok,
+            probe_time,
+            work,
+            work_pct
+        );
+        readings > 0 && ok == readings
     }
 
     /// One `calibrate fit` to measure: how many references, and how they lie.
@@ -563,6 +649,9 @@ mod harness {
         ok &= measure(&fallback, &unit, fs);
         for case in FIT_CASES.iter() {
             ok &= fit_cost(case, &unit);
+        }
+        for case in STREAM_CASES {
+            ok &= stream_cost(case, &unit);
         }
         defmt::info!("exit ok={=bool}", ok);
         board::exit(ok)

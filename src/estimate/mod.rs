@@ -17,6 +17,7 @@ pub mod paper;
 pub mod resonator;
 pub mod ringdown;
 pub mod staged;
+pub mod track;
 
 use crate::engine::sweep::SweepPoint;
 use crate::status::Failure;

@@ -5,6 +5,7 @@
 //! acquire (hold: ring-down seed + short hold) ──ok──▶ track: segment k at f_h,k
 //!    ▲                                                   │ windows → Y − (G0 + j2πf C0)
 //!    │ lost (misses in a row, stall)                      │ resonator fit (f0, Q, g, z)
+//!    │                                                    │ filter (f0, Q) ← fit, covariance
 //!    └───────────────────────────────────────────────────┤ pipeline::conclude → reading seq k
 //!                                                        └ f_h,k+1 = f0 ± dither · f0/(2Q)
 //! ```
@@ -26,6 +27,16 @@
 //! needs for its contact checks (`no_contact` on lift-off, the Q model) — would rest on the prior
 //! alone; the alternating offset makes every segment's transient measure it.
 //!
+//! **What the tracker carries** ([`crate::estimate::track`]): each segment's fit, with its
+//! covariance of `f0` and `Q`, is one measurement of a Kalman filter over `(f0, Q)` whose
+//! process model lets them drift at [`TrackerConfig::drift`] and [`TrackerConfig::q_drift`];
+//! the reading is the filter's estimate, and its σ adds the lag behind that drift. Off the
+//! resonance a segment's `f0` error follows its `Q` error (the offset drive measures the
+//! detuning through `Q`); the pooled `Q` takes that part out. An innovation past the gate (a
+//! step, a new contact) restarts the filter from the segment. A plan may hold several segments
+//! ([`TrackerConfig::plan_segments`]): the later ones are fitted with the plan's windows so far
+//! and give the filter what they add.
+//!
 //! **Lock**: a segment whose fit fails, leaves the band, or moves the resonance by more than one
 //! linewidth `f0/Q` from the estimate it was driven from is not locked (its reading fails
 //! `not_locked` or with the fit's failure); the drive still follows a moved estimate, and after
@@ -42,13 +53,14 @@ use crate::engine::{PointPlan, PointRaw};
 use crate::estimate::conductance::GROSS_CHI2;
 use crate::estimate::hold::{Hold, HoldSettings};
 use crate::estimate::resonator::{self, HoldWindow, MAX_WINDOWS};
+use crate::estimate::track::{Measurement, Process, Sym2, Track, Update};
 use crate::estimate::Estimate;
 use crate::hal::FrontEndScale;
 use crate::loadcell::RawForce;
 use crate::reading::driver::{PointSource, Wanted};
 use crate::reading::{Method, Reading};
 use crate::status::{Failure, Status};
-use crate::unit::profile::UnitProfile;
+use crate::unit::profile::{UnitProfile, FREE_RESONANCE_DRIFT_HZ_S};
 use crate::units::bounded;
 use crate::units::{Hz, Seconds, Volts};
 use core::f64::consts::PI;
@@ -70,10 +82,17 @@ pub struct TrackerConfig {
     pub seed: Hz,
     /// The acquisition's hold in all (first half on the seed, second on its estimate).
     pub acquire_hold: Seconds,
-    /// Length of one tracking segment: one reading each (25–1000 ms). A segment is at least
+    /// Length of one tracking segment: one reading each (8–1000 ms). A segment is at least
     /// four windows of one cycle (the resonator's fit needs four windows; an engine window must
     /// span half a batch), 17 ms at 238 Hz.
     pub segment: Seconds,
+    /// Segments a plan holds (1–8): the drive moves only between plans, so the segments after
+    /// a plan's first see no retuning and lose nothing to the DAC's pipeline (the two batches
+    /// and the wait for a cycle boundary between plans are spent once a plan); each is fitted
+    /// with the plan's windows so far and adds what they know beyond the previous fit. The
+    /// first segment takes at least four windows, a later one at least two; a plan at most 16
+    /// (fewer segments when they do not fit).
+    pub plan_segments: u8,
     /// Offset of the drive from the estimate, alternately above and below, in half-linewidths
     /// `f0/(2Q)` (0–2).
     pub dither: f32,
@@ -81,6 +100,12 @@ pub struct TrackerConfig {
     pub q_prior: f32,
     /// Segments in a row without lock before the tracker acquires again (1–20).
     pub lost_after: u8,
+    /// How fast the resonance may move between segments, Hz/s (0.01–100): the tracker's
+    /// process model ([`crate::estimate::track`]) takes a random step of this rate times the
+    /// time between segments; the larger it is, the fewer segments a reading pools.
+    pub drift: f32,
+    /// How fast `Q` may move between segments, as a fraction of it per s (0.01–100).
+    pub q_drift: f32,
     /// Drive amplitude at the PZT.
     pub drive: Volts,
 }
@@ -88,18 +113,23 @@ pub struct TrackerConfig {
 impl TrackerConfig {
     /// Band 170–290 Hz seeded at 230 Hz, acquisition 20 + 20 ms seed and 100 ms hold, segments
     /// of 30 ms (seven one-cycle windows at 240 Hz; with the two batches every plan waits in the
-    /// DAC's pipeline and the wait for a cycle boundary, a reading every 44 ms: 23 readings/s,
-    /// docs/methods.md) with the drive a quarter half-linewidth off the resonance alternately,
-    /// Q prior ±50 %, re-acquire after three unlocked segments in a row, 5 V.
+    /// DAC's pipeline and the wait for a cycle boundary, a reading every 38 ms, docs/methods.md),
+    /// one a plan, with the drive a quarter half-linewidth off the resonance alternately, Q prior
+    /// ±50 %, the resonance drifting at the probe's specified thermal drift
+    /// ([`FREE_RESONANCE_DRIFT_HZ_S`]) and `Q` at 20 %/s (ours: `Q` follows the contact; faster
+    /// changes are the gate's), re-acquire after three unlocked segments in a row, 5 V.
     pub const DEFAULT: Self = Self {
         band_start: Hz(170.0),
         band_stop: Hz(290.0),
         seed: Hz(230.0),
         acquire_hold: Seconds(0.1),
         segment: Seconds(0.03),
+        plan_segments: 1,
         dither: 0.25,
         q_prior: 0.5,
         lost_after: 3,
+        drift: FREE_RESONANCE_DRIFT_HZ_S,
+        q_drift: 0.2,
         drive: Volts(5.0),
     };
 
@@ -148,16 +178,21 @@ impl TrackerConfig {
             self.dither,
             self.q_prior,
             self.acquire_hold.0,
+            self.drift,
+            self.q_drift,
         ]
         .iter()
         .all(|x| x.is_finite());
         if !finite {
             return Err(SettingsError::NotFinite);
         }
-        let knobs_ok = (0.025..=1.0).contains(&self.segment.0)
+        let knobs_ok = (0.008..=1.0).contains(&self.segment.0)
+            && (1..=8).contains(&self.plan_segments)
             && (0.0..=2.0).contains(&self.dither)
             && (0.05..=2.0).contains(&self.q_prior)
             && (1..=20).contains(&self.lost_after)
+            && (0.01..=100.0).contains(&self.drift)
+            && (0.01..=100.0).contains(&self.q_drift)
             && self.acquire_hold.0 >= 0.1;
         if !knobs_ok {
             return Err(SettingsError::KnobOutOfRange);
@@ -185,6 +220,11 @@ impl TrackerConfig {
             misses: 0,
             seq: 0,
             segment_start: 0,
+            track: Track::EMPTY,
+            first_segment: 0,
+            per_segment: 0,
+            plan_prior: (0.0, 0.0, 0.0),
+            plan_fit: None,
         })
     }
 }
@@ -242,6 +282,15 @@ pub struct Tracker {
     misses: u8,
     seq: u32,
     segment_start: u64,
+    track: Track,
+    /// Windows of the plan in progress's first segment, and of each later one.
+    first_segment: u16,
+    per_segment: u16,
+    /// The plan's fits start from: `f0`, and `Q` with its prior's σ (the estimate when the plan
+    /// was made: the same prior for every fit of the plan, so that their difference is data).
+    plan_prior: (f64, f64, f64),
+    /// The last fit of the plan in progress (of all its windows until then).
+    plan_fit: Option<Measurement>,
 }
 
 /// The one place a stream's estimate becomes a reading: the pipeline with the unit's profile
@@ -275,6 +324,12 @@ impl Tracker {
         matches!(self.mode, Mode::Acquire(_))
     }
 
+    /// True while a tracking plan has windows to come (a reading ended one of its segments,
+    /// not the plan).
+    pub fn plan_running(&self) -> bool {
+        matches!(self.mode, Mode::Track) && self.plan.is_some()
+    }
+
     /// Readings emitted so far (the next reading's `seq`).
     pub fn emitted(&self) -> u32 {
         self.seq
@@ -299,27 +354,35 @@ impl Tracker {
                 let ftw = tuning_word(f, self.fs);
                 self.f_h = frequency_hz(ftw, self.fs);
                 // Windows of whole cycles, the shortest the engine passes on (one cycle in the
-                // band), at most MAX_WINDOWS of them.
+                // band; longer for a single long segment), at most MAX_WINDOWS a plan: its first
+                // segment at least four (the fit's fewest), each later one at least two (its
+                // fit takes the plan's windows so far).
                 let per_cycle = 1.0 / self.f_h.max(1.0);
                 let seg = self.cfg.segment.0 as f64;
-                let cycles = libm::ceil(seg / per_cycle / MAX_WINDOWS as f64)
-                    .max(resonator::first_cycles(self.f_h, self.fs));
-                let n = bounded(
-                    libm::floor(seg / (cycles * per_cycle)),
-                    4.0,
-                    MAX_WINDOWS as f64,
-                );
+                let most = MAX_WINDOWS as f64;
+                let mut cycles = resonator::first_cycles(self.f_h, self.fs);
+                if self.cfg.plan_segments <= 1 {
+                    cycles = cycles.max(libm::ceil(seg / per_cycle / most));
+                }
+                let n = bounded(libm::floor(seg / (cycles * per_cycle)), 2.0, most) as u16;
+                let first = n.max(4);
+                let later = (self.cfg.plan_segments.max(1) as u16 - 1)
+                    .min((MAX_WINDOWS as u16).saturating_sub(first) / n);
+                self.per_segment = n;
+                self.first_segment = first;
                 self.tag = self.tag.wrapping_add(1);
                 let plan = PointPlan {
                     ftw,
                     amplitude_codes: self.amplitude,
                     settle_samples: 0,
                     cycles: cycles as u32,
-                    windows: n as u16,
+                    windows: first + later * n,
                     open: false,
                     tag: TRACK_TAG | (self.tag & 0xff),
                 };
                 self.plan = Some(plan);
+                self.plan_prior = (self.f_est, self.q_est, self.cfg.q_prior as f64 * self.q_est);
+                self.plan_fit = None;
                 self.windows.clear();
                 self.monitor = Default::default();
                 self.clipped = false;
@@ -351,6 +414,23 @@ impl Tracker {
                     Ok(e) => {
                         self.f_est = e.resonance.0 as f64;
                         self.q_est = bounded(e.q.map_or(10.0, |q| q as f64), 2.0, 200.0);
+                        // The filter starts from the acquisition (its `Q`'s σ, when it has one).
+                        self.track.clear();
+                        let sq = e.q_sigma.map_or(0.0, |s| s as f64);
+                        let sf = e.sigma.0 as f64;
+                        self.track.update(
+                            &Measurement {
+                                f0: self.f_est,
+                                q: self.q_est,
+                                cov: Sym2 {
+                                    a: sf * sf,
+                                    b: 0.0,
+                                    c: sq * sq,
+                                },
+                                t: t as f64 / self.fs,
+                            },
+                            &self.process(),
+                        );
                         self.mode = Mode::Track;
                         self.plan = None;
                         self.misses = 0;
@@ -384,11 +464,17 @@ impl Tracker {
                         var: p.variance * ai * ai,
                     });
                 }
-                if raw.window + 1 < plan.windows {
+                let done = raw.window + 1;
+                let ends_segment = done == self.first_segment
+                    || (done > self.first_segment
+                        && (done - self.first_segment).is_multiple_of(self.per_segment.max(1)));
+                if !ends_segment && done < plan.windows {
                     return None;
                 }
-                self.plan = None;
-                let est = self.segment_estimate(scale);
+                if done >= plan.windows {
+                    self.plan = None;
+                }
+                let est = self.segment_estimate(scale, t as f64 / self.fs);
                 let locked = est.is_ok();
                 self.misses = if locked {
                     0
@@ -398,7 +484,11 @@ impl Tracker {
                 let took = self.seconds(t.saturating_sub(self.segment_start));
                 let (from, to) = force_window(self.segment_start, t, self.fs);
                 self.segment_start = t;
-                let points = self.windows.len() as u16;
+                let points = if self.plan_fit.is_some() && done > self.first_segment {
+                    self.per_segment
+                } else {
+                    self.first_segment
+                };
                 let r = self.emit(est, unit, t, took, points, locked, force(from, to));
                 if self.misses >= self.cfg.lost_after {
                     self.reacquire(scale, unit);
@@ -467,29 +557,49 @@ impl Tracker {
         }
         self.plan = None;
         self.misses = 0;
+        self.track.clear();
     }
 
-    /// The finished segment's estimate; moves the estimate the drive follows.
-    fn segment_estimate(&mut self, scale: &FrontEndScale) -> Result<Estimate, Failure> {
+    /// The filter's process model: the configured rates, and the gate at the χ² of two degrees
+    /// of freedom that a measurement consistent with the prediction exceeds once in a thousand
+    /// (`−2 ln 10⁻³`).
+    fn process(&self) -> Process {
+        Process {
+            f0_rate: self.cfg.drift as f64,
+            q_rate: self.cfg.q_drift as f64,
+            gate: 13.8155,
+        }
+    }
+
+    /// The finished segment's estimate (ending at `t_end`, s), pooled with what the tracker
+    /// knows ([`Track`]); moves the estimate the drive follows.
+    fn segment_estimate(&mut self, scale: &FrontEndScale, t_end: f64) -> Result<Estimate, Failure> {
         if self.clipped {
             return Err(Failure::Clipped);
         }
         let (m, r) = &self.monitor;
         let pv = solve(m, r).ok_or(Failure::DriveFault)?;
         let drive = Drive::from_monitor(&pv, scale).ok_or(Failure::DriveFault)?;
-        for x in self.windows.iter_mut() {
+        // The plan's windows so far, as admittances with the drive phasor measured so far.
+        let mut w = [HoldWindow::default(); MAX_WINDOWS];
+        let n = self.windows.len().min(MAX_WINDOWS);
+        for (o, x) in w.iter_mut().zip(self.windows.iter()) {
             let y = drive.admittance(x.y, x.var);
-            (x.y, x.var) = (y.y, y.var);
+            *o = HoldWindow {
+                y: y.y,
+                var: y.var,
+                ..*x
+            };
         }
         let y_s = C64::new(self.static_g, 2.0 * PI * self.f_h * self.static_c);
-        let q_sd = self.cfg.q_prior as f64 * self.q_est;
+        let (f_start, q_start, q_sd) = self.plan_prior;
         let seg = resonator::Segment {
-            windows: &self.windows,
+            windows: &w[..n],
             f_h: self.f_h,
             y_s,
             mirror: resonator::mirror(drive.v),
         };
-        let h = resonator::fit(seg, self.f_est, (self.q_est, q_sd))?;
+        let h = resonator::fit(seg, f_start, (q_start, q_sd))?;
         // A segment the resonator's model does not explain (a knock, a tone) is no reading,
         // and the drive does not follow it: the next segment (30 ms on by default) will be clean.
         if h.reduced_chi2 > GROSS_CHI2 {
@@ -502,14 +612,83 @@ impl Tracker {
             return Err(Failure::OutOfBand);
         }
         let moved = libm::fabs(f0 - self.f_est);
-        // Follow the estimate either way; a jump of more than a linewidth is no lock.
+        // Follow the estimate either way; a jump of more than a linewidth is no lock, and what
+        // the filter knew is of another resonance.
         self.f_est = f0;
         self.q_est = q;
         if moved > f0 / q {
+            self.track.clear();
             return Err(Failure::NotLocked);
         }
-        Ok(e)
+        let sf = e.sigma.0 as f64;
+        let fit = Measurement {
+            f0,
+            q,
+            cov: Sym2 {
+                a: sf * sf,
+                b: h.cov_f0_q,
+                c: h.sigma_q * h.sigma_q,
+            },
+            t: t_end,
+        };
+        // A plan's later segments are fitted with all its windows so far (their starting state
+        // is the plan's, not a free one); what they add is the information the earlier fit did
+        // not have: `Y = C⁻¹ − C_prev⁻¹`, `Y z = C⁻¹ x − C_prev⁻¹ x_prev`.
+        let m = match self.plan_fit.replace(fit) {
+            None => Some(fit),
+            Some(prev) => added_information(&fit, &prev),
+        };
+        let update = m.map_or(Update::Refused, |m| self.track.update(&m, &self.process()));
+        let pooled = match update {
+            // Nothing the filter can take (a later segment that adds no information the
+            // linearised fits tell apart): what it knows, predicted to the segment's end.
+            Update::Refused => self.track.predicted(t_end, &self.process()),
+            Update::Pooled | Update::Restarted => self.track.estimate(),
+        };
+        let Some(p) = pooled else {
+            self.track.clear();
+            return Ok(e);
+        };
+        if !(lo..=hi).contains(&p.f0) || !(2.0..=200.0).contains(&p.q) {
+            self.track.clear();
+            return Ok(e);
+        }
+        self.f_est = p.f0;
+        self.q_est = p.q;
+        // The σ states the lag behind a drift at the configured rate besides the covariance.
+        let lag = self.track.drift_lag(self.cfg.drift as f64);
+        Ok(Estimate {
+            resonance: Hz(p.f0 as f32),
+            sigma: Hz(libm::sqrt(p.cov.a.max(0.0) + lag * lag) as f32),
+            q: Some(p.q as f32),
+            q_sigma: Some(libm::sqrt(p.cov.c.max(0.0)) as f32),
+            ..e
+        })
     }
+}
+
+/// What `now` (a fit of a plan's windows so far) knows beyond `before` (the fit of fewer of
+/// them), as a measurement: the difference of their information matrices over `(f0, Q)` and of
+/// their information vectors; `None` when the difference is not positive definite (nothing
+/// added that the linearised fits can tell apart).
+fn added_information(now: &Measurement, before: &Measurement) -> Option<Measurement> {
+    let (a, b) = (now.cov.inverse()?, before.cov.inverse()?);
+    let info = Sym2 {
+        a: a.a - b.a,
+        b: a.b - b.b,
+        c: a.c - b.c,
+    };
+    let cov = info.inverse()?;
+    let y = [
+        a.a * now.f0 + a.b * now.q - (b.a * before.f0 + b.b * before.q),
+        a.b * now.f0 + a.c * now.q - (b.b * before.f0 + b.c * before.q),
+    ];
+    Some(Measurement {
+        f0: cov.a * y[0] + cov.b * y[1],
+        q: cov.b * y[0] + cov.c * y[1],
+        cov,
+        t: now.t,
+    })
 }
 
 /// Run `tracker` against `src` until `emit` returns false: plans loaded one by one (the drive
@@ -556,9 +735,11 @@ pub async fn run_with<S: PointSource>(
                 if !emit(src, &r) {
                     break 'outer;
                 }
-                // A reading ends its plan (a segment's last window, the acquisition's end, a
+                // A reading that ends its plan (a plan's last segment, the acquisition's end, a
                 // stall): the next plan follows at once.
-                continue 'outer;
+                if !tracker.plan_running() {
+                    continue 'outer;
+                }
             }
         }
     }
@@ -587,6 +768,76 @@ mod tests {
         }
     }
 
+    /// What a fit of more windows adds to one of fewer is what the new windows measure: two
+    /// independent measurements `A`, `B` fused in covariance form (`x = x_A + K (x_B − x_A)`,
+    /// `K = C_A (C_A + C_B)⁻¹`, `C = (I − K) C_A`) are the fit of all; the difference with `A`
+    /// gives back `B`.
+    #[test]
+    fn added_information_is_the_new_windows_measurement() {
+        let a = Measurement {
+            f0: 238.10,
+            q: 10.4,
+            cov: Sym2 {
+                a: 4e-3,
+                b: 0.02,
+                c: 0.25,
+            },
+            t: 1.0,
+        };
+        let b = Measurement {
+            f0: 238.16,
+            q: 10.1,
+            cov: Sym2 {
+                a: 9e-4,
+                b: -0.004,
+                c: 0.36,
+            },
+            t: 1.0,
+        };
+        let m = |s: &Sym2| [[s.a, s.b], [s.b, s.c]];
+        let (ca, cb) = (m(&a.cov), m(&b.cov));
+        let s = [
+            [ca[0][0] + cb[0][0], ca[0][1] + cb[0][1]],
+            [ca[1][0] + cb[1][0], ca[1][1] + cb[1][1]],
+        ];
+        let det = s[0][0] * s[1][1] - s[0][1] * s[1][0];
+        let si = [
+            [s[1][1] / det, -s[0][1] / det],
+            [-s[1][0] / det, s[0][0] / det],
+        ];
+        let k: [[f64; 2]; 2] = core::array::from_fn(|i| {
+            core::array::from_fn(|j| ca[i][0] * si[0][j] + ca[i][1] * si[1][j])
+        });
+        let d = [b.f0 - a.f0, b.q - a.q];
+        let x = [
+            a.f0 + k[0][0] * d[0] + k[0][1] * d[1],
+            a.q + k[1][0] * d[0] + k[1][1] * d[1],
+        ];
+        let c: [[f64; 2]; 2] = core::array::from_fn(|i| {
+            core::array::from_fn(|j| ca[i][j] - (k[i][0] * ca[0][j] + k[i][1] * ca[1][j]))
+        });
+        let all = Measurement {
+            f0: x[0],
+            q: x[1],
+            cov: Sym2 {
+                a: c[0][0],
+                b: 0.5 * (c[0][1] + c[1][0]),
+                c: c[1][1],
+            },
+            t: 1.0,
+        };
+        let got = added_information(&all, &a).unwrap();
+        assert!(
+            (got.f0 - b.f0).abs() < 1e-9 && (got.q - b.q).abs() < 1e-9,
+            "{got:?}"
+        );
+        assert!((got.cov.a / b.cov.a - 1.0).abs() < 1e-6, "{got:?}");
+        assert!((got.cov.b / b.cov.b - 1.0).abs() < 1e-6, "{got:?}");
+        assert!((got.cov.c / b.cov.c - 1.0).abs() < 1e-6, "{got:?}");
+        // Nothing added (the same fit twice): no measurement.
+        assert!(added_information(&a, &a).is_none());
+    }
+
     #[test]
     fn knobs_out_of_range_are_refused() {
         let scale = FrontEndScale::PROBE;
@@ -598,7 +849,20 @@ mod tests {
                 ..d
             },
             TrackerConfig {
-                segment: Seconds(0.02),
+                segment: Seconds(0.005),
+                ..d
+            },
+            TrackerConfig {
+                plan_segments: 0,
+                ..d
+            },
+            TrackerConfig {
+                plan_segments: 9,
+                ..d
+            },
+            TrackerConfig { drift: 0.0, ..d },
+            TrackerConfig {
+                q_drift: f32::INFINITY,
                 ..d
             },
             TrackerConfig { dither: 2.5, ..d },
@@ -622,9 +886,22 @@ mod tests {
     /// from 0 without gaps, each concluded (a failure or a reading with a resonance).
     #[test]
     fn arbitrary_windows_never_panic_and_readings_have_no_gaps() {
+        for cfg in [
+            TrackerConfig::DEFAULT,
+            TrackerConfig {
+                segment: Seconds(0.012),
+                plan_segments: 4,
+                ..TrackerConfig::DEFAULT
+            },
+        ] {
+            arbitrary_windows(cfg);
+        }
+    }
+
+    fn arbitrary_windows(cfg: TrackerConfig) {
         let scale = FrontEndScale::PROBE;
         let unit = unit();
-        let mut t = TrackerConfig::DEFAULT.validate(&scale, &unit).unwrap();
+        let mut t = cfg.validate(&scale, &unit).unwrap();
         let mut next = xorshift(0x9e37_79b9_7f4a_7c15);
         let mut sample = 0u64;
         let mut expect = 0u32;
@@ -638,7 +915,9 @@ mod tests {
                     expect += 1;
                     assert!(r.t_s.0 >= 0.0);
                     assert!(r.reading.status != Status::Ok || r.reading.modulus.is_some());
-                    break;
+                    if !t.plan_running() {
+                        break;
+                    }
                 }
             }
         }

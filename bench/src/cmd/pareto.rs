@@ -4,7 +4,7 @@ use super::progress;
 use crate::pareto::{
     calibrate, configs, crb_pct, evaluate, evaluate_on, evaluate_stream, scene_crb_pct,
     scene_tau_ms, steady_crb_pct, stream_unit, tau_ms, Cell, Config, StreamCell, STREAM_SECONDS,
-    STREAM_SEGMENTS_S, STREAM_SETTLE_S,
+    STREAM_SETTINGS, STREAM_SETTLE_S,
 };
 use crate::plot::{self, draw_legend, draw_to, err, Area, Backend, PALETTE};
 use crate::scene::Target;
@@ -280,7 +280,7 @@ pub fn run(a: ParetoArgs) -> Result<()> {
     Ok(())
 }
 
-/// The continuous tracker at every segment length of [`STREAM_SEGMENTS_S`] on phantom C (the
+/// The continuous tracker at every setting of [`STREAM_SETTINGS`] on phantom C (the
 /// issue's scene) at bench noise and on the study's moduli in both noise scenes, `seeds` streams
 /// each (noise seeds 0, 1, ...).
 fn stream_study(seeds: usize) -> Result<Vec<StreamRow>> {
@@ -301,19 +301,19 @@ fn stream_study(seeds: usize) -> Result<Vec<StreamRow>> {
             targets.insert(0, Target::Phantom(c));
         }
         for t in targets {
-            for seg in STREAM_SEGMENTS_S {
-                jobs.push((*noise, t, seg));
+            for set in STREAM_SETTINGS {
+                jobs.push((*noise, t, set));
             }
         }
     }
     let pb = progress(jobs.len() as u64, "pareto: stream");
-    let cells = par_map(&jobs, |(noise, target, seg)| {
+    let cells = par_map(&jobs, |(noise, target, (seg, per))| {
         let unit = &units
             .iter()
             .find(|u| u.0 == *noise)
             .expect("a unit per noise")
             .1;
-        let cell = evaluate_stream(*target, *noise, *seg, unit, seeds, 0);
+        let cell = evaluate_stream(*target, *noise, *seg, *per, unit, seeds, 0);
         pb.inc(1);
         cell
     });
@@ -321,7 +321,7 @@ fn stream_study(seeds: usize) -> Result<Vec<StreamRow>> {
     let rows = jobs
         .into_iter()
         .zip(cells)
-        .map(|((noise, target, seg), cell)| {
+        .map(|((noise, target, (seg, _)), cell)| {
             let cell = cell.ok_or_else(|| {
                 anyhow!(
                     "the tracker failed to stream on {} at {seg} s segments",
@@ -419,11 +419,7 @@ fn write_csv(
     // The continuous tracker: `readings` its readings after the first 0.5 s, `probe_time_ms` the
     // mean probe time of one, `crb_pct` the steady-state bound, `ok_per_s` the ok readings a second.
     for r in streams {
-        let knobs = format!(
-            "segment {:.0} ms, {}",
-            r.cell.segment_s * 1e3,
-            r.scene_label()
-        );
+        let knobs = format!("segment {} ms, {}", r.cell.setting(), r.scene_label());
         line(
             "stream",
             knobs,
@@ -463,14 +459,15 @@ fn aggregate(rows: &[Row], c: usize, noise: NoiseScene) -> Option<(f64, f64, f64
 /// error caused by noise %), both over the study's moduli as [`aggregate`] takes them (the
 /// mean time, the RMS error).
 fn stream_curve(streams: &[StreamRow], noise: NoiseScene) -> Vec<(f64, f64)> {
-    STREAM_SEGMENTS_S
+    STREAM_SETTINGS
         .iter()
-        .filter_map(|seg| {
+        .filter_map(|(seg, per)| {
             let r: Vec<&StreamRow> = streams
                 .iter()
                 .filter(|r| {
                     r.noise == noise
                         && r.cell.segment_s == *seg
+                        && r.cell.plan_segments == *per
                         && matches!(r.target, Target::Modulus(_))
                 })
                 .collect();
@@ -1001,17 +998,20 @@ fn stream_summary(streams: &[StreamRow], seeds: usize) -> String {
          The core's tracker (`src/instrument/continuous.rs`) as `probe-bench stream --segment-s T` streams: \
          {seeds} streams of {STREAM_SECONDS} s per cell (noise seeds 0–{}), the readings that end \
          after the first {STREAM_SETTLE_S} s; the unit calibrated with hold (the stream's \
-         readings are hold's motional resonance). One reading per segment: the probe time per \
-         reading is a segment (the previous reading's end to its own), and readings/s counts the \
-         ok ones. Error from noise: against the same stream in the quiet scene, reading for \
+         readings are hold's motional resonance). One reading per segment (\"12 × 4\": segments \
+         of 12 ms, four a plan, the drive moved only between plans): the probe time per reading \
+         is a segment (the previous reading's end to its own), and readings/s counts the ok ones. \
+         Each reading is the tracker's filter after its segment (`src/estimate/track.rs`: `f0` \
+         and `Q` carried from segment to segment under the configured drift, 0.3 Hz/s and 20 %/s \
+         of `Q`), so it pools earlier segments. Error from noise: against the same stream in the quiet scene, reading for \
          reading (the same `seq` ending within 1 ms: the column \"matched\"; the others, whose \
          segments have drifted apart, against the quiet stream's mean). CRB: the **steady-state** bound (`pareto::steady_crb_pct`) for \
          one reading's probe time — the drive never stops, so a segment starts on a resonator \
          already in steady state near its resonance, not from rest (the switch-on build-up of \
          the single-reading bound does not apply); on the resonance, `f0` and `g` unknown, `Q` \
          from the tracker's ±50 % prior, the load cell's floor for the force averaged over \
-         max(segment, 0.1 s) added. A lower bound for the tracker, whose drive sits a quarter \
-         half-linewidth off the resonance.",
+         max(segment, 0.1 s) added. A lower bound for one segment alone; a reading that pools \
+         segments may go below it (docs/methods.md, \"Continuous reading\").",
         seeds.max(1) - 1
     );
     let mut scenes: Vec<(NoiseScene, String)> = Vec::new();
@@ -1039,8 +1039,8 @@ fn stream_summary(streams: &[StreamRow], seeds: usize) -> String {
             let (c, x) = (&r.cell, &r.cell.cell);
             let _ = writeln!(
                 s,
-                "| {:.0} | {:.1} | {:.1} | {}/{} | {} | {:+.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.4} | {:.1} |",
-                c.segment_s * 1e3,
+                "| {} | {:.1} | {:.1} | {}/{} | {} | {:+.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.4} | {:.1} |",
+                c.setting(),
                 x.time_ms,
                 c.ok_per_s,
                 x.ok,

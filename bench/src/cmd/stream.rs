@@ -137,6 +137,15 @@ pub struct TrackerArgs {
     /// Length of one tracking segment (one reading each), s.
     #[arg(long, default_value_t = TrackerConfig::DEFAULT.segment.0 as f64)]
     pub segment_s: f64,
+    /// Segments a plan holds (1–8): the drive moves only between plans; a plan's later
+    /// segments are fitted with its windows so far (`--segment-s 0.012 --plan-segments 4`:
+    /// more than 50 readings a second).
+    #[arg(long, default_value_t = TrackerConfig::DEFAULT.plan_segments)]
+    pub plan_segments: u8,
+    /// How fast the resonance may drift between segments, Hz/s: the tracker's process model
+    /// (what it pools over, and the lag its σ states).
+    #[arg(long, default_value_t = TrackerConfig::DEFAULT.drift as f64)]
+    pub drift_hz_s: f64,
     /// Offset of the drive from the resonance, alternately above and below, in
     /// half-linewidths f0/(2Q) (0: on the resonance).
     #[arg(long, default_value_t = TrackerConfig::DEFAULT.dither as f64)]
@@ -151,6 +160,8 @@ impl TrackerArgs {
     pub fn config(&self) -> TrackerConfig {
         TrackerConfig {
             segment: Seconds(self.segment_s as f32),
+            plan_segments: self.plan_segments,
+            drift: self.drift_hz_s as f32,
             dither: self.dither as f32,
             q_prior: self.q_prior as f32,
             ..TrackerConfig::DEFAULT
@@ -161,6 +172,8 @@ impl TrackerArgs {
     pub fn is_default(&self) -> bool {
         let d = TrackerConfig::DEFAULT;
         self.segment_s == d.segment.0 as f64
+            && self.plan_segments == d.plan_segments
+            && self.drift_hz_s == d.drift as f64
             && self.dither == d.dither as f64
             && self.q_prior == d.q_prior as f64
     }
@@ -190,9 +203,11 @@ pub fn run(a: StreamArgs) -> Result<()> {
         print_scene_header("stream", &target, a.scene.preload_n, noise, &scene);
         if !(a.image.qemu || a.image.stm32) {
             println!(
-            "  tracker: segments of {:.0} ms, drive ±{} half-linewidths off the resonance; unit profile of the simulated unit ({} calibration)",
+            "  tracker: segments of {:.0} ms, {} a plan, drive ±{} half-linewidths off the resonance, drift {} Hz/s; unit profile of the simulated unit ({} calibration)",
             a.tracker.segment_s * 1e3,
+            a.tracker.plan_segments,
             a.tracker.dither,
+            a.tracker.drift_hz_s,
             METHOD.name()
         );
         }

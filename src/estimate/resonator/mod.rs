@@ -99,6 +99,9 @@ pub struct HoldFit {
     pub estimate: Estimate,
     /// Standard uncertainty of `Q`.
     pub sigma_q: f64,
+    /// Covariance of `f0` and `Q` (Hz): off the resonance the steady state's phase gives the
+    /// detuning only through `Q`, so their errors are correlated with the offset's sign.
+    pub cov_f0_q: f64,
     /// χ² per degree of freedom at the fit (above [`crate::estimate::conductance::GROSS_CHI2`]
     /// the model does not explain the windows and `sigma` has been scaled by it).
     pub reduced_chi2: f64,

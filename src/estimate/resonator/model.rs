@@ -374,12 +374,13 @@ pub(super) struct Normal {
 }
 
 impl Normal {
-    /// The variances of `f0` and `Q` (the first two diagonal entries of `(JᵀWJ)⁻¹`) for
-    /// weight `wt`, in `f64`: the scaled matrix factored as `L D Lᵀ` (no square roots), `L y =
-    /// e_i` solved for the two unit vectors, `Σ y_k² / d_k` unscaled by `scale_i² / wt`. `None`
-    /// when the matrix is not positive definite.
+    /// The variances of `f0` and `Q` and their covariance (the upper-left 2 × 2 block of
+    /// `(JᵀWJ)⁻¹`: `[var f0, var Q, cov(f0, Q)]`) for weight `wt`, in `f64`: the scaled matrix
+    /// factored as `L D Lᵀ` (no square roots), `L y = e_i` solved for the two unit vectors,
+    /// `Σ y_k y'_k / d_k` unscaled by `scale_i scale_j / wt`. `None` when the matrix is not
+    /// positive definite.
     #[allow(clippy::needless_range_loop)] // triangular index arithmetic reads best as indices
-    pub(super) fn variances(&self, wt: f64) -> Option<[f64; 2]> {
+    pub(super) fn variances(&self, wt: f64) -> Option<[f64; 3]> {
         const N: usize = 5;
         let m: [[f64; N]; N] =
             core::array::from_fn(|i| core::array::from_fn(|j| self.jtj[i.max(j)][i.min(j)] as f64));
@@ -407,22 +408,23 @@ impl Normal {
             d[i] = s;
             inv_d[i] = 1.0 / s;
         }
-        let mut out = [0.0f64; 2];
-        for (c, o) in out.iter_mut().enumerate() {
-            let mut y = [0.0f64; N];
-            y[c] = 1.0;
-            let mut v = inv_d[c];
+        // y_c = L⁻¹ e_c for c = 0, 1; (JᵀWJ)⁻¹[a][b] = Σ_k y_a[k] y_b[k] / d_k (scaled).
+        let mut y = [[0.0f64; N]; 2];
+        for (c, yc) in y.iter_mut().enumerate() {
+            yc[c] = 1.0;
             for i in c + 1..N {
                 let mut s = 0.0;
                 for k in c..i {
-                    s -= l[i][k] * y[k];
+                    s -= l[i][k] * yc[k];
                 }
-                y[i] = s;
-                v += s * s * inv_d[i];
+                yc[i] = s;
             }
-            let sc = self.scale[c] as f64;
-            *o = v * sc * sc / wt;
         }
+        let dot = |a: usize, b: usize| -> f64 {
+            let v: f64 = (0..N).map(|k| y[a][k] * y[b][k] * inv_d[k]).sum();
+            v * self.scale[a] as f64 * self.scale[b] as f64 / wt
+        };
+        let out = [dot(0, 0), dot(1, 1), dot(0, 1)];
         out.iter().all(|v| v.is_finite()).then_some(out)
     }
 
@@ -505,16 +507,16 @@ mod gradcheck {
             };
             let n = evaluate(&pb, &p, true, None).1;
             let (jtj, jtr) = n.unscaled(pb.wt);
-            // The variances of f0 and Q by LDLᵀ of the scaled matrix, against the f64 inverse
-            // of the unscaled one.
+            // The variances of f0 and Q and their covariance by LDLᵀ of the scaled matrix,
+            // against the f64 inverse of the unscaled one.
             let inv = crate::linalg::spd_inverse(&jtj).unwrap();
             let v = n.variances(pb.wt).unwrap();
-            for i in 0..2 {
+            for (k, (i, j)) in [(0, 0), (1, 1), (0, 1)].into_iter().enumerate() {
                 assert!(
-                    (v[i] / inv[i][i] - 1.0).abs() < 1e-9,
-                    "{i}: {} vs {}",
-                    v[i],
-                    inv[i][i]
+                    (v[k] / inv[i][j] - 1.0).abs() < 1e-9,
+                    "{i}{j}: {} vs {}",
+                    v[k],
+                    inv[i][j]
                 );
             }
             for (i, g) in jtr.iter().enumerate() {

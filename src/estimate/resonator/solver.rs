@@ -363,6 +363,7 @@ fn fit_segments(
     let scale = crate::estimate::gross_scale(red);
     let sigma = libm::sqrt((cov[0] * scale).max(0.0));
     let sigma_q = libm::sqrt((cov[1] * scale).max(0.0));
+    let cov_f0_q = cov[2] * scale;
     let (f0, q) = (p.f0, p.q);
     if !(p.g > 0.0) || !f0.is_finite() || !q.is_finite() || !sigma.is_finite() {
         return Err(Failure::NoResonance);
@@ -377,6 +378,7 @@ fn fit_segments(
             points_used: pb.w.len() as u16,
         },
         sigma_q,
+        cov_f0_q,
         reduced_chi2: red,
         linear: (p.g, p.z),
     })
