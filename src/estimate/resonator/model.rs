@@ -2,7 +2,7 @@
 //! transient and their derivatives), the state carried between segments, χ² with its Jacobian,
 //! the normal equations and the covariance.
 
-use super::{Carry, Segment, MAX_SEGMENTS, MAX_WINDOWS};
+use super::{Carry, Filters, Segment, MAX_SEGMENTS, MAX_WINDOWS};
 use num_complex::Complex64 as C64;
 
 /// A window as the fit's inner loop uses it: start relative to its segment's first window,
@@ -154,6 +154,57 @@ impl DriveModel {
         let y = gh + (z - gh) * e;
         let d_of = |i: usize| self.dh[i] * g * (one - e) + (z - gh) * e * self.dlam[i] * d;
         (y, [d_of(0), d_of(1), self.h * (one - e)], e)
+    }
+}
+
+impl DriveModel {
+    /// The motional state per unit `g` at `d` seconds after the drive at `f_h` was switched on
+    /// with the resonator at rest, in the window frame of a segment whose drive phasor's
+    /// [`super::mirror`] factor is `mirror` and whose windows start at phase 0 of the drive
+    /// (`d` the time from the switch-on to the segment's first window).
+    ///
+    /// The resonator's full second-order response, not the envelope's: the motional admittance
+    /// `Y(s) = (g ω0/Q) s / ((s − s_p)(s − s̄_p))` driven by `Re(U e^{jωt})` from `t = 0`
+    /// (Laplace: `U/(2(s − jω)) + Ū/(2(s + jω))`) through the filters `H(s)`; the response's
+    /// free part at the pole `s_p = λ + jω` in the drive's frame, divided by the measured drive
+    /// `H(jω) U`, is `T e^{λt}` with
+    ///
+    /// `T = A R [1/λ + M/(λ + 2jω)]`,  `A = (ω0/Q) s_p / (2j ω_d)` (the pole's residue per `g`),
+    /// `R = H(s_p)/H(jω)`, `M = (Ū/U) e^{−2jφ_on}` = `mirror · (H/H̄)(jω) · e^{2jωd}`
+    ///
+    /// (the drive's phase at the switch-on is `−ω d`, the window frame's origin being phase 0),
+    /// and the state is `h + T e^{λd}` (`T → −h` in the envelope's limit, `M → 0`, `R → 1`). Ours
+    /// from the equation of motion; `hal_sim::plant` integrates the same chain exactly (test
+    /// `the_state_at_switch_on_is_the_resonators_response_from_rest`).
+    pub(super) fn rest_state(
+        &self,
+        f0: f32,
+        q: f32,
+        f_h: f32,
+        d: f32,
+        mirror: C32,
+        filters: &Filters,
+    ) -> C32 {
+        use core::f32::consts::PI as PI32;
+        let one = C32::new(1.0, 0.0);
+        let w = 2.0 * PI32 * f_h;
+        let jw = C32::new(0.0, w);
+        let s_p = self.lam + jw;
+        let w_d = 2.0 * PI32 * f0 * crate::dsp::trig::sqrtf((1.0 - 0.25 / (q * q)).max(1e-12));
+        let a = s_p * (2.0 * PI32 * f0 / q) / C32::new(0.0, 2.0 * w_d);
+        // One filter's two poles: the ratio of its response at s_p to that at jω, `1/(1 + λ/(ω_c +
+        // jω))²`, and its phase turn `(H/H̄)(jω) = ((1 − jω/ω_c)/(1 + jω/ω_c))²`.
+        let pole = |w_c: f32| {
+            let r = one / (one + self.lam / C32::new(w_c, w));
+            let t = C32::new(1.0, -w / w_c) / C32::new(1.0, w / w_c);
+            (r * r, t * t)
+        };
+        let (rr, tr) = pole(filters.w_r);
+        let (ra, ta) = pole(filters.w_a);
+        let (s, c) = crate::dsp::trig::sincos(2.0 * w * d);
+        let m = mirror * tr * ta * C32::new(c, s);
+        let t = a * rr * ra * (one / self.lam + m / (self.lam + jw * 2.0));
+        self.h + t * cexp(self.lam * d)
     }
 }
 
@@ -349,6 +400,21 @@ pub(super) fn evaluate(
         }
         ea = eb;
     }
+    if let Some(rest) = &pb.rest {
+        let (r, cols) = rest.residual(p, jac, &scale);
+        chi2 += rest.w * r.norm_sqr();
+        if jac {
+            let rw = r * rest.w;
+            for i in 0..5 {
+                let ci = cols[i];
+                jtr32[i] += ci.re * rw.re + ci.im * rw.im;
+                let cw = ci * rest.w;
+                for j in 0..=i {
+                    jtj32[i][j] += cw.re * cols[j].re + cw.im * cols[j].im;
+                }
+            }
+        }
+    }
     let normal = Normal {
         jtj: jtj32,
         jtr: jtr32,
@@ -451,6 +517,67 @@ pub(super) struct Problem<'a> {
     pub(super) segs: heapless::Vec<(f64, f64, C32), MAX_SEGMENTS>,
     pub(super) carry: Option<&'a Carry>,
     pub(super) wt: f64,
+    /// The prior on the first segment's start state, when the drive came on from rest.
+    pub(super) rest: Option<RestPrior>,
+}
+
+/// The prior on the state at the first segment's first window: the resonator's response from
+/// rest to the segment's drive switched on `d` seconds earlier ([`DriveModel::rest_state`]),
+/// `g K(f0, Q)`, with weight `w` per unit of the windows' weighted squared residual (`1/σ_z²`
+/// over the windows' `1/var`: the same units as the windows' terms of χ²).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct RestPrior {
+    pub(super) f_h: f64,
+    pub(super) d: f32,
+    pub(super) mirror: C32,
+    pub(super) filters: Filters,
+    pub(super) w: f32,
+}
+
+impl RestPrior {
+    /// `K(f0, Q)`: the state from rest per unit `g`.
+    pub(super) fn k(&self, f0: f64, q: f64) -> C32 {
+        let at = Params {
+            f0,
+            q,
+            g: 0.0,
+            z: C64::new(0.0, 0.0),
+        };
+        DriveModel::new(&at, self.f_h).rest_state(
+            f0 as f32,
+            q as f32,
+            self.f_h as f32,
+            self.d,
+            self.mirror,
+            &self.filters,
+        )
+    }
+
+    /// The prior's residual `g K − z` at `p` and, with `jac`, its columns over (f0, Q, g, Re z,
+    /// Im z), the first two multiplied by `scale` as [`evaluate`]'s (`∂K/∂f0`, `∂K/∂Q` by central
+    /// differences of a thousandth of a linewidth and of `Q`: `K` is smooth on that scale, and
+    /// `f32` keeps the differences to 1e-4 of the derivative).
+    pub(super) fn residual(&self, p: &Params, jac: bool, scale: &[f32; 5]) -> (C32, [C32; 5]) {
+        let (f0, q, g) = (p.f0, p.q, p.g as f32);
+        let k = self.k(f0, q);
+        let r = k * g - c32(p.z);
+        let zero = C32::new(0.0, 0.0);
+        if !jac {
+            return (r, [zero; 5]);
+        }
+        let (df, dq) = (1e-3 * f0 / q, 1e-3 * q);
+        let kf = (self.k(f0 + df, q) - self.k(f0 - df, q)) / (2.0 * df) as f32;
+        let kq = (self.k(f0, q + dq) - self.k(f0, q - dq)) / (2.0 * dq) as f32;
+        // The columns of the model `z − g K` (the residual is its negative, as the windows').
+        let cols = [
+            -kf * g * scale[0],
+            -kq * g * scale[1],
+            -k,
+            C32::new(1.0, 0.0),
+            C32::new(0.0, 1.0),
+        ];
+        (r, cols)
+    }
 }
 
 /// `exp(z)` by the `libm` crate's `expf` and [`crate::dsp::trig::sincos`] (`f32` arithmetic
@@ -502,6 +629,7 @@ mod gradcheck {
                 segs: [(f_h, w0, c32(m))].into_iter().collect(),
                 carry: None,
                 wt: 1e14,
+                rest: None,
             };
             let n = evaluate(&pb, &p, true, None).1;
             let (jtj, jtr) = n.unscaled(pb.wt);
