@@ -208,6 +208,6 @@ pub(crate) fn rest_state(f0: f64, q: f64, f_h: f64, d: f64, mirror: C64, filters
         filters: *filters,
         w: 0.0,
     };
-    let k = r.k(f0, q);
+    let k = r.k(f0, q).0;
     C64::new(k.re as f64, k.im as f64)
 }

@@ -175,36 +175,52 @@ impl DriveModel {
     /// (the drive's phase at the switch-on is `−ω d`, the window frame's origin being phase 0),
     /// and the state is `h + T e^{λd}` (`T → −h` in the envelope's limit, `M → 0`, `R → 1`). Ours
     /// from the equation of motion; `hal_sim::plant` integrates the same chain exactly (test
-    /// `the_state_at_switch_on_is_the_resonators_response_from_rest`).
+    /// `the_start_from_rest_is_the_resonators_response`).
     pub(super) fn rest_state(
         &self,
-        f0: f32,
         q: f32,
         f_h: f32,
         d: f32,
         mirror: C32,
         filters: &Filters,
-    ) -> C32 {
+    ) -> (C32, [C32; 2]) {
         use core::f32::consts::PI as PI32;
         let one = C32::new(1.0, 0.0);
         let w = 2.0 * PI32 * f_h;
         let jw = C32::new(0.0, w);
-        let s_p = self.lam + jw;
-        let w_d = 2.0 * PI32 * f0 * crate::dsp::trig::sqrtf((1.0 - 0.25 / (q * q)).max(1e-12));
-        let a = s_p * (2.0 * PI32 * f0 / q) / C32::new(0.0, 2.0 * w_d);
-        // One filter's two poles: the ratio of its response at s_p to that at jω, `1/(1 + λ/(ω_c +
-        // jω))²`, and its phase turn `(H/H̄)(jω) = ((1 − jω/ω_c)/(1 + jω/ω_c))²`.
+        let lam = self.lam;
+        let s_p = lam + jw;
+        // A = s_p (ω0/Q)/(2j ω_d) = s_p c, c = 1/(2j Q sqrt(1 − 1/(4Q²))) (no f0 in c).
+        let root2 = (1.0 - 0.25 / (q * q)).max(1e-12);
+        let c = one / C32::new(0.0, 2.0 * q * crate::dsp::trig::sqrtf(root2));
+        let dc_dq = -c * (1.0 / q + 0.25 / (q * q * q * root2));
+        let a = s_p * c;
+        // One filter's two poles: `r² = 1/(1 + λ/(ω_c + jω))²`, the ratio of its response at
+        // s_p to that at jω, its derivative in λ `−2 r³/(ω_c + jω)`, and its phase turn
+        // `(H/H̄)(jω) = ((1 − jω/ω_c)/(1 + jω/ω_c))²`.
         let pole = |w_c: f32| {
-            let r = one / (one + self.lam / C32::new(w_c, w));
+            let k = one / C32::new(w_c, w);
+            let r = one / (one + lam * k);
             let t = C32::new(1.0, -w / w_c) / C32::new(1.0, w / w_c);
-            (r * r, t * t)
+            (r * r, -r * r * r * k * 2.0, t * t)
         };
-        let (rr, tr) = pole(filters.w_r);
-        let (ra, ta) = pole(filters.w_a);
-        let (s, c) = crate::dsp::trig::sincos(2.0 * w * d);
-        let m = mirror * tr * ta * C32::new(c, s);
-        let t = a * rr * ra * (one / self.lam + m / (self.lam + jw * 2.0));
-        self.h + t * cexp(self.lam * d)
+        let (rr, drr, tr) = pole(filters.w_r);
+        let (ra, dra, ta) = pole(filters.w_a);
+        let (sn, cs) = crate::dsp::trig::sincos(2.0 * w * d);
+        let m = mirror * tr * ta * C32::new(cs, sn);
+        let inv_l = one / lam;
+        let inv_l2 = one / (lam + jw * 2.0);
+        let big_r = rr * ra;
+        let b = inv_l + m * inv_l2;
+        let t = a * big_r * b;
+        let e = cexp(lam * d);
+        // ∂/∂λ of R B, then of the whole: ∂K/∂p = ∂h/∂p + e (∂A/∂p R B + (A ∂(RB)/∂λ + T d) ∂λ/∂p).
+        let d_rb = (drr * ra + rr * dra) * b - big_r * (inv_l * inv_l + m * inv_l2 * inv_l2);
+        let via_lam = a * d_rb + t * d;
+        let rb = big_r * b;
+        let da = [self.dlam[0] * c, self.dlam[1] * c + s_p * dc_dq];
+        let dk = core::array::from_fn(|i| self.dh[i] + e * (da[i] * rb + via_lam * self.dlam[i]));
+        (self.h + t * e, dk)
     }
 }
 
@@ -401,7 +417,7 @@ pub(super) fn evaluate(
         ea = eb;
     }
     if let Some(rest) = &pb.rest {
-        let (r, cols) = rest.residual(p, jac, &scale);
+        let (r, cols) = rest.residual(p, &scale);
         chi2 += rest.w * r.norm_sqr();
         if jac {
             let rw = r * rest.w;
@@ -535,8 +551,8 @@ pub(super) struct RestPrior {
 }
 
 impl RestPrior {
-    /// `K(f0, Q)`: the state from rest per unit `g`.
-    pub(super) fn k(&self, f0: f64, q: f64) -> C32 {
+    /// `K(f0, Q)`: the state from rest per unit `g`, and its derivatives in `f0` and `Q`.
+    pub(super) fn k(&self, f0: f64, q: f64) -> (C32, [C32; 2]) {
         let at = Params {
             f0,
             q,
@@ -544,7 +560,6 @@ impl RestPrior {
             z: C64::new(0.0, 0.0),
         };
         DriveModel::new(&at, self.f_h).rest_state(
-            f0 as f32,
             q as f32,
             self.f_h as f32,
             self.d,
@@ -553,25 +568,16 @@ impl RestPrior {
         )
     }
 
-    /// The prior's residual `g K − z` at `p` and, with `jac`, its columns over (f0, Q, g, Re z,
-    /// Im z), the first two multiplied by `scale` as [`evaluate`]'s (`∂K/∂f0`, `∂K/∂Q` by central
-    /// differences of a thousandth of a linewidth and of `Q`: `K` is smooth on that scale, and
-    /// `f32` keeps the differences to 1e-4 of the derivative).
-    pub(super) fn residual(&self, p: &Params, jac: bool, scale: &[f32; 5]) -> (C32, [C32; 5]) {
-        let (f0, q, g) = (p.f0, p.q, p.g as f32);
-        let k = self.k(f0, q);
+    /// The prior's residual `g K − z` at `p` and its columns over (f0, Q, g, Re z, Im z), the
+    /// first two multiplied by `scale` as [`evaluate`]'s.
+    pub(super) fn residual(&self, p: &Params, scale: &[f32; 5]) -> (C32, [C32; 5]) {
+        let g = p.g as f32;
+        let (k, dk) = self.k(p.f0, p.q);
         let r = k * g - c32(p.z);
-        let zero = C32::new(0.0, 0.0);
-        if !jac {
-            return (r, [zero; 5]);
-        }
-        let (df, dq) = (1e-3 * f0 / q, 1e-3 * q);
-        let kf = (self.k(f0 + df, q) - self.k(f0 - df, q)) / (2.0 * df) as f32;
-        let kq = (self.k(f0, q + dq) - self.k(f0, q - dq)) / (2.0 * dq) as f32;
         // The columns of the model `z − g K` (the residual is its negative, as the windows').
         let cols = [
-            -kf * g * scale[0],
-            -kq * g * scale[1],
+            -dk[0] * g * scale[0],
+            -dk[1] * g * scale[1],
             -k,
             C32::new(1.0, 0.0),
             C32::new(0.0, 1.0),
@@ -598,14 +604,21 @@ mod gradcheck {
     use crate::estimate::resonator::mirror;
 
     /// The analytic gradient of χ² over all five parameters, the mirror image's terms
-    /// included (a rotated drive, a transient far from the fit's point), against central
-    /// differences of χ² (f64 reference on the same windows).
+    /// included (a rotated drive, a transient far from the fit's point), with and without the
+    /// prior on the start from rest (its `∂K/∂f0`, `∂K/∂Q`), against central differences of χ²
+    /// (f64 reference on the same windows).
     #[test]
     fn gradient_matches_finite_differences() {
         let y_s = C64::new(0.0, 0.0);
-        for (f_h, m) in [
-            (241.3, C64::new(1.0, 0.0)),
-            (238.0, mirror(C64::new(0.6, 0.8))),
+        let filters = Filters {
+            w_r: 6283.0,
+            w_a: 5000.0,
+        };
+        for (f_h, m, rest) in [
+            (241.3, C64::new(1.0, 0.0), false),
+            (238.0, mirror(C64::new(0.6, 0.8)), false),
+            (241.3, C64::new(1.0, 0.0), true),
+            (230.0, mirror(C64::new(0.6, 0.8)), true),
         ] {
             let w = synthetic(241.3, 10.4, 1.5e-7, f_h, C64::new(1e-8, 0.0), y_s, 16);
             let w = &w[..16];
@@ -629,7 +642,14 @@ mod gradcheck {
                 segs: [(f_h, w0, c32(m))].into_iter().collect(),
                 carry: None,
                 wt: 1e14,
-                rest: None,
+                // The start from rest 4 ms after the switch-on, weighted as a few windows.
+                rest: rest.then_some(RestPrior {
+                    f_h,
+                    d: 0.004,
+                    mirror: c32(m),
+                    filters,
+                    w: 4.0,
+                }),
             };
             let n = evaluate(&pb, &p, true, None).1;
             let (jtj, jtr) = n.unscaled(pb.wt);

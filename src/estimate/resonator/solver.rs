@@ -78,7 +78,7 @@ impl Problem<'_> {
             ea = eb;
         }
         // The prior on the start state (`g K − z = 0`, weight `w`): two rows `(K, −1, −j)`.
-        let k = self.rest.map(|r| (r.k(f0, q), r.w));
+        let k = self.rest.map(|r| (r.k(f0, q).0, r.w));
         if let Some((k, w)) = k {
             let rows = [[k.re, -1.0, 0.0], [k.im, 0.0, -1.0]];
             for row in rows {
@@ -453,7 +453,7 @@ fn fit_with(
     let cov = n.variances(pb.wt).ok_or(Failure::NoResonance)?;
     // The prior's share of χ² at the fit (its two components count as observations).
     let misfit = pb.rest.as_ref().map_or(0.0, |r| {
-        r.w as f64 * r.residual(&p, false, &n.scale).0.norm_sqr() as f64 * pb.wt
+        r.w as f64 * r.residual(&p, &n.scale).0.norm_sqr() as f64 * pb.wt
     });
     let priors = if pb.rest.is_some() { 3 } else { 1 };
     let dof = (2 * pb.w.len() + priors).saturating_sub(5).max(1) as f64;
