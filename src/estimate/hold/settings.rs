@@ -60,8 +60,8 @@ impl HoldSettings {
         static_conductance: Siemens(0.0),
     };
 
-    /// The fast hold, auto's first stage (`measure::auto_hold`): no seed ring-down; a 16 ms
-    /// first segment at `seed` (the band centre): the filters' settle and three one-cycle windows,
+    /// The fast hold, auto's first stage (`measure::auto_hold`): no seed ring-down; an 11.5 ms
+    /// first segment at `seed` (the band centre): the filters' settle and two one-cycle windows,
     /// whose searched fit — the start state the resonator's response from rest — places the
     /// second; its plan stays open, so that its windows go on while the second's plan passes the
     /// DAC's pipeline; the rest of 120 ms on that estimate; both segments in one fit
@@ -69,13 +69,13 @@ impl HoldSettings {
     pub const FAST: Self = Self {
         seed_burst: Seconds(0.0),
         seed_ring: Seconds(0.0),
-        refine: Seconds(0.016),
+        refine: Seconds(0.0115),
         hold: Seconds(0.12),
         ..Self::DEFAULT
     };
 
     /// The shortest first segment of a hold with no seed driven at `seed` on a front end
-    /// sampling at `fs`: the filters' settle and three of the first segment's windows (the
+    /// sampling at `fs`: the filters' settle and two of the first segment's windows (the
     /// fewest its searched fit takes, [`first_cycles`] each), s.
     pub fn min_first(seed: Hz, fs: Hz) -> Seconds {
         let f = seed.0.max(1.0);

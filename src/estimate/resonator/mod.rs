@@ -37,9 +37,10 @@ use num_complex::Complex64 as C64;
 pub const MAX_WINDOWS: usize = 16;
 
 /// Windows of a hold's first segment with no seed: the fewest its searched fit takes
-/// ([`fit_searched`]; `hold::HoldSettings::min_first`): six numbers for `f0`, `g` and the start
-/// state, with the prior on `Q` (and the start from rest, [`SwitchOn`], when known).
-pub(crate) const FIRST_WINDOWS: usize = 3;
+/// ([`fit_searched`]; `hold::HoldSettings::min_first`): four numbers for `f0`, `g` and the start
+/// state with the start from rest ([`SwitchOn`]) and the prior on `Q`; with the state free,
+/// only a rough placement for the second segment.
+pub(crate) const FIRST_WINDOWS: usize = 2;
 
 /// Whole cycles of the shortest window the engine passes on at `f` Hz sampled at `fs` (a
 /// hold's first segment's, a tracker segment's): the fewest that span half a batch

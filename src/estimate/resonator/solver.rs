@@ -206,17 +206,14 @@ pub fn fit_searched(
 }
 
 /// Largest χ² the prior on the start state may add at the fit before the windows are taken to
-/// disagree with a start from rest: the prior's two components, 6 (χ² of two degrees of freedom
-/// exceeds it 5 % of the time).
-const REST_MISFIT: f64 = 6.0;
+/// disagree with a start from rest: the prior's two components, 16 (a 4σ disagreement; a χ² of
+/// two degrees of freedom exceeds it 3e-4 of the time).
+const REST_MISFIT: f64 = 16.0;
 
 /// The fit over the segments ([`fit_with`]) with the start state from rest when `rest` is
-/// given and the windows agree with it, else with the state free. Windows that disagree with a
-/// start from rest say that the resonator is not the model's alone — a knock or a drive
-/// shortly before left it ringing, or a second mode answers the switch-on (the stability map's
-/// `second-mode`: its background biases `f0` whatever the start) — so the free fit's
-/// uncertainties are scaled by `sqrt(misfit / 2)`, the disagreement per component, as a gross
-/// misfit scales them ([`crate::estimate::gross_scale`]).
+/// given and the windows agree with it, else with the state free ([`HoldFit::at_rest`] false:
+/// the resonator was not at rest, or is not the model's alone — a knock or a drive shortly
+/// before left it ringing, a second mode answers the switch-on).
 fn fit_segments(
     segs: &[Segment],
     carry: Option<&Carry>,
@@ -230,14 +227,6 @@ fn fit_segments(
             if misfit <= REST_MISFIT {
                 return Ok(h);
             }
-            let scale = libm::sqrt(0.5 * misfit);
-            return fit_with(segs, carry, start, q_prior, from, None).map(|(mut h, _)| {
-                let e = &mut h.estimate;
-                e.sigma = Hz(e.sigma.0 * scale as f32);
-                e.q_sigma = e.q_sigma.map(|s| s * scale as f32);
-                h.sigma_q *= scale;
-                h
-            });
         }
     }
     fit_with(segs, carry, start, q_prior, from, None).map(|(h, _)| h)
