@@ -634,28 +634,8 @@ mod tests {
     #[cfg(feature = "sim")]
     #[test]
     fn the_first_segment_keeps_its_windows_while_the_second_is_on_its_way() {
-        use crate::reading::driver::{block_on, run_plans, Plans, SyncSource};
-        struct P(Hold, FrontEndScale);
-        impl Plans for P {
-            fn next_plan(&mut self) -> Option<PointPlan> {
-                self.0.next_plan()
-            }
-            fn accept(&mut self, raw: &PointRaw) -> Option<crate::engine::sweep::SweepPoint> {
-                self.0.accept(raw, &self.1);
-                None
-            }
-            fn is_complete(&self) -> bool {
-                self.0.is_complete()
-            }
-        }
         let scene = hal_sim::Scene::on_modulus_kpa(500.0).with_noise(hal_sim::NoiseScene::Bench);
-        let mut board = crate::board::sim::SimBoard::new(hal_sim::SimProbe::new(scene, 3));
-        let scale = crate::hal::SampleStream::scale(&board);
-        let mut engine = crate::engine::SampleEngine::new();
-        let mut src = SyncSource::new(&mut board, &mut engine);
-        let mut m = P(HoldSettings::FAST.validate(&scale).unwrap(), scale);
-        assert!(block_on(run_plans(&mut src, &mut m, |_, _| {})).is_ok());
-        let h = &m.0;
+        let h = &run_fast(scene, 3);
         assert!(h.estimate().is_ok(), "{:?}", h.estimate());
         let first = &h.windows()[..h.first_len as usize];
         assert!(first.len() > FIRST_WINDOWS, "{} windows", first.len());

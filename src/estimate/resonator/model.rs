@@ -404,15 +404,7 @@ pub(super) fn evaluate(
                 e * m.dz[3] + ib * (m.dz[3] * ea).conj(),
                 e * m.dz[4] + ib * (m.dz[4] * ea).conj(),
             ];
-            let rw = r * x.wl;
-            for i in 0..5 {
-                let ci = cols[i];
-                jtr32[i] += ci.re * rw.re + ci.im * rw.im;
-                let cw = ci * x.wl;
-                for j in 0..=i {
-                    jtj32[i][j] += cw.re * cols[j].re + cw.im * cols[j].im;
-                }
-            }
+            add_row(&mut jtj32, &mut jtr32, &cols, r, x.wl);
         }
         ea = eb;
     }
@@ -420,15 +412,7 @@ pub(super) fn evaluate(
         let (r, cols) = rest.residual(p, &scale);
         chi2 += rest.w * r.norm_sqr();
         if jac {
-            let rw = r * rest.w;
-            for i in 0..5 {
-                let ci = cols[i];
-                jtr32[i] += ci.re * rw.re + ci.im * rw.im;
-                let cw = ci * rest.w;
-                for j in 0..=i {
-                    jtj32[i][j] += cw.re * cols[j].re + cw.im * cols[j].im;
-                }
-            }
+            add_row(&mut jtj32, &mut jtr32, &cols, r, rest.w);
         }
     }
     let normal = Normal {
@@ -437,6 +421,22 @@ pub(super) fn evaluate(
         scale,
     };
     (chi2 as f64 * wt, normal)
+}
+
+/// One complex residual `r` with its columns `cols` and weight `w` into the normal equations'
+/// lower triangle `jtj` and `jtr` (its real and imaginary parts two rows).
+#[inline(always)]
+#[allow(clippy::needless_range_loop)] // the triangle's indices
+fn add_row(jtj: &mut [[f32; 5]; 5], jtr: &mut [f32; 5], cols: &[C32; 5], r: C32, w: f32) {
+    let rw = r * w;
+    for i in 0..5 {
+        let ci = cols[i];
+        jtr[i] += ci.re * rw.re + ci.im * rw.im;
+        let cw = ci * w;
+        for j in 0..=i {
+            jtj[i][j] += cw.re * cols[j].re + cw.im * cols[j].im;
+        }
+    }
 }
 
 /// The normal equations of the fit over (f0, Q, g, Re z, Im z) in `f32`, each column of the
