@@ -459,6 +459,8 @@ mod tests {
         let s = super::scale_of(&hal_sim::FrontEnd::default());
         let p = FrontEndScale::PROBE;
         assert_eq!(s.sample_rate, p.sample_rate);
+        assert_eq!(s.reconstruction_corner, p.reconstruction_corner);
+        assert_eq!(s.antialias_corner, p.antialias_corner);
         for (a, b) in [
             (s.drive_volts_per_code, p.drive_volts_per_code),
             (s.amps_per_code, p.amps_per_code),
