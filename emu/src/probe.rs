@@ -243,8 +243,13 @@ mod tests {
         };
         let mut p = Peripherals::default();
         p.wiring = Box::new(HalSimProbe::new(scene, 1));
-        p.write(0x4002_1000 + crate::periph::rcc::AHB2ENR, 4, 1 << 1, 0)
-            .unwrap();
+        p.write(
+            0x4002_1000 + crate::periph::rcc::Enr::Ahb2.offset(),
+            4,
+            1 << 1,
+            0,
+        )
+        .unwrap();
         // MODER: PB4 input, PB5 output (the rest at reset); PUPDR: PB4 pull-up.
         let moder = p.read(GPIOB, 4, 0).unwrap();
         let moder = (moder & !(0xF << 8)) | (1 << 10);

@@ -61,31 +61,31 @@ enum Dev {
     Syscfg,
 }
 
-/// A clock gate: the enable register's offset in RCC and the bit.
-type Gate = Option<(u32, u32)>;
+/// A clock gate: the enable register and the bit.
+type Gate = Option<(rcc::Enr, u32)>;
 
 fn route(addr: u32) -> Option<(Dev, u32, Gate)> {
-    use rcc::{AHB1ENR, AHB2ENR, APB1ENR1, APB1ENR2};
+    use rcc::Enr::{Ahb1, Ahb2, Apb1r1, Apb1r2, Apb2};
     let (dev, base, gate) = match addr {
-        0x4000_1000..=0x4000_13FF => (Dev::Tim6, 0x4000_1000, Some((APB1ENR1, 4))),
-        0x4001_0000..=0x4001_002F => (Dev::Syscfg, 0x4001_0000, Some((rcc::APB2ENR, 0))),
-        0x4000_8000..=0x4000_83FF => (Dev::Lpuart1, 0x4000_8000, Some((APB1ENR2, 0))),
-        0x4002_0000..=0x4002_03FF => (Dev::Dma1, 0x4002_0000, Some((AHB1ENR, 0))),
-        0x4002_0800..=0x4002_0BFF => (Dev::Dmamux1, 0x4002_0800, Some((AHB1ENR, 2))),
-        0x5000_0000..=0x5000_00FF => (Dev::Adc(0), 0x5000_0000, Some((AHB2ENR, 13))),
-        0x5000_0100..=0x5000_01FF => (Dev::Adc(1), 0x5000_0100, Some((AHB2ENR, 13))),
-        0x5000_0300..=0x5000_03FF => (Dev::AdcCommon, 0x5000_0300, Some((AHB2ENR, 13))),
-        0x5000_0800..=0x5000_0BFF => (Dev::Dac1, 0x5000_0800, Some((AHB2ENR, 16))),
+        0x4000_1000..=0x4000_13FF => (Dev::Tim6, 0x4000_1000, Some((Apb1r1, 4))),
+        0x4001_0000..=0x4001_002F => (Dev::Syscfg, 0x4001_0000, Some((Apb2, 0))),
+        0x4000_8000..=0x4000_83FF => (Dev::Lpuart1, 0x4000_8000, Some((Apb1r2, 0))),
+        0x4002_0000..=0x4002_03FF => (Dev::Dma1, 0x4002_0000, Some((Ahb1, 0))),
+        0x4002_0800..=0x4002_0BFF => (Dev::Dmamux1, 0x4002_0800, Some((Ahb1, 2))),
+        0x5000_0000..=0x5000_00FF => (Dev::Adc(0), 0x5000_0000, Some((Ahb2, 13))),
+        0x5000_0100..=0x5000_01FF => (Dev::Adc(1), 0x5000_0100, Some((Ahb2, 13))),
+        0x5000_0300..=0x5000_03FF => (Dev::AdcCommon, 0x5000_0300, Some((Ahb2, 13))),
+        0x5000_0800..=0x5000_0BFF => (Dev::Dac1, 0x5000_0800, Some((Ahb2, 16))),
         0x4000_3000..=0x4000_33FF => (Dev::Iwdg, 0x4000_3000, None),
-        0x4000_7000..=0x4000_73FF => (Dev::Pwr, 0x4000_7000, Some((APB1ENR1, 28))),
+        0x4000_7000..=0x4000_73FF => (Dev::Pwr, 0x4000_7000, Some((Apb1r1, 28))),
         0x4002_1000..=0x4002_13FF => (Dev::Rcc, 0x4002_1000, None),
-        0x4002_2000..=0x4002_23FF => (Dev::Flash, 0x4002_2000, Some((AHB1ENR, 8))),
+        0x4002_2000..=0x4002_23FF => (Dev::Flash, 0x4002_2000, Some((Ahb1, 8))),
         0x4800_0000..=0x4800_1BFF => {
             let n = ((addr - 0x4800_0000) / 0x400) as usize;
             (
                 Dev::Gpio(n),
                 0x4800_0000 + 0x400 * n as u32,
-                Some((AHB2ENR, n as u32)),
+                Some((Ahb2, n as u32)),
             )
         }
         0x1FFF_7000..=0x1FFF_7FFF => (Dev::Otp, 0x1FFF_7000, None),
@@ -608,7 +608,7 @@ impl Peripherals {
     pub fn flash_write(&mut self, array: &[u8], addr: u32, size: usize, value: u64, now: u64) {
         let t = self.clock_seconds(now);
         let off = (addr - crate::machine::FLASH_BASE) as usize;
-        if !self.rcc.enabled(rcc::AHB1ENR, 8) {
+        if !self.rcc.enabled(rcc::Enr::Ahb1, 8) {
             self.violate(
                 now,
                 format!("flash write at {addr:#010x} with FLASHEN clear"),
@@ -635,7 +635,7 @@ impl Peripherals {
             route(addr).ok_or_else(|| "no peripheral model at this address".to_string())?;
         if let Some((reg, bit)) = gate {
             if !self.rcc.enabled(reg, bit) {
-                self.violate(now, format!("read of {dev:?} (+{off:#x}) with its clock off (RCC {reg:#x} bit {bit}): RM0440 RCC, peripheral clock enable registers"));
+                self.violate(now, format!("read of {dev:?} (+{off:#x}) with its clock off (RCC {:#x} bit {bit}): RM0440 RCC, peripheral clock enable registers", reg.offset()));
                 return Ok(0);
             }
         }
@@ -710,7 +710,7 @@ impl Peripherals {
             route(addr).ok_or_else(|| "no peripheral model at this address".to_string())?;
         if let Some((reg, bit)) = gate {
             if !self.rcc.enabled(reg, bit) {
-                self.violate(now, format!("write of {v:#x} to {dev:?} (+{off:#x}) with its clock off (RCC {reg:#x} bit {bit}): RM0440 RCC, peripheral clock enable registers"));
+                self.violate(now, format!("write of {v:#x} to {dev:?} (+{off:#x}) with its clock off (RCC {:#x} bit {bit}): RM0440 RCC, peripheral clock enable registers", reg.offset()));
                 return Ok(());
             }
         }

@@ -23,16 +23,45 @@ pub const HSI_HZ: f64 = 16e6;
 /// The NUCLEO-G474RE's HSE crystal (X3), Hz.
 pub const HSE_HZ: f64 = 24e6;
 
-/// Peripheral clock enable registers' offsets.
-pub const AHB1ENR: u32 = 0x48;
-/// AHB2ENR.
-pub const AHB2ENR: u32 = 0x4C;
-/// APB1ENR1.
-pub const APB1ENR1: u32 = 0x58;
-/// APB1ENR2.
-pub const APB1ENR2: u32 = 0x5C;
-/// APB2ENR.
-pub const APB2ENR: u32 = 0x60;
+/// A peripheral clock enable register (RM0440 7.4: RCC_AHB1ENR … RCC_APB2ENR), in the order
+/// of [`Rcc::enr`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Enr {
+    /// AHB1ENR (DMA1, DMAMUX1, FLASH).
+    Ahb1,
+    /// AHB2ENR (GPIO, ADC12, DAC1).
+    Ahb2,
+    /// AHB3ENR.
+    Ahb3,
+    /// APB1ENR1 (TIM6, PWR).
+    Apb1r1,
+    /// APB1ENR2 (LPUART1).
+    Apb1r2,
+    /// APB2ENR (SYSCFG).
+    Apb2,
+}
+
+impl Enr {
+    /// Every enable register, in the order of [`Rcc::enr`].
+    pub const ALL: [Enr; 6] = [
+        Enr::Ahb1,
+        Enr::Ahb2,
+        Enr::Ahb3,
+        Enr::Apb1r1,
+        Enr::Apb1r2,
+        Enr::Apb2,
+    ];
+
+    /// The register's offset in RCC.
+    pub fn offset(self) -> u32 {
+        [0x48, 0x4C, 0x50, 0x58, 0x5C, 0x60][self as usize]
+    }
+
+    /// The enable register at offset `off`, if it is one.
+    pub fn at(off: u32) -> Option<Enr> {
+        Self::ALL.into_iter().find(|r| r.offset() == off)
+    }
+}
 
 /// The RCC's registers.
 #[derive(Clone, Debug)]
@@ -49,7 +78,7 @@ pub struct Rcc {
     pub cier: u32,
     /// Reset registers AHB1/2/3, APB1R1/R2, APB2 (0x28, 0x2C, 0x30, 0x38, 0x3C, 0x40).
     pub rstr: [u32; 6],
-    /// Enable registers at 0x48, 0x4C, 0x50, 0x58, 0x5C, 0x60 (index by [`Rcc::enr_index`]).
+    /// Enable registers, in the order of [`Enr`] (index by [`Rcc::enr_index`]).
     pub enr: [u32; 6],
     /// Sleep-mode enables (stored).
     pub smenr: [u32; 6],
@@ -122,20 +151,12 @@ pub fn apb_div(ppre: u32) -> u32 {
 impl Rcc {
     /// Index into `enr`/`rstr`-like arrays for an enable register offset.
     pub fn enr_index(off: u32) -> Option<usize> {
-        match off {
-            0x48 => Some(0),
-            0x4C => Some(1),
-            0x50 => Some(2),
-            0x58 => Some(3),
-            0x5C => Some(4),
-            0x60 => Some(5),
-            _ => None,
-        }
+        Enr::at(off).map(|r| r as usize)
     }
 
-    /// Is bit `bit` of the enable register at `off` set?
-    pub fn enabled(&self, off: u32, bit: u32) -> bool {
-        Self::enr_index(off).is_some_and(|i| self.enr[i] & (1 << bit) != 0)
+    /// Is bit `bit` of the enable register `reg` set?
+    pub fn enabled(&self, reg: Enr, bit: u32) -> bool {
+        self.enr[reg as usize] & (1 << bit) != 0
     }
 
     /// SYSCLK source from SWS (= SW: the switch completes at once): 1 HSI16, 2 HSE, 3 PLL.
