@@ -1,5 +1,5 @@
 // Windows of arbitrary content for the continuous tracker's tests: included (`include!`) by
-// the unit tests of src/instrument/continuous.rs and by tests/stream.rs, which import
+// the unit tests of src/instrument/continuous/mod.rs and by tests/stream.rs, which import
 // `ChannelSums`, `LockInSums`, `ReferenceSums`, `PointPlan` and `PointRaw` from the crate.
 
 /// A small xorshift generator of 64-bit words from `x` (not zero).

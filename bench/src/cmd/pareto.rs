@@ -995,7 +995,7 @@ fn stream_summary(streams: &[StreamRow], seeds: usize) -> String {
     let _ = writeln!(
         s,
         "\n### continuous tracker (`probe-bench stream`)\n\n\
-         The core's tracker (`src/instrument/continuous.rs`) as `probe-bench stream --segment-s T` streams: \
+         The core's tracker (`src/instrument/continuous/mod.rs`) as `probe-bench stream --segment-s T` streams: \
          {seeds} streams of {STREAM_SECONDS} s per cell (noise seeds 0–{}), the readings that end \
          after the first {STREAM_SETTLE_S} s; the unit calibrated with hold (the stream's \
          readings are hold's motional resonance). One reading per segment (\"12 × 4\": segments \

@@ -304,7 +304,7 @@ fn stream_section(cases: &[StreamCase], rows: &[StreamRow], seeds: u64) -> Strin
     let _ = writeln!(
         md,
         "\n### continuous mode (`probe-bench stream`)\n\n\
-         The default tracker (`src/instrument/continuous.rs`) with the unit of the hold column, noise seeds \
+         The default tracker (`src/instrument/continuous/mod.rs`) with the unit of the hold column, noise seeds \
          {}–{}; every reading classed as above (an `ok` within 3 σ of the truth under the probe \
          at the start or the end of its probe time is correct; any other `ok` is a silent wrong \
          number; a failure code is correct during the acquisition (the first {STREAM_SETTLE_S} s), \
