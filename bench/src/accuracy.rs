@@ -81,7 +81,7 @@ impl Options {
             noise_moduli: vec![500.0],
             noise_seeds: 8,
             bias_moduli: vec![350.0, 700.0],
-            seeds: 4,
+            seeds: 8,
             preload_moduli: vec![279.0],
             forces: vec![0.015, 0.030, 0.050],
             drifts_hz: vec![0.5],

@@ -110,9 +110,9 @@ fn measured_terms_agree_with_their_predictions() {
 /// resonance (measured here from a reading with the free resonance moved by 0.1 Hz), at 300,
 /// 1000 and 2500 kPa in the bench noise (the same noise stream in every reading, so it cancels
 /// in the differences; the quiet front end's noise-free windows read a drift as interference):
-/// within 0.07 of 0.63. The drift moves a 0.13 s reading by only 0.05 Hz, and where its second
-/// segment lands moves with it: the epochs measured scatter by ±0.06 about their mean (0.57 to
-/// 0.69). The reference is the simulator's drift, not the allowance's formula.
+/// within 0.07 of `DRIFT_EPOCH`. The drift moves a 0.13 s reading by only 0.05 Hz, and where its
+/// second segment lands moves with it: the epochs measured scatter by ±0.06 about their mean.
+/// The reference is the simulator's drift, not the allowance's formula.
 #[test]
 fn a_steady_drift_moves_the_reading_by_its_epoch() {
     use hal_sim::{NoiseScene, Scene};

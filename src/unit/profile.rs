@@ -150,11 +150,11 @@ pub const FREE_RESONANCE_DRIFT_HZ_S: f32 = 0.3;
 
 /// Where in its probe time a reading's resonance lies, as a fraction of it: the
 /// information-weighted epoch of the default method (a steady drift of the free resonance moves
-/// auto's reading by `DRIFT_EPOCH × rate × probe time`; measured 0.57–0.69 over 300–2500 kPa,
-/// test `bench/tests/accuracy.rs::a_steady_drift_moves_the_reading_by_its_epoch`). Uniform weighting
+/// auto's reading by `DRIFT_EPOCH × rate × probe time`: the mean over 300–2500 kPa of what
+/// `bench/tests/accuracy.rs::a_steady_drift_moves_the_reading_by_its_epoch` measures). Uniform weighting
 /// would give 0.5; hold's information builds up with the response, so its later windows weigh
 /// more.
-pub const DRIFT_EPOCH: f32 = 0.63;
+pub const DRIFT_EPOCH: f32 = 0.60;
 
 /// The free resonance's allowance of a reading that took `probe_time`:
 /// [`FREE_RESONANCE_ALLOWANCE`] and [`FREE_RESONANCE_DRIFT_HZ_S`] × [`DRIFT_EPOCH`] ×
