@@ -131,7 +131,11 @@ pub(crate) fn check_stream_args(a: &crate::cmd::stream::StreamArgs, board: &str)
 /// The image's `stream` command line for these options (`check_stream_args` passed).
 pub(crate) fn stream_line(a: &crate::cmd::stream::StreamArgs) -> String {
     let t = &a.tracker;
-    format!("stream {} {} {}", a.seconds, t.segment_s, t.plan_segments)
+    // The segment as the image's `f32` takes it (the shortest text that reads back to it).
+    format!(
+        "stream {} {} {}",
+        a.seconds, t.segment_s as f32, t.plan_segments
+    )
 }
 
 /// The one stream an image logged, its readings with `t_s` from `origin` (probe time, s: when

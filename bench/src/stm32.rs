@@ -281,9 +281,8 @@ pub fn stream(a: &StreamArgs, target: &Target, noise: NoiseScene) -> Result<Vec<
             "probe-bench stream --stm32: the STM32 image on the emulated NUCLEO-G474RE, {}",
             target.describe()
         );
-        println!("  session: air in free air, weigh {WEIGHT_G} g, calibrate add on A–E, calibrate fit, stream {} s; scene changes (s after the command): {changes:?}", a.seconds);
+        println!("  session: air in free air, weigh {WEIGHT_G} g, calibrate add on A–E, calibrate fit, `{line}`; scene changes (s after the command): {changes:?}");
     }
-    let line = format!("stream {}", a.seconds);
     let r = run(&events, a.noise.seed, a.out.json)?;
     let origin = r
         .sent_at_probe_s(&line)
