@@ -609,3 +609,32 @@ fn stream_is_refused_while_the_selftest_fails() {
         Some(Event::Refused(Refusal::SelfTest(_)))
     ));
 }
+
+/// `stream`'s tracker settings outside the tracker's ranges (`TrackerConfig::validate`: segment
+/// 8–1000 ms, 1–8 segments a plan) are refused as settings before any reading is taken.
+#[test]
+fn stream_tracker_settings_out_of_range_are_refused_before_it_runs() {
+    use pzt_probe::engine::sweep::SettingsError;
+    use pzt_probe::instrument::command::CommandError;
+    let mut io = SimIo::with_factory();
+    let mut s = boot(&mut io);
+    for line in [
+        "stream 1 0.005",
+        "stream 1 1.5",
+        "stream 1 0.012 0",
+        "stream 1 0.012 9",
+    ] {
+        let before = io.events.len();
+        assert!(!send(&mut s, &mut io, line), "{line}");
+        let new = io.events.get(before..).unwrap_or_default();
+        assert!(
+            matches!(
+                new,
+                [Event::Refused(Refusal::Settings(CommandError::Settings(
+                    SettingsError::KnobOutOfRange
+                )))]
+            ),
+            "{line}: {new:?}"
+        );
+    }
+}

@@ -110,10 +110,10 @@ fn run_lines(
 }
 
 /// The `stream` options an image can take (`board`: `--qemu` or `--stm32`, for the message):
-/// its default tracker, no knocks, a lift-off as a step, the command's range of seconds.
+/// the tracker's segment and segments a plan (the others the default's), no knocks, a lift-off as a step, the command's range of seconds.
 pub(crate) fn check_stream_args(a: &crate::cmd::stream::StreamArgs, board: &str) -> Result<()> {
-    if !a.tracker.is_default() {
-        bail!("with {board} the image streams with its default tracker (no --segment-s, --plan-segments, --drift-hz-s, --dither, --q-prior)");
+    if !a.tracker.is_image_settable() {
+        bail!("with {board} the image's tracker takes --segment-s and --plan-segments only (no --drift-hz-s, --dither, --q-prior)");
     }
     if a.knocks_hz.is_some() {
         bail!("with {board} there are no knocks (the image's board has no knock)");
@@ -126,6 +126,16 @@ pub(crate) fn check_stream_args(a: &crate::cmd::stream::StreamArgs, board: &str)
         bail!("with {board} --seconds must be in [{lo}, {hi}]");
     }
     Ok(())
+}
+
+/// The image's `stream` command line for these options (`check_stream_args` passed).
+pub(crate) fn stream_line(a: &crate::cmd::stream::StreamArgs) -> String {
+    let t = &a.tracker;
+    // The segment as the image's `f32` takes it (the shortest text that reads back to it).
+    format!(
+        "stream {} {} {}",
+        a.seconds, t.segment_s as f32, t.plan_segments
+    )
 }
 
 /// The one stream an image logged, its readings with `t_s` from `origin` (probe time, s: when
@@ -198,7 +208,7 @@ pub fn stream(
             _ => bail!("with --qemu --touch-at-s needs a --phantom"),
         }
     }
-    lines.push(format!("stream {}", a.seconds));
+    lines.push(stream_line(a));
     let (log, session) = run_lines("stream", target, &lines, a.out.json)?;
     stream_readings(&log, &session, a.out.json, None)
 }

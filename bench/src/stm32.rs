@@ -267,10 +267,9 @@ pub fn stream(a: &StreamArgs, target: &Target, noise: NoiseScene) -> Result<Vec<
         changes.push((p.at_s, scene_name(&under, p.to_fraction * preload)?));
     }
     changes.sort_by(|x, y| x.0.total_cmp(&y.0));
+    let line = crate::qemu::stream_line(a);
     let mut events = user_path(Method::Auto, &Method::Auto.default_settings())?;
-    events
-        .scene("done+0.5", &on)
-        .send("+0.5", &format!("stream {}", a.seconds));
+    events.scene("done+0.5", &on).send("+0.5", &line);
     // (`stream_readings` finds the command by this line.)
     let mut last = 0.0;
     for (t, name) in &changes {
@@ -282,9 +281,8 @@ pub fn stream(a: &StreamArgs, target: &Target, noise: NoiseScene) -> Result<Vec<
             "probe-bench stream --stm32: the STM32 image on the emulated NUCLEO-G474RE, {}",
             target.describe()
         );
-        println!("  session: air in free air, weigh {WEIGHT_G} g, calibrate add on A–E, calibrate fit, stream {} s; scene changes (s after the command): {changes:?}", a.seconds);
+        println!("  session: air in free air, weigh {WEIGHT_G} g, calibrate add on A–E, calibrate fit, `{line}`; scene changes (s after the command): {changes:?}");
     }
-    let line = format!("stream {}", a.seconds);
     let r = run(&events, a.noise.seed, a.out.json)?;
     let origin = r
         .sent_at_probe_s(&line)

@@ -28,11 +28,12 @@
 //! | `store` | write calibration and air reference to flash |
 //! | `status` | report settings, calibration and counters |
 //! | `selftest` | run the self-test of the analog chain (as at power-on); readings are refused while it fails |
-//! | `stream <seconds>` | read continuously (0.1–600 s): numbered, time-stamped readings ([`crate::instrument::continuous`]) |
+//! | `stream <seconds> [<segment_s> [<plan_segments>]]` | read continuously (0.1–600 s): numbered, time-stamped readings ([`crate::instrument::continuous`]); the tracker's segment length and segments per plan default to [`TrackerConfig::DEFAULT`]'s and are validated by [`TrackerConfig::validate`] before the stream starts |
 
 use crate::engine::sweep::{SettingsError, SweepSettings};
 use crate::estimate::staged::StagedSettings;
 use crate::hal::FrontEndScale;
+use crate::instrument::continuous::TrackerConfig;
 use crate::loadcell::ForceWindow;
 use crate::reading::{Method, Settings};
 use crate::units::{Hz, KPa, Newtons, Seconds, Volts};
@@ -87,9 +88,34 @@ pub enum Command {
     /// Take the load cell's sensitivity from this known weight resting on the tip
     /// (`weigh <grams>`, after an air reference gave the zero).
     Weigh(Newtons),
-    /// Read continuously for this long ([`crate::instrument::continuous`]): numbered, time-stamped readings
-    /// until then.
-    Stream(Seconds),
+    /// Read continuously ([`crate::instrument::continuous`]): numbered, time-stamped readings
+    /// until the request's time is over.
+    Stream(StreamRequest),
+}
+
+/// What `stream` asks for: how long, and the tracker's settings it may set (the others are
+/// [`TrackerConfig::DEFAULT`]'s). The tracker's ranges are checked by [`TrackerConfig::validate`]
+/// when the stream is served, before it starts.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StreamRequest {
+    /// How long to stream.
+    pub seconds: Seconds,
+    /// [`TrackerConfig::segment`].
+    pub segment: Seconds,
+    /// [`TrackerConfig::plan_segments`].
+    pub plan_segments: u8,
+}
+
+impl StreamRequest {
+    /// The tracker's settings this request asks for.
+    pub fn tracker(&self) -> TrackerConfig {
+        TrackerConfig {
+            segment: self.segment,
+            plan_segments: self.plan_segments,
+            ..TrackerConfig::DEFAULT
+        }
+    }
 }
 
 /// Known weights `weigh` takes, grams: from 1 g (10 mN, a tenth of the window's top) to the
@@ -356,7 +382,7 @@ pub fn parse(line: &[u8], scale: &FrontEndScale) -> Result<Command, CommandError
         "calibrate" => calibrate(args),
         "force" => force_window(args),
         "weigh" => one_in(args, WEIGH_GRAMS).map(|g| Command::Weigh(Newtons(g * NEWTONS_PER_GRAM))),
-        "stream" => one_in(args, STREAM_SECONDS).map(|t| Command::Stream(Seconds(t))),
+        "stream" => stream(args),
         _ => Err(CommandError::UnknownCommand),
     }
 }
@@ -399,6 +425,29 @@ fn one_in(args: &[&str], (lo, hi): (f32, f32)) -> Result<f32, CommandError> {
     } else {
         Err(CommandError::OutOfRange)
     }
+}
+
+/// `stream <seconds> [<segment_s> [<plan_segments>]]`.
+fn stream(args: &[&str]) -> Result<Command, CommandError> {
+    let (head, rest) = args.split_at(args.len().min(1));
+    let seconds = Seconds(one_in(head, STREAM_SECONDS)?);
+    let d = TrackerConfig::DEFAULT;
+    let segment = match rest.first() {
+        Some(w) => Seconds(number(w)?),
+        None => d.segment,
+    };
+    let plan_segments = match rest.get(1) {
+        Some(w) => count(number(w)?)?,
+        None => d.plan_segments,
+    };
+    if rest.len() > 2 {
+        return Err(CommandError::TooManyArguments);
+    }
+    Ok(Command::Stream(StreamRequest {
+        seconds,
+        segment,
+        plan_segments,
+    }))
 }
 
 /// `sweep <start_hz> <stop_hz> <step_hz> <settle_s> <integrate_s> <drive_v>`.
@@ -527,11 +576,27 @@ mod tests {
     #[test]
     fn stream_takes_its_seconds_within_range() {
         use CommandError::*;
+        let d = TrackerConfig::DEFAULT;
+        let stream = |seconds, segment, plan_segments| {
+            Command::Stream(StreamRequest {
+                seconds: Seconds(seconds),
+                segment: Seconds(segment),
+                plan_segments,
+            })
+        };
         check(&[
-            ("stream 3", Ok(Command::Stream(Seconds(3.0)))),
-            ("stream 0.1", Ok(Command::Stream(Seconds(0.1)))),
+            ("stream 3", Ok(stream(3.0, d.segment.0, d.plan_segments))),
+            ("stream 0.1", Ok(stream(0.1, d.segment.0, d.plan_segments))),
+            ("stream 3 0.012", Ok(stream(3.0, 0.012, d.plan_segments))),
+            ("stream 3 0.012 4", Ok(stream(3.0, 0.012, 4))),
             ("stream", Err(MissingArgument)),
-            ("stream 3 4", Err(TooManyArguments)),
+            ("stream 3 0.012 4 5", Err(TooManyArguments)),
+            ("stream 3 x", Err(BadNumber)),
+            ("stream 3 nan", Err(BadNumber)),
+            ("stream 3 0.012 nan", Err(BadNumber)),
+            ("stream 3 0.012 2.5", Err(OutOfRange)),
+            ("stream 3 0.012 -1", Err(OutOfRange)),
+            ("stream 3 0.012 256", Err(OutOfRange)),
             ("stream x", Err(BadNumber)),
             ("stream nan", Err(BadNumber)),
             ("stream 0.05", Err(OutOfRange)),

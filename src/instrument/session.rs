@@ -10,8 +10,8 @@
 
 use crate::boot::BootError;
 use crate::engine::sweep::SweepPoint;
-use crate::instrument::command::{Command, CommandError};
-use crate::instrument::continuous::{StreamReading, TrackerConfig};
+use crate::instrument::command::{Command, CommandError, StreamRequest};
+use crate::instrument::continuous::StreamReading;
 use crate::instrument::selftest::{self, SelfTestFault, SelfTestReport};
 use crate::loadcell::{ForceWindow, LoadCellCal, RawForce};
 use crate::reading::driver::{read, PointSource, Stop};
@@ -78,7 +78,7 @@ pub enum Event {
     Refused(Refusal),
     /// The commands, the methods and the default method.
     Help,
-    /// A reading of a continuous stream (`stream <seconds>`), handed on without waiting:
+    /// A reading of a continuous stream (`stream`), handed on without waiting:
     /// one the report channel had no room for is dropped (its `seq` is missing).
     Stream(StreamReading),
     /// A stream ended.
@@ -392,7 +392,7 @@ impl Session {
                 io.emit(Event::Help).await;
                 true
             }
-            Command::Stream(t) => self.stream(io, t).await,
+            Command::Stream(r) => self.stream(io, r).await,
             Command::Reload => {
                 // Discards unsaved changes, not the self-test's verdict on the hardware.
                 let selftest = self.selftest;
@@ -527,17 +527,21 @@ impl Session {
         }
     }
 
-    /// `stream <seconds>`: the continuous tracker ([`crate::instrument::continuous`]) with its default
-    /// configuration and the session's profile, until a reading ends `seconds` after the
-    /// start. Every reading is offered to the outside world without waiting
+    /// `stream <seconds> [<segment_s> [<plan_segments>]]`: the continuous tracker
+    /// ([`crate::instrument::continuous`]) with the request's configuration
+    /// ([`StreamRequest::tracker`], validated before anything runs; refused as a settings error)
+    /// and the session's profile, until a reading ends `seconds` after the start. Every reading is offered to the outside world without waiting
     /// ([`Io::try_emit`]): the tracker's plans and the sample interrupt never wait on a slow
     /// host; a reading that finds no room is dropped and counted (its `seq` is missing from
     /// the log). True when any reading was `ok`.
-    async fn stream<I: Io>(&mut self, io: &mut I, seconds: Seconds) -> bool {
+    async fn stream<I: Io>(&mut self, io: &mut I, request: StreamRequest) -> bool {
         let scale = io.scale();
         // Built in place (out of line): not a 4 KiB temporary in the task's frame.
         let mut slot = None;
-        if let Err(e) = TrackerConfig::DEFAULT.validate_into(&scale, &self.profile, &mut slot) {
+        if let Err(e) = request
+            .tracker()
+            .validate_into(&scale, &self.profile, &mut slot)
+        {
             let why = Refusal::Settings(CommandError::Settings(e));
             io.emit(Event::Refused(why)).await;
             return false;
@@ -547,7 +551,7 @@ impl Session {
         };
         let fs = scale.sample_rate.0 as f64;
         let start = io.now_sample() as f64 / fs;
-        let end = start + seconds.0 as f64;
+        let end = start + request.seconds.0 as f64;
         let (mut ok, mut dropped) = (0u32, 0u32);
         let _ = io.take_plan_work();
         let readings =

@@ -168,12 +168,11 @@ impl TrackerArgs {
         }
     }
 
-    /// True when every setting is the default's, as given (not rounded to the core's `f32`).
-    pub fn is_default(&self) -> bool {
+    /// True when every setting the firmware's `stream` command cannot take (all but the
+    /// segment and the segments a plan) is the default's, as given (not rounded to `f32`).
+    pub fn is_image_settable(&self) -> bool {
         let d = TrackerConfig::DEFAULT;
-        self.segment_s == d.segment.0 as f64
-            && self.plan_segments == d.plan_segments
-            && self.drift_hz_s == d.drift as f64
+        self.drift_hz_s == d.drift as f64
             && self.dither == d.dither as f64
             && self.q_prior == d.q_prior as f64
     }
