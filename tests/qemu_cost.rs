@@ -51,9 +51,8 @@ struct Known {
 const KNOWN_OVER_BUDGET: &[Known] = &[Known {
     method: "auto",
     why: "its first stage, the fast hold, does about the work of the seeded hold it replaced \
-          (accept 0.31-0.36 M instructions: the windows' solves and both fits; finish 0.21-0.23 M: \
-          the pipeline's inversion) in a third of the probe time (0.13 s): 2.55-2.81 % of the \
-          core, measured 2026-11-27",
+          (its fits 0.32-0.38 M instructions, the pipeline's inversion 0.16 M) in a third of the \
+          probe time (0.13 s): 2.1-2.6 % of the core, measured 2026-11-24",
     reading_pct: 3.2,
     // Its calls stay within the general bound (the sweep-G fallback's 14 ms at 60 kPa).
     call_us: CALL_MAX_US,

@@ -76,8 +76,6 @@ pub fn scale_of(fe: &hal_sim::FrontEnd) -> FrontEndScale {
         drive_volts_per_code: (fe.drive_gain * fe.vref_v / hal_sim::frontend::CODES) as f32,
         amps_per_code: fe.amps_per_code() as f32,
         monitor_volts_per_code: fe.monitor_volts_per_code() as f32,
-        reconstruction_corner: Hz(fe.reconstruction_hz as f32),
-        antialias_corner: Hz(fe.antialias_hz as f32),
     }
 }
 
@@ -455,8 +453,6 @@ mod tests {
         let s = super::scale_of(&hal_sim::FrontEnd::default());
         let p = FrontEndScale::PROBE;
         assert_eq!(s.sample_rate, p.sample_rate);
-        assert_eq!(s.reconstruction_corner, p.reconstruction_corner);
-        assert_eq!(s.antialias_corner, p.antialias_corner);
         for (a, b) in [
             (s.drive_volts_per_code, p.drive_volts_per_code),
             (s.amps_per_code, p.amps_per_code),

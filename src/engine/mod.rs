@@ -84,11 +84,6 @@ pub struct PointRaw {
     /// Samples from the start of the batch in which the plan took effect (its frequency switch,
     /// phase-continuous) to the end of this window (saturating).
     pub since_load: u32,
-    /// Samples the drive had been off (amplitude 0, or no plan) when the plan took effect,
-    /// saturating; [`u32::MAX`] when the engine has not driven since it started. 0: the drive
-    /// was on up to the switch. What the resonator's state at the switch can be: a drive off for
-    /// many of its time constants left it at rest.
-    pub quiet_before: u32,
 }
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -98,8 +93,6 @@ struct BatchInfo {
     plan: Option<PointPlan>,
     /// Which load of the engine the batch belongs to ([`SampleEngine::load`] or `stop`).
     load: u32,
-    /// Samples the drive had been off before this batch ([`PointRaw::quiet_before`]).
-    quiet: u32,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -136,9 +129,6 @@ pub enum EngineError {
 pub struct SampleEngine {
     dds: Dds,
     amplitude: i32,
-    /// Samples generated with the drive off since it was last on (saturating; `u32::MAX`: never
-    /// on since the start).
-    quiet: u32,
     plan: Option<PointPlan>,
     pending: Option<Option<PointPlan>>,
     ring: [BatchInfo; RING],
@@ -156,8 +146,6 @@ pub struct SampleEngine {
     samples: u64,
     /// Sample count when the demodulated plan took effect.
     load_sample: u64,
-    /// [`BatchInfo::quiet`] of the batch in which the plan being demodulated took effect.
-    load_quiet: u32,
     overruns: u32,
 }
 
@@ -173,7 +161,6 @@ impl SampleEngine {
         Self {
             dds: Dds { phase: 0, ftw: 0 },
             amplitude: 0,
-            quiet: u32::MAX,
             plan: None,
             pending: None,
             ring: [BatchInfo {
@@ -181,7 +168,6 @@ impl SampleEngine {
                 ftw: 0,
                 plan: None,
                 load: 0,
-                quiet: u32::MAX,
             }; RING],
             generated: 0,
             demodulated: 0,
@@ -216,7 +202,6 @@ impl SampleEngine {
             window: 0,
             samples: 0,
             load_sample: 0,
-            load_quiet: u32::MAX,
             overruns: 0,
         }
     }
@@ -281,12 +266,6 @@ impl SampleEngine {
             ftw: self.dds.ftw,
             plan: self.plan,
             load: self.loads,
-            quiet: self.quiet,
-        };
-        self.quiet = if self.amplitude == 0 {
-            self.quiet.saturating_add(dac.len() as u32)
-        } else {
-            0
         };
         self.generated = self.generated.wrapping_add(1);
         let amp = self.amplitude;
@@ -314,7 +293,6 @@ impl SampleEngine {
             self.demod_tag = tag;
             self.demod_load = info.load;
             self.load_sample = self.samples;
-            self.load_quiet = info.quiet;
             self.sums = LockInSums::default();
             self.window = 0;
             self.stage = match info.plan {
@@ -364,7 +342,6 @@ impl SampleEngine {
                                 since_load: (self.samples.saturating_sub(self.load_sample))
                                     .min(u32::MAX as u64)
                                     as u32,
-                                quiet_before: self.load_quiet,
                             };
                             if out.push(point).is_err() {
                                 self.overruns = self.overruns.saturating_add(1);

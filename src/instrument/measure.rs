@@ -378,7 +378,6 @@ mod tests {
             end_sample: 0,
             window: 0,
             since_load: 0,
-            quiet_before: 0,
         }
     }
 

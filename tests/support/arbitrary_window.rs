@@ -54,6 +54,5 @@ fn arbitrary_window(
         end_sample,
         window,
         since_load: 0,
-        quiet_before: 0,
     }
 }

@@ -94,8 +94,6 @@ pub const SCALE: FrontEndScale = FrontEndScale {
     drive_volts_per_code: 5.0 * 3.3 / 4096.0,
     amps_per_code: 3.3 / 4096.0 / 300e3,
     monitor_volts_per_code: 3.3 / 4096.0 / 0.15,
-    reconstruction_corner: Hz(1_000.0),
-    antialias_corner: Hz(1_000.0),
 };
 
 /// The board's converter scale.

@@ -52,8 +52,8 @@ mod settings;
 pub use settings::HoldSettings;
 
 use super::resonator::{
-    add_sums, first_cycles, fit, fit_searched, fit_two, mirror, to_admittance, Carry, Filters,
-    HoldFit, HoldWindow, Segment, SwitchOn, MAX_WINDOWS,
+    add_sums, first_cycles, fit, fit_searched, fit_two, mirror, to_admittance, Carry, HoldFit,
+    HoldWindow, Segment, MAX_WINDOWS,
 };
 use super::ringdown::Ringdown;
 use super::Estimate;
@@ -87,13 +87,6 @@ const MIN_SINGLE_CYCLES: f64 = 4.0;
 const SEED_Q_SD: f64 = 0.25;
 /// Tag of the hold plan (the seed's tags count up from 1).
 const HOLD_TAG: u16 = 0xC0DE;
-/// Standard uncertainty of the start state from rest ([`SwitchOn`]), relative to the windows'
-/// admittance scale, with the resonator quiet: what the model leaves out (the converters' zero-
-/// order hold, the static branch's own switch-on transient), a few thousandths of `g` on the
-/// simulated probe (test `the_start_from_rest_is_the_resonators_response`).
-const REST_WIDTH: f32 = 0.005;
-/// `Q` of the longest ring a drive can leave behind in the band: the free probe's (about 40).
-const RING_Q: f32 = 40.0;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Phase {
@@ -135,14 +128,6 @@ pub struct Hold {
     /// How the state passes into the second segment (its switch time known from its first
     /// window; `rho` once its drive is known).
     carry: Carry,
-    /// When the first segment's plan took effect (the drive's switch-on), s, and how long the
-    /// drive had been off before it, s (infinite: not since the engine started).
-    t_on: f64,
-    quiet: f32,
-    /// The front end's filters (the start state from rest passes through them).
-    filters: Filters,
-    /// The first segment's fit took its start state from rest: the joint fit may too.
-    at_rest: bool,
     n_windows: u16,
     segment: u8,
     seeds_tried: u8,
@@ -240,18 +225,9 @@ impl Hold {
                 // sums are added up and solved once at the end (half the work per window).
                 let s = &raw.sums;
                 if raw.window == 0 {
-                    // When this segment's plan took effect: the drive's switch-on, or the
-                    // frequency switch.
-                    let t = raw.end_sample.saturating_sub(raw.since_load as u64) as f64 / self.fs;
-                    if self.segment == 0 {
-                        self.t_on = t;
-                        self.quiet = match raw.quiet_before {
-                            u32::MAX => f32::INFINITY,
-                            n => (n as f64 / self.fs) as f32,
-                        };
-                    } else {
-                        self.carry.t_switch = t;
-                    }
+                    // The frequency switch: when this segment's plan took effect.
+                    self.carry.t_switch =
+                        raw.end_sample.saturating_sub(raw.since_load as u64) as f64 / self.fs;
                 }
                 self.clipped |= s.current_rail_hits > 0;
                 add_sums(&mut self.monitor, &s.monitor, &s.reference);
@@ -278,7 +254,6 @@ impl Hold {
                             self.f_first = self.f_hold;
                             self.q_first = e.q.map_or(self.q_seed, |q| q as f64);
                             self.linear_first = h.linear;
-                            self.at_rest = h.at_rest;
                             self.f_seed = e.resonance.0 as f64;
                             self.ftw = tuning_word(self.f_seed, self.fs);
                             self.f_hold = frequency_hz(self.ftw, self.fs);
@@ -442,28 +417,10 @@ impl Hold {
         )
     }
 
-    /// The switch-on before a seedless first segment: the resonator at rest, up to what the
-    /// drive's history may have left ringing — a drive off for `quiet` seconds leaves at most
-    /// `e^{−quiet/τ}` of a steady state at most as large as this one (the methods drive at
-    /// their default 5 V), `τ` the longest ring in the band ([`RING_Q`] at its bottom).
-    fn switch_on(&self) -> Option<SwitchOn> {
-        if self.seed.is_some() {
-            return None;
-        }
-        let tau = RING_Q / (core::f32::consts::PI * self.s.band_start.0.max(1.0));
-        let left = libm::expf(-self.quiet / tau);
-        Some(SwitchOn {
-            t_on: self.t_on,
-            filters: self.filters,
-            width: crate::dsp::trig::sqrtf(REST_WIDTH * REST_WIDTH + left * left),
-        })
-    }
-
     fn estimate_hold(&self) -> Result<HoldFit, Failure> {
         if self.clipped {
             return Err(Failure::Clipped);
         }
-        let rest = self.switch_on();
         let prior = (self.q_seed, self.q_seed_sd);
         let (first, second) = self.windows.split_at(self.first_len as usize);
         let this = Segment {
@@ -479,27 +436,17 @@ impl Hold {
                 y_s: self.static_admittance(self.f_first),
                 mirror: mirror(self.v_first),
             };
-            let rest = rest.as_ref().filter(|_| self.at_rest);
-            let h = fit_two(
+            fit_two(
                 first,
                 this,
                 &self.carry,
                 (self.f_seed, self.q_first),
                 Some(self.linear_first),
                 prior,
-                rest,
-            )?;
-            // The second segment's windows contradict the start from rest that placed it: the
-            // resonator is not the model's alone (a second mode answering the switch, a knock);
-            // the placement and the reading are not to be trusted. Not locked: auto goes on to
-            // its next method.
-            if rest.is_some() && !h.at_rest {
-                return Err(Failure::NotLocked);
-            }
-            h
+            )?
         } else if self.seed.is_none() {
             let band = (self.s.band_start.0 as f64, self.s.band_stop.0 as f64);
-            fit_searched(this, band, prior, rest.as_ref())?
+            fit_searched(this, band, prior)?
         } else {
             fit(this, self.f_seed, prior)?
         };
@@ -532,82 +479,9 @@ mod tests {
     /// plan keeps the windows that close while the second's plan passes the DAC's pipeline —
     /// gap-free after the segment's own four, all before the switch, kept for the joint fit —
     /// and the second segment keeps the room it planned.
-    /// The start state from rest against the simulated probe's exact plant (`hal_sim::plant`:
-    /// the filters, the zero-order hold and the resonator integrated exactly): the fast hold on
-    /// the quiet scene at 200–2500 kPa, its joint fit made with the state free, gives the state
-    /// at the first window; the resonator's response from rest to the drive switched on at
-    /// `t_on` (`rest_state`) is within 0.005 of `g` of it ([`REST_WIDTH`]: 0.0016–0.0042
-    /// measured), and without the front end's filters more than 0.03 off (the test can fail).
     #[cfg(feature = "sim")]
     #[test]
-    fn the_start_from_rest_is_the_resonators_response() {
-        use crate::estimate::resonator::rest_state;
-        for e in [200.0, 500.0, 1000.0, 2500.0] {
-            let scene = hal_sim::Scene::on_modulus_kpa(e).with_noise(hal_sim::NoiseScene::Quiet);
-            let h = run_fast(scene, 3);
-            assert_eq!(h.quiet, f32::INFINITY);
-            let (first, second) = h.windows.split_at(h.first_len as usize);
-            let seg = |w, f_h, v| Segment {
-                windows: w,
-                f_h,
-                y_s: h.static_admittance(f_h),
-                mirror: mirror(v),
-            };
-            let fit = fit_two(
-                seg(first, h.f_first, h.v_first),
-                seg(second, h.f_hold, h.v_hold),
-                &h.carry,
-                (h.f_seed, h.q_first),
-                None,
-                (NOMINAL_Q, NOMINAL_Q_SD * NOMINAL_Q),
-                None,
-            )
-            .unwrap();
-            assert!(!fit.at_rest);
-            let (g, z) = fit.linear;
-            let (f0, q) = (
-                fit.estimate.resonance.0 as f64,
-                fit.estimate.q.unwrap() as f64,
-            );
-            let d = first[0].t0 - h.t_on;
-            let k = |filters| rest_state(f0, q, h.f_first, d, mirror(h.v_first), filters);
-            let off = (z / g - k(&h.filters)).norm();
-            let none = Filters { w_r: 1e9, w_a: 1e9 };
-            let unfiltered = (z / g - k(&none)).norm();
-            std::eprintln!("{e} kPa: |z/g − K| {off:.5}, without the filters {unfiltered:.5}");
-            assert!(off < REST_WIDTH as f64, "{e} kPa: {off}");
-            assert!(unfiltered > 0.03, "{e} kPa: {unfiltered}");
-        }
-    }
-
-    /// A second mode answering the switch-on (the stability map's `second-mode`: 295 Hz, `Q`
-    /// 40, half the first mode's peak conductance, bench noise): the joint fit's windows
-    /// contradict the start from rest that placed the second segment, and the fast hold is
-    /// `not_locked` (auto goes on to fit), never a reading through the second mode's background
-    /// (0.33 Hz off); on the same scene without the second mode it reads with the start from
-    /// rest.
-    #[cfg(feature = "sim")]
-    #[test]
-    fn a_second_mode_answering_the_switch_on_is_not_locked() {
-        let cases = hal_sim::catalogue::catalogue(hal_sim::NoiseScene::Bench);
-        let scene = |name| {
-            let c = cases.iter().find(|c| c.name == name).unwrap();
-            c.scene
-        };
-        for seed in 0..4 {
-            let h = run_fast(scene("second-mode"), seed);
-            assert_eq!(h.estimate(), Err(Failure::NotLocked), "seed {seed}");
-            let h = run_fast(scene("nominal"), seed);
-            assert!(h.at_rest, "seed {seed}");
-            let f = h.estimate().unwrap().resonance.0 as f64;
-            let truth = scene("nominal").resonance_hz();
-            assert!((f - truth).abs() < 0.03, "seed {seed}: {f} vs {truth}");
-        }
-    }
-
-    /// The fast hold run to its end on the simulated probe in `scene` with noise seed `seed`.
-    #[cfg(feature = "sim")]
-    fn run_fast(scene: hal_sim::Scene, seed: u64) -> Hold {
+    fn the_first_segment_keeps_its_windows_while_the_second_is_on_its_way() {
         use crate::reading::driver::{block_on, run_plans, Plans, SyncSource};
         struct P(Hold, FrontEndScale);
         impl Plans for P {
@@ -622,23 +496,17 @@ mod tests {
                 self.0.is_complete()
             }
         }
-        let mut board = crate::board::sim::SimBoard::new(hal_sim::SimProbe::new(scene, seed));
+        let scene = hal_sim::Scene::on_modulus_kpa(500.0).with_noise(hal_sim::NoiseScene::Bench);
+        let mut board = crate::board::sim::SimBoard::new(hal_sim::SimProbe::new(scene, 3));
         let scale = crate::hal::SampleStream::scale(&board);
         let mut engine = crate::engine::SampleEngine::new();
         let mut src = SyncSource::new(&mut board, &mut engine);
         let mut m = P(HoldSettings::FAST.validate(&scale).unwrap(), scale);
         assert!(block_on(run_plans(&mut src, &mut m, |_, _| {})).is_ok());
-        m.0
-    }
-
-    #[cfg(feature = "sim")]
-    #[test]
-    fn the_first_segment_keeps_its_windows_while_the_second_is_on_its_way() {
-        let scene = hal_sim::Scene::on_modulus_kpa(500.0).with_noise(hal_sim::NoiseScene::Bench);
-        let h = &run_fast(scene, 3);
+        let h = &m.0;
         assert!(h.estimate().is_ok(), "{:?}", h.estimate());
         let first = &h.windows()[..h.first_len as usize];
-        assert!(first.len() > FIRST_WINDOWS, "{} windows", first.len());
+        assert!(first.len() > FIRST_WINDOWS + 1, "{} windows", first.len());
         for w in first.windows(2) {
             assert!((w[1].t0 - (w[0].t0 + w[0].len)).abs() < 1.5 / h.fs, "{w:?}");
         }

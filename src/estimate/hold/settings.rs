@@ -5,7 +5,7 @@ use crate::dsp::dds::{frequency_hz, tuning_word};
 use crate::engine::sweep::{
     amplitude_codes, check_band, check_durations, check_frequency, SettingsError,
 };
-use crate::estimate::resonator::{first_cycles, Carry, Filters, FIRST_WINDOWS};
+use crate::estimate::resonator::{first_cycles, Carry, FIRST_WINDOWS};
 use crate::estimate::ringdown::RingdownSettings;
 use crate::hal::FrontEndScale;
 use crate::units::{Farads, Hz, Seconds, Siemens, Volts};
@@ -60,22 +60,22 @@ impl HoldSettings {
         static_conductance: Siemens(0.0),
     };
 
-    /// The fast hold, auto's first stage (`measure::auto_hold`): no seed ring-down; an 11.5 ms
-    /// first segment at `seed` (the band centre): the filters' settle and two one-cycle windows,
-    /// whose searched fit — the start state the resonator's response from rest — places the
-    /// second; its plan stays open, so that its windows go on while the second's plan passes the
-    /// DAC's pipeline; the rest of 120 ms on that estimate; both segments in one fit
-    /// (`docs/speed-accuracy.md`, `docs/methods.md`).
+    /// The fast hold, auto's first stage (`measure::auto_hold`): no seed ring-down; a 20 ms
+    /// first segment at `seed` (the band centre): the filters' settle and four one-cycle
+    /// windows, whose searched fit places the second; its plan stays open, so that its windows
+    /// go on while the second's plan passes the DAC's pipeline; 100 ms on that estimate; both
+    /// segments in one fit. 134.6 ms in all at 500 kPa (9.8 τ), 1.28× the Cramér–Rao bound
+    /// (`docs/speed-accuracy.md`).
     pub const FAST: Self = Self {
         seed_burst: Seconds(0.0),
         seed_ring: Seconds(0.0),
-        refine: Seconds(0.0115),
+        refine: Seconds(0.02),
         hold: Seconds(0.12),
         ..Self::DEFAULT
     };
 
     /// The shortest first segment of a hold with no seed driven at `seed` on a front end
-    /// sampling at `fs`: the filters' settle and two of the first segment's windows (the
+    /// sampling at `fs`: the filters' settle and three of the first segment's windows (the
     /// fewest its searched fit takes, [`first_cycles`] each), s.
     pub fn min_first(seed: Hz, fs: Hz) -> Seconds {
         let f = seed.0.max(1.0);
@@ -129,7 +129,7 @@ impl HoldSettings {
         // plate and its cable (0–100 nF); |G0| up to 1 mS (a fitted G0 may come out a little
         // negative).
         // With no seed the first segment only places the second, and counts in the joint fit:
-        // `FIRST_WINDOWS` windows suffice (`min_first`); the second is a hold of its own.
+        // three two-cycle windows suffice (`min_first`); the second is a hold of its own.
         let refine_ok = if seedless {
             self.refine.0 >= Self::min_first(self.seed, scale.sample_rate).0
                 && self.hold.0 - self.refine.0 >= MIN_HOLD_S
@@ -175,10 +175,6 @@ impl HoldSettings {
                 t_switch: 0.0,
                 rho: C64::new(1.0, 0.0),
             },
-            t_on: 0.0,
-            quiet: f32::INFINITY,
-            filters: Filters::of(scale),
-            at_rest: false,
             n_windows: 0,
             segment: 0,
             seeds_tried: 1,

@@ -37,10 +37,8 @@ use num_complex::Complex64 as C64;
 pub const MAX_WINDOWS: usize = 16;
 
 /// Windows of a hold's first segment with no seed: the fewest its searched fit takes
-/// ([`fit_searched`]; `hold::HoldSettings::min_first`): four numbers for `f0`, `g` and the start
-/// state with the start from rest ([`SwitchOn`]) and the prior on `Q`; with the state free,
-/// only a rough placement for the second segment.
-pub(crate) const FIRST_WINDOWS: usize = 2;
+/// ([`fit_searched`]; `hold::HoldSettings::min_first`).
+pub(crate) const FIRST_WINDOWS: usize = 3;
 
 /// Whole cycles of the shortest window the engine passes on at `f` Hz sampled at `fs` (a
 /// hold's first segment's, a tracker segment's): the fewest that span half a batch
@@ -110,9 +108,6 @@ pub struct HoldFit {
     /// The fitted motional peak conductance `g` (S) and state `z` at the start of the first
     /// window (S): a joint fit that takes these windows goes on from them ([`fit_two`]).
     pub linear: (f64, C64),
-    /// The start state was the resonator's response from rest ([`SwitchOn`]); false when no
-    /// switch-on was given or the windows disagreed with it.
-    pub at_rest: bool,
 }
 
 /// One segment of a hold: consecutive windows driven at one frequency `f_h`, with the static
@@ -160,58 +155,4 @@ pub struct Carry {
     pub t_switch: f64,
     /// Ratio of the first segment's drive phasor to the second's.
     pub rho: C64,
-}
-
-/// The front end's two filters as a switch-on sees them: the reconstruction filter between the
-/// DAC and the PZT and the anti-alias filter before the ADC, two real poles each (the drive
-/// monitor passes an anti-alias filter identical to the current's).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Filters {
-    /// Reconstruction filter's corner, rad/s.
-    pub w_r: f32,
-    /// Anti-alias filter's corner, rad/s.
-    pub w_a: f32,
-}
-
-impl Filters {
-    /// The filters of a front end.
-    pub fn of(scale: &crate::hal::FrontEndScale) -> Self {
-        let w = |f: crate::units::Hz| 2.0 * core::f32::consts::PI * f.0;
-        Self {
-            w_r: w(scale.reconstruction_corner),
-            w_a: w(scale.antialias_corner),
-        }
-    }
-}
-
-/// The drive's switch-on before a first segment with the resonator at rest: the segment's start
-/// state is the resonator's response from rest (its full second-order response through the
-/// front end's filters, a function of `f0`, `Q`, `g` and the drive), known to within `width`
-/// of the windows' admittance scale (the model's own residue and what the drive's history may
-/// have left ringing). The fit takes it as a prior and drops it when the windows disagree
-/// ([`HoldFit::at_rest`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SwitchOn {
-    /// When the drive came on, s (the windows' time base).
-    pub t_on: f64,
-    /// The front end's filters.
-    pub filters: Filters,
-    /// The prior's standard uncertainty of each component of the start state, relative to the
-    /// largest windowed admittance less its static part.
-    pub width: f32,
-}
-
-/// The state per unit `g` at `d` seconds after a drive at `f_h` came on with the resonator at
-/// rest ([`model::RestPrior::k`]), for the tests.
-#[cfg(test)]
-pub(crate) fn rest_state(f0: f64, q: f64, f_h: f64, d: f64, mirror: C64, filters: &Filters) -> C64 {
-    let r = model::RestPrior {
-        f_h,
-        d: d as f32,
-        mirror: c32(mirror),
-        filters: *filters,
-        w: 0.0,
-    };
-    let k = r.k(f0, q).0;
-    C64::new(k.re as f64, k.im as f64)
 }

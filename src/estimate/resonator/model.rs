@@ -2,7 +2,7 @@
 //! transient and their derivatives), the state carried between segments, χ² with its Jacobian,
 //! the normal equations and the covariance.
 
-use super::{Carry, Filters, Segment, MAX_SEGMENTS, MAX_WINDOWS};
+use super::{Carry, Segment, MAX_SEGMENTS, MAX_WINDOWS};
 use num_complex::Complex64 as C64;
 
 /// A window as the fit's inner loop uses it: start relative to its segment's first window,
@@ -154,73 +154,6 @@ impl DriveModel {
         let y = gh + (z - gh) * e;
         let d_of = |i: usize| self.dh[i] * g * (one - e) + (z - gh) * e * self.dlam[i] * d;
         (y, [d_of(0), d_of(1), self.h * (one - e)], e)
-    }
-}
-
-impl DriveModel {
-    /// The motional state per unit `g` at `d` seconds after the drive at `f_h` was switched on
-    /// with the resonator at rest, in the window frame of a segment whose drive phasor's
-    /// [`super::mirror`] factor is `mirror` and whose windows start at phase 0 of the drive
-    /// (`d` the time from the switch-on to the segment's first window).
-    ///
-    /// The resonator's full second-order response, not the envelope's: the motional admittance
-    /// `Y(s) = (g ω0/Q) s / ((s − s_p)(s − s̄_p))` driven by `Re(U e^{jωt})` from `t = 0`
-    /// (Laplace: `U/(2(s − jω)) + Ū/(2(s + jω))`) through the filters `H(s)`; the response's
-    /// free part at the pole `s_p = λ + jω` in the drive's frame, divided by the measured drive
-    /// `H(jω) U`, is `T e^{λt}` with
-    ///
-    /// `T = A R [1/λ + M/(λ + 2jω)]`,  `A = (ω0/Q) s_p / (2j ω_d)` (the pole's residue per `g`),
-    /// `R = H(s_p)/H(jω)`, `M = (Ū/U) e^{−2jφ_on}` = `mirror · (H/H̄)(jω) · e^{2jωd}`
-    ///
-    /// (the drive's phase at the switch-on is `−ω d`, the window frame's origin being phase 0),
-    /// and the state is `h + T e^{λd}` (`T → −h` in the envelope's limit, `M → 0`, `R → 1`). Ours
-    /// from the equation of motion; `hal_sim::plant` integrates the same chain exactly (test
-    /// `the_start_from_rest_is_the_resonators_response`).
-    pub(super) fn rest_state(
-        &self,
-        q: f32,
-        f_h: f32,
-        d: f32,
-        mirror: C32,
-        filters: &Filters,
-    ) -> (C32, [C32; 2]) {
-        use core::f32::consts::PI as PI32;
-        let one = C32::new(1.0, 0.0);
-        let w = 2.0 * PI32 * f_h;
-        let jw = C32::new(0.0, w);
-        let lam = self.lam;
-        let s_p = lam + jw;
-        // A = s_p (ω0/Q)/(2j ω_d) = s_p c, c = 1/(2j Q sqrt(1 − 1/(4Q²))) (no f0 in c).
-        let root2 = (1.0 - 0.25 / (q * q)).max(1e-12);
-        let c = one / C32::new(0.0, 2.0 * q * crate::dsp::trig::sqrtf(root2));
-        let dc_dq = -c * (1.0 / q + 0.25 / (q * q * q * root2));
-        let a = s_p * c;
-        // One filter's two poles: `r² = 1/(1 + λ/(ω_c + jω))²`, the ratio of its response at
-        // s_p to that at jω, its derivative in λ `−2 r³/(ω_c + jω)`, and its phase turn
-        // `(H/H̄)(jω) = ((1 − jω/ω_c)/(1 + jω/ω_c))²`.
-        let pole = |w_c: f32| {
-            let k = one / C32::new(w_c, w);
-            let r = one / (one + lam * k);
-            let t = C32::new(1.0, -w / w_c) / C32::new(1.0, w / w_c);
-            (r * r, -r * r * r * k * 2.0, t * t)
-        };
-        let (rr, drr, tr) = pole(filters.w_r);
-        let (ra, dra, ta) = pole(filters.w_a);
-        let (sn, cs) = crate::dsp::trig::sincos(2.0 * w * d);
-        let m = mirror * tr * ta * C32::new(cs, sn);
-        let inv_l = one / lam;
-        let inv_l2 = one / (lam + jw * 2.0);
-        let big_r = rr * ra;
-        let b = inv_l + m * inv_l2;
-        let t = a * big_r * b;
-        let e = cexp(lam * d);
-        // ∂/∂λ of R B, then of the whole: ∂K/∂p = ∂h/∂p + e (∂A/∂p R B + (A ∂(RB)/∂λ + T d) ∂λ/∂p).
-        let d_rb = (drr * ra + rr * dra) * b - big_r * (inv_l * inv_l + m * inv_l2 * inv_l2);
-        let via_lam = a * d_rb + t * d;
-        let rb = big_r * b;
-        let da = [self.dlam[0] * c, self.dlam[1] * c + s_p * dc_dq];
-        let dk = core::array::from_fn(|i| self.dh[i] + e * (da[i] * rb + via_lam * self.dlam[i]));
-        (self.h + t * e, dk)
     }
 }
 
@@ -404,16 +337,17 @@ pub(super) fn evaluate(
                 e * m.dz[3] + ib * (m.dz[3] * ea).conj(),
                 e * m.dz[4] + ib * (m.dz[4] * ea).conj(),
             ];
-            add_row(&mut jtj32, &mut jtr32, &cols, r, x.wl);
+            let rw = r * x.wl;
+            for i in 0..5 {
+                let ci = cols[i];
+                jtr32[i] += ci.re * rw.re + ci.im * rw.im;
+                let cw = ci * x.wl;
+                for j in 0..=i {
+                    jtj32[i][j] += cw.re * cols[j].re + cw.im * cols[j].im;
+                }
+            }
         }
         ea = eb;
-    }
-    if let Some(rest) = &pb.rest {
-        let (r, cols) = rest.residual(p, &scale);
-        chi2 += rest.w * r.norm_sqr();
-        if jac {
-            add_row(&mut jtj32, &mut jtr32, &cols, r, rest.w);
-        }
     }
     let normal = Normal {
         jtj: jtj32,
@@ -421,22 +355,6 @@ pub(super) fn evaluate(
         scale,
     };
     (chi2 as f64 * wt, normal)
-}
-
-/// One complex residual `r` with its columns `cols` and weight `w` into the normal equations'
-/// lower triangle `jtj` and `jtr` (its real and imaginary parts two rows).
-#[inline(always)]
-#[allow(clippy::needless_range_loop)] // the triangle's indices
-fn add_row(jtj: &mut [[f32; 5]; 5], jtr: &mut [f32; 5], cols: &[C32; 5], r: C32, w: f32) {
-    let rw = r * w;
-    for i in 0..5 {
-        let ci = cols[i];
-        jtr[i] += ci.re * rw.re + ci.im * rw.im;
-        let cw = ci * w;
-        for j in 0..=i {
-            jtj[i][j] += cw.re * cols[j].re + cw.im * cols[j].im;
-        }
-    }
 }
 
 /// The normal equations of the fit over (f0, Q, g, Re z, Im z) in `f32`, each column of the
@@ -535,57 +453,6 @@ pub(super) struct Problem<'a> {
     pub(super) segs: heapless::Vec<(f64, f64, C32), MAX_SEGMENTS>,
     pub(super) carry: Option<&'a Carry>,
     pub(super) wt: f64,
-    /// The prior on the first segment's start state, when the drive came on from rest.
-    pub(super) rest: Option<RestPrior>,
-}
-
-/// The prior on the state at the first segment's first window: the resonator's response from
-/// rest to the segment's drive switched on `d` seconds earlier ([`DriveModel::rest_state`]),
-/// `g K(f0, Q)`, with weight `w` per unit of the windows' weighted squared residual (`1/σ_z²`
-/// over the windows' `1/var`: the same units as the windows' terms of χ²).
-#[derive(Clone, Copy, Debug)]
-pub(super) struct RestPrior {
-    pub(super) f_h: f64,
-    pub(super) d: f32,
-    pub(super) mirror: C32,
-    pub(super) filters: Filters,
-    pub(super) w: f32,
-}
-
-impl RestPrior {
-    /// `K(f0, Q)`: the state from rest per unit `g`, and its derivatives in `f0` and `Q`.
-    pub(super) fn k(&self, f0: f64, q: f64) -> (C32, [C32; 2]) {
-        let at = Params {
-            f0,
-            q,
-            g: 0.0,
-            z: C64::new(0.0, 0.0),
-        };
-        DriveModel::new(&at, self.f_h).rest_state(
-            q as f32,
-            self.f_h as f32,
-            self.d,
-            self.mirror,
-            &self.filters,
-        )
-    }
-
-    /// The prior's residual `g K − z` at `p` and its columns over (f0, Q, g, Re z, Im z), the
-    /// first two multiplied by `scale` as [`evaluate`]'s.
-    pub(super) fn residual(&self, p: &Params, scale: &[f32; 5]) -> (C32, [C32; 5]) {
-        let g = p.g as f32;
-        let (k, dk) = self.k(p.f0, p.q);
-        let r = k * g - c32(p.z);
-        // The columns of the model `z − g K` (the residual is its negative, as the windows').
-        let cols = [
-            -dk[0] * g * scale[0],
-            -dk[1] * g * scale[1],
-            -k,
-            C32::new(1.0, 0.0),
-            C32::new(0.0, 1.0),
-        ];
-        (r, cols)
-    }
 }
 
 /// `exp(z)` by the `libm` crate's `expf` and [`crate::dsp::trig::sincos`] (`f32` arithmetic
@@ -606,21 +473,14 @@ mod gradcheck {
     use crate::estimate::resonator::mirror;
 
     /// The analytic gradient of χ² over all five parameters, the mirror image's terms
-    /// included (a rotated drive, a transient far from the fit's point), with and without the
-    /// prior on the start from rest (its `∂K/∂f0`, `∂K/∂Q`), against central differences of χ²
-    /// (f64 reference on the same windows).
+    /// included (a rotated drive, a transient far from the fit's point), against central
+    /// differences of χ² (f64 reference on the same windows).
     #[test]
     fn gradient_matches_finite_differences() {
         let y_s = C64::new(0.0, 0.0);
-        let filters = Filters {
-            w_r: 6283.0,
-            w_a: 5000.0,
-        };
-        for (f_h, m, rest) in [
-            (241.3, C64::new(1.0, 0.0), false),
-            (238.0, mirror(C64::new(0.6, 0.8)), false),
-            (241.3, C64::new(1.0, 0.0), true),
-            (230.0, mirror(C64::new(0.6, 0.8)), true),
+        for (f_h, m) in [
+            (241.3, C64::new(1.0, 0.0)),
+            (238.0, mirror(C64::new(0.6, 0.8))),
         ] {
             let w = synthetic(241.3, 10.4, 1.5e-7, f_h, C64::new(1e-8, 0.0), y_s, 16);
             let w = &w[..16];
@@ -644,14 +504,6 @@ mod gradcheck {
                 segs: [(f_h, w0, c32(m))].into_iter().collect(),
                 carry: None,
                 wt: 1e14,
-                // The start from rest 4 ms after the switch-on, weighted as a few windows.
-                rest: rest.then_some(RestPrior {
-                    f_h,
-                    d: 0.004,
-                    mirror: c32(m),
-                    filters,
-                    w: 4.0,
-                }),
             };
             let n = evaluate(&pb, &p, true, None).1;
             let (jtj, jtr) = n.unscaled(pb.wt);
