@@ -221,6 +221,7 @@ fn the_bench_log_and_the_plot() {
 /// settings but the segment and the segments a plan, a ramped lift-off) are refused.
 #[test]
 fn qemu_streams_the_same_json_and_follows_lift_off_and_new_contact() {
+    let _image = common::image_lock();
     let v = stream(&[
         "--phantom",
         "C",
@@ -291,6 +292,7 @@ fn ok_after(v: &[Value], from_s: f64, truth_kpa: f64) -> (usize, f64, f64, f64) 
 /// difference of the two means (each reading's own stated σ, the readings independent).
 #[test]
 fn stm32_streams_phantom_c_as_the_host_does() {
+    let _image = common::image_lock();
     let args = ["--phantom", "C", "--seconds", "3"];
     let v = stream(&[&args[..], &["--stm32"]].concat());
     let (n, mean, rms, sigma) = ok_after(&v, 0.5, 414.0);
@@ -337,6 +339,7 @@ fn stm32_streams_phantom_c_as_the_host_does() {
 /// 0.5 s within 0.5 % RMS of C's 414 kPa, as on the host.
 #[test]
 fn stm32_streams_phantom_c_with_the_fast_setting() {
+    let _image = common::image_lock();
     let (seg, per) = probe_bench::pareto::FAST_STREAM;
     let (seg, per) = (seg.to_string(), per.to_string());
     let v = stream(&[

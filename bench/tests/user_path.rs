@@ -130,6 +130,7 @@ fn help_lists_every_method_and_the_firmwares_default() {
 /// (tests/qemu.rs says which are missing).
 #[test]
 fn the_firmware_in_qemu_agrees_with_the_host() {
+    let _image = common::image_lock();
     let cases: &[&[&str]] = &[
         &["--phantom", "B"],
         &["--phantom", "D", "--seed", "3"],
@@ -242,6 +243,7 @@ fn the_json_reports_the_contact_force() {
 /// `too_hard`, `no_contact`), with the host's force within 1 mN.
 #[test]
 fn stm32_reads_with_its_load_cell_and_any_method_as_the_host_does() {
+    let _image = common::image_lock();
     let cell = hal_sim::loadcell::LoadCell::default();
     let weight_n = 0.010 * hal_sim::loadcell::STANDARD_GRAVITY_M_S2;
     let r = measure(&["--phantom", "B", "--method", "fit", "--stm32"]);

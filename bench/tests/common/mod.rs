@@ -8,6 +8,16 @@ pub mod scan;
 use std::path::PathBuf;
 use std::process::{Command, Output};
 
+/// The firmware images of both boards are built to one path
+/// (`target/thumbv7em-none-eabihf/fw/probe`: `cargo qemu-build` and `cargo fw`), so a test that
+/// runs `--qemu` or `--stm32` holds this for as long as it runs: another thread's build of the
+/// other board's image would replace its ELF under it (the test binaries themselves run one
+/// after another).
+pub fn image_lock() -> std::sync::MutexGuard<'static, ()> {
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    LOCK.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// The `probe-bench` binary under test.
 pub fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_probe-bench"))
