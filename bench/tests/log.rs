@@ -18,11 +18,19 @@ fn root() -> PathBuf {
 /// Every format string passed to `defmt::{trace,debug,info,warn,error}!` in the firmware, and
 /// to the log module's `reading_line!` (which hands its format to `defmt::info!`).
 fn firmware_formats() -> BTreeSet<String> {
-    // The RTIC application and the instrument layer (its log module) log; the boards' own
+    // The RTIC application and the instrument layer (its log module, its folders) log; the boards' own
     // lines (the QEMU board's watchdog) and the cost image's are not the instrument's log.
     let mut files = vec![root().join("src/bin/probe.rs")];
-    for e in std::fs::read_dir(root().join("src/instrument")).expect("src/instrument") {
-        files.push(e.expect("entry").path());
+    let mut dirs = vec![root().join("src/instrument")];
+    while let Some(dir) = dirs.pop() {
+        for e in std::fs::read_dir(&dir).expect("src/instrument") {
+            let path = e.expect("entry").path();
+            if path.is_dir() {
+                dirs.push(path);
+            } else if path.extension().is_some_and(|x| x == "rs") {
+                files.push(path);
+            }
+        }
     }
     let src = files
         .iter()
