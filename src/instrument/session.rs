@@ -530,10 +530,10 @@ impl Session {
     /// `stream <seconds> [<segment_s> [<plan_segments>]]`: the continuous tracker
     /// ([`crate::instrument::continuous`]) with the request's configuration
     /// ([`StreamRequest::tracker`], validated before anything runs; refused as a settings error)
-    /// and the session's profile, until a reading ends `seconds` after the start. Every reading is offered to the outside world without waiting
-    /// ([`Io::try_emit`]): the tracker's plans and the sample interrupt never wait on a slow
-    /// host; a reading that finds no room is dropped and counted (its `seq` is missing from
-    /// the log). True when any reading was `ok`.
+    /// and the session's profile, until a reading ends `seconds` after the start. Every reading
+    /// is offered to the outside world without waiting ([`Io::try_emit`]): the tracker's plans
+    /// and the sample interrupt never wait on a slow host; a reading that finds no room is
+    /// dropped and counted (its `seq` is missing from the log). True when any reading was `ok`.
     async fn stream<I: Io>(&mut self, io: &mut I, request: StreamRequest) -> bool {
         let scale = io.scale();
         // Built in place (out of line): not a 4 KiB temporary in the task's frame.

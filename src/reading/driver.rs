@@ -89,7 +89,8 @@ pub enum Stop {
 
 /// One reading with `method` and `settings`, ended in the pipeline with `unit`. `on_point`
 /// sees every admittance point with its plan's tag. A stall ends the reading as the source's
-/// [`PointSource::stall_failure`] (`drive_fault`, or `dma_error`; `on_stop` hears of it); settings the method refuses as `bad_settings`.
+/// [`PointSource::stall_failure`] (`drive_fault`, or `dma_error`; `on_stop` hears of it);
+/// settings the method refuses as `bad_settings`.
 pub async fn read<S: PointSource>(
     src: &mut S,
     method: Method,
