@@ -95,6 +95,9 @@ pub struct Board {
     pub ccm: Box<[u8]>,
     /// Cycles executed (instructions) as opposed to slept in WFI.
     pub executed: u64,
+    /// When set, how many times each translated block (start address, size in bytes) ran
+    /// ([`Board::profile`]).
+    pub block_runs: Option<std::collections::HashMap<(u32, u32), u64>>,
 }
 
 impl Board {
@@ -113,7 +116,24 @@ impl Board {
             sram: vec![0; SRAM_SIZE].into_boxed_slice(),
             ccm: vec![0; CCM_SIZE].into_boxed_slice(),
             executed: 0,
+            block_runs: None,
         }
+    }
+
+    /// The instructions executed at each address since `block_runs` was set, by address: every
+    /// instruction of a block counts each time the block ran (a block left early by an
+    /// exception counts whole, as the cycle count does).
+    pub fn profile(&self) -> std::collections::BTreeMap<u32, u64> {
+        let mut at = std::collections::BTreeMap::new();
+        for (&(addr, size), &runs) in self.block_runs.iter().flatten() {
+            let mut a = addr;
+            while a < addr + size {
+                *at.entry(a).or_insert(0) += runs;
+                let h = self.mem_read(a, 2).unwrap_or(0);
+                a += if h >> 11 >= 0b11101 { 4 } else { 2 };
+            }
+        }
+        at
     }
 
     /// Read a 32-bit word of RAM or flash as the bus masters other than the CPU (DMA) see it.
@@ -389,6 +409,9 @@ impl Machine {
             let b = uc.get_data_mut();
             b.now += n;
             b.executed += n;
+            if let Some(runs) = b.block_runs.as_mut() {
+                *runs.entry((addr as u32, size)).or_insert(0) += 1;
+            }
         })?;
         // Exception return (EXCP_EXCEPTION_EXIT = 8) and the rest of the CPU's exceptions.
         uc.add_intr_hook(|uc, intno| {

@@ -18,6 +18,10 @@
 //! `--seconds T` ends the run (default 2; after the last event), `--limit S` stops a run still
 //! waiting at S emulated seconds (default 3600; exit 4). A fault is printed to stderr (exit 2).
 //! The documented rules the image broke are printed to stderr at the end (exit 3 if any).
+//!
+//! With `STM32_EMU_PROFILE=FILE` in the environment the instructions executed from the last
+//! event to the end are written to FILE, a line `0x<address> <count>` per instruction address
+//! (`scripts/profile-stm32` names their functions).
 
 use std::io::Write;
 use std::process::ExitCode;
@@ -128,6 +132,10 @@ fn main() -> ExitCode {
     let mut last_event = 0.0f64;
     let mut served_at: Option<f64> = Some(0.0);
     let wall = std::time::Instant::now();
+    let profile = std::env::var_os("STM32_EMU_PROFILE");
+    if events.peek().is_none() && profile.is_some() {
+        m.board_mut().block_runs = Some(Default::default());
+    }
     let mut out = std::io::stdout().lock();
     let mut code = ExitCode::SUCCESS;
     loop {
@@ -146,6 +154,9 @@ fn main() -> ExitCode {
             }
             let (_, what) = events.next().unwrap();
             last_event = now;
+            if events.peek().is_none() && profile.is_some() {
+                m.board_mut().block_runs = Some(Default::default());
+            }
             let probe_s = HalSimProbe::at_pins(&mut m).map_or(f64::NAN, |p| p.probe().time_s());
             eprintln!("stm32-emu: event at {now:.6} s (probe time {probe_s:.6} s): {what:?}");
             match what {
@@ -220,6 +231,17 @@ fn main() -> ExitCode {
         m.resets,
         wall.elapsed().as_secs_f64()
     );
+    if let Some(path) = &profile {
+        let lines: String = b
+            .profile()
+            .iter()
+            .map(|(a, n)| format!("{a:#010x} {n}\n"))
+            .collect();
+        if let Err(e) = std::fs::write(path, lines) {
+            eprintln!("stm32-emu: {}: {e}", path.to_string_lossy());
+            code = ExitCode::FAILURE;
+        }
+    }
     for v in &b.periph.violations {
         eprintln!("stm32-emu: rule broken at cycle {}: {}", v.at, v.rule);
     }
