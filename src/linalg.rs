@@ -280,23 +280,40 @@ pub fn damped_solve<const N: usize>(
     spd_solve(&m, jtr)
 }
 
-/// The float arithmetic of the Cholesky factorisation and solve: `f64` (software on the
-/// Cortex-M4F: the covariances, the calibration) and `f32` (its FPU: hold's Levenberg–Marquardt
-/// steps), with each type's square root.
+/// The float arithmetic shared by `f64` (software on the Cortex-M4F: the covariances, the
+/// calibration fits) and `f32` (its FPU: hold's Levenberg–Marquardt steps, a reading's
+/// contact-law inversion): the Cholesky factorisation and solve, and the contact law's
+/// evaluation, each written once for both, with each type's elementary functions.
 pub trait Real:
     Copy
     + PartialOrd
+    + core::ops::Add<Output = Self>
     + core::ops::Sub<Output = Self>
     + core::ops::Mul<Output = Self>
     + core::ops::Div<Output = Self>
+    + core::ops::Neg<Output = Self>
     + core::ops::SubAssign
 {
     /// Zero.
     const ZERO: Self;
     /// One.
     const ONE: Self;
+    /// The machine epsilon.
+    const EPSILON: Self;
+    /// The nearest value of the type.
+    fn of(v: f64) -> Self;
+    /// The value as `f64` (exact).
+    fn wide(self) -> f64;
     /// The square root.
     fn sqrt(self) -> Self;
+    /// The cube root.
+    fn cbrt(self) -> Self;
+    /// `e^self`.
+    fn exp(self) -> Self;
+    /// The natural logarithm.
+    fn ln(self) -> Self;
+    /// The absolute value.
+    fn abs(self) -> Self;
     /// True when neither infinite nor NaN.
     fn finite(self) -> bool;
 }
@@ -304,8 +321,27 @@ pub trait Real:
 impl Real for f64 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
+    const EPSILON: Self = f64::EPSILON;
+    fn of(v: f64) -> Self {
+        v
+    }
+    fn wide(self) -> f64 {
+        self
+    }
     fn sqrt(self) -> Self {
         libm::sqrt(self)
+    }
+    fn cbrt(self) -> Self {
+        libm::cbrt(self)
+    }
+    fn exp(self) -> Self {
+        libm::exp(self)
+    }
+    fn ln(self) -> Self {
+        libm::log(self)
+    }
+    fn abs(self) -> Self {
+        libm::fabs(self)
     }
     fn finite(self) -> bool {
         self.is_finite()
@@ -315,8 +351,27 @@ impl Real for f64 {
 impl Real for f32 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
+    const EPSILON: Self = f32::EPSILON;
+    fn of(v: f64) -> Self {
+        v as f32
+    }
+    fn wide(self) -> f64 {
+        self as f64
+    }
     fn sqrt(self) -> Self {
         crate::dsp::trig::sqrtf(self)
+    }
+    fn cbrt(self) -> Self {
+        libm::cbrtf(self)
+    }
+    fn exp(self) -> Self {
+        libm::expf(self)
+    }
+    fn ln(self) -> Self {
+        libm::logf(self)
+    }
+    fn abs(self) -> Self {
+        libm::fabsf(self)
     }
     fn finite(self) -> bool {
         self.is_finite()

@@ -18,6 +18,7 @@ use crate::loadcell::{ContactForce, RawForce, MAX_FORCE_CHANGE, NO_CONTACT_FORCE
 use crate::reading::{Method, Reading};
 use crate::status::{Failure, Status};
 use crate::unit::profile::UnitProfile;
+use crate::unit::q_model::QDeviation;
 use crate::units::Seconds;
 
 /// Largest relative repeatability uncertainty of a modulus that is still a reading. The
@@ -144,11 +145,13 @@ pub fn conclude(
     };
     // The contact: with a load cell the force window and its stability judge the press, and Q
     // may only say what tissue loss cannot (a Q above the calibrated contact's); without one,
-    // a Q off the curve either way is the only sign of a press unlike the calibration's.
+    // a Q off the curve either way is the only sign of a press unlike the calibration's. The
+    // contact law at the reading's force is evaluated once, in `f32` (the M4F's FPU).
     let force_n = force.map(|w| w.mean.0 as f64);
-    let (e_kpa, q) = (m.value.0 as f64, q as f64);
-    let law = unit.contact.as_ref();
-    let deviation = q_model.deviation(e_kpa, force_n, q, law);
+    let law = unit.contact.map(|c| c.at_force::<f32>(force_n));
+    let e_kpa = m.value.0;
+    let q_cal = q_model.q_on(e_kpa, force_n, law.as_ref());
+    let deviation = QDeviation::of(q as f64, q_cal as f64);
     let contact_unlike = match force_n {
         Some(_) => deviation.exceeded(),
         None => !deviation.holds(),
@@ -164,7 +167,9 @@ pub fn conclude(
     r.modulus = Some(m.value);
     r.modulus_sigma = Some(m.sigma);
     r.modulus_sigma_repeat = Some(m.sigma_repeat);
-    if let Some((loss, sigma)) = unit.tissue_loss(e_kpa, force_n, q, est.q_sigma.map(f64::from)) {
+    let q_sigma = est.q_sigma.map(f64::from);
+    let loss = law.and_then(|l| unit.tissue_loss_on(&l, e_kpa, force_n, q as f64, q_sigma));
+    if let Some((loss, sigma)) = loss {
         r.loss_tangent = Some(loss as f32);
         r.loss_tangent_sigma = Some(sigma as f32);
     }

@@ -10,10 +10,11 @@
 
 use crate::engine::sweep::{SweepPoint, SweepSettings};
 use crate::estimate::fit::fit_bvd;
+use crate::linalg::Real;
 use crate::loadcell::{ContactForce, ForceWindow, LoadCellCal};
 use crate::status::Failure;
 use crate::unit::calibration::{held_out_rms, Modulus, PowerLaw, RefPoint, MAX_REFERENCES};
-use crate::unit::contact_law::ContactLaw;
+use crate::unit::contact_law::{ContactLaw, LawAt};
 use crate::unit::q_model::{DampingModel, QModel};
 use crate::units::{Farads, Hz, Seconds, Siemens, Volts};
 
@@ -218,14 +219,31 @@ impl UnitProfile {
         q: f64,
         q_sigma: Option<f64>,
     ) -> Option<(f64, f64)> {
-        let (law, model, q_sigma) = (self.contact?, self.q_model?, q_sigma?);
-        let share = law.loss_share(e_kpa, force_n);
-        let q_cal = model.q_at(e_kpa, force_n, Some(&law));
+        let law = self.contact?.at_force::<f64>(force_n);
+        self.tissue_loss_on(&law, e_kpa, force_n, q, q_sigma)
+    }
+
+    /// [`Self::tissue_loss`] with the contact law at the reading's force already evaluated
+    /// ([`ContactLaw::at_force`]), in `T` (a reading's: `f32`).
+    pub fn tissue_loss_on<T: Real>(
+        &self,
+        law: &LawAt<T>,
+        e_kpa: T,
+        force_n: Option<f64>,
+        q: f64,
+        q_sigma: Option<f64>,
+    ) -> Option<(f64, f64)> {
+        let (model, q_sigma) = (self.q_model?, q_sigma?);
+        let share = law.loss_share(e_kpa).wide();
+        let q_cal = model.q_on(e_kpa, force_n, Some(law)).wide();
         if !(share > 1e-6) || !(q_cal > 0.0) || !(q > 0.0) {
             return None;
         }
         let eta = (1.0 / q - 1.0 / q_cal) / share;
-        let (d_q, d_cal) = (q_sigma / (q * q), model.scatter(Some(&law)) / q_cal);
+        let (d_q, d_cal) = (
+            q_sigma / (q * q),
+            model.scatter(self.contact.as_ref()) / q_cal,
+        );
         let sigma = libm::sqrt(d_q * d_q + d_cal * d_cal) / share;
         (eta.is_finite() && sigma.is_finite()).then_some((eta, sigma))
     }
@@ -269,13 +287,16 @@ impl UnitProfile {
             }
             None => (
                 self.calibration.invert(f, sigma)?,
-                self.calibration.invert(Hz(f.0 - u as f32), sigma),
+                (u != 0.0).then(|| {
+                    let moved = self.calibration.invert(Hz(f.0 - u as f32), sigma);
+                    moved.map(|x| x.value)
+                }),
             ),
         };
         // Near the span's ends the moved inversion may leave it: the allowance then goes by the
         // slope on the other side (the same to first order).
         let drift = match moved {
-            Ok(x) if u > 0.0 => libm::fabsf(x.value.0 - m.value.0),
+            Some(Ok(x)) if u > 0.0 => libm::fabsf(x.0 - m.value.0),
             _ => 0.0,
         };
         Ok(Modulus {

@@ -2,7 +2,8 @@
 //! phantoms, the contact condition its calibration holds for and the lossless contact a
 //! reading's tissue loss is read against. May import the leaves and the contact law.
 
-use crate::unit::contact_law::ContactLaw;
+use crate::linalg::Real;
+use crate::unit::contact_law::{ContactLaw, LawAt};
 use crate::unit::profile::Reference;
 
 /// The unit's quality factor against modulus on the reference phantoms: the contact condition
@@ -166,13 +167,13 @@ impl QModel {
     }
 
     /// The empirical curve `q0 + q1 ln E + q2 ln F` at `e_kpa` and contact force `force_n` (N;
-    /// the force term is left out for a model without one or without a force).
-    pub fn log_linear_q(&self, e_kpa: f64, force_n: Option<f64>) -> f64 {
+    /// the force term is left out for a model without one or without a force), in `T`.
+    pub fn log_linear_q<T: Real>(&self, e_kpa: T, force_n: Option<f64>) -> T {
         let f = match force_n {
-            Some(f) if self.q2 != 0.0 && f > 0.0 => self.q2 * libm::log(f),
-            _ => 0.0,
+            Some(f) if self.q2 != 0.0 && f > 0.0 => T::of(self.q2) * T::of(f).ln(),
+            _ => T::ZERO,
         };
-        self.q0 + self.q1 * libm::log(e_kpa) + f
+        T::of(self.q0) + T::of(self.q1) * e_kpa.ln() + f
     }
 
     /// Expected Q of the lossless calibrated contact at `e_kpa` and contact force `force_n`
@@ -180,8 +181,15 @@ impl QModel {
     /// one and the unit's contact law `law` is given, else the empirical curve
     /// ([`Self::log_linear_q`]).
     pub fn q_at(&self, e_kpa: f64, force_n: Option<f64>, law: Option<&ContactLaw>) -> f64 {
+        let law = law.map(|l| l.at_force::<f64>(force_n));
+        self.q_on(e_kpa, force_n, law.as_ref())
+    }
+
+    /// [`Self::q_at`] with the contact law at the reading's force `force_n` already evaluated
+    /// ([`ContactLaw::at_force`]), in `T` (a reading's: `f32`).
+    pub fn q_on<T: Real>(&self, e_kpa: T, force_n: Option<f64>, law: Option<&LawAt<T>>) -> T {
         match (self.damping, law) {
-            (Some(d), Some(law)) => d.q_at(law, e_kpa, force_n),
+            (Some(d), Some(law)) => d.q_on(law, e_kpa),
             _ => self.log_linear_q(e_kpa, force_n),
         }
     }
@@ -204,8 +212,7 @@ impl QModel {
         q: f64,
         law: Option<&ContactLaw>,
     ) -> QDeviation {
-        let expect = self.q_at(e_kpa, force_n, law);
-        QDeviation((expect > 0.0).then(|| q / expect - 1.0))
+        QDeviation::of(q, self.q_at(e_kpa, force_n, law))
     }
 
     /// True when every coefficient is finite and the scatter not negative.
@@ -225,6 +232,11 @@ impl QModel {
 pub struct QDeviation(pub Option<f64>);
 
 impl QDeviation {
+    /// `q`'s relative deviation from the curve's `expect`.
+    pub fn of(q: f64, expect: f64) -> Self {
+        QDeviation((expect > 0.0).then(|| q / expect - 1.0))
+    }
+
     /// True when the Q is within [`QModel::TOLERANCE`] of the curve.
     pub fn holds(self) -> bool {
         self.0.is_some_and(|d| libm::fabs(d) <= QModel::TOLERANCE)
@@ -244,11 +256,16 @@ impl DampingModel {
     /// `None`) through the unit's contact law `law`: `R / (g1 + g2 shape)` ([`DampingModel`]).
     /// Not positive where the damping is not.
     pub fn q_at(&self, law: &ContactLaw, e_kpa: f64, force_n: Option<f64>) -> f64 {
-        let c = self.probe_per_s + self.contact_per_s * law.damping_shape(e_kpa, force_n);
-        if c > 0.0 {
-            law.mode_rate(e_kpa, force_n) / c
+        self.q_on(&law.at_force(force_n), e_kpa)
+    }
+
+    /// [`Self::q_at`] with the law at the reading's force already evaluated, in `T`.
+    pub fn q_on<T: Real>(&self, law: &LawAt<T>, e_kpa: T) -> T {
+        let c = T::of(self.probe_per_s) + T::of(self.contact_per_s) * law.damping_shape(e_kpa);
+        if c > T::ZERO {
+            law.mode_rate(e_kpa) / c
         } else {
-            0.0
+            T::ZERO
         }
     }
 

@@ -31,12 +31,12 @@
 //! references (each modulus at every force, [`crate::unit::profile::calibrate`]) are what tells
 //! whether a probe follows them.
 
-use crate::linalg::{levenberg_marquardt, spd_inverse, LmStop};
+use crate::linalg::{levenberg_marquardt, spd_inverse, LmStop, Real};
 use crate::status::Failure;
 use crate::unit::calibration::{
     checked_span_of, inversion_input, span, FitError, Modulus, RefPoint,
 };
-use crate::units::Hz;
+use crate::units::{Hz, KPa};
 use core::f64::consts::PI;
 
 /// The contact law of one unit.
@@ -81,44 +81,54 @@ fn force_ratio(ref_n: f64, force_n: f64) -> f64 {
 }
 
 /// The law's constants out of their logarithms, computed once for many evaluations (an
-/// inversion takes about fifty: on the Cortex-M4F every `f64` exponential is software).
-#[derive(Clone, Copy)]
-struct Constants {
-    k1: f64,
-    ks: f64,
-    a: f64,
-    b: f64,
+/// inversion takes about ten), in `T`: `f64` for the calibration's fits, `f32` (the
+/// Cortex-M4F's FPU, where every `f64` operation is software) for a reading's inversion and
+/// its contact's Q and loss share ([`ContactLaw::at_force`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Constants<T> {
+    k1: T,
+    ks: T,
+    a: T,
+    b: T,
 }
 
-impl Constants {
+/// `2π` in `T`.
+fn two_pi<T: Real>() -> T {
+    T::of(2.0 * PI)
+}
+
+impl<T: Real> Constants<T> {
     /// At the force ratio `ratio = F/F0`.
     fn of(free_hz: f64, p: &[f64; 3], ratio: f64) -> Self {
-        let l = libm::log(ratio);
+        let l = T::of(ratio).ln();
+        let w = two_pi::<T>() * T::of(free_hz);
         Self {
-            k1: (2.0 * PI * free_hz) * (2.0 * PI * free_hz),
-            ks: libm::exp(p[0]),
-            a: libm::exp(p[1] + FORCE_EXPONENT_A * l),
-            b: libm::exp(p[2] + FORCE_EXPONENT_B * l),
+            k1: w * w,
+            ks: T::of(p[0]).exp(),
+            a: (T::of(p[1]) + T::of(FORCE_EXPONENT_A) * l).exp(),
+            b: (T::of(p[2]) + T::of(FORCE_EXPONENT_B) * l).exp(),
         }
     }
 
     /// From the constants themselves (`K1`, `Ks`, `A`, `B` at the reference force).
-    fn with(k1: f64, ks: f64, a: f64, b: f64) -> Self {
+    fn with(k1: T, ks: T, a: T, b: T) -> Self {
         Self { k1, ks, a, b }
     }
 
     /// The law and its slopes at `y = E^(1/3)` (E in kPa): `F = sqrt(N/M)/2π` with
     /// `N = K1 + s A y²`, `M = 1 + s² B/y³`, `s = Ks/(Ks + A y²)`, and
     /// `dF = F (dN/N − dM/M)/2` for each variable.
-    fn at_cube_root(&self, y: f64) -> Slopes {
-        let at = self.at_term(y * y, 1.0 / (y * y * y));
+    fn at_cube_root(&self, y: T) -> Slopes<T> {
+        let at = self.at_term(y * y, T::ONE / (y * y * y));
         let Term { km, bm, s, n, m } = at.term;
-        let df = |dn: f64, dm: f64| 0.5 * at.f * (dn / n - dm / m);
+        let half = T::of(0.5);
+        let two = T::of(2.0);
+        let df = |dn: T, dm: T| half * at.f * (dn / n - dm / m);
         // y: dkm = 2 km/y, ds = −s (1−s) dkm/km, dbm = −3 bm/y.
-        let ds_dy = -s * (1.0 - s) * 2.0 / y;
+        let ds_dy = -s * (T::ONE - s) * two / y;
         let df_dy = df(
-            ds_dy * km + s * 2.0 * km / y,
-            2.0 * s * ds_dy * bm - 3.0 * s * s * bm / y,
+            ds_dy * km + s * two * km / y,
+            two * s * ds_dy * bm - T::of(3.0) * s * s * bm / y,
         );
         Slopes {
             f: at.f,
@@ -130,20 +140,22 @@ impl Constants {
     /// The law and its slopes in the constants at the factors `u = (F/F0)^(1/3) E^(2/3)` and
     /// `v = (F/F0)/E` of one modulus and force ([`factors`]): `km = A u`, `bm = B v`, the rest
     /// as [`at_cube_root`](Self::at_cube_root) (one square root, no other transcendental).
-    fn at_term(&self, u: f64, v: f64) -> AtTerm {
+    fn at_term(&self, u: T, v: T) -> AtTerm<T> {
         let km = self.a * u;
         let s = self.ks / (self.ks + km);
         let bm = self.b * v;
         let n = self.k1 + s * km;
-        let m = 1.0 + s * s * bm;
-        let f = libm::sqrt(n / m) / (2.0 * PI);
-        let df = |dn: f64, dm: f64| 0.5 * f * (dn / n - dm / m);
+        let m = T::ONE + s * s * bm;
+        let f = (n / m).sqrt() / two_pi::<T>();
+        let half = T::of(0.5);
+        let two = T::of(2.0);
+        let df = |dn: T, dm: T| half * f * (dn / n - dm / m);
         // ln Ks: ds = s (1−s). ln A: dkm = km, ds = −s (1−s). ln B: dbm = bm.
-        let t = s * (1.0 - s);
+        let t = s * (T::ONE - s);
         let df_dp = [
-            df(t * km, 2.0 * s * t * bm),
-            df(s * s * km, -2.0 * s * t * bm),
-            df(0.0, s * s * bm),
+            df(t * km, two * s * t * bm),
+            df(s * s * km, -(two * s * t * bm)),
+            df(T::ZERO, s * s * bm),
         ];
         AtTerm {
             f,
@@ -152,40 +164,101 @@ impl Constants {
         }
     }
 
+    /// The contact stiffness `km = A E^(2/3)` and the series coupling's transfer
+    /// `s = Ks/(Ks + km)` at modulus `e_kpa`.
+    fn contact(&self, e_kpa: T) -> (T, T) {
+        let km = self.a * (e_kpa * e_kpa).cbrt();
+        (km, self.ks / (self.ks + km))
+    }
+
     /// Resonance (Hz) at modulus `e_kpa`.
-    fn frequency(&self, e_kpa: f64) -> f64 {
-        let km = self.a * libm::cbrt(e_kpa * e_kpa);
-        let s = self.ks / (self.ks + km);
-        libm::sqrt((self.k1 + s * km) / (1.0 + s * s * self.b / e_kpa)) / (2.0 * PI)
+    fn frequency(&self, e_kpa: T) -> T {
+        let (km, s) = self.contact(e_kpa);
+        ((self.k1 + s * km) / (T::ONE + s * s * self.b / e_kpa)).sqrt() / two_pi::<T>()
     }
 }
 
+/// A modulus found by [`ContactLaw::root`]: its cube root, itself (kPa) and the law's slopes
+/// there.
+struct Root<T> {
+    y: T,
+    e: T,
+    at: Slopes<T>,
+}
+
+/// Most evaluations of the law a root takes (its bracket halves at least every other one).
+const ROOT_STEPS: usize = 60;
+
 /// The law's value and slopes at one modulus.
-struct Slopes {
+struct Slopes<T> {
     /// Resonance, Hz.
-    f: f64,
+    f: T,
     /// `dF/dy`, `y = E^(1/3)`.
-    df_dy: f64,
+    df_dy: T,
     /// `dF/d(ln Ks)`, `dF/d(ln A)`, `dF/d(ln B)`.
-    df_dp: [f64; 3],
+    df_dp: [T; 3],
 }
 
 /// The intermediate values of the law at one modulus and force (for the slopes in `y`).
-struct Term {
-    km: f64,
-    bm: f64,
-    s: f64,
-    n: f64,
-    m: f64,
+struct Term<T> {
+    km: T,
+    bm: T,
+    s: T,
+    n: T,
+    m: T,
 }
 
 /// The law's value and slopes in the constants at one modulus and force.
-struct AtTerm {
+struct AtTerm<T> {
     /// Resonance, Hz.
-    f: f64,
+    f: T,
     /// `dF/d(ln Ks)`, `dF/d(ln A)`, `dF/d(ln B)`.
-    df_dp: [f64; 3],
-    term: Term,
+    df_dp: [T; 3],
+    term: Term<T>,
+}
+
+/// A [`ContactLaw`] at one contact force ([`ContactLaw::at_force`]), in `T`.
+#[derive(Clone, Copy, Debug)]
+pub struct LawAt<T> {
+    k: Constants<T>,
+    /// The force ratio `F/F0`.
+    ratio: T,
+}
+
+impl<T: Real> LawAt<T> {
+    /// Resonance at modulus `e_kpa`, Hz.
+    pub fn frequency(&self, e_kpa: T) -> T {
+        self.k.frequency(e_kpa)
+    }
+
+    /// The tissue's share of the mode's loss: `s² k_m / k` at modulus `e_kpa`, with
+    /// `k_m = A u` the contact stiffness, `s` the series coupling's transfer and
+    /// `k = K1 + s k_m` the mode's stiffness (all per modal mass). A tissue of loss tangent `η`
+    /// makes the contact stiffness `k_m (1 + jη)`, which reaches the mode as `s k_m (1 + j s η)`
+    /// to first order in `η`: it adds `η s² k_m / k` to the mode's `1/Q` (docs/physics.md,
+    /// "Viscoelastic tissue").
+    pub fn loss_share(&self, e_kpa: T) -> T {
+        let (km, s) = self.k.contact(e_kpa);
+        s * s * km / (self.k.k1 + s * km)
+    }
+
+    /// The loaded mode's `sqrt(k m) / m0` at modulus `e_kpa`, s⁻¹: `sqrt(N M)` with
+    /// `N = K1 + s k_m` the mode's stiffness and `M = 1 + s² B/E` its mass, both per modal mass
+    /// `m0`. A damping `c` gives the mode `Q = sqrt(k m) / c`, so `Q = mode_rate / (c / m0)`
+    /// (paper 003 eq. 1–2; the Kelvin model of `hal-sim`'s `tissue.rs`).
+    pub fn mode_rate(&self, e_kpa: T) -> T {
+        let (km, s) = self.k.contact(e_kpa);
+        ((self.k.k1 + s * km) * (T::ONE + s * s * self.k.b / e_kpa)).sqrt()
+    }
+
+    /// How the contact's damping varies with the modulus `e_kpa` (kPa) and the force:
+    /// `(E / kPa)^(−1/6) (F/F0)^(2/3)`. Paper 003's appendix gives the contact damping
+    /// `c_m = κ ρ v S / (1 − ν)` with the shear-wave speed `v ∝ E^(1/2)` and the contact area
+    /// `S = π a²`; with the law's Hertz radius `a ∝ (F/E)^(1/3)` ([`FORCE_EXPONENT_A`]) it is
+    /// `∝ E^(−1/6) F^(2/3)` ([`DAMPING_EXPONENT_E`], [`DAMPING_EXPONENT_F`]).
+    pub fn damping_shape(&self, e_kpa: T) -> T {
+        (self.ratio * self.ratio).cbrt() / e_kpa.cbrt().sqrt()
+    }
 }
 
 /// The factors of one modulus `e_kpa` and force ratio `ratio` in the law (
@@ -269,7 +342,7 @@ impl Terms {
     }
 
     /// χ² of the law with constants `k`.
-    fn chi2(&self, k: &Constants) -> f64 {
+    fn chi2(&self, k: &Constants<f64>) -> f64 {
         self.chi2_below(k, f64::INFINITY)
     }
 
@@ -277,7 +350,7 @@ impl Terms {
     /// reaches it: every term adds a square (or NaN), so a partial sum at or above `bound` says
     /// that χ² is not below it either (the grid of starts keeps only a χ² below the best so far,
     /// and skips the rest of a start that cannot be).
-    fn chi2_below(&self, k: &Constants, bound: f64) -> f64 {
+    fn chi2_below(&self, k: &Constants<f64>, bound: f64) -> f64 {
         let mut sum = self.c;
         for &[u, v, w, f] in &self.t[..self.len] {
             let r = f - k.at_term(u, v).f;
@@ -290,7 +363,7 @@ impl Terms {
     }
 
     /// `JᵀWJ` and `JᵀW r` of the law with constants `k`, `J` its analytic slopes.
-    fn normal(&self, k: &Constants) -> Normal {
+    fn normal(&self, k: &Constants<f64>) -> Normal {
         let mut jtj = [[0.0; 3]; 3];
         let mut jtr = [0.0; 3];
         for &[u, v, w, f] in &self.t[..self.len] {
@@ -309,7 +382,7 @@ impl Terms {
 
 /// Resonance (Hz) of the law `free_hz`, `p` at modulus `e_kpa` and force ratio `ratio`.
 fn frequency_of(free_hz: f64, p: &[f64; 3], e_kpa: f64, ratio: f64) -> f64 {
-    Constants::of(free_hz, p, ratio).frequency(e_kpa)
+    Constants::<f64>::of(free_hz, p, ratio).frequency(e_kpa)
 }
 
 /// How many numbers [`ContactLaw::to_values`] gives.
@@ -390,47 +463,35 @@ impl ContactLaw {
         )
     }
 
-    /// The tissue's share of the mode's loss: `s² k_m / k` at modulus `e_kpa` pressed with
-    /// `force_n` (N; the reference force when `None`), with `k_m = A u` the contact stiffness,
-    /// `s` the series coupling's transfer and `k = K1 + s k_m` the mode's stiffness (all per
-    /// modal mass). A tissue of loss tangent `η` makes the contact stiffness `k_m (1 + jη)`,
-    /// which reaches the mode as `s k_m (1 + j s η)` to first order in `η`: it adds
-    /// `η s² k_m / k` to the mode's `1/Q` (docs/physics.md, "Viscoelastic tissue").
+    /// The law at the contact force `force_n` (N; the reference force when `None` or for a
+    /// law without one), in `T`: its constants computed once for the evaluations of one
+    /// reading ([`LawAt`]).
+    pub fn at_force<T: Real>(&self, force_n: Option<f64>) -> LawAt<T> {
+        let ratio = force_ratio(self.force_n, force_n.unwrap_or(0.0));
+        LawAt {
+            k: Constants::of(self.free_hz, &self.p, ratio),
+            ratio: T::of(ratio),
+        }
+    }
+
+    /// [`LawAt::loss_share`] at `force_n`, in `f64`.
     pub fn loss_share(&self, e_kpa: f64, force_n: Option<f64>) -> f64 {
-        let ratio = force_ratio(self.force_n, force_n.unwrap_or(0.0));
-        let k = Constants::of(self.free_hz, &self.p, ratio);
-        let km = k.a * libm::cbrt(e_kpa * e_kpa);
-        let s = k.ks / (k.ks + km);
-        s * s * km / (k.k1 + s * km)
+        self.at_force::<f64>(force_n).loss_share(e_kpa)
     }
 
-    /// The loaded mode's `sqrt(k m) / m0` at modulus `e_kpa` pressed with `force_n` (N; the
-    /// reference force when `None`), s⁻¹: `sqrt(N M)` with `N = K1 + s k_m` the mode's
-    /// stiffness and `M = 1 + s² B/E` its mass, both per modal mass `m0`. A damping `c` gives
-    /// the mode `Q = sqrt(k m) / c`, so `Q = mode_rate / (c / m0)` (paper 003 eq. 1–2; the
-    /// Kelvin model of `hal-sim`'s `tissue.rs`).
+    /// [`LawAt::mode_rate`] at `force_n`, in `f64`.
     pub fn mode_rate(&self, e_kpa: f64, force_n: Option<f64>) -> f64 {
-        let ratio = force_ratio(self.force_n, force_n.unwrap_or(0.0));
-        let k = Constants::of(self.free_hz, &self.p, ratio);
-        let km = k.a * libm::cbrt(e_kpa * e_kpa);
-        let s = k.ks / (k.ks + km);
-        libm::sqrt((k.k1 + s * km) * (1.0 + s * s * k.b / e_kpa))
+        self.at_force::<f64>(force_n).mode_rate(e_kpa)
     }
 
-    /// How the contact's damping varies with the modulus `e_kpa` (kPa) and the force `force_n`
-    /// (N; the reference force when `None`): `(E / kPa)^(−1/6) (F/F0)^(2/3)`. Paper 003's
-    /// appendix gives the contact damping `c_m = κ ρ v S / (1 − ν)` with the shear-wave speed
-    /// `v ∝ E^(1/2)` and the contact area `S = π a²`; with the law's Hertz radius
-    /// `a ∝ (F/E)^(1/3)` ([`FORCE_EXPONENT_A`]) it is `∝ E^(−1/6) F^(2/3)`
-    /// ([`DAMPING_EXPONENT_E`], [`DAMPING_EXPONENT_F`]).
+    /// [`LawAt::damping_shape`] at `force_n`, in `f64`.
     pub fn damping_shape(&self, e_kpa: f64, force_n: Option<f64>) -> f64 {
-        let ratio = force_ratio(self.force_n, force_n.unwrap_or(0.0));
-        libm::cbrt(ratio * ratio) / libm::sqrt(libm::cbrt(e_kpa))
+        self.at_force::<f64>(force_n).damping_shape(e_kpa)
     }
 
     /// The rigid limit `sqrt(K1 + Ks)/2π`, Hz.
     pub fn rigid_hz(&self) -> f64 {
-        let k = Constants::of(self.free_hz, &self.p, 1.0);
+        let k = Constants::<f64>::of(self.free_hz, &self.p, 1.0);
         libm::sqrt(k.k1 + k.ks) / (2.0 * PI)
     }
 
@@ -452,79 +513,64 @@ impl ContactLaw {
     /// uncertainty, N; `None`: at the reference force), with the law's own uncertainty and the
     /// force's propagated: as [`crate::unit::calibration::PowerLaw::invert`] (the same failures for
     /// the same cases). The force's uncertainty counts as the resonance's (`∂f/∂F σ_F` added
-    /// in quadrature): a force read anew each reading scatters with it.
+    /// in quadrature): a force read anew each reading scatters with it. The root and its slopes
+    /// are found in `f32` ([`Self::root`]), the uncertainty propagated in `f64`.
     pub fn invert(&self, f: Hz, sigma: Hz, force: Option<(f64, f64)>) -> Result<Modulus, Failure> {
-        let (input, k) = self.inversion(f, sigma, force)?;
-        self.solve(&k, input, None).map(|(m, _)| m)
+        self.invert_moved(f, sigma, force, 0.0).0
     }
 
-    /// [`ContactLaw::invert`], and the same with the free resonance moved by `moved_hz` (the
-    /// unit's drift allowance, [`crate::unit::profile::UnitProfile::invert`]): the second shares the
-    /// first's constants (the free resonance enters only `K1`) and starts its Newton steps at
-    /// the first's root (two or three evaluations instead of eight). The same roots to the
-    /// same tolerance as two calls of `invert`.
+    /// [`ContactLaw::invert`], and the modulus alone had the free resonance moved by `moved_hz`
+    /// (the unit's drift allowance, [`crate::unit::profile::UnitProfile::invert`]; not sought
+    /// when 0): the second shares the first's constants (the free resonance enters only `K1`)
+    /// and starts its Newton steps at the first's root.
     pub fn invert_moved(
         &self,
         f: Hz,
         sigma: Hz,
         force: Option<(f64, f64)>,
         moved_hz: f64,
-    ) -> (Result<Modulus, Failure>, Result<Modulus, Failure>) {
-        let moved = ContactLaw {
-            free_hz: self.free_hz + moved_hz,
-            ..*self
-        };
-        let (input, k) = match self.inversion(f, sigma, force) {
+    ) -> (Result<Modulus, Failure>, Option<Result<KPa, Failure>>) {
+        let (f, sf) = match inversion_input(self.is_valid(), f, sigma) {
             Ok(x) => x,
-            Err(e) => return (Err(e), moved.invert(f, sigma, force)),
+            Err(e) => return (Err(e), None),
         };
-        let (m, y) = match self.solve(&k, input, None) {
-            Ok((m, y)) => (Ok(m), Some(y)),
-            Err(e) => (Err(e), None),
-        };
-        let two_pi_free = 2.0 * PI * moved.free_hz;
-        let k_moved = Constants {
-            k1: two_pi_free * two_pi_free,
-            ..k
-        };
-        (m, moved.solve(&k_moved, input, y).map(|(m, _)| m))
-    }
-
-    /// The checked resonance, its uncertainty and the force's relative one, and the law's
-    /// constants at the force.
-    fn inversion(
-        &self,
-        f: Hz,
-        sigma: Hz,
-        force: Option<(f64, f64)>,
-    ) -> Result<((f64, f64, f64), Constants), Failure> {
-        let (f, sf) = inversion_input(self.is_valid(), f, sigma)?;
         let (ratio, sigma_ln_f) = match force {
             Some((fm, sfm)) if self.force_n > 0.0 && fm > 0.0 => {
                 (force_ratio(self.force_n, fm), (sfm / fm).max(0.0))
             }
             _ => (1.0, 0.0),
         };
-        Ok((
-            (f, sf, sigma_ln_f),
-            Constants::of(self.free_hz, &self.p, ratio),
-        ))
+        let k = Constants::<f32>::of(self.free_hz, &self.p, ratio);
+        let root = self.root(&k, f, None);
+        let moved = (moved_hz != 0.0).then(|| {
+            let w = two_pi::<f32>() * (self.free_hz + moved_hz) as f32;
+            let k_moved = Constants { k1: w * w, ..k };
+            let near = root.as_ref().ok().map(|r| r.y);
+            self.root(&k_moved, f, near).map(|r| KPa(r.e))
+        });
+        let m = root.map(|r| {
+            // dE/df = 3 y² / (dF/dy); dE/dp = −(∂F/∂p)(dE/df).
+            let de_df = (3.0 * r.y * r.y / r.at.df_dy) as f64;
+            let g = r.at.df_dp.map(|d| -(d as f64) * de_df);
+            // ∂f/∂ln F through A and B.
+            let df_dlnf = (FORCE_EXPONENT_A as f32 * r.at.df_dp[1]
+                + FORCE_EXPONENT_B as f32 * r.at.df_dp[2]) as f64;
+            let sf = libm::sqrt(sf * sf + (df_dlnf * sigma_ln_f) * (df_dlnf * sigma_ln_f));
+            let (misfit, cov) = (self.model_sigma_hz, &self.cov);
+            Modulus::propagated(r.e as f64, de_df, sf, misfit, &g, cov)
+        });
+        (m, moved)
     }
 
-    /// The inversion proper with constants `k` from [`Self::inversion`]'s input, Newton steps
-    /// started at `near` (a cube root of a modulus) when it lies inside the searched range:
-    /// the modulus and its cube root.
-    fn solve(
-        &self,
-        k: &Constants,
-        (f, sf, sigma_ln_f): (f64, f64, f64),
-        near: Option<f64>,
-    ) -> Result<(Modulus, f64), Failure> {
-        // In y = E^(1/3) the law needs no transcendental but a square root (km = A y²,
-        // B/E = B/y³): Newton steps on y, kept inside a bracket that shrinks with every
-        // evaluation (a bisection step where Newton would leave it). Cost: ~8 evaluations
-        // where a bisection of the range took 64 (docs/firmware.md).
-        let (mut lo, mut hi) = SEARCH_CUBE_ROOT;
+    /// The modulus whose resonance is `f` (Hz) with the law's constants `k`, with the law's
+    /// slopes there: Newton steps on `y = E^(1/3)` started at `near` when it lies inside the
+    /// searched range, kept inside a bracket that shrinks with every evaluation (a bisection
+    /// step where Newton would leave it; at most [`ROOT_STEPS`] evaluations). In `y` the law
+    /// needs no transcendental but a square root (`km = A y²`, `B/E = B/y³`). Out of the
+    /// calibration's span, or where the law does not rise, the failure that says so.
+    fn root<T: Real>(&self, k: &Constants<T>, f: f64, near: Option<T>) -> Result<Root<T>, Failure> {
+        let f = T::of(f);
+        let (mut lo, mut hi) = (T::of(SEARCH_CUBE_ROOT.0), T::of(SEARCH_CUBE_ROOT.1));
         if f >= k.at_cube_root(hi).f {
             return Err(Failure::AboveRange);
         }
@@ -533,22 +579,24 @@ impl ContactLaw {
         }
         let mut y = match near {
             Some(y) if y > lo && y < hi => y,
-            _ => libm::cbrt(libm::sqrt(self.min_kpa * self.max_kpa)),
+            _ => (T::of(self.min_kpa) * T::of(self.max_kpa)).sqrt().cbrt(),
         };
+        // Newton converges quadratically: a step below √ε·y leaves an error of order ε·y.
+        let tol = T::EPSILON.sqrt();
         let mut at = k.at_cube_root(y);
-        for _ in 0..60 {
+        for _ in 0..ROOT_STEPS {
             if at.f < f {
                 lo = y;
             } else {
                 hi = y;
             }
             let newton = y - (at.f - f) / at.df_dy;
-            let next = if at.df_dy > 0.0 && newton >= lo && newton <= hi {
+            let next = if at.df_dy > T::ZERO && newton >= lo && newton <= hi {
                 newton
             } else {
-                0.5 * (lo + hi)
+                T::of(0.5) * (lo + hi)
             };
-            let done = libm::fabs(next - y) <= 1e-12 * y;
+            let done = (next - y).abs() <= tol * y || hi - lo <= tol * y;
             y = next;
             at = k.at_cube_root(y);
             if done {
@@ -556,23 +604,16 @@ impl ContactLaw {
             }
         }
         let e = y * y * y;
-        if e > self.max_kpa {
+        if e.wide() > self.max_kpa {
             return Err(Failure::AboveRange);
         }
-        if e < self.min_kpa {
+        if e.wide() < self.min_kpa {
             return Err(Failure::BelowRange);
         }
-        // dE/df = 3 y² / (dF/dy); dE/dp = −(∂F/∂p)(dE/df).
-        if !(at.df_dy > 0.0) {
+        if !(at.df_dy > T::ZERO) {
             return Err(Failure::AboveRange);
         }
-        let de_df = 3.0 * y * y / at.df_dy;
-        let g = at.df_dp.map(|d| -d * de_df);
-        // ∂f/∂ln F through A and B.
-        let df_dlnf = FORCE_EXPONENT_A * at.df_dp[1] + FORCE_EXPONENT_B * at.df_dp[2];
-        let sf = libm::sqrt(sf * sf + (df_dlnf * sigma_ln_f) * (df_dlnf * sigma_ln_f));
-        let (misfit, cov) = (self.model_sigma_hz, &self.cov);
-        Ok((Modulus::propagated(e, de_df, sf, misfit, &g, cov), y))
+        Ok(Root { y, e, at })
     }
 
     /// Weighted least-squares fit of `(ln Ks, ln A, ln B)` at the reference force `force_n` (N;
@@ -619,7 +660,7 @@ impl ContactLaw {
             return Err(FitError::BadInput);
         }
         let n_points = terms.points;
-        let k1 = Constants::of(free_hz, &[0.0; 3], 1.0).k1;
+        let k1 = Constants::<f64>::of(free_hz, &[0.0; 3], 1.0).k1;
         // Starts: Ks from the rigid limit over the highest reading (its square less K1, times
         // 1–16), A and B over three decades each about the simulated probe's. The grid's
         // exponentials once per axis value (19, not 3 × 245).
