@@ -484,7 +484,7 @@ impl SweepMeasurement {
         }
     }
 
-    /// The reading, through the one [`pipeline`](crate::reading::pipeline) with the unit's profile and
+    /// The reading, through the one [`pipeline`] with the unit's profile and
     /// the load cell's counts over the reading's window.
     pub fn finish(&self, unit: &UnitProfile, force: Option<RawForce>) -> Reading {
         conclude(
@@ -500,7 +500,7 @@ impl SweepMeasurement {
 
 /// Anything that asks the sample engine for points (its [`Plans`]) and ends in a reading.
 pub trait Measurement: Plans {
-    /// The reading, through the one [`pipeline`](crate::reading::pipeline) with the unit's profile and
+    /// The reading, through the one [`pipeline`] with the unit's profile and
     /// the load cell's counts over the reading's window (`None`: no load cell, or it was
     /// silent).
     fn finish(&self, unit: &UnitProfile, force: Option<RawForce>) -> Reading;

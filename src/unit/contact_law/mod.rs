@@ -514,7 +514,7 @@ impl ContactLaw {
     /// force's propagated: as [`crate::unit::calibration::PowerLaw::invert`] (the same failures for
     /// the same cases). The force's uncertainty counts as the resonance's (`∂f/∂F σ_F` added
     /// in quadrature): a force read anew each reading scatters with it. The root and its slopes
-    /// are found in `f32` ([`Self::root`]), the uncertainty propagated in `f64`.
+    /// are found in `f32` (a bracketed Newton search), the uncertainty propagated in `f64`.
     pub fn invert(&self, f: Hz, sigma: Hz, force: Option<(f64, f64)>) -> Result<Modulus, Failure> {
         self.invert_moved(f, sigma, force, 0.0).0
     }
