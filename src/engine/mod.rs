@@ -11,7 +11,7 @@
 
 pub mod sweep;
 
-use crate::dsp::dds::{cos_q15, sin_q15, Dds};
+use crate::dsp::dds::{sin_q15, Dds};
 use crate::dsp::lockin::LockInSums;
 use crate::hal::AdcFrame;
 use crate::units::{DacCode, MAX_CODE, MID_CODE};
@@ -303,62 +303,79 @@ impl SampleEngine {
         let mut phase = info.start_phase;
         let ftw = info.ftw;
         let mut out = Points::new();
-        for f in adc {
-            if let Stage::Settling(n) = self.stage {
-                self.stage = if n == 0 {
-                    Stage::AwaitBoundary
-                } else {
-                    Stage::Settling(n - 1)
-                };
-            }
-            if let Stage::Integrating(_) = self.stage {
-                self.sums.accumulate(
-                    cos_q15(phase),
-                    sin_q15(phase),
-                    f.current.centered(),
-                    f.monitor.centered(),
-                );
-                self.sums.current_rail_hits += f.current.is_rail() as u32;
-                self.sums.monitor_rail_hits += f.monitor.is_rail() as u32;
-            }
-            let next = phase.wrapping_add(ftw);
-            let wrapped = next < phase;
-            phase = next;
-            self.samples += 1;
-            if wrapped {
-                match self.stage {
-                    Stage::AwaitBoundary => {
-                        let cycles = info.plan.map_or(0, |p| p.cycles);
-                        self.stage = Stage::Integrating(cycles);
-                    }
-                    Stage::Integrating(k) if k <= 1 => {
-                        self.stage = Stage::Done;
-                        if let Some(plan) = info.plan {
-                            let point = PointRaw {
-                                plan,
-                                sums: self.sums,
-                                end_sample: self.samples,
-                                window: self.window,
-                                since_load: (self.samples.saturating_sub(self.load_sample))
-                                    .min(u32::MAX as u64)
-                                    as u32,
-                            };
-                            if out.push(point).is_err() {
-                                self.overruns = self.overruns.saturating_add(1);
-                            }
-                            if plan.open || self.window.saturating_add(1) < plan.windows {
-                                self.window = self.window.saturating_add(1);
-                                self.sums = LockInSums::default();
-                                self.stage = Stage::Integrating(plan.cycles);
-                            }
-                        }
-                    }
-                    Stage::Integrating(k) => self.stage = Stage::Integrating(k - 1),
-                    _ => {}
+        let mut rest = adc;
+        // Run by run: a stage's samples up to its next event (the end of the settling, a cycle
+        // boundary) at once, the same stage changes at the same samples as stepping each one.
+        while !rest.is_empty() {
+            // The samples skipped: the phase steps over them.
+            let skip = |phase: &mut u32, n: usize| {
+                *phase = phase.wrapping_add(ftw.wrapping_mul(n as u32));
+                n
+            };
+            let (used, wrapped) = match self.stage {
+                // Settling(n) turns into AwaitBoundary at the start of its (n + 1)-th sample,
+                // which may wrap: the n samples before it are skipped.
+                Stage::Settling(n) => {
+                    let m = (n as usize).min(rest.len());
+                    self.stage = if m < rest.len() {
+                        Stage::AwaitBoundary
+                    } else {
+                        Stage::Settling(n - m as u32)
+                    };
+                    (skip(&mut phase, m), false)
                 }
+                Stage::Integrating(_) => self.sums.integrate(rest, &mut phase, ftw),
+                // Up to the sample whose step wraps: (2^32 − 1 − phase) / ftw more samples.
+                Stage::AwaitBoundary => match (!phase).checked_div(ftw) {
+                    Some(k) if (k as usize) < rest.len() => {
+                        (skip(&mut phase, k as usize + 1), true)
+                    }
+                    _ => (skip(&mut phase, rest.len()), false),
+                },
+                Stage::Idle | Stage::Done => (skip(&mut phase, rest.len()), false),
+            };
+            rest = rest.get(used..).unwrap_or_default();
+            self.samples += used as u64;
+            if wrapped {
+                self.boundary(&info, &mut out);
             }
         }
         out
+    }
+
+    /// The stage change at a cycle boundary (a sample whose phase step wrapped): integration
+    /// starts, or a cycle is counted, or the window closes and is handed on in `out` (and the
+    /// next one starts when the plan has more, or is open).
+    fn boundary(&mut self, info: &BatchInfo, out: &mut Points) {
+        match self.stage {
+            Stage::AwaitBoundary => {
+                let cycles = info.plan.map_or(0, |p| p.cycles);
+                self.stage = Stage::Integrating(cycles);
+            }
+            Stage::Integrating(k) if k <= 1 => {
+                self.stage = Stage::Done;
+                if let Some(plan) = info.plan {
+                    let point = PointRaw {
+                        plan,
+                        sums: self.sums,
+                        end_sample: self.samples,
+                        window: self.window,
+                        since_load: (self.samples.saturating_sub(self.load_sample))
+                            .min(u32::MAX as u64) as u32,
+                    };
+                    if out.push(point).is_err() {
+                        self.overruns = self.overruns.saturating_add(1);
+                    }
+                    if plan.open || self.window.saturating_add(1) < plan.windows {
+                        self.window = self.window.saturating_add(1);
+                        self.sums = LockInSums::default();
+                        self.stage = Stage::Integrating(plan.cycles);
+                    }
+                }
+            }
+            Stage::Integrating(k) => self.stage = Stage::Integrating(k - 1),
+            _ => {}
+        }
     }
 }
 
@@ -481,6 +498,144 @@ mod tests {
         // batch.
         assert!(10_000.0 / 400.0 >= MIN_WINDOW_SAMPLES as f64);
     }
+    /// The definition `demodulate` is held to: every sample stepped through the stages one at a
+    /// time, its products added straight to the `i64` sums.
+    fn demodulate_per_sample(e: &mut SampleEngine, adc: &[AdcFrame]) -> Points {
+        let info = if e.demodulated != e.generated {
+            let i = e.ring[e.demodulated as usize % RING];
+            e.demodulated = e.demodulated.wrapping_add(1);
+            i
+        } else {
+            BatchInfo::default()
+        };
+        let tag = info.plan.map(|p| p.tag);
+        if tag != e.demod_tag || info.load != e.demod_load {
+            e.demod_tag = tag;
+            e.demod_load = info.load;
+            e.load_sample = e.samples;
+            e.sums = LockInSums::default();
+            e.window = 0;
+            e.stage = match info.plan {
+                Some(p) if p.cycles > 0 => Stage::Settling(p.settle_samples),
+                _ => Stage::Idle,
+            };
+        }
+        let mut phase = info.start_phase;
+        let mut out = Points::new();
+        for f in adc {
+            if let Stage::Settling(n) = e.stage {
+                e.stage = if n == 0 {
+                    Stage::AwaitBoundary
+                } else {
+                    Stage::Settling(n - 1)
+                };
+            }
+            if let Stage::Integrating(_) = e.stage {
+                let (c, s) = (crate::dsp::dds::cos_q15(phase), sin_q15(phase));
+                e.sums
+                    .accumulate(c, s, f.current.centered(), f.monitor.centered());
+                e.sums.current_rail_hits += f.current.is_rail() as u32;
+                e.sums.monitor_rail_hits += f.monitor.is_rail() as u32;
+            }
+            let next = phase.wrapping_add(info.ftw);
+            let wrapped = next < phase;
+            phase = next;
+            e.samples += 1;
+            if wrapped {
+                e.boundary(&info, &mut out);
+            }
+        }
+        out
+    }
+
+    /// A SplitMix64 stream: the test's own generator, not the engine's arithmetic.
+    struct Mix(u64);
+
+    impl Mix {
+        fn next(&mut self) -> u64 {
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^ (z >> 31)
+        }
+        fn below(&mut self, n: u64) -> u64 {
+            self.next() % n
+        }
+    }
+
+    /// The run-by-run `demodulate` against the per-sample definition: random plans (drive
+    /// frequencies from 0 to the tuning word's top, settling, cycles, windows, open or not,
+    /// stops, loads faster than the batches, repeated tags), random batch lengths (1–80, across
+    /// the 32-sample runs) and random codes (rails, and values beyond 12 bits): the same
+    /// windows, sums, stages, sample counts and overruns after every batch.
+    #[test]
+    fn demodulating_run_by_run_is_demodulating_sample_by_sample() {
+        let mut rng = Mix(0x5EED);
+        let mut closed = 0;
+        for case in 0..300 {
+            let (mut a, mut b) = (SampleEngine::new(), SampleEngine::new());
+            for _ in 0..40 {
+                if rng.below(3) == 0 {
+                    let ftw = match rng.below(6) {
+                        0 => 0,
+                        1 => u32::MAX - rng.below(4) as u32,
+                        2 => rng.next() as u32,
+                        _ => tuning_word(100.0 + rng.below(400) as f64, 10_000.0),
+                    };
+                    let plan = PointPlan {
+                        ftw,
+                        amplitude_codes: rng.below(2100) as u16,
+                        settle_samples: rng.below(120) as u32,
+                        cycles: rng.below(5) as u32,
+                        windows: rng.below(5) as u16,
+                        open: rng.below(2) == 0,
+                        tag: rng.below(4) as u16,
+                    };
+                    if rng.below(8) == 0 {
+                        a.stop();
+                        b.stop();
+                    } else {
+                        a.load(plan);
+                        b.load(plan);
+                    }
+                }
+                let len = 1 + rng.below(80) as usize;
+                let mut dac = [DacCode::MID; 80];
+                let mut adc = [AdcFrame::default(); 80];
+                for f in adc.iter_mut().take(len) {
+                    let mut code = || match rng.below(10) {
+                        0 => [0, MAX_CODE, u16::MAX][rng.below(3) as usize],
+                        1 => rng.next() as u16,
+                        _ => rng.below(MAX_CODE as u64 + 1) as u16,
+                    };
+                    *f = AdcFrame {
+                        current: AdcCode(code()),
+                        monitor: AdcCode(code()),
+                    };
+                }
+                // Now and then a batch generated twice before one is demodulated (an overrun
+                // of the ring once it is full).
+                for _ in 0..1 + (rng.below(6) == 0) as usize {
+                    a.generate(&mut dac[..len]);
+                    b.generate(&mut dac[..len]);
+                }
+                let (pa, pb) = (
+                    a.demodulate(&adc[..len]),
+                    demodulate_per_sample(&mut b, &adc[..len]),
+                );
+                assert_eq!(pa, pb, "case {case}");
+                closed += pa.len();
+                assert_eq!(
+                    (a.samples, a.overruns, a.sums, a.stage, a.window),
+                    (b.samples, b.overruns, b.sums, b.stage, b.window),
+                    "case {case}"
+                );
+            }
+        }
+        assert!(closed > 1000, "{closed} windows closed");
+    }
+
     /// An open plan goes on closing windows of its length after its own, numbered on and
     /// gap-free, until the next plan takes effect: none of it closes after the switch, the one
     /// the switch cut is dropped, and the engine is not busy once the plan's own windows are in.
