@@ -115,17 +115,22 @@ impl LockInSums {
     /// same integers as adding every sample's products to the `i64` sums), never panics.
     ///
     /// Three passes that each keep their sums in registers: the reference (its sums, and each
-    /// sample's `c`, `s` kept for the next passes), then each channel against it; their sums
-    /// added to the window's once. Not inlined: the passes then have the registers to
-    /// themselves.
+    /// sample's `c`, `s` kept in `refs` for the next passes: scratch, whatever it held), then
+    /// each channel against it; their sums added to the window's once. Not inlined: the passes
+    /// then have the registers to themselves.
     #[inline(never)]
-    pub fn integrate(&mut self, frames: &[AdcFrame], phase: &mut u32, ftw: u32) -> (usize, bool) {
-        let mut refs = [0u32; RUN_MAX];
-        let (n, wrapped) = reference_run(&mut refs, frames.len(), phase, ftw, &mut self.reference);
+    pub fn integrate(
+        &mut self,
+        frames: &[AdcFrame],
+        phase: &mut u32,
+        ftw: u32,
+        refs: &mut [u32; RUN_MAX],
+    ) -> (usize, bool) {
+        let (n, wrapped) = reference_run(refs, frames.len(), phase, ftw, &mut self.reference);
         let frames = frames.get(..n).unwrap_or_default();
-        let (cur, c_sum, s_sum) = channel_run(frames, &refs, |f| f.current);
+        let (cur, c_sum) = channel_run(frames, refs, |f| f.current, |c, _| c);
         cur.add_to(&mut self.current, &mut self.current_rail_hits);
-        let (mon, _, _) = channel_run(frames, &refs, |f| f.monitor);
+        let (mon, s_sum) = channel_run(frames, refs, |f| f.monitor, |_, s| s);
         mon.add_to(&mut self.monitor, &mut self.monitor_rail_hits);
         let r = &mut self.reference;
         r.c += c_sum as i64;
@@ -166,47 +171,47 @@ fn reference_run(
     ftw: u32,
     r: &mut ReferenceSums,
 ) -> (usize, bool) {
+    // The sample whose step wraps: (2^32 − 1 − phase) / ftw samples on.
+    let n = n.min(RUN_MAX);
+    let (n, wrapped) = match (!*phase).checked_div(ftw) {
+        Some(k) if (k as usize) < n => (k as usize + 1, true),
+        _ => (n, false),
+    };
     let (mut cc, mut ss, mut cs) = (0i64, 0i64, 0i64);
     let mut p = *phase;
-    let (mut used, mut wrapped) = (0, false);
-    for slot in out.iter_mut().take(n) {
+    for slot in out.get_mut(..n).unwrap_or_default() {
         let (c, s) = (cos_q15(p), sin_q15(p));
         *slot = (c as u16 as u32) | ((s as u32) << 16);
         cc += (c as i64) * (c as i64);
         ss += (s as i64) * (s as i64);
         cs += (c as i64) * (s as i64);
-        used += 1;
-        let (next, w) = p.overflowing_add(ftw);
-        p = next;
-        if w {
-            wrapped = true;
-            break;
-        }
+        p = p.wrapping_add(ftw);
     }
     *phase = p;
     r.cc += cc;
     r.ss += ss;
     r.cs += cs;
-    (used, wrapped)
+    (n, wrapped)
 }
 
 /// One channel (`code` of each frame) against the reference `refs` ([`reference_run`]'s, one
-/// a frame): its run sums, and `Σc`, `Σs`.
+/// a frame): its run sums, and the sum of `half` of the reference (`Σc` or `Σs`: each pass
+/// takes one, so that neither runs out of registers).
 #[inline(always)]
 fn channel_run(
     frames: &[AdcFrame],
     refs: &[u32; RUN_MAX],
     code: impl Fn(&AdcFrame) -> AdcCode,
-) -> (RunChannel, i32, i32) {
+    half: impl Fn(i32, i32) -> i32,
+) -> (RunChannel, i32) {
     let mut ch = RunChannel::default();
-    let (mut c_sum, mut s_sum) = (0i32, 0i32);
+    let mut ref_sum = 0i32;
     for (f, &w) in frames.iter().zip(refs) {
         let (c, s) = (w as u16 as i16 as i32, (w as i32) >> 16);
         ch.add(code(f), c, s);
-        c_sum += c;
-        s_sum += s;
+        ref_sum += half(c, s);
     }
-    (ch, c_sum, s_sum)
+    (ch, ref_sum)
 }
 
 /// A fitted phasor in code units.
@@ -364,7 +369,7 @@ mod tests {
             }; 100];
             let (mut run, mut phase, mut rest) = (LockInSums::default(), phase0, &frames[..]);
             while !rest.is_empty() {
-                let (n, wrapped) = run.integrate(rest, &mut phase, 0);
+                let (n, wrapped) = run.integrate(rest, &mut phase, 0, &mut [7; RUN_MAX]);
                 assert_eq!((n, wrapped), (rest.len().min(RUN_MAX), false));
                 rest = &rest[n..];
             }

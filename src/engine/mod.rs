@@ -12,7 +12,7 @@
 pub mod sweep;
 
 use crate::dsp::dds::{sin_q15, Dds};
-use crate::dsp::lockin::LockInSums;
+use crate::dsp::lockin::{LockInSums, RUN_MAX};
 use crate::hal::AdcFrame;
 use crate::units::{DacCode, MAX_CODE, MID_CODE};
 
@@ -147,6 +147,8 @@ pub struct SampleEngine {
     /// Sample count when the demodulated plan took effect.
     load_sample: u64,
     overruns: u32,
+    /// Scratch of [`LockInSums::integrate`]: a run's reference.
+    run_reference: [u32; RUN_MAX],
 }
 
 impl Default for SampleEngine {
@@ -203,6 +205,7 @@ impl SampleEngine {
             samples: 0,
             load_sample: 0,
             overruns: 0,
+            run_reference: [0; RUN_MAX],
         }
     }
 
@@ -269,11 +272,14 @@ impl SampleEngine {
         };
         self.generated = self.generated.wrapping_add(1);
         let amp = self.amplitude;
+        // The DDS stepped on a copy (in registers), stored back once.
+        let mut dds = self.dds;
         for out in dac.iter_mut() {
-            let ph = self.dds.step();
+            let ph = dds.step();
             let v = MID_CODE as i32 + ((amp * sin_q15(ph)) >> 15);
             *out = DacCode(v.clamp(0, MAX_CODE as i32) as u16);
         }
+        self.dds = dds;
     }
 
     /// Demodulate the ADC batch captured while the oldest not yet demodulated DAC batch played.
@@ -281,6 +287,18 @@ impl SampleEngine {
     /// [`MAX_POINTS_PER_BATCH`]; a window shorter than [`MIN_WINDOW_SAMPLES`] could close a
     /// third, which is dropped and counted in [`overruns`](Self::overruns)).
     pub fn demodulate(&mut self, adc: &[AdcFrame]) -> Points {
+        let mut out = Points::new();
+        self.demodulate_into(adc, |p| {
+            let _ = out.push(p);
+        });
+        out
+    }
+
+    /// [`demodulate`](Self::demodulate), each closed window handed to `point` as it closes (the
+    /// sample interrupt's hand-off, without a batch's list of points to copy): at most
+    /// [`MAX_POINTS_PER_BATCH`] a batch, a further one dropped and counted in
+    /// [`overruns`](Self::overruns).
+    pub fn demodulate_into(&mut self, adc: &[AdcFrame], mut point: impl FnMut(PointRaw)) {
         let info = if self.demodulated != self.generated {
             let i = self.ring[self.demodulated as usize % RING];
             self.demodulated = self.demodulated.wrapping_add(1);
@@ -302,7 +320,7 @@ impl SampleEngine {
         }
         let mut phase = info.start_phase;
         let ftw = info.ftw;
-        let mut out = Points::new();
+        let mut closed = 0;
         let mut rest = adc;
         // Run by run: a stage's samples up to its next event (the end of the settling, a cycle
         // boundary) at once, the same stage changes at the same samples as stepping each one.
@@ -324,7 +342,10 @@ impl SampleEngine {
                     };
                     (skip(&mut phase, m), false)
                 }
-                Stage::Integrating(_) => self.sums.integrate(rest, &mut phase, ftw),
+                Stage::Integrating(_) => {
+                    self.sums
+                        .integrate(rest, &mut phase, ftw, &mut self.run_reference)
+                }
                 // Up to the sample whose step wraps: (2^32 − 1 − phase) / ftw more samples.
                 Stage::AwaitBoundary => match (!phase).checked_div(ftw) {
                     Some(k) if (k as usize) < rest.len() => {
@@ -337,44 +358,51 @@ impl SampleEngine {
             rest = rest.get(used..).unwrap_or_default();
             self.samples += used as u64;
             if wrapped {
-                self.boundary(&info, &mut out);
+                if let Some(p) = self.boundary(&info) {
+                    closed += 1;
+                    if closed <= MAX_POINTS_PER_BATCH {
+                        point(p);
+                    } else {
+                        self.overruns = self.overruns.saturating_add(1);
+                    }
+                }
             }
         }
-        out
     }
 
     /// The stage change at a cycle boundary (a sample whose phase step wrapped): integration
-    /// starts, or a cycle is counted, or the window closes and is handed on in `out` (and the
-    /// next one starts when the plan has more, or is open).
-    fn boundary(&mut self, info: &BatchInfo, out: &mut Points) {
+    /// starts, or a cycle is counted, or the window closes and is returned (and the next one
+    /// starts when the plan has more, or is open).
+    fn boundary(&mut self, info: &BatchInfo) -> Option<PointRaw> {
         match self.stage {
             Stage::AwaitBoundary => {
                 let cycles = info.plan.map_or(0, |p| p.cycles);
                 self.stage = Stage::Integrating(cycles);
+                None
             }
             Stage::Integrating(k) if k <= 1 => {
                 self.stage = Stage::Done;
-                if let Some(plan) = info.plan {
-                    let point = PointRaw {
-                        plan,
-                        sums: self.sums,
-                        end_sample: self.samples,
-                        window: self.window,
-                        since_load: (self.samples.saturating_sub(self.load_sample))
-                            .min(u32::MAX as u64) as u32,
-                    };
-                    if out.push(point).is_err() {
-                        self.overruns = self.overruns.saturating_add(1);
-                    }
-                    if plan.open || self.window.saturating_add(1) < plan.windows {
-                        self.window = self.window.saturating_add(1);
-                        self.sums = LockInSums::default();
-                        self.stage = Stage::Integrating(plan.cycles);
-                    }
+                let plan = info.plan?;
+                let point = PointRaw {
+                    plan,
+                    sums: self.sums,
+                    end_sample: self.samples,
+                    window: self.window,
+                    since_load: (self.samples.saturating_sub(self.load_sample)).min(u32::MAX as u64)
+                        as u32,
+                };
+                if plan.open || self.window.saturating_add(1) < plan.windows {
+                    self.window = self.window.saturating_add(1);
+                    self.sums = LockInSums::default();
+                    self.stage = Stage::Integrating(plan.cycles);
                 }
+                Some(point)
             }
-            Stage::Integrating(k) => self.stage = Stage::Integrating(k - 1),
-            _ => {}
+            Stage::Integrating(k) => {
+                self.stage = Stage::Integrating(k - 1);
+                None
+            }
+            _ => None,
         }
     }
 }
@@ -541,8 +569,10 @@ mod tests {
             let wrapped = next < phase;
             phase = next;
             e.samples += 1;
-            if wrapped {
-                e.boundary(&info, &mut out);
+            if let Some(p) = wrapped.then(|| e.boundary(&info)).flatten() {
+                if out.push(p).is_err() {
+                    e.overruns = e.overruns.saturating_add(1);
+                }
             }
         }
         out
