@@ -113,9 +113,8 @@ impl AdcCode {
     /// Signed offset from mid-scale, `-2048..=2047`: a value above [`MAX_CODE`] (not a 12-bit
     /// code) is taken as the rail it is beyond.
     #[inline]
-    pub const fn centered(self) -> i32 {
-        let code = if self.0 > MAX_CODE { MAX_CODE } else { self.0 };
-        code as i32 - MID_CODE as i32
+    pub fn centered(self) -> i32 {
+        (self.0 as i32).clamp(0, MAX_CODE as i32) - MID_CODE as i32
     }
 }
 

@@ -60,7 +60,9 @@ impl RunChannel {
         self.xs += x * s;
         self.x += x;
         self.xx += x * x;
-        self.rails += code.is_rail() as u32;
+        // At a rail ([`AdcCode::is_rail`]) exactly when `x` is −2048 or 2047, the two values
+        // that `x ^ (x >> 31)` (`x` or `−1 − x`, 0..=2047) takes to 2047.
+        self.rails += (((x ^ (x >> 31)) + 1) >> 11) as u32;
     }
 
     #[inline(always)]
@@ -114,9 +116,10 @@ impl LockInSums {
     /// ([`AdcCode::is_rail`]); the sums take each code as [`AdcCode::centered`] does. Exact (the
     /// same integers as adding every sample's products to the `i64` sums), never panics.
     ///
-    /// Three passes that each keep their sums in registers: the reference (its sums, and each
-    /// sample's `c`, `s` kept in `refs` for the next passes: scratch, whatever it held), then
-    /// each channel against it; their sums added to the window's once. Not inlined: the passes
+    /// Three passes that each keep their sums in registers: the reference (`Σc²`, `Σs²`, and
+    /// each sample's `c`, `s` kept in `refs` for the next passes: scratch, whatever it held),
+    /// then the current channel against it (with `Σc`, `Σs`) and the monitor (with `Σcs`);
+    /// their sums added to the window's once. Not inlined: the passes
     /// then have the registers to themselves.
     #[inline(never)]
     pub fn integrate(
@@ -128,13 +131,31 @@ impl LockInSums {
     ) -> (usize, bool) {
         let (n, wrapped) = reference_run(refs, frames.len(), phase, ftw, &mut self.reference);
         let frames = frames.get(..n).unwrap_or_default();
-        let (cur, c_sum) = channel_run(frames, refs, |f| f.current, |c, _| c);
+        let (mut c_sum, mut s_sum) = (0i32, 0i32);
+        let cur = channel_run(
+            frames,
+            refs,
+            |f| f.current,
+            |c, s| {
+                c_sum += c;
+                s_sum += s;
+            },
+        );
         cur.add_to(&mut self.current, &mut self.current_rail_hits);
-        let (mon, s_sum) = channel_run(frames, refs, |f| f.monitor, |_, s| s);
+        let mut cs = 0i64;
+        let mon = channel_run(
+            frames,
+            refs,
+            |f| f.monitor,
+            |c, s| {
+                cs += (c as i64) * (s as i64);
+            },
+        );
         mon.add_to(&mut self.monitor, &mut self.monitor_rail_hits);
         let r = &mut self.reference;
         r.c += c_sum as i64;
         r.s += s_sum as i64;
+        r.cs += cs;
         r.n += frames.len() as u32;
         (frames.len(), wrapped)
     }
@@ -160,9 +181,9 @@ impl LockInSums {
 }
 
 /// The reference of up to `n` samples (at most [`RUN_MAX`]) from `phase` on, stopping after the
-/// sample whose step wraps: each sample's `c` (low half) and `s` (high half) into `out`, `Σc²`,
-/// `Σs²`, `Σcs` added to `r`. Returns the samples and whether the last wrapped; `phase` is left
-/// at the next sample's.
+/// sample whose step wraps: each sample's `c` (low half) and `s` (high half) into `out`, `Σc²`
+/// and `Σs²` added to `r`. Returns the samples and whether the last wrapped; `phase` is left at
+/// the next sample's.
 #[inline(always)]
 fn reference_run(
     out: &mut [u32; RUN_MAX],
@@ -177,41 +198,38 @@ fn reference_run(
         Some(k) if (k as usize) < n => (k as usize + 1, true),
         _ => (n, false),
     };
-    let (mut cc, mut ss, mut cs) = (0i64, 0i64, 0i64);
+    let (mut cc, mut ss) = (0i64, 0i64);
     let mut p = *phase;
     for slot in out.get_mut(..n).unwrap_or_default() {
         let (c, s) = (cos_q15(p), sin_q15(p));
         *slot = (c as u16 as u32) | ((s as u32) << 16);
         cc += (c as i64) * (c as i64);
         ss += (s as i64) * (s as i64);
-        cs += (c as i64) * (s as i64);
         p = p.wrapping_add(ftw);
     }
     *phase = p;
     r.cc += cc;
     r.ss += ss;
-    r.cs += cs;
     (n, wrapped)
 }
 
 /// One channel (`code` of each frame) against the reference `refs` ([`reference_run`]'s, one
-/// a frame): its run sums, and the sum of `half` of the reference (`Σc` or `Σs`: each pass
-/// takes one, so that neither runs out of registers).
+/// a frame): its run sums; `also` sees each sample's `c`, `s` (the reference's remaining sums,
+/// shared out between the passes so that none runs out of registers).
 #[inline(always)]
 fn channel_run(
     frames: &[AdcFrame],
     refs: &[u32; RUN_MAX],
     code: impl Fn(&AdcFrame) -> AdcCode,
-    half: impl Fn(i32, i32) -> i32,
-) -> (RunChannel, i32) {
+    mut also: impl FnMut(i32, i32),
+) -> RunChannel {
     let mut ch = RunChannel::default();
-    let mut ref_sum = 0i32;
     for (f, &w) in frames.iter().zip(refs) {
         let (c, s) = (w as u16 as i16 as i32, (w as i32) >> 16);
         ch.add(code(f), c, s);
-        ref_sum += half(c, s);
+        also(c, s);
     }
-    (ch, ref_sum)
+    ch
 }
 
 /// A fitted phasor in code units.
