@@ -299,25 +299,7 @@ impl SampleEngine {
     /// [`MAX_POINTS_PER_BATCH`] a batch, a further one dropped and counted in
     /// [`overruns`](Self::overruns).
     pub fn demodulate_into(&mut self, adc: &[AdcFrame], mut point: impl FnMut(PointRaw)) {
-        let info = if self.demodulated != self.generated {
-            let i = self.ring[self.demodulated as usize % RING];
-            self.demodulated = self.demodulated.wrapping_add(1);
-            i
-        } else {
-            BatchInfo::default()
-        };
-        let tag = info.plan.map(|p| p.tag);
-        if tag != self.demod_tag || info.load != self.demod_load {
-            self.demod_tag = tag;
-            self.demod_load = info.load;
-            self.load_sample = self.samples;
-            self.sums = LockInSums::default();
-            self.window = 0;
-            self.stage = match info.plan {
-                Some(p) if p.cycles > 0 => Stage::Settling(p.settle_samples),
-                _ => Stage::Idle,
-            };
-        }
+        let info = self.next_batch();
         let mut phase = info.start_phase;
         let ftw = info.ftw;
         let mut closed = 0;
@@ -368,6 +350,31 @@ impl SampleEngine {
                 }
             }
         }
+    }
+
+    /// The record of the batch to demodulate, the oldest generated and not yet demodulated
+    /// (none: the drive was off); a new plan or load starts its point afresh.
+    fn next_batch(&mut self) -> BatchInfo {
+        let info = if self.demodulated != self.generated {
+            let i = self.ring[self.demodulated as usize % RING];
+            self.demodulated = self.demodulated.wrapping_add(1);
+            i
+        } else {
+            BatchInfo::default()
+        };
+        let tag = info.plan.map(|p| p.tag);
+        if tag != self.demod_tag || info.load != self.demod_load {
+            self.demod_tag = tag;
+            self.demod_load = info.load;
+            self.load_sample = self.samples;
+            self.sums = LockInSums::default();
+            self.window = 0;
+            self.stage = match info.plan {
+                Some(p) if p.cycles > 0 => Stage::Settling(p.settle_samples),
+                _ => Stage::Idle,
+            };
+        }
+        info
     }
 
     /// The stage change at a cycle boundary (a sample whose phase step wrapped): integration
@@ -526,28 +533,10 @@ mod tests {
         // batch.
         assert!(10_000.0 / 400.0 >= MIN_WINDOW_SAMPLES as f64);
     }
-    /// The definition `demodulate` is held to: every sample stepped through the stages one at a
-    /// time, its products added straight to the `i64` sums.
+    /// The definition `demodulate` is held to: every sample of the batch stepped through the
+    /// stages one at a time, its products added straight to the `i64` sums.
     fn demodulate_per_sample(e: &mut SampleEngine, adc: &[AdcFrame]) -> Points {
-        let info = if e.demodulated != e.generated {
-            let i = e.ring[e.demodulated as usize % RING];
-            e.demodulated = e.demodulated.wrapping_add(1);
-            i
-        } else {
-            BatchInfo::default()
-        };
-        let tag = info.plan.map(|p| p.tag);
-        if tag != e.demod_tag || info.load != e.demod_load {
-            e.demod_tag = tag;
-            e.demod_load = info.load;
-            e.load_sample = e.samples;
-            e.sums = LockInSums::default();
-            e.window = 0;
-            e.stage = match info.plan {
-                Some(p) if p.cycles > 0 => Stage::Settling(p.settle_samples),
-                _ => Stage::Idle,
-            };
-        }
+        let info = e.next_batch();
         let mut phase = info.start_phase;
         let mut out = Points::new();
         for f in adc {
@@ -578,20 +567,9 @@ mod tests {
         out
     }
 
-    /// A SplitMix64 stream: the test's own generator, not the engine's arithmetic.
-    struct Mix(u64);
-
-    impl Mix {
-        fn next(&mut self) -> u64 {
-            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^ (z >> 31)
-        }
-        fn below(&mut self, n: u64) -> u64 {
-            self.next() % n
-        }
+    /// A draw below `n` from the tests' generator.
+    fn below(rng: &mut probe_rng::Rng, n: u64) -> u64 {
+        rng.next_u64() % n
     }
 
     /// The run-by-run `demodulate` against the per-sample definition: random plans (drive
@@ -601,28 +579,28 @@ mod tests {
     /// windows, sums, stages, sample counts and overruns after every batch.
     #[test]
     fn demodulating_run_by_run_is_demodulating_sample_by_sample() {
-        let mut rng = Mix(0x5EED);
+        let mut rng = probe_rng::Rng::new(0x5EED);
         let mut closed = 0;
         for case in 0..300 {
             let (mut a, mut b) = (SampleEngine::new(), SampleEngine::new());
             for _ in 0..40 {
-                if rng.below(3) == 0 {
-                    let ftw = match rng.below(6) {
+                if below(&mut rng, 3) == 0 {
+                    let ftw = match below(&mut rng, 6) {
                         0 => 0,
-                        1 => u32::MAX - rng.below(4) as u32,
-                        2 => rng.next() as u32,
-                        _ => tuning_word(100.0 + rng.below(400) as f64, 10_000.0),
+                        1 => u32::MAX - below(&mut rng, 4) as u32,
+                        2 => rng.next_u64() as u32,
+                        _ => tuning_word(100.0 + below(&mut rng, 400) as f64, 10_000.0),
                     };
                     let plan = PointPlan {
                         ftw,
-                        amplitude_codes: rng.below(2100) as u16,
-                        settle_samples: rng.below(120) as u32,
-                        cycles: rng.below(5) as u32,
-                        windows: rng.below(5) as u16,
-                        open: rng.below(2) == 0,
-                        tag: rng.below(4) as u16,
+                        amplitude_codes: below(&mut rng, 2100) as u16,
+                        settle_samples: below(&mut rng, 120) as u32,
+                        cycles: below(&mut rng, 5) as u32,
+                        windows: below(&mut rng, 5) as u16,
+                        open: below(&mut rng, 2) == 0,
+                        tag: below(&mut rng, 4) as u16,
                     };
-                    if rng.below(8) == 0 {
+                    if below(&mut rng, 8) == 0 {
                         a.stop();
                         b.stop();
                     } else {
@@ -630,14 +608,14 @@ mod tests {
                         b.load(plan);
                     }
                 }
-                let len = 1 + rng.below(80) as usize;
+                let len = 1 + below(&mut rng, 80) as usize;
                 let mut dac = [DacCode::MID; 80];
                 let mut adc = [AdcFrame::default(); 80];
                 for f in adc.iter_mut().take(len) {
-                    let mut code = || match rng.below(10) {
-                        0 => [0, MAX_CODE, u16::MAX][rng.below(3) as usize],
-                        1 => rng.next() as u16,
-                        _ => rng.below(MAX_CODE as u64 + 1) as u16,
+                    let mut code = || match below(&mut rng, 10) {
+                        0 => [0, MAX_CODE, u16::MAX][below(&mut rng, 3) as usize],
+                        1 => rng.next_u64() as u16,
+                        _ => below(&mut rng, MAX_CODE as u64 + 1) as u16,
                     };
                     *f = AdcFrame {
                         current: AdcCode(code()),
@@ -646,7 +624,7 @@ mod tests {
                 }
                 // Now and then a batch generated twice before one is demodulated (an overrun
                 // of the ring once it is full).
-                for _ in 0..1 + (rng.below(6) == 0) as usize {
+                for _ in 0..1 + (below(&mut rng, 6) == 0) as usize {
                     a.generate(&mut dac[..len]);
                     b.generate(&mut dac[..len]);
                 }
