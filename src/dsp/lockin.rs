@@ -14,7 +14,7 @@
 //! `i64` sums once a run: the same integers as adding each sample's products to the `i64` sums.
 //! The solve (a 3×3 inverse) runs once per point at low priority.
 
-use crate::dsp::dds::{cos_q15, sin_q15};
+use crate::dsp::dds::{cos_q15, run_to_wrap, sin_q15};
 use crate::hal::AdcFrame;
 use crate::linalg::inverse3;
 use crate::units::AdcCode;
@@ -112,15 +112,15 @@ impl LockInSums {
     /// DDS's phase of the first frame, advancing `ftw` a sample) until the phase wraps — a
     /// cycle boundary: the sample whose step wraps is the cycle's last and is summed — or the
     /// frames or the run end. Returns how many frames were summed and whether the last of them
-    /// wrapped; `phase` is left at the next frame's. The rail hits are counted on the raw codes
-    /// ([`AdcCode::is_rail`]); the sums take each code as [`AdcCode::centered`] does. Exact (the
-    /// same integers as adding every sample's products to the `i64` sums), never panics.
+    /// wrapped; `phase` is left at the next frame's. The rail hits are the codes
+    /// [`AdcCode::is_rail`] finds; the sums take each code as [`AdcCode::centered`] does. Exact
+    /// (the same integers as adding every sample's products to the `i64` sums), never panics.
     ///
     /// Three passes that each keep their sums in registers: the reference (`Σc²`, `Σs²`, and
     /// each sample's `c`, `s` kept in `refs` for the next passes: scratch, whatever it held),
     /// then the current channel against it (with `Σc`, `Σs`) and the monitor (with `Σcs`);
-    /// their sums added to the window's once. Not inlined: the passes
-    /// then have the registers to themselves.
+    /// their sums added to the window's once. Not inlined: the passes then have the registers
+    /// to themselves.
     #[inline(never)]
     pub fn integrate(
         &mut self,
@@ -192,12 +192,7 @@ fn reference_run(
     ftw: u32,
     r: &mut ReferenceSums,
 ) -> (usize, bool) {
-    // The sample whose step wraps: (2^32 − 1 − phase) / ftw samples on.
-    let n = n.min(RUN_MAX);
-    let (n, wrapped) = match (!*phase).checked_div(ftw) {
-        Some(k) if (k as usize) < n => (k as usize + 1, true),
-        _ => (n, false),
-    };
+    let (n, wrapped) = run_to_wrap(*phase, ftw, n.min(RUN_MAX));
     let (mut cc, mut ss) = (0i64, 0i64);
     let mut p = *phase;
     for slot in out.get_mut(..n).unwrap_or_default() {

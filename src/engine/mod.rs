@@ -11,7 +11,7 @@
 
 pub mod sweep;
 
-use crate::dsp::dds::{sin_q15, Dds};
+use crate::dsp::dds::{run_to_wrap, sin_q15, Dds};
 use crate::dsp::lockin::{LockInSums, RUN_MAX};
 use crate::hal::AdcFrame;
 use crate::units::{DacCode, MAX_CODE, MID_CODE};
@@ -328,13 +328,11 @@ impl SampleEngine {
                     self.sums
                         .integrate(rest, &mut phase, ftw, &mut self.run_reference)
                 }
-                // Up to the sample whose step wraps: (2^32 − 1 − phase) / ftw more samples.
-                Stage::AwaitBoundary => match (!phase).checked_div(ftw) {
-                    Some(k) if (k as usize) < rest.len() => {
-                        (skip(&mut phase, k as usize + 1), true)
-                    }
-                    _ => (skip(&mut phase, rest.len()), false),
-                },
+                // Up to the sample whose step wraps.
+                Stage::AwaitBoundary => {
+                    let (n, wrapped) = run_to_wrap(phase, ftw, rest.len());
+                    (skip(&mut phase, n), wrapped)
+                }
                 Stage::Idle | Stage::Done => (skip(&mut phase, rest.len()), false),
             };
             rest = rest.get(used..).unwrap_or_default();
