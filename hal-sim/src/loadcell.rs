@@ -316,6 +316,11 @@ mod tests {
     /// Read one conversion the way the datasheet's timing diagram does it, bit by bit, with a
     /// 1 µs high and low time (a reference for the test, not the firmware's driver).
     fn read_by_hand(chip: &RefCell<Hx711Sim>, high_us: u32) -> Option<i32> {
+        read_timed(chip, high_us * 1000, 1000)
+    }
+
+    /// [`read_by_hand`] with `high_ns` and `low_ns` the clock's high and low times.
+    fn read_timed(chip: &RefCell<Hx711Sim>, high_ns: u32, low_ns: u32) -> Option<i32> {
         let (mut dout, mut sck, mut delay) = (Dout(chip), Sck(chip), Delay(chip));
         if dout.is_high().unwrap() {
             return None;
@@ -323,13 +328,13 @@ mod tests {
         let mut v: u32 = 0;
         for _ in 0..24 {
             sck.set_high().unwrap();
-            delay.delay_us(high_us);
+            delay.delay_ns(high_ns);
             sck.set_low().unwrap();
             v = (v << 1) | dout.is_high().unwrap() as u32;
-            delay.delay_us(1);
+            delay.delay_ns(low_ns);
         }
         sck.set_high().unwrap();
-        delay.delay_us(high_us);
+        delay.delay_ns(high_ns);
         sck.set_low().unwrap();
         // Sign-extend the 24-bit two's complement value.
         Some(((v << 8) as i32) >> 8)
@@ -381,25 +386,16 @@ mod tests {
     /// or a low time below it loses the conversion (`DOUT` high for the rest of the read).
     #[test]
     fn pulses_below_the_minimum_lose_the_conversion() {
-        let read = |high_ns: u32, low_ns: u32| {
-            let chip = RefCell::new(Hx711Sim::new(LoadCell::quiet(), 4));
-            chip.borrow_mut().advance(0.051, 0.030);
-            let (mut dout, mut sck, mut delay) = (Dout(&chip), Sck(&chip), Delay(&chip));
-            let mut v: u32 = 0;
-            for _ in 0..25 {
-                sck.set_high().unwrap();
-                delay.delay_ns(high_ns);
-                sck.set_low().unwrap();
-                v = (v << 1) | dout.is_high().unwrap() as u32;
-                delay.delay_ns(low_ns);
-            }
-            (((v >> 1) << 8) as i32) >> 8
-        };
         let cell = LoadCell::quiet();
+        let read = |high_ns: u32, low_ns: u32| {
+            let chip = RefCell::new(Hx711Sim::new(cell, 4));
+            chip.borrow_mut().advance(0.051, 0.030);
+            read_timed(&chip, high_ns, low_ns)
+        };
         let want = libm::round((0.030 + cell.offset_n) * cell.counts_per_n) as i32;
-        assert_eq!(read(200, 200), want);
-        assert_ne!(read(150, 200), want, "high time below T3");
-        assert_ne!(read(200, 150), want, "low time below T4");
+        assert_eq!(read(200, 200), Some(want));
+        assert_ne!(read(150, 200), Some(want), "high time below T3");
+        assert_ne!(read(200, 150), Some(want), "low time below T4");
     }
 
     /// Creep approaches `creep_fraction` of a constant load with its time constant (first
