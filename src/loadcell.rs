@@ -8,9 +8,9 @@
 //! constructor resets the chip and then waits in an unbounded `nb::block!` for the first
 //! conversion (50 ms at 80 SPS, 400 ms at 10 SPS, forever with the chip missing). This driver
 //! never waits for the chip: [`Hx711::read`] returns `Ok(None)` until a conversion is ready.
-//! A read is 25 clock pulses of 1 µs high and 1 µs low; a pulse held high beyond 60 µs powers the
-//! chip down (the read is lost), so on the target a read runs in a critical section (about
-//! 50 µs: well inside the sample interrupt's slack of 2.5 ms per batch).
+//! A read is 25 clock pulses of [`PULSE_NS`] high and low; a pulse held high beyond 60 µs powers
+//! the chip down (the read is lost), so on the target a read runs in a critical section (25 pulses:
+//! well inside the sample interrupt's slack of 2.5 ms per batch).
 //!
 //! # Force over a window
 //!
@@ -49,6 +49,12 @@ pub enum LoadCellError {
     /// The conversion sits at a rail.
     Saturated,
 }
+
+/// `PD_SCK`'s high time and its low time in a clock pulse, ns: the HX711 datasheet's minima
+/// T3 and T4, 0.2 µs each (Avia Semiconductor, HX711 datasheet, Fig. 2's timing table), with
+/// half again as margin. The high time also covers T2 (`DOUT` valid at most 0.1 µs after the
+/// rising edge; the bit is read after the falling edge).
+pub const PULSE_NS: u32 = 300;
 
 /// HX711 on a data input and a clock output, channel A at gain 128.
 pub struct Hx711<D, I, O> {
@@ -95,9 +101,9 @@ impl<D: DelayNs, I: InputPin, O: OutputPin> Hx711<D, I, O> {
 
     fn pulse(&mut self) -> Result<(), LoadCellError> {
         self.sck.set_high().map_err(|_| LoadCellError::Pin)?;
-        self.delay.delay_us(1);
+        self.delay.delay_ns(PULSE_NS);
         self.sck.set_low().map_err(|_| LoadCellError::Pin)?;
-        self.delay.delay_us(1);
+        self.delay.delay_ns(PULSE_NS);
         Ok(())
     }
 }

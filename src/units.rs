@@ -110,10 +110,11 @@ impl AdcCode {
     pub const fn is_rail(self) -> bool {
         self.0 == 0 || self.0 >= MAX_CODE
     }
-    /// Signed offset from mid-scale.
+    /// Signed offset from mid-scale, `-2048..=2047`: a value above [`MAX_CODE`] (not a 12-bit
+    /// code) is taken as the rail it is beyond.
     #[inline]
-    pub const fn centered(self) -> i32 {
-        self.0 as i32 - MID_CODE as i32
+    pub fn centered(self) -> i32 {
+        (self.0 as i32).clamp(0, MAX_CODE as i32) - MID_CODE as i32
     }
 }
 

@@ -196,8 +196,8 @@ fn qemu_image_measures_phantom_b() {
     );
     assert_eq!(last("status")["method"], "auto");
 
-    // No overrun of any kind, and the sample interrupt within its budget (2 % of a 170 MHz
-    // core at 10 kHz: 340 a sample, 8 500 per 25-sample batch).
+    // No overrun of any kind, and the sample interrupt within its budget (1 % of a 170 MHz
+    // core at 10 kHz, issue #28: 170 a sample, 4 250 per 25-sample batch).
     assert!(
         !parsed.iter().any(|(n, _)| n == "overrun" || n == "stalled"),
         "overrun or stall reported"
@@ -209,7 +209,7 @@ fn qemu_image_measures_phantom_b() {
     assert!(num(&counters, "batches") > 0.0);
     assert_eq!(counters["unit"], "instructions");
     let isr_max = num(&counters, "isr_max");
-    let budget = 0.02 * 170e6 / 10_000.0 * pzt_probe::engine::BATCH as f64;
+    let budget = 0.01 * 170e6 / 10_000.0 * pzt_probe::engine::BATCH as f64;
     assert!(
         isr_max > 0.0 && isr_max < budget,
         "isr_max {isr_max} of {budget}"

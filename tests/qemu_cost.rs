@@ -1,6 +1,7 @@
 //! On-target cost of every estimation method: build the QEMU-only cost image
 //! (`src/bin/cost.rs`), run it on `mps2-an386` with instruction counting, and check every
-//! method's per-sample and per-reading work against the budget — 2 % of a 170 MHz core at the
+//! method's per-sample and per-reading work against the budget — 1 % per sample (the sample
+//! engine's worst batch) and 2 % per reading of a 170 MHz core at the
 //! firmware's 10 kHz sample rate — and that every reading ended as it should.
 //!
 //! Prints the figures as the markdown tables of `docs/firmware.md`
@@ -21,6 +22,8 @@ use std::time::Duration;
 const TIMEOUT: Duration = Duration::from_secs(900);
 /// The budget: this share of the core (percent) ...
 const BUDGET_PCT: f64 = 2.0;
+/// ... and the sample engine's, in its worst batch (issue #28: the sample interrupt within 1 %).
+const SAMPLE_BUDGET_PCT: f64 = 1.0;
 /// ... of the STM32G474's core at 170 MHz, counting one cycle per instruction ...
 const CORE_HZ: f64 = 170e6;
 /// ... at the firmware's sample rate (`SAMPLE_RATE_HZ` of `src/board/stm32g474/mod.rs`; the
@@ -192,9 +195,9 @@ fn every_method_fits_its_budget_on_target() {
             "{who}"
         );
 
-        // Per sample: the sample engine's mean and its worst batch.
+        // Per sample: the sample engine's worst batch (and so its mean).
         assert!(
-            sample_pct(max) < BUDGET_PCT,
+            sample_pct(max) < SAMPLE_BUDGET_PCT,
             "{who}: per-sample max {:.2} %",
             sample_pct(max)
         );

@@ -17,7 +17,9 @@
 //! power-up the first conversion comes after the settling time (four conversion periods at
 //! 80 SPS). Time on the pin side passes through the driver's delays ([`Delay`]): a read that
 //! stretches a clock pulse beyond 60 µs (an interrupt in the middle of it) is seen as it would be
-//! on the board.
+//! on the board. A pulse shorter than the datasheet's minimum high or low time (T3, T4: 0.2 µs)
+//! is outside what the chip guarantees; the model (ours: the datasheet says no more) then loses
+//! the conversion being read, so that `DOUT` reads high for the rest of it.
 //!
 //! The vibration of the probe at ~230 Hz is outside the chip's sinc filter's passband at 10 or
 //! 80 SPS; the cell here sees the static contact force only.
@@ -81,6 +83,10 @@ impl LoadCell {
 /// Standard gravity, m/s² (the conventional value of the CGPM, 1901): the weight of a known mass.
 pub const STANDARD_GRAVITY_M_S2: f64 = 9.806_65;
 
+/// Shortest `PD_SCK` high time (T3) and low time (T4) of a clock pulse, s (datasheet, Fig. 2's
+/// timing table: 0.2 µs each).
+pub const PULSE_MIN_S: f64 = 0.2e-6;
+
 /// Longest time `PD_SCK` may stay high before the chip powers down, s (datasheet: 60 µs).
 pub const POWER_DOWN_S: f64 = 60e-6;
 /// Conversion periods from power-up (or reset) to the first conversion at 80 SPS (datasheet:
@@ -109,6 +115,8 @@ pub struct Hx711Sim {
     sck: bool,
     /// How long `PD_SCK` has been high, s (pin-side time).
     sck_high_s: f64,
+    /// Pin-side time since `PD_SCK`'s last edge, s (infinite before the first).
+    since_edge_s: f64,
     powered: bool,
     /// Conversions finished and read (for tests and the log).
     conversions: u64,
@@ -141,6 +149,7 @@ impl Hx711Sim {
             bit: false,
             sck: false,
             sck_high_s: 0.0,
+            since_edge_s: f64::INFINITY,
             powered: true,
             conversions: 0,
             reads: 0,
@@ -193,6 +202,14 @@ impl Hx711Sim {
     }
 
     fn set_sck(&mut self, high: bool) {
+        if high != self.sck {
+            // A high (falling edge) or low (rising edge) time below the minimum during a read.
+            if self.since_edge_s < PULSE_MIN_S && self.clocked > 0 {
+                self.ready = None;
+                self.clocked = 0;
+            }
+            self.since_edge_s = 0.0;
+        }
         if high && !self.sck {
             self.sck_high_s = 0.0;
             if let Some(v) = self.ready {
@@ -226,6 +243,7 @@ impl Hx711Sim {
     }
 
     fn wait(&mut self, s: f64) {
+        self.since_edge_s += s;
         if self.sck {
             self.sck_high_s += s;
             if self.sck_high_s > POWER_DOWN_S && self.powered {
@@ -298,6 +316,11 @@ mod tests {
     /// Read one conversion the way the datasheet's timing diagram does it, bit by bit, with a
     /// 1 µs high and low time (a reference for the test, not the firmware's driver).
     fn read_by_hand(chip: &RefCell<Hx711Sim>, high_us: u32) -> Option<i32> {
+        read_timed(chip, high_us * 1000, 1000)
+    }
+
+    /// [`read_by_hand`] with `high_ns` and `low_ns` the clock's high and low times.
+    fn read_timed(chip: &RefCell<Hx711Sim>, high_ns: u32, low_ns: u32) -> Option<i32> {
         let (mut dout, mut sck, mut delay) = (Dout(chip), Sck(chip), Delay(chip));
         if dout.is_high().unwrap() {
             return None;
@@ -305,13 +328,13 @@ mod tests {
         let mut v: u32 = 0;
         for _ in 0..24 {
             sck.set_high().unwrap();
-            delay.delay_us(high_us);
+            delay.delay_ns(high_ns);
             sck.set_low().unwrap();
             v = (v << 1) | dout.is_high().unwrap() as u32;
-            delay.delay_us(1);
+            delay.delay_ns(low_ns);
         }
         sck.set_high().unwrap();
-        delay.delay_us(high_us);
+        delay.delay_ns(high_ns);
         sck.set_low().unwrap();
         // Sign-extend the 24-bit two's complement value.
         Some(((v << 8) as i32) >> 8)
@@ -357,6 +380,22 @@ mod tests {
         assert!(dout.is_high().unwrap(), "settling after power-up");
         chip.borrow_mut().advance(0.151, 0.02);
         assert!(dout.is_low().unwrap());
+    }
+
+    /// Pulses at the datasheet's minimum high and low time (0.2 µs) read the conversion; a high
+    /// or a low time below it loses the conversion (`DOUT` high for the rest of the read).
+    #[test]
+    fn pulses_below_the_minimum_lose_the_conversion() {
+        let cell = LoadCell::quiet();
+        let read = |high_ns: u32, low_ns: u32| {
+            let chip = RefCell::new(Hx711Sim::new(cell, 4));
+            chip.borrow_mut().advance(0.051, 0.030);
+            read_timed(&chip, high_ns, low_ns)
+        };
+        let want = libm::round((0.030 + cell.offset_n) * cell.counts_per_n) as i32;
+        assert_eq!(read(200, 200), Some(want));
+        assert_ne!(read(150, 200), Some(want), "high time below T3");
+        assert_ne!(read(200, 150), Some(want), "low time below T4");
     }
 
     /// Creep approaches `creep_fraction` of a constant load with its time constant (first

@@ -131,7 +131,7 @@ pub fn uart_rx(uart: &mut board::Uart, bytes: &mut ByteTx) {
 }
 
 /// The load-cell task: every [`LOAD_CELL_POLL_MS`] the HX711's conversion, if one is ready,
-/// into the force log, stamped with the sample count. The read (25 clock pulses, about 50 µs)
+/// into the force log, stamped with the sample count. The read (25 clock pulses)
 /// runs with interrupts masked: a pulse stretched past 60 µs by the sample interrupt would
 /// power the chip down and lose the conversion (`src/loadcell.rs`). Without a load cell the
 /// task ends.

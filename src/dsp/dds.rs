@@ -80,6 +80,18 @@ pub fn frequency_hz(ftw: u32, sample_rate_hz: f64) -> f64 {
     ftw as f64 * sample_rate_hz / 4_294_967_296.0
 }
 
+/// At most `n` samples from `phase` on (advancing `ftw` a sample), up to and including the one
+/// whose step wraps the phase (a cycle boundary of the reference): how many, and whether that one
+/// is among them. The wrapping sample is `(2^32 − 1 − phase) / ftw` samples on (never for `ftw`
+/// 0).
+#[inline(always)]
+pub fn run_to_wrap(phase: u32, ftw: u32, n: usize) -> (usize, bool) {
+    match (!phase).checked_div(ftw) {
+        Some(k) if (k as usize) < n => (k as usize + 1, true),
+        _ => (n, false),
+    }
+}
+
 /// Phase accumulator.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Dds {

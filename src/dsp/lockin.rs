@@ -9,9 +9,15 @@
 //! variance of that very point. The phasor `a − j b` and its covariance follow.
 //!
 //! Cost in the interrupt: 13 integer multiply-accumulates per sample (both channels and the
-//! reference). The solve (a 3×3 inverse) runs once per point at low priority.
+//! reference), summed by [`LockInSums::integrate`] a run of at most [`RUN_MAX`] samples at a
+//! time in 32-bit registers (the reference's squares in 64 bits) and added to the window's
+//! `i64` sums once a run: the same integers as adding each sample's products to the `i64` sums.
+//! The solve (a 3×3 inverse) runs once per point at low priority.
 
+use crate::dsp::dds::{cos_q15, run_to_wrap, sin_q15};
+use crate::hal::AdcFrame;
 use crate::linalg::inverse3;
+use crate::units::AdcCode;
 use num_complex::Complex64;
 
 /// Scale of the Q15 reference (`table = 32767 sin`).
@@ -30,13 +36,42 @@ pub struct ChannelSums {
     pub xx: i64,
 }
 
-impl ChannelSums {
+/// Most samples one run sums in 32 bits: a product `x c` of a centred 12-bit code
+/// (`|x| ≤ 2048`) and a Q15 reference (`|c| ≤ 32767`: the table's entries and the interpolation
+/// between two of them) is at most `2048 · 32767`, and 32 of them stay below `2^31`.
+pub const RUN_MAX: usize = 32;
+const _: () = assert!(RUN_MAX as i64 * 2048 * 32767 <= i32::MAX as i64);
+
+/// One channel's sums over a run of at most [`RUN_MAX`] samples, exact in `i32`.
+#[derive(Clone, Copy, Default)]
+struct RunChannel {
+    xc: i32,
+    xs: i32,
+    x: i32,
+    xx: i32,
+    rails: u32,
+}
+
+impl RunChannel {
     #[inline(always)]
-    fn add(&mut self, x: i32, c: i32, s: i32) {
-        self.xc += (x * c) as i64;
-        self.xs += (x * s) as i64;
-        self.x += x as i64;
-        self.xx += (x * x) as i64;
+    fn add(&mut self, code: AdcCode, c: i32, s: i32) {
+        let x = code.centered();
+        self.xc += x * c;
+        self.xs += x * s;
+        self.x += x;
+        self.xx += x * x;
+        // At a rail ([`AdcCode::is_rail`]) exactly when `x` is −2048 or 2047, the two values
+        // that `x ^ (x >> 31)` (`x` or `−1 − x`, 0..=2047) takes to 2047.
+        self.rails += (((x ^ (x >> 31)) + 1) >> 11) as u32;
+    }
+
+    #[inline(always)]
+    fn add_to(self, sums: &mut ChannelSums, rails: &mut u32) {
+        sums.xc += self.xc as i64;
+        sums.xs += self.xs as i64;
+        sums.x += self.x as i64;
+        sums.xx += self.xx as i64;
+        *rails += self.rails;
     }
 }
 
@@ -73,19 +108,123 @@ pub struct LockInSums {
 }
 
 impl LockInSums {
-    /// Add one sample pair (centred codes) with reference `c`, `s` (Q15).
-    #[inline(always)]
-    pub fn accumulate(&mut self, c: i32, s: i32, current: i32, monitor: i32) {
-        self.current.add(current, c, s);
-        self.monitor.add(monitor, c, s);
+    /// Demodulate at most [`RUN_MAX`] of `frames` against the reference from `phase` on (the
+    /// DDS's phase of the first frame, advancing `ftw` a sample) until the phase wraps — a
+    /// cycle boundary: the sample whose step wraps is the cycle's last and is summed — or the
+    /// frames or the run end. Returns how many frames were summed and whether the last of them
+    /// wrapped; `phase` is left at the next frame's. The rail hits are the codes
+    /// [`AdcCode::is_rail`] finds; the sums take each code as [`AdcCode::centered`] does. Exact
+    /// (the same integers as adding every sample's products to the `i64` sums), never panics.
+    ///
+    /// Three passes that each keep their sums in registers: the reference (`Σc²`, `Σs²`, and
+    /// each sample's `c`, `s` kept in `refs` for the next passes: scratch, whatever it held),
+    /// then the current channel against it (with `Σc`, `Σs`) and the monitor (with `Σcs`);
+    /// their sums added to the window's once. Not inlined: the passes then have the registers
+    /// to themselves.
+    #[inline(never)]
+    pub fn integrate(
+        &mut self,
+        frames: &[AdcFrame],
+        phase: &mut u32,
+        ftw: u32,
+        refs: &mut [u32; RUN_MAX],
+    ) -> (usize, bool) {
+        let (n, wrapped) = reference_run(refs, frames.len(), phase, ftw, &mut self.reference);
+        let frames = frames.get(..n).unwrap_or_default();
+        let (mut c_sum, mut s_sum) = (0i32, 0i32);
+        let cur = channel_run(
+            frames,
+            refs,
+            |f| f.current,
+            |c, s| {
+                c_sum += c;
+                s_sum += s;
+            },
+        );
+        cur.add_to(&mut self.current, &mut self.current_rail_hits);
+        let mut cs = 0i64;
+        let mon = channel_run(
+            frames,
+            refs,
+            |f| f.monitor,
+            |c, s| {
+                cs += (c as i64) * (s as i64);
+            },
+        );
+        mon.add_to(&mut self.monitor, &mut self.monitor_rail_hits);
         let r = &mut self.reference;
-        r.cc += (c * c) as i64;
-        r.ss += (s * s) as i64;
-        r.cs += (c * s) as i64;
+        r.c += c_sum as i64;
+        r.s += s_sum as i64;
+        r.cs += cs;
+        r.n += frames.len() as u32;
+        (frames.len(), wrapped)
+    }
+
+    /// Add one sample pair (centred codes) with reference `c`, `s` (Q15) straight to the `i64`
+    /// sums: the definition [`integrate`](Self::integrate) is tested against.
+    #[cfg(test)]
+    pub(crate) fn accumulate(&mut self, c: i32, s: i32, current: i32, monitor: i32) {
+        for (ch, x) in [(&mut self.current, current), (&mut self.monitor, monitor)] {
+            ch.xc += (x as i64) * (c as i64);
+            ch.xs += (x as i64) * (s as i64);
+            ch.x += x as i64;
+            ch.xx += (x as i64) * (x as i64);
+        }
+        let r = &mut self.reference;
+        r.cc += (c as i64) * (c as i64);
+        r.ss += (s as i64) * (s as i64);
+        r.cs += (c as i64) * (s as i64);
         r.c += c as i64;
         r.s += s as i64;
         r.n += 1;
     }
+}
+
+/// The reference of up to `n` samples (at most [`RUN_MAX`]) from `phase` on, stopping after the
+/// sample whose step wraps: each sample's `c` (low half) and `s` (high half) into `out`, `Σc²`
+/// and `Σs²` added to `r`. Returns the samples and whether the last wrapped; `phase` is left at
+/// the next sample's.
+#[inline(always)]
+fn reference_run(
+    out: &mut [u32; RUN_MAX],
+    n: usize,
+    phase: &mut u32,
+    ftw: u32,
+    r: &mut ReferenceSums,
+) -> (usize, bool) {
+    let (n, wrapped) = run_to_wrap(*phase, ftw, n.min(RUN_MAX));
+    let (mut cc, mut ss) = (0i64, 0i64);
+    let mut p = *phase;
+    for slot in out.get_mut(..n).unwrap_or_default() {
+        let (c, s) = (cos_q15(p), sin_q15(p));
+        *slot = (c as u16 as u32) | ((s as u32) << 16);
+        cc += (c as i64) * (c as i64);
+        ss += (s as i64) * (s as i64);
+        p = p.wrapping_add(ftw);
+    }
+    *phase = p;
+    r.cc += cc;
+    r.ss += ss;
+    (n, wrapped)
+}
+
+/// One channel (`code` of each frame) against the reference `refs` ([`reference_run`]'s, one
+/// a frame): its run sums; `also` sees each sample's `c`, `s` (the reference's remaining sums,
+/// shared out between the passes so that none runs out of registers).
+#[inline(always)]
+fn channel_run(
+    frames: &[AdcFrame],
+    refs: &[u32; RUN_MAX],
+    code: impl Fn(&AdcFrame) -> AdcCode,
+    mut also: impl FnMut(i32, i32),
+) -> RunChannel {
+    let mut ch = RunChannel::default();
+    for (f, &w) in frames.iter().zip(refs) {
+        let (c, s) = (w as u16 as i16 as i32, (w as i32) >> 16);
+        ch.add(code(f), c, s);
+        also(c, s);
+    }
+    ch
 }
 
 /// A fitted phasor in code units.
@@ -188,7 +327,7 @@ fn fit(ch: &ChannelSums, r: &ReferenceSums) -> Option<(Complex64, f64, [f64; 3],
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::dsp::dds::{cos_q15, sin_q15, tuning_word};
+    use crate::dsp::dds::{tuning_word, QUARTER_TURN};
 
     /// Reference: an f64 least-squares fit by explicit normal equations on the same samples.
     #[test]
@@ -224,6 +363,38 @@ mod tests {
             "{var} {}",
             p.variance
         );
+    }
+
+    /// `integrate` at the sums' extremes — a code at either rail against a reference held at
+    /// ±32767 (zero frequency: no wrap) for 100 samples, three full runs and a part — against the
+    /// per-sample `i64` definition; the test build checks every `i32` step for overflow.
+    #[test]
+    fn integrating_at_the_extremes_is_exact() {
+        for (phase0, code) in [
+            (0, 0),
+            (0, 4095),
+            (QUARTER_TURN, 0),
+            (2 * QUARTER_TURN, 4095),
+        ] {
+            let frames = [AdcFrame {
+                current: AdcCode(code),
+                monitor: AdcCode(4095 - code),
+            }; 100];
+            let (mut run, mut phase, mut rest) = (LockInSums::default(), phase0, &frames[..]);
+            while !rest.is_empty() {
+                let (n, wrapped) = run.integrate(rest, &mut phase, 0, &mut [7; RUN_MAX]);
+                assert_eq!((n, wrapped), (rest.len().min(RUN_MAX), false));
+                rest = &rest[n..];
+            }
+            let mut want = LockInSums::default();
+            for f in &frames {
+                let (c, s) = (cos_q15(phase0), sin_q15(phase0));
+                want.accumulate(c, s, f.current.centered(), f.monitor.centered());
+            }
+            want.current_rail_hits = 100;
+            want.monitor_rail_hits = 100;
+            assert_eq!(run, want);
+        }
     }
 
     #[test]

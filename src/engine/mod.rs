@@ -11,8 +11,8 @@
 
 pub mod sweep;
 
-use crate::dsp::dds::{cos_q15, sin_q15, Dds};
-use crate::dsp::lockin::LockInSums;
+use crate::dsp::dds::{run_to_wrap, sin_q15, Dds};
+use crate::dsp::lockin::{LockInSums, RUN_MAX};
 use crate::hal::AdcFrame;
 use crate::units::{DacCode, MAX_CODE, MID_CODE};
 
@@ -147,6 +147,8 @@ pub struct SampleEngine {
     /// Sample count when the demodulated plan took effect.
     load_sample: u64,
     overruns: u32,
+    /// Scratch of [`LockInSums::integrate`]: a run's reference.
+    run_reference: [u32; RUN_MAX],
 }
 
 impl Default for SampleEngine {
@@ -203,6 +205,7 @@ impl SampleEngine {
             samples: 0,
             load_sample: 0,
             overruns: 0,
+            run_reference: [0; RUN_MAX],
         }
     }
 
@@ -269,11 +272,14 @@ impl SampleEngine {
         };
         self.generated = self.generated.wrapping_add(1);
         let amp = self.amplitude;
+        // The DDS stepped on a copy (in registers), stored back once.
+        let mut dds = self.dds;
         for out in dac.iter_mut() {
-            let ph = self.dds.step();
+            let ph = dds.step();
             let v = MID_CODE as i32 + ((amp * sin_q15(ph)) >> 15);
             *out = DacCode(v.clamp(0, MAX_CODE as i32) as u16);
         }
+        self.dds = dds;
     }
 
     /// Demodulate the ADC batch captured while the oldest not yet demodulated DAC batch played.
@@ -281,6 +287,72 @@ impl SampleEngine {
     /// [`MAX_POINTS_PER_BATCH`]; a window shorter than [`MIN_WINDOW_SAMPLES`] could close a
     /// third, which is dropped and counted in [`overruns`](Self::overruns)).
     pub fn demodulate(&mut self, adc: &[AdcFrame]) -> Points {
+        let mut out = Points::new();
+        self.demodulate_into(adc, |p| {
+            let _ = out.push(p);
+        });
+        out
+    }
+
+    /// [`demodulate`](Self::demodulate), each closed window handed to `point` as it closes (the
+    /// sample interrupt's hand-off, without a batch's list of points to copy): at most
+    /// [`MAX_POINTS_PER_BATCH`] a batch, a further one dropped and counted in
+    /// [`overruns`](Self::overruns).
+    pub fn demodulate_into(&mut self, adc: &[AdcFrame], mut point: impl FnMut(PointRaw)) {
+        let info = self.next_batch();
+        let mut phase = info.start_phase;
+        let ftw = info.ftw;
+        let mut closed = 0;
+        let mut rest = adc;
+        // Run by run: a stage's samples up to its next event (the end of the settling, a cycle
+        // boundary) at once, the same stage changes at the same samples as stepping each one.
+        while !rest.is_empty() {
+            // The samples skipped: the phase steps over them.
+            let skip = |phase: &mut u32, n: usize| {
+                *phase = phase.wrapping_add(ftw.wrapping_mul(n as u32));
+                n
+            };
+            let (used, wrapped) = match self.stage {
+                // Settling(n) turns into AwaitBoundary at the start of its (n + 1)-th sample,
+                // which may wrap: the n samples before it are skipped.
+                Stage::Settling(n) => {
+                    let m = (n as usize).min(rest.len());
+                    self.stage = if m < rest.len() {
+                        Stage::AwaitBoundary
+                    } else {
+                        Stage::Settling(n - m as u32)
+                    };
+                    (skip(&mut phase, m), false)
+                }
+                Stage::Integrating(_) => {
+                    self.sums
+                        .integrate(rest, &mut phase, ftw, &mut self.run_reference)
+                }
+                // Up to the sample whose step wraps.
+                Stage::AwaitBoundary => {
+                    let (n, wrapped) = run_to_wrap(phase, ftw, rest.len());
+                    (skip(&mut phase, n), wrapped)
+                }
+                Stage::Idle | Stage::Done => (skip(&mut phase, rest.len()), false),
+            };
+            rest = rest.get(used..).unwrap_or_default();
+            self.samples += used as u64;
+            if wrapped {
+                if let Some(p) = self.boundary(&info) {
+                    closed += 1;
+                    if closed <= MAX_POINTS_PER_BATCH {
+                        point(p);
+                    } else {
+                        self.overruns = self.overruns.saturating_add(1);
+                    }
+                }
+            }
+        }
+    }
+
+    /// The record of the batch to demodulate, the oldest generated and not yet demodulated
+    /// (none: the drive was off); a new plan or load starts its point afresh.
+    fn next_batch(&mut self) -> BatchInfo {
         let info = if self.demodulated != self.generated {
             let i = self.ring[self.demodulated as usize % RING];
             self.demodulated = self.demodulated.wrapping_add(1);
@@ -300,65 +372,43 @@ impl SampleEngine {
                 _ => Stage::Idle,
             };
         }
-        let mut phase = info.start_phase;
-        let ftw = info.ftw;
-        let mut out = Points::new();
-        for f in adc {
-            if let Stage::Settling(n) = self.stage {
-                self.stage = if n == 0 {
-                    Stage::AwaitBoundary
-                } else {
-                    Stage::Settling(n - 1)
+        info
+    }
+
+    /// The stage change at a cycle boundary (a sample whose phase step wrapped): integration
+    /// starts, or a cycle is counted, or the window closes and is returned (and the next one
+    /// starts when the plan has more, or is open).
+    fn boundary(&mut self, info: &BatchInfo) -> Option<PointRaw> {
+        match self.stage {
+            Stage::AwaitBoundary => {
+                let cycles = info.plan.map_or(0, |p| p.cycles);
+                self.stage = Stage::Integrating(cycles);
+                None
+            }
+            Stage::Integrating(k) if k <= 1 => {
+                self.stage = Stage::Done;
+                let plan = info.plan?;
+                let point = PointRaw {
+                    plan,
+                    sums: self.sums,
+                    end_sample: self.samples,
+                    window: self.window,
+                    since_load: (self.samples.saturating_sub(self.load_sample)).min(u32::MAX as u64)
+                        as u32,
                 };
-            }
-            if let Stage::Integrating(_) = self.stage {
-                self.sums.accumulate(
-                    cos_q15(phase),
-                    sin_q15(phase),
-                    f.current.centered(),
-                    f.monitor.centered(),
-                );
-                self.sums.current_rail_hits += f.current.is_rail() as u32;
-                self.sums.monitor_rail_hits += f.monitor.is_rail() as u32;
-            }
-            let next = phase.wrapping_add(ftw);
-            let wrapped = next < phase;
-            phase = next;
-            self.samples += 1;
-            if wrapped {
-                match self.stage {
-                    Stage::AwaitBoundary => {
-                        let cycles = info.plan.map_or(0, |p| p.cycles);
-                        self.stage = Stage::Integrating(cycles);
-                    }
-                    Stage::Integrating(k) if k <= 1 => {
-                        self.stage = Stage::Done;
-                        if let Some(plan) = info.plan {
-                            let point = PointRaw {
-                                plan,
-                                sums: self.sums,
-                                end_sample: self.samples,
-                                window: self.window,
-                                since_load: (self.samples.saturating_sub(self.load_sample))
-                                    .min(u32::MAX as u64)
-                                    as u32,
-                            };
-                            if out.push(point).is_err() {
-                                self.overruns = self.overruns.saturating_add(1);
-                            }
-                            if plan.open || self.window.saturating_add(1) < plan.windows {
-                                self.window = self.window.saturating_add(1);
-                                self.sums = LockInSums::default();
-                                self.stage = Stage::Integrating(plan.cycles);
-                            }
-                        }
-                    }
-                    Stage::Integrating(k) => self.stage = Stage::Integrating(k - 1),
-                    _ => {}
+                if plan.open || self.window.saturating_add(1) < plan.windows {
+                    self.window = self.window.saturating_add(1);
+                    self.sums = LockInSums::default();
+                    self.stage = Stage::Integrating(plan.cycles);
                 }
+                Some(point)
             }
+            Stage::Integrating(k) => {
+                self.stage = Stage::Integrating(k - 1);
+                None
+            }
+            _ => None,
         }
-        out
     }
 }
 
@@ -481,6 +531,117 @@ mod tests {
         // batch.
         assert!(10_000.0 / 400.0 >= MIN_WINDOW_SAMPLES as f64);
     }
+    /// The definition `demodulate` is held to: every sample of the batch stepped through the
+    /// stages one at a time, its products added straight to the `i64` sums.
+    fn demodulate_per_sample(e: &mut SampleEngine, adc: &[AdcFrame]) -> Points {
+        let info = e.next_batch();
+        let mut phase = info.start_phase;
+        let mut out = Points::new();
+        for f in adc {
+            if let Stage::Settling(n) = e.stage {
+                e.stage = if n == 0 {
+                    Stage::AwaitBoundary
+                } else {
+                    Stage::Settling(n - 1)
+                };
+            }
+            if let Stage::Integrating(_) = e.stage {
+                let (c, s) = (crate::dsp::dds::cos_q15(phase), sin_q15(phase));
+                e.sums
+                    .accumulate(c, s, f.current.centered(), f.monitor.centered());
+                e.sums.current_rail_hits += f.current.is_rail() as u32;
+                e.sums.monitor_rail_hits += f.monitor.is_rail() as u32;
+            }
+            let next = phase.wrapping_add(info.ftw);
+            let wrapped = next < phase;
+            phase = next;
+            e.samples += 1;
+            if let Some(p) = wrapped.then(|| e.boundary(&info)).flatten() {
+                if out.push(p).is_err() {
+                    e.overruns = e.overruns.saturating_add(1);
+                }
+            }
+        }
+        out
+    }
+
+    /// A draw below `n` from the tests' generator.
+    fn below(rng: &mut probe_rng::Rng, n: u64) -> u64 {
+        rng.next_u64() % n
+    }
+
+    /// The run-by-run `demodulate` against the per-sample definition: random plans (drive
+    /// frequencies from 0 to the tuning word's top, settling, cycles, windows, open or not,
+    /// stops, loads faster than the batches, repeated tags), random batch lengths (1–80, across
+    /// the 32-sample runs) and random codes (rails, and values beyond 12 bits): the same
+    /// windows, sums, stages, sample counts and overruns after every batch.
+    #[test]
+    fn demodulating_run_by_run_is_demodulating_sample_by_sample() {
+        let mut rng = probe_rng::Rng::new(0x5EED);
+        let mut closed = 0;
+        for case in 0..300 {
+            let (mut a, mut b) = (SampleEngine::new(), SampleEngine::new());
+            for _ in 0..40 {
+                if below(&mut rng, 3) == 0 {
+                    let ftw = match below(&mut rng, 6) {
+                        0 => 0,
+                        1 => u32::MAX - below(&mut rng, 4) as u32,
+                        2 => rng.next_u64() as u32,
+                        _ => tuning_word(100.0 + below(&mut rng, 400) as f64, 10_000.0),
+                    };
+                    let plan = PointPlan {
+                        ftw,
+                        amplitude_codes: below(&mut rng, 2100) as u16,
+                        settle_samples: below(&mut rng, 120) as u32,
+                        cycles: below(&mut rng, 5) as u32,
+                        windows: below(&mut rng, 5) as u16,
+                        open: below(&mut rng, 2) == 0,
+                        tag: below(&mut rng, 4) as u16,
+                    };
+                    if below(&mut rng, 8) == 0 {
+                        a.stop();
+                        b.stop();
+                    } else {
+                        a.load(plan);
+                        b.load(plan);
+                    }
+                }
+                let len = 1 + below(&mut rng, 80) as usize;
+                let mut dac = [DacCode::MID; 80];
+                let mut adc = [AdcFrame::default(); 80];
+                for f in adc.iter_mut().take(len) {
+                    let mut code = || match below(&mut rng, 10) {
+                        0 => [0, MAX_CODE, u16::MAX][below(&mut rng, 3) as usize],
+                        1 => rng.next_u64() as u16,
+                        _ => below(&mut rng, MAX_CODE as u64 + 1) as u16,
+                    };
+                    *f = AdcFrame {
+                        current: AdcCode(code()),
+                        monitor: AdcCode(code()),
+                    };
+                }
+                // Now and then a batch generated twice before one is demodulated (an overrun
+                // of the ring once it is full).
+                for _ in 0..1 + (below(&mut rng, 6) == 0) as usize {
+                    a.generate(&mut dac[..len]);
+                    b.generate(&mut dac[..len]);
+                }
+                let (pa, pb) = (
+                    a.demodulate(&adc[..len]),
+                    demodulate_per_sample(&mut b, &adc[..len]),
+                );
+                assert_eq!(pa, pb, "case {case}");
+                closed += pa.len();
+                assert_eq!(
+                    (a.samples, a.overruns, a.sums, a.stage, a.window),
+                    (b.samples, b.overruns, b.sums, b.stage, b.window),
+                    "case {case}"
+                );
+            }
+        }
+        assert!(closed > 1000, "{closed} windows closed");
+    }
+
     /// An open plan goes on closing windows of its length after its own, numbered on and
     /// gap-free, until the next plan takes effect: none of it closes after the switch, the one
     /// the switch cut is dropped, and the engine is not busy once the plan's own windows are in.

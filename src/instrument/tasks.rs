@@ -49,9 +49,10 @@ pub const LOAD_CELL_POLL_MS: u32 = 5;
 const _: () = assert!(PENDING >= REQUEST_CAP + 1 + REPORT_CAP);
 
 /// The sample interrupt's work on one batch: every queued plan taken from `plan` (`Load` or
-/// `Stop`), the ADC half `adc` demodulated, the DAC half `dac` refilled (the plan applied
-/// phase-continuously) and each finished point offered to `point`, which never waits: a point
-/// it refuses (a full channel) is counted in [`DROPPED`]. Returns the points refused. Bounded:
+/// `Stop`), the ADC half `adc` demodulated with each finished point offered to `point` as its
+/// window closes ([`SampleEngine::demodulate_into`]), which never waits: a point it refuses (a
+/// full channel) is counted in [`DROPPED`]; then the DAC half `dac` refilled (the plan applied
+/// phase-continuously). Returns the points refused. Bounded:
 /// no logging, no allocation, no wait.
 #[inline(always)]
 pub fn batch(
@@ -67,15 +68,14 @@ pub fn batch(
             None => engine.stop(),
         }
     }
-    let points = engine.demodulate(adc);
-    engine.generate(dac);
     let mut refused = 0;
-    for p in points {
+    engine.demodulate_into(adc, |p| {
         if !point(p) {
             DROPPED.fetch_add(1, Ordering::Relaxed);
             refused += 1;
         }
-    }
+    });
+    engine.generate(dac);
     refused
 }
 
