@@ -362,7 +362,7 @@ impl Real for f32 {
         crate::dsp::trig::sqrtf(self)
     }
     fn cbrt(self) -> Self {
-        libm::cbrtf(self)
+        crate::dsp::trig::cbrtf(self)
     }
     fn exp(self) -> Self {
         libm::expf(self)
