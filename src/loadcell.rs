@@ -329,7 +329,9 @@ impl ContactForce {
 #[derive(Clone, Debug, Default)]
 pub struct ForceLog {
     samples: heapless::Deque<(u32, i32), FORCE_LOG>,
-    blocks: heapless::Deque<(u32, f32), FORCE_BLOCKS>,
+    /// Each block's mid-point and the sum of its counts (exact: a sum of [`FORCE_BLOCK`]
+    /// 24-bit conversions fits `i32`).
+    blocks: heapless::Deque<(u32, i32), FORCE_BLOCKS>,
     /// The block being filled: conversions, the sum of their counts and of their sample
     /// counts' offsets from the first one's, and the first one's.
     block: (u8, i64, u64, u64),
@@ -365,11 +367,12 @@ impl ForceLog {
         if *n as usize == FORCE_BLOCK {
             let k = FORCE_BLOCK as u64;
             let mid = *first + *offsets / k;
-            let mean = (*sum as f64 / k as f64) as f32;
+            // Saturating only for counts beyond the converter's 24 bits.
+            let total = (*sum).clamp(i32::MIN as i64, i32::MAX as i64) as i32;
             if self.blocks.is_full() {
                 self.blocks.pop_front();
             }
-            let _ = self.blocks.push_back((mid as u32, mean));
+            let _ = self.blocks.push_back((mid as u32, total));
             self.block = (0, 0, 0, 0);
         }
     }
@@ -394,65 +397,66 @@ impl ForceLog {
         if !(sample_rate > 0.0) || to < from {
             return None;
         }
-        // Each entry's full sample count: as far before `to` as its low bits say (an entry
-        // "after" `to` wraps to far before it and falls outside).
-        let full = move |at: u32| to.wrapping_sub((to as u32).wrapping_sub(at) as u64);
+        // Each entry's distance before `to` in samples: what its low bits say (an entry "after"
+        // `to` wraps to far before it and falls outside). Always below 2³².
+        let before = move |at: u32| (to as u32).wrapping_sub(at);
         let reaches_back = !self.dropped
             || self
                 .samples
                 .front()
-                .is_some_and(|&(at, _)| full(at) <= from);
+                .is_some_and(|&(at, _)| to.wrapping_sub(before(at) as u64) <= from);
         if reaches_back {
-            let fine = || {
-                self.samples
-                    .iter()
-                    .map(move |&(at, c)| (full(at), c as f64))
-            };
-            line_over(fine, from, to, sample_rate)
+            let fine = self.samples.iter().map(|&(at, c)| (before(at), c));
+            line_over(fine, to - from, 1)
         } else {
-            let coarse = || self.blocks.iter().map(move |&(at, c)| (full(at), c as f64));
-            line_over(coarse, from, to, sample_rate)
+            let coarse = self.blocks.iter().map(|&(at, c)| (before(at), c));
+            line_over(coarse, to - from, FORCE_BLOCK as i64)
         }
     }
 }
 
-/// The least-squares line through the points `(at, y)` with `at` in `from..=to`: mean, its
-/// standard uncertainty and the change across the window ([`ForceLog::over`]).
-fn line_over<I: Iterator<Item = (u64, f64)>>(
-    points: impl Fn() -> I,
-    from: u64,
-    to: u64,
-    sample_rate: f32,
-) -> Option<RawForce> {
-    let fs = sample_rate as f64;
-    let inside = || points().filter(|(at, _)| (from..=to).contains(at));
-    let n = inside().count();
+/// The least-squares line through the points `(u, y / per)` with `u` (samples before the
+/// window's end) at most `window`: mean, its standard uncertainty and the change across the
+/// window ([`ForceLog::over`]).
+///
+/// One pass of exact integer sums (`u < 2³²` and `|y| < 2³¹`: every product fits `i64`, every
+/// sum `i128`), and the centred sums `n Σuu − (Σu)²`, `n Σuy − Σu Σy`, `n Σyy − (Σy)²` exact
+/// too, so the only rounding is the few `f64` operations at the end (emulated `f64` per point
+/// is dear on the Cortex-M4F). The residual `n Σr² = C_yy − C_uy²/C_uu` cancels in `f64` only
+/// as far as the line explains the counts: by `f64`'s 1e-16 times `(ramp / scatter)²`.
+fn line_over(points: impl Iterator<Item = (u32, i32)>, window: u64, per: i64) -> Option<RawForce> {
+    let (mut n, mut su, mut sy) = (0i64, 0i64, 0i64);
+    let (mut suu, mut suy, mut syy) = (0i128, 0i128, 0i128);
+    for (u, y) in points {
+        if u as u64 > window {
+            continue;
+        }
+        let (u, y) = (u as i64, y as i64);
+        n += 1;
+        su += u;
+        sy += y;
+        suu += (u as u64 * u as u64) as i128;
+        suy += (u * y) as i128;
+        syy += (y * y) as i128;
+    }
     if n < 3 {
         return None;
     }
-    let nf = n as f64;
-    let t = |at: u64| (at - from) as f64 / fs;
-    let tm = inside().map(|(at, _)| t(at)).sum::<f64>() / nf;
-    let ym = inside().map(|(_, y)| y).sum::<f64>() / nf;
-    let (mut stt, mut sty) = (0.0, 0.0);
-    for (at, y) in inside() {
-        let dt = t(at) - tm;
-        stt += dt * dt;
-        sty += dt * (y - ym);
-    }
-    let slope = if stt > 0.0 { sty / stt } else { 0.0 };
-    let mut ss = 0.0;
-    for (at, y) in inside() {
-        let r = y - ym - slope * (t(at) - tm);
-        ss += r * r;
-    }
+    let nn = n as i128;
+    let (su, sy) = (su as i128, sy as i128);
+    let cuu = (nn * suu - su * su) as f64;
+    let cuy = (nn * suy - su * sy) as f64;
+    let cyy = (nn * syy - sy * sy) as f64;
+    let (nf, per) = (n as f64, per as f64);
+    // Counts per sample, of the time running backwards from the window's end.
+    let slope = if cuu > 0.0 { cuy / cuu } else { 0.0 };
+    let ss = ((cyy - slope * cuy) / nf).max(0.0);
     let scatter = libm::sqrt(ss / (nf - 2.0));
-    let window = (to - from) as f64 / fs;
     Some(RawForce {
-        mean: ym,
-        sigma: scatter / libm::sqrt(nf),
-        change: slope * window,
-        samples: n.min(u16::MAX as usize) as u16,
+        mean: sy as f64 / nf / per,
+        sigma: scatter / libm::sqrt(nf) / per,
+        change: -slope * window as f64 / per,
+        samples: n.min(u16::MAX as i64) as u16,
     })
 }
 
@@ -502,6 +506,98 @@ mod tests {
         assert!(log.over(0, 124, fs).is_none());
         assert!(log.over(10, 5, fs).is_none());
         assert!(log.over(0, 10_000, 0.0).is_none());
+    }
+
+    /// The one-pass integer sums against the two-pass `f64` least squares (the reference: the
+    /// line through the points with times in seconds from the window's start) over random logs:
+    /// counts anywhere in the converter's 24 bits, ramps and noise of any size, jittered
+    /// conversion times, windows of every length, the block means' path included.
+    #[test]
+    fn line_agrees_with_the_two_pass_f64_reference() {
+        fn reference(pts: &[(u64, f64)], from: u64, to: u64, fs: f64) -> Option<RawForce> {
+            let inside: Vec<(f64, f64)> = pts
+                .iter()
+                .filter(|(at, _)| (from..=to).contains(at))
+                .map(|&(at, y)| ((at - from) as f64 / fs, y))
+                .collect();
+            let n = inside.len() as f64;
+            if inside.len() < 3 {
+                return None;
+            }
+            let tm = inside.iter().map(|p| p.0).sum::<f64>() / n;
+            let ym = inside.iter().map(|p| p.1).sum::<f64>() / n;
+            let stt: f64 = inside.iter().map(|p| (p.0 - tm).powi(2)).sum();
+            let sty: f64 = inside.iter().map(|p| (p.0 - tm) * (p.1 - ym)).sum();
+            let slope = if stt > 0.0 { sty / stt } else { 0.0 };
+            let ss: f64 = inside
+                .iter()
+                .map(|p| (p.1 - ym - slope * (p.0 - tm)).powi(2))
+                .sum();
+            Some(RawForce {
+                mean: ym,
+                sigma: (ss / (n - 2.0)).sqrt() / n.sqrt(),
+                change: slope * (to - from) as f64 / fs,
+                samples: inside.len() as u16,
+            })
+        }
+        let mut rng = probe_rng::Rng::new(28);
+        let fs = 10_000.0;
+        let (mut worst_mean, mut worst_change, mut worst_sigma) = (0.0f64, 0.0f64, 0.0f64);
+        let mut compared = [0usize; 2];
+        for case in 0..400 {
+            let mut log = ForceLog::new();
+            let base = rng.next_u64() % (1 << 40);
+            let level = (rng.uniform() - 0.5) * 1.6e7;
+            let ramp = (rng.uniform() - 0.5) * 10f64.powf(rng.uniform() * 7.0);
+            let noise = 10f64.powf(rng.uniform() * 4.0);
+            let count = 20 + (rng.next_u64() % 600) as usize;
+            let mut fine = Vec::new();
+            let mut at = base;
+            for k in 0..count {
+                at += 100 + rng.next_u64() % 50;
+                let y = level + ramp * k as f64 / 80.0 + noise * rng.normal();
+                let c = (y.round() as i32).clamp(-(1 << 23), (1 << 23) - 1);
+                log.push(at, LoadCellCounts(c));
+                fine.push((at, c as f64));
+            }
+            let to = at - rng.next_u64() % 400;
+            let from = to.saturating_sub(rng.next_u64() % (at - base + 2000));
+            let got = log.over(from, to, fs as f32);
+            let by_blocks = fine.len() > FORCE_LOG && fine[fine.len() - FORCE_LOG].0 > from;
+            let pts: Vec<(u64, f64)> = if !by_blocks {
+                fine
+            } else {
+                // The blocks' exact means at their mid-points (low 32 bits against `to`).
+                let full = |a: u32| to.wrapping_sub((to as u32).wrapping_sub(a) as u64);
+                log.blocks
+                    .iter()
+                    .map(|&(a, sum)| (full(a), sum as f64 / FORCE_BLOCK as f64))
+                    .collect()
+            };
+            let want = reference(&pts, from, to, fs);
+            match (got, want) {
+                (None, None) => {}
+                (Some(g), Some(w)) => {
+                    assert_eq!(g.samples, w.samples, "case {case}");
+                    compared[by_blocks as usize] += 1;
+                    let scale = w.sigma * (w.samples as f64).sqrt() + 1.0;
+                    worst_mean = worst_mean.max((g.mean - w.mean).abs() / scale);
+                    worst_change = worst_change.max((g.change - w.change).abs() / scale);
+                    worst_sigma = worst_sigma.max((g.sigma - w.sigma).abs() / (w.sigma + 1e-6));
+                }
+                (g, w) => panic!("case {case}: {g:?} vs {w:?}"),
+            }
+        }
+        std::eprintln!(
+            "{compared:?} compared; worst: mean {worst_mean:e} change {worst_change:e} \
+             sigma {worst_sigma:e}"
+        );
+        assert!(compared.iter().all(|&c| c >= 50), "{compared:?}");
+        // Mean and change in units of the scatter (plus one count), σ relative: rounding alone
+        // (tolerances a hundred times the worst seen), far below anything the force window reads.
+        assert!(worst_mean < 1e-12, "{worst_mean:e}");
+        assert!(worst_change < 1e-10, "{worst_change:e}");
+        assert!(worst_sigma < 1e-9, "{worst_sigma:e}");
     }
 
     /// The log keeps the last FORCE_LOG samples.

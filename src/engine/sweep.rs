@@ -2,7 +2,7 @@
 //! conversion of a finished point into admittance.
 
 use crate::dsp::dds::{frequency_hz, tuning_word};
-use crate::dsp::lockin::{solve, Phasor};
+use crate::dsp::lockin::{solve, solve_value};
 use crate::engine::{PointPlan, PointRaw};
 use crate::hal::FrontEndScale;
 use crate::units::{Hz, Seconds, Volts};
@@ -289,14 +289,9 @@ pub struct Admittance {
 }
 
 impl Drive {
-    /// The drive from the monitor channel's phasor (codes); `None` below 2 monitor codes (no
-    /// drive: DAC or amplifier fault).
-    pub fn from_monitor(pv: &Phasor, scale: &FrontEndScale) -> Option<Self> {
-        Self::from_value(pv.value, pv.variance, scale)
-    }
-
-    /// [`Drive::from_monitor`] from the monitor's amplitude `value` (codes) and its variance
-    /// alone ([`crate::dsp::lockin::solve_value`]).
+    /// The drive from the monitor channel's amplitude `value` (codes) and the variance of each
+    /// of its components ([`crate::dsp::lockin::solve_value`]); `None` below 2 monitor codes
+    /// (no drive: DAC or amplifier fault).
     pub fn from_value(value: Complex64, variance: f64, scale: &FrontEndScale) -> Option<Self> {
         let av = scale.monitor_volts_per_code as f64;
         let v = value * av;
@@ -325,8 +320,8 @@ impl Drive {
 pub fn point_from_raw(raw: &PointRaw, scale: &FrontEndScale) -> Result<SweepPoint, PointError> {
     let r = &raw.sums.reference;
     let pi = solve(&raw.sums.current, r).ok_or(PointError::Degenerate)?;
-    let pv = solve(&raw.sums.monitor, r).ok_or(PointError::Degenerate)?;
-    let drive = Drive::from_monitor(&pv, scale).ok_or(PointError::NoDrive)?;
+    let (v, var_v) = solve_value(&raw.sums.monitor, r).ok_or(PointError::Degenerate)?;
+    let drive = Drive::from_value(v, var_v, scale).ok_or(PointError::NoDrive)?;
     let ai = scale.amps_per_code as f64;
     let i = pi.value * ai;
     let y = drive.admittance(i, pi.variance * ai * ai);

@@ -209,8 +209,9 @@ pub fn hum(
         let (f_h, len, span) = (seg.f_h as f32, first.len as f32, span as f32);
         // The transient's own turn, relative to the drive.
         let own = (f0 - seg.f_h) as f32;
-        // `|S|² / (2 Σ var) > HUM_THRESHOLD`, the division taken once.
-        let limit = HUM_THRESHOLD * 2.0 * var;
+        // `|S|² / (2 Σ var) > HUM_THRESHOLD`, the division taken once, compared in f32 (a
+        // threshold: f32's 1e-7 moves it by nothing the exponential statistic resolves).
+        let limit = (HUM_THRESHOLD * 2.0 * var) as f32;
         for fm in MAINS_HZ {
             for k in 1..=MAINS_HARMONICS {
                 let d = fm as f32 * k as f32 - f_h;
@@ -240,7 +241,7 @@ pub fn hum(
                     }
                     sum += *rk * turn;
                 }
-                if sum.norm_sqr() as f64 > limit {
+                if sum.norm_sqr() > limit {
                     return Err(Failure::Interference);
                 }
             }

@@ -18,7 +18,7 @@
 
 use super::Estimate;
 use crate::dsp::dds::{frequency_hz, tuning_word};
-use crate::dsp::lockin::solve;
+use crate::dsp::lockin::solve_value;
 use crate::engine::sweep::{
     amplitude_codes, check_band, check_durations, check_frequency, point_from_raw, PointError,
     SettingsError,
@@ -218,13 +218,13 @@ impl<const W: usize> Ringdown<W> {
                 }
             }
             Phase::Ring => {
-                if let Some(p) = solve(&raw.sums.current, &raw.sums.reference) {
+                if let Some((value, var)) = solve_value(&raw.sums.current, &raw.sums.reference) {
                     let n = raw.sums.reference.n as f64;
                     let _ = self.windows.push(Window {
                         t: (raw.end_sample as f64 - 0.5 * n) / self.fs,
-                        re: p.value.re,
-                        im: p.value.im,
-                        var: p.variance,
+                        re: value.re,
+                        im: value.im,
+                        var,
                     });
                 }
                 if raw.window + 1 >= self.n_windows {
@@ -279,9 +279,10 @@ fn noise_variance(w: &[Window]) -> f64 {
 /// alone: white noise gives each phasor `|a|²/σ²` a χ² of two degrees of freedom, and their mean
 /// stands beyond what it exceeds once in ten thousand
 /// ([`super::interference::chi2_limit_per_dof`]); mains hum near the ring's frequency does.
+/// False with no windows.
 fn tail_holds_a_tone(w: &[Window]) -> bool {
     let n = w.len();
-    let tail = &w[n - (n / 3).max(1)..];
+    let tail = &w[n.saturating_sub((n / 3).max(1))..];
     let (mut sum, mut k) = (0.0, 0usize);
     for x in tail.iter().filter(|x| x.var > 0.0) {
         sum += (x.re * x.re + x.im * x.im) / x.var;
@@ -390,6 +391,10 @@ mod tests {
         assert_eq!(fit(&noise, 230.0), Err(Failure::NoResonance));
         assert_eq!(fit(&tone, 230.0), Err(Failure::NoResonance));
         assert!(!tail_holds_a_tone(&noise));
+        assert!(
+            !tail_holds_a_tone(&[]),
+            "no windows, no tone (and no panic)"
+        );
         assert!(tail_holds_a_tone(&tone));
     }
 

@@ -52,8 +52,8 @@ mod settings;
 pub use settings::HoldSettings;
 
 use super::resonator::{
-    add_sums, first_cycles, fit, fit_searched, fit_two, mirror, to_admittance, Carry, HoldFit,
-    HoldWindow, Segment, MAX_WINDOWS,
+    add_sums, current_window, first_cycles, fit, fit_searched, fit_two, mirror, to_admittance,
+    Carry, HoldFit, HoldWindow, Segment, MAX_WINDOWS,
 };
 use super::ringdown::Ringdown;
 use super::Estimate;
@@ -231,7 +231,7 @@ impl Hold {
                 }
                 self.clipped |= s.current_rail_hits > 0;
                 add_sums(&mut self.monitor, &s.monitor, &s.reference);
-                match self.current_window(raw, scale) {
+                match current_window(raw, scale, self.fs) {
                     Some(w) => {
                         let _ = self.windows.push(w);
                     }
@@ -268,21 +268,6 @@ impl Hold {
         }
     }
 
-    /// A finished window's current phasor, A, and its variance per component (its start and
-    /// length from the engine's sample count); `None` when its sums do not solve.
-    fn current_window(&self, raw: &PointRaw, scale: &FrontEndScale) -> Option<HoldWindow> {
-        let s = &raw.sums;
-        let (value, variance) = solve_value(&s.current, &s.reference)?;
-        let ai = scale.amps_per_code as f64;
-        let len = s.reference.n as f64 / self.fs;
-        Some(HoldWindow {
-            t0: raw.end_sample as f64 / self.fs - len,
-            len,
-            y: value * ai,
-            var: variance * ai * ai,
-        })
-    }
-
     /// A window of the first segment's open plan that closed after the second segment was
     /// planned, before the second's plan took effect: more of the first segment's drive, kept
     /// for the joint fit while none of the second's has come and there is room
@@ -292,7 +277,7 @@ impl Hold {
             return;
         }
         self.clipped |= raw.sums.current_rail_hits > 0;
-        let Some(mut w) = self.current_window(raw, scale) else {
+        let Some(mut w) = current_window(raw, scale, self.fs) else {
             return;
         };
         to_admittance(

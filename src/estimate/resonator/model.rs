@@ -375,56 +375,44 @@ pub(super) struct Normal {
 
 impl Normal {
     /// The variances of `f0` and `Q` and their covariance (the upper-left 2 × 2 block of
-    /// `(JᵀWJ)⁻¹`: `[var f0, var Q, cov(f0, Q)]`) for weight `wt`, in `f64`: the scaled matrix
-    /// factored as `L D Lᵀ` (no square roots), `L y = e_i` solved for the two unit vectors,
-    /// `Σ y_k y'_k / d_k` unscaled by `scale_i scale_j / wt`. `None` when the matrix is not
-    /// positive definite.
+    /// `(JᵀWJ)⁻¹`: `[var f0, var Q, cov(f0, Q)]`) for weight `wt`, in `f64`: the linear
+    /// parameters `(g, Re z, Im z)` eliminated from the scaled matrix (the first three pivots of
+    /// its `L D Lᵀ`, no square roots), which leaves the Schur complement `S` of `(f0, Q)`, whose
+    /// inverse is that block; unscaled by `scale_i scale_j / wt`. `None` when the matrix is
+    /// not positive definite.
     #[allow(clippy::needless_range_loop)] // triangular index arithmetic reads best as indices
     pub(super) fn variances(&self, wt: f64) -> Option<[f64; 3]> {
         const N: usize = 5;
-        let m: [[f64; N]; N] =
-            core::array::from_fn(|i| core::array::from_fn(|j| self.jtj[i.max(j)][i.min(j)] as f64));
-        let mut l = [[0.0f64; N]; N];
-        let mut d = [0.0f64; N];
-        let mut inv_d = [0.0f64; N];
-        for i in 0..N {
-            // L[i][k] d[k] for the row, then the diagonal.
-            let mut ld = [0.0f64; N];
-            for j in 0..i {
-                let mut s = m[i][j];
-                for k in 0..j {
-                    s -= ld[k] * l[j][k];
-                }
-                ld[j] = s;
-                l[i][j] = s * inv_d[j];
-            }
-            let mut s = m[i][i];
-            for k in 0..i {
-                s -= ld[k] * l[i][k];
-            }
-            if !(s > 0.0) || !s.is_finite() {
+        // The linear parameters first, then (f0, Q).
+        const ORDER: [usize; N] = [2, 3, 4, 0, 1];
+        let mut m: [[f64; N]; N] = core::array::from_fn(|i| {
+            core::array::from_fn(|j| {
+                let (a, b) = (ORDER[i], ORDER[j]);
+                self.jtj[a.max(b)][a.min(b)] as f64
+            })
+        });
+        // Lower triangle: m[i][j], j ≤ i.
+        for k in 0..3 {
+            let d = m[k][k];
+            if !(d > 0.0) || !d.is_finite() {
                 return None;
             }
-            d[i] = s;
-            inv_d[i] = 1.0 / s;
-        }
-        // y_c = L⁻¹ e_c for c = 0, 1; (JᵀWJ)⁻¹[a][b] = Σ_k y_a[k] y_b[k] / d_k (scaled).
-        let mut y = [[0.0f64; N]; 2];
-        for (c, yc) in y.iter_mut().enumerate() {
-            yc[c] = 1.0;
-            for i in c + 1..N {
-                let mut s = 0.0;
-                for k in c..i {
-                    s -= l[i][k] * yc[k];
+            let inv = 1.0 / d;
+            for i in k + 1..N {
+                let l = m[i][k] * inv;
+                for j in k + 1..=i {
+                    m[i][j] -= l * m[j][k];
                 }
-                yc[i] = s;
             }
         }
-        let dot = |a: usize, b: usize| -> f64 {
-            let v: f64 = (0..N).map(|k| y[a][k] * y[b][k] * inv_d[k]).sum();
-            v * self.scale[a] as f64 * self.scale[b] as f64 / wt
-        };
-        let out = [dot(0, 0), dot(1, 1), dot(0, 1)];
+        let (a, b, c) = (m[3][3], m[4][3], m[4][4]);
+        let det = a * c - b * b;
+        if !(a > 0.0) || !(det > 0.0) || !det.is_finite() {
+            return None;
+        }
+        let k = 1.0 / (det * wt);
+        let (s0, s1) = (self.scale[0] as f64, self.scale[1] as f64);
+        let out = [c * k * s0 * s0, a * k * s1 * s1, -b * k * s0 * s1];
         out.iter().all(|v| v.is_finite()).then_some(out)
     }
 

@@ -46,7 +46,7 @@
 //! the unit's profile: lift-off becomes `no_contact`, a light touch `bad_contact`, and so on.
 
 use crate::dsp::dds::{frequency_hz, tuning_word};
-use crate::dsp::lockin::{solve, ChannelSums, ReferenceSums};
+use crate::dsp::lockin::{solve_value, ChannelSums, ReferenceSums};
 use crate::engine::sweep::{amplitude_codes, Drive, SettingsError};
 use crate::engine::window_budget_samples;
 use crate::engine::{PointPlan, PointRaw};
@@ -455,15 +455,8 @@ impl Tracker {
                 let s = &raw.sums;
                 self.clipped |= s.current_rail_hits > 0;
                 resonator::add_sums(&mut self.monitor, &s.monitor, &s.reference);
-                if let Some(p) = solve(&s.current, &s.reference) {
-                    let ai = scale.amps_per_code as f64;
-                    let len = s.reference.n as f64 / self.fs;
-                    let _ = self.windows.push(HoldWindow {
-                        t0: t as f64 / self.fs - len,
-                        len,
-                        y: p.value * ai,
-                        var: p.variance * ai * ai,
-                    });
+                if let Some(w) = resonator::current_window(raw, scale, self.fs) {
+                    let _ = self.windows.push(w);
                 }
                 let done = raw.window + 1;
                 let ends_segment = done == self.first_segment
@@ -579,19 +572,13 @@ impl Tracker {
             return Err(Failure::Clipped);
         }
         let (m, r) = &self.monitor;
-        let pv = solve(m, r).ok_or(Failure::DriveFault)?;
-        let drive = Drive::from_monitor(&pv, scale).ok_or(Failure::DriveFault)?;
+        let (value, variance) = solve_value(m, r).ok_or(Failure::DriveFault)?;
+        let drive = Drive::from_value(value, variance, scale).ok_or(Failure::DriveFault)?;
         // The plan's windows so far, as admittances with the drive phasor measured so far.
         let mut w = [HoldWindow::default(); MAX_WINDOWS];
         let n = self.windows.len().min(MAX_WINDOWS);
-        for (o, x) in w.iter_mut().zip(self.windows.iter()) {
-            let y = drive.admittance(x.y, x.var);
-            *o = HoldWindow {
-                y: y.y,
-                var: y.var,
-                ..*x
-            };
-        }
+        w[..n].copy_from_slice(&self.windows[..n]);
+        resonator::to_admittance(&mut w[..n], drive.v, drive.var_v);
         let y_s = C64::new(self.static_g, 2.0 * PI * self.f_h * self.static_c);
         let (f_start, q_start, q_sd) = self.plan_prior;
         let seg = resonator::Segment {
