@@ -181,7 +181,10 @@ impl QModel {
     /// one and the unit's contact law `law` is given, else the empirical curve
     /// ([`Self::log_linear_q`]).
     pub fn q_at(&self, e_kpa: f64, force_n: Option<f64>, law: Option<&ContactLaw>) -> f64 {
-        let law = law.map(|l| l.at_force::<f64>(force_n));
+        // The law evaluated only where the curve needs it.
+        let law = law
+            .filter(|_| self.damping.is_some())
+            .map(|l| l.at_force::<f64>(force_n));
         self.q_on(e_kpa, force_n, law.as_ref())
     }
 

@@ -257,8 +257,13 @@ impl<T: Real> LawAt<T> {
     /// `S = π a²`; with the law's Hertz radius `a ∝ (F/E)^(1/3)` ([`FORCE_EXPONENT_A`]) it is
     /// `∝ E^(−1/6) F^(2/3)` ([`DAMPING_EXPONENT_E`], [`DAMPING_EXPONENT_F`]).
     pub fn damping_shape(&self, e_kpa: T) -> T {
-        (self.ratio * self.ratio).cbrt() / e_kpa.cbrt().sqrt()
+        damping_shape(self.ratio, e_kpa)
     }
+}
+
+/// [`LawAt::damping_shape`] at the force ratio `ratio`.
+fn damping_shape<T: Real>(ratio: T, e_kpa: T) -> T {
+    (ratio * ratio).cbrt() / e_kpa.cbrt().sqrt()
 }
 
 /// The factors of one modulus `e_kpa` and force ratio `ratio` in the law (
@@ -484,9 +489,10 @@ impl ContactLaw {
         self.at_force::<f64>(force_n).mode_rate(e_kpa)
     }
 
-    /// [`LawAt::damping_shape`] at `force_n`, in `f64`.
+    /// [`LawAt::damping_shape`] at `force_n`, in `f64` (the force ratio alone: none of the
+    /// law's constants).
     pub fn damping_shape(&self, e_kpa: f64, force_n: Option<f64>) -> f64 {
-        self.at_force::<f64>(force_n).damping_shape(e_kpa)
+        damping_shape(force_ratio(self.force_n, force_n.unwrap_or(0.0)), e_kpa)
     }
 
     /// The rigid limit `sqrt(K1 + Ks)/2π`, Hz.
