@@ -26,7 +26,7 @@ mod solver;
 #[cfg(test)]
 mod fixtures;
 
-pub use solver::{fit, fit_from, fit_searched, fit_two};
+pub use solver::{fit, fit_searched, fit_two};
 
 use super::Estimate;
 use crate::dsp::lockin::{solve_value, ChannelSums, ReferenceSums};

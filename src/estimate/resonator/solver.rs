@@ -107,20 +107,7 @@ fn noise_variance(w: &[HoldWindow]) -> f64 {
 /// `Q = q_prior.0 ± q_prior.1` (a hold at one frequency measures the phase well and `Q` poorly;
 /// the prior — the seed's `Q` — keeps a noisy hold from trading one for the other).
 pub fn fit(seg: Segment, f_start: f64, q_prior: (f64, f64)) -> Result<HoldFit, Failure> {
-    fit_from(seg, (f_start, q_prior.0), None, q_prior)
-}
-
-/// [`fit`] from `start` (`f0`, `Q`) and, when given, the linear parameters `linear` (`g`, `z`:
-/// [`HoldFit::linear`]) of a fit of fewer of the same windows — the tracker's later segments
-/// go on from the fit of the plan's windows before them, a step or two from the new optimum
-/// instead of the plan's start; the prior on `Q` stays `q_prior`.
-pub fn fit_from(
-    seg: Segment,
-    start: (f64, f64),
-    linear: Option<(f64, C64)>,
-    q_prior: (f64, f64),
-) -> Result<HoldFit, Failure> {
-    fit_segments(&[seg], None, start, q_prior, Start::of(linear))
+    fit_segments(&[seg], None, (f_start, q_prior.0), q_prior, Start::Linear)
 }
 
 /// The joint fit of two consecutive segments: one `f0`, `Q`, `g`, and the first segment's
@@ -141,13 +128,11 @@ pub fn fit_two(
     linear: Option<(f64, C64)>,
     q_prior: (f64, f64),
 ) -> Result<HoldFit, Failure> {
-    fit_segments(
-        &[first, second],
-        Some(carry),
-        start,
-        q_prior,
-        Start::of(linear),
-    )
+    let start_linear = match linear {
+        Some((g, z)) => Start::Given(g, z),
+        None => Start::Linear,
+    };
+    fit_segments(&[first, second], Some(carry), start, q_prior, start_linear)
 }
 
 /// Where a fit's linear parameters start.
@@ -159,16 +144,6 @@ enum Start {
     Search(f64, f64),
     /// The given `g`, `z`.
     Given(f64, C64),
-}
-
-impl Start {
-    /// The given linear parameters, or solved anew.
-    fn of(linear: Option<(f64, C64)>) -> Self {
-        match linear {
-            Some((g, z)) => Start::Given(g, z),
-            None => Start::Linear,
-        }
-    }
 }
 
 /// Steps of the start search over the band, in half-widths `f0/(2Q)` of the prior `Q`.

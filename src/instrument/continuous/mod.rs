@@ -289,9 +289,8 @@ pub struct Tracker {
     /// The plan's fits start from: `f0`, and `Q` with its prior's σ (the estimate when the plan
     /// was made: the same prior for every fit of the plan, so that their difference is data).
     plan_prior: (f64, f64, f64),
-    /// The last fit of the plan in progress (of all its windows until then), and its linear
-    /// parameters (`g`, `z`), where the next segment's fit starts.
-    plan_fit: Option<(Measurement, (f64, C64))>,
+    /// The last fit of the plan in progress (of all its windows until then).
+    plan_fit: Option<Measurement>,
 }
 
 /// The one place a stream's estimate becomes a reading: the pipeline with the unit's profile
@@ -587,13 +586,7 @@ impl Tracker {
             y_s,
             mirror: resonator::mirror(drive.v),
         };
-        // A later segment's fit goes on from the plan's fit before it (the same windows and
-        // more), with the plan's prior on Q.
-        let (start, linear) = match self.plan_fit {
-            Some((m, linear)) => ((m.f0, m.q), Some(linear)),
-            None => ((f_start, q_start), None),
-        };
-        let h = resonator::fit_from(seg, start, linear, (q_start, q_sd))?;
+        let h = resonator::fit(seg, f_start, (q_start, q_sd))?;
         // A segment the resonator's model does not explain (a knock, a tone) is no reading,
         // and the drive does not follow it: the next segment (30 ms on by default) will be clean.
         if h.reduced_chi2 > GROSS_CHI2 {
@@ -628,9 +621,9 @@ impl Tracker {
         // A plan's later segments are fitted with all its windows so far (their starting state
         // is the plan's, not a free one); what they add is the information the earlier fit did
         // not have: `Y = C⁻¹ − C_prev⁻¹`, `Y z = C⁻¹ x − C_prev⁻¹ x_prev`.
-        let m = match self.plan_fit.replace((fit, h.linear)) {
+        let m = match self.plan_fit.replace(fit) {
             None => Some(fit),
-            Some((prev, _)) => added_information(&fit, &prev),
+            Some(prev) => added_information(&fit, &prev),
         };
         let update = m.map_or(Update::Refused, |m| self.track.update(&m, &self.process()));
         let pooled = match update {
