@@ -318,65 +318,50 @@ pub trait Real:
     fn finite(self) -> bool;
 }
 
-impl Real for f64 {
-    const ZERO: Self = 0.0;
-    const ONE: Self = 1.0;
-    const EPSILON: Self = f64::EPSILON;
-    fn of(v: f64) -> Self {
-        v
-    }
-    fn wide(self) -> f64 {
-        self
-    }
-    fn sqrt(self) -> Self {
-        libm::sqrt(self)
-    }
-    fn cbrt(self) -> Self {
-        libm::cbrt(self)
-    }
-    fn exp(self) -> Self {
-        libm::exp(self)
-    }
-    fn ln(self) -> Self {
-        libm::log(self)
-    }
-    fn abs(self) -> Self {
-        libm::fabs(self)
-    }
-    fn finite(self) -> bool {
-        self.is_finite()
-    }
+/// [`Real`] for a float type with its elementary functions.
+macro_rules! real {
+    ($t:ty, sqrt: $sqrt:path, cbrt: $cbrt:path, exp: $exp:path, ln: $ln:path, abs: $abs:path) => {
+        impl Real for $t {
+            const ZERO: Self = 0.0;
+            const ONE: Self = 1.0;
+            const EPSILON: Self = <$t>::EPSILON;
+            fn of(v: f64) -> Self {
+                v as $t
+            }
+            fn wide(self) -> f64 {
+                self as f64
+            }
+            fn sqrt(self) -> Self {
+                $sqrt(self)
+            }
+            fn cbrt(self) -> Self {
+                $cbrt(self)
+            }
+            fn exp(self) -> Self {
+                $exp(self)
+            }
+            fn ln(self) -> Self {
+                $ln(self)
+            }
+            fn abs(self) -> Self {
+                $abs(self)
+            }
+            fn finite(self) -> bool {
+                self.is_finite()
+            }
+        }
+    };
 }
 
-impl Real for f32 {
-    const ZERO: Self = 0.0;
-    const ONE: Self = 1.0;
-    const EPSILON: Self = f32::EPSILON;
-    fn of(v: f64) -> Self {
-        v as f32
-    }
-    fn wide(self) -> f64 {
-        self as f64
-    }
-    fn sqrt(self) -> Self {
-        crate::dsp::trig::sqrtf(self)
-    }
-    fn cbrt(self) -> Self {
-        crate::dsp::trig::cbrtf(self)
-    }
-    fn exp(self) -> Self {
-        libm::expf(self)
-    }
-    fn ln(self) -> Self {
-        libm::logf(self)
-    }
-    fn abs(self) -> Self {
-        libm::fabsf(self)
-    }
-    fn finite(self) -> bool {
-        self.is_finite()
-    }
-}
+real!(f64, sqrt: libm::sqrt, cbrt: libm::cbrt, exp: libm::exp, ln: libm::log, abs: libm::fabs);
+real!(
+    f32,
+    sqrt: crate::dsp::trig::sqrtf,
+    cbrt: crate::dsp::trig::cbrtf,
+    exp: libm::expf,
+    ln: libm::logf,
+    abs: libm::fabsf
+);
 
 /// The lower Cholesky factor `L` (`m = L Lᵀ`) of a symmetric positive-definite matrix (its lower
 /// triangle is read), and the reciprocals of its diagonal; `None` if `m` is not positive
