@@ -112,8 +112,8 @@ pub struct TrackerConfig {
 
 impl TrackerConfig {
     /// Band 170–290 Hz seeded at 230 Hz, acquisition 20 + 20 ms seed and 100 ms hold, segments
-    /// of 30 ms (seven one-cycle windows at 240 Hz; with the two batches every plan waits in the
-    /// DAC's pipeline and the wait for a cycle boundary, a reading every 38 ms, docs/methods.md),
+    /// of 30 ms (seven one-cycle windows at 240 Hz; each plan also waits two batches in the DAC's
+    /// pipeline and for a cycle boundary: the readings' spacing is in docs/methods.md),
     /// one a plan, with the drive a quarter half-linewidth off the resonance alternately, Q prior
     /// ±50 %, the resonance drifting at the probe's specified thermal drift
     /// ([`FREE_RESONANCE_DRIFT_HZ_S`]) and `Q` at 20 %/s (ours: `Q` follows the contact; faster
