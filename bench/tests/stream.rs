@@ -428,7 +428,10 @@ fn the_trackers_speed_accuracy_point_on_phantom_c() {
 
 /// Issue 28's fast setting (`pareto::FAST_STREAM`: segments of 12 ms, four a plan): at least
 /// 50 ok readings per second within 0.5 % RMS of the truth, on phantom C (noise seeds 0–4),
-/// phantoms A and E and 2000 kPa (other seeds).
+/// phantoms A and E and 2000 kPa (other seeds). On C its error from noise is within 0.85× one
+/// segment's steady-state bound (measured 0.6×: the tracker pools a plan's segments through the
+/// difference of their fits' information, which a fit stopped short of its optimum moves — a
+/// later segment's fit started from the one before it read 1.0×).
 #[test]
 fn the_fast_setting_reads_fifty_a_second_within_half_a_percent() {
     use hal_sim::{phantoms, NoiseScene};
@@ -448,6 +451,9 @@ fn the_fast_setting_reads_fifty_a_second_within_half_a_percent() {
         print_point(&name, &s);
         assert!(s.ok_per_s >= 50.0, "{name}: {} ok/s", s.ok_per_s);
         assert!(x.rms_pct() <= 0.5, "{name}: RMS {} %", x.rms_pct());
+        if seed0 == 0 {
+            assert!(s.ratio() <= 0.85, "{name}: {} × its bound", s.ratio());
+        }
     }
 }
 
