@@ -85,7 +85,7 @@ fn force_ratio(ref_n: f64, force_n: f64) -> f64 {
 /// Cortex-M4F's FPU, where every `f64` operation is software) for a reading's inversion and
 /// its contact's Q and loss share ([`ContactLaw::at_force`]).
 #[derive(Clone, Copy, Debug)]
-pub struct Constants<T> {
+struct Constants<T> {
     k1: T,
     ks: T,
     a: T,
