@@ -186,7 +186,8 @@ struct Root<T> {
     at: Slopes<T>,
 }
 
-/// Most evaluations of the law a root takes (its bracket halves at least every other one).
+/// Most evaluations of the law a root takes: a bound on the loop (Newton inside the bracket
+/// converges in a few; a bisection step halves the bracket).
 const ROOT_STEPS: usize = 60;
 
 /// The law's value and slopes at one modulus.
