@@ -168,7 +168,8 @@ pub fn conclude(
     r.modulus_sigma = Some(m.sigma);
     r.modulus_sigma_repeat = Some(m.sigma_repeat);
     let q_sigma = est.q_sigma.map(f64::from);
-    let loss = law.and_then(|l| unit.tissue_loss_on(&l, e_kpa, force_n, q as f64, q_sigma));
+    let q_cal = q_cal as f64;
+    let loss = law.and_then(|l| unit.tissue_loss_on(&l, e_kpa, q_cal, q as f64, q_sigma));
     if let Some((loss, sigma)) = loss {
         r.loss_tangent = Some(loss as f32);
         r.loss_tangent_sigma = Some(sigma as f32);

@@ -220,22 +220,23 @@ impl UnitProfile {
         q_sigma: Option<f64>,
     ) -> Option<(f64, f64)> {
         let law = self.contact?.at_force::<f64>(force_n);
-        self.tissue_loss_on(&law, e_kpa, force_n, q, q_sigma)
+        let q_cal = self.q_model?.q_on(e_kpa, force_n, Some(&law));
+        self.tissue_loss_on(&law, e_kpa, q_cal, q, q_sigma)
     }
 
     /// [`Self::tissue_loss`] with the contact law at the reading's force already evaluated
-    /// ([`ContactLaw::at_force`]), in `T` (a reading's: `f32`).
+    /// ([`ContactLaw::at_force`]), in `T` (a reading's: `f32`), and the lossless calibrated
+    /// contact's `q_cal` there ([`QModel::q_on`] through that law) already known.
     pub fn tissue_loss_on<T: Real>(
         &self,
         law: &LawAt<T>,
         e_kpa: T,
-        force_n: Option<f64>,
+        q_cal: f64,
         q: f64,
         q_sigma: Option<f64>,
     ) -> Option<(f64, f64)> {
         let (model, q_sigma) = (self.q_model?, q_sigma?);
         let share = law.loss_share(e_kpa).wide();
-        let q_cal = model.q_on(e_kpa, force_n, Some(law)).wide();
         if !(share > 1e-6) || !(q_cal > 0.0) || !(q > 0.0) {
             return None;
         }
