@@ -212,6 +212,20 @@ fn the_bench_log_and_the_plot() {
     assert!(plot.contains("<svg") && plot.contains("modulus"), "{plot}");
     run_fails_one_line(bin().args(["stream", "--phantom", "B", "--step-to", "D"]));
     run_fails_one_line(bin().args(["stream", "--phantom", "C", "--touch-at-s", "1"]));
+    // A tracker setting outside its range is refused before the stream runs, in the settings
+    // error's words.
+    for (knob, value) in [
+        ("--plan-segments", "9"),
+        ("--segment-s", "1000"),
+        ("--q-prior", "0"),
+    ] {
+        let e = run_fails_one_line(
+            bin()
+                .args(["stream", "--phantom", "C", "--seconds", "0.5", "--json"])
+                .args([knob, value]),
+        );
+        assert!(e.contains("a method setting is outside its range"), "{e}");
+    }
 }
 
 /// `stream --qemu`: the firmware image's `stream` command in QEMU, the same JSON. Lifted off
