@@ -269,8 +269,9 @@ pub fn solve_value(ch: &ChannelSums, r: &ReferenceSums) -> Option<(Complex64, f6
     let a = centred(n, r.cc, r.c, r.c);
     let b = centred(n, r.cs, r.c, r.s);
     let c = centred(n, r.ss, r.s, r.s);
-    let det = a * c - b * b;
-    if !(det > 1e-13 * a * c) || !det.is_finite() {
+    let ac = a * c;
+    let det = ac - b * b;
+    if !(det > 1e-13 * ac) || !det.is_finite() {
         return None;
     }
     let u = centred(n, ch.xc, ch.x, r.c);
@@ -278,13 +279,12 @@ pub fn solve_value(ch: &ChannelSums, r: &ReferenceSums) -> Option<(Complex64, f6
     let inv_det = 1.0 / det;
     let ca = (c * u - b * v) * inv_det;
     let cb = (a * v - b * u) * inv_det;
-    // N × the residual sum of squares over N − 3 degrees of freedom.
+    // N × the residual sum of squares; its variance σ² = rss_n / (N (N − 3)).
     let rss_n = (centred(n, ch.xx, ch.x, ch.x) - (ca * u + cb * v)).max(0.0);
-    let nf = r.n as f64;
-    let sigma2 = rss_n / (nf * (nf - 3.0));
-    // (M⁻¹)_aa + (M⁻¹)_bb of the full normal matrix: N (C + A) / det of the centred one.
-    let var_sum = Q15 * Q15 * sigma2 * nf * (a + c) * inv_det;
-    Some((Complex64::new(ca * Q15, -cb * Q15), 0.5 * var_sum.max(0.0)))
+    // Each component's variance: half of σ² ((M⁻¹)_aa + (M⁻¹)_bb), the full normal matrix's
+    // `N (C + A) / det` of the centred one (the N's cancel), in the reference's Q15 units.
+    let var = 0.5 * Q15 * Q15 * rss_n / (r.n as f64 - 3.0) * ((a + c) * inv_det);
+    Some((Complex64::new(ca * Q15, -cb * Q15), var.max(0.0)))
 }
 
 /// `N Σpq − Σp Σq` (`N` times a centred sum of products) exactly in integers, then in `f64`:
