@@ -673,5 +673,24 @@ pub fn stream_catalogue(noise: NoiseScene) -> Vec<StreamCase> {
             accept_from_s: 1.5,
             accept_to_s: inf,
         },
+        // Tissue softer than the band: its resonance lies below the tracker's band, where a hold
+        // whose bursts lie in the band hears too little to tell it from noise. Every reading
+        // names the cause, as a single reading does.
+        StreamCase {
+            name: "below-band",
+            scene: StreamScene::on(Target::Phantom(ph(BELOW_BAND)), noise),
+            seconds: 2.0,
+            must: vec![Must::Code {
+                from_s: 0.0,
+                code: "out_of_band",
+            }],
+            accept: &["out_of_band"],
+            accept_from_s: 0.0,
+            accept_to_s: inf,
+        },
     ]
 }
+
+/// The tissue of the `below-band` stream scene: Krouskop's breast fat, whose resonance at 30 mN
+/// lies below the tracker's band (`bench/tests/stream.rs` checks it against the simulator).
+pub const BELOW_BAND: &str = "fat-like";

@@ -100,7 +100,7 @@ fn the_continuous_scenes_do_what_they_must() {
     let command_unit = default_for(METHOD).unwrap();
     let map_unit = calibrated(METHOD, 10).unwrap().profile;
     let cases = stream_catalogue(NoiseScene::Bench);
-    assert_eq!(cases.len(), 10);
+    assert_eq!(cases.len(), 11);
     for (unit, seeds) in [
         (&command_unit, 0..3),
         (&map_unit, FIRST_SEED..FIRST_SEED + 5),
@@ -149,6 +149,28 @@ fn after_a_lift_off_the_stream_says_no_contact() {
             after.len()
         );
     }
+}
+
+/// On tissue whose resonance lies below the tracker's band (by the simulator's own physics) the
+/// stream names the cause, `out_of_band`, in every reading, as the single reading does; a hold
+/// alone would hear too little and say `low_snr` ("raise the drive"), which misleads.
+#[test]
+fn below_the_band_the_stream_says_out_of_band() {
+    use pzt_probe::instrument::continuous::TrackerConfig;
+    let tissue = probe_bench::stability::BELOW_BAND;
+    let scene = hal_sim::scenes::Scene::on_phantom(&hal_sim::phantoms::by_name(tissue).unwrap());
+    let band = TrackerConfig::DEFAULT.band_start.0 as f64;
+    assert!(scene.resonance_hz() < band, "{} Hz", scene.resonance_hz());
+    let v = stream(&["--phantom", tissue, "--seconds", "2", "--seed", "3"]);
+    assert!(v.len() >= 2, "{} readings", v.len());
+    for r in &v {
+        assert_eq!(r["status"], "out_of_band", "{r}");
+        assert_eq!(r["locked"], false, "{r}");
+        assert!(r["modulus_kpa"].is_null(), "{r}");
+    }
+    let one = run_ok(bin().args(["measure", "--phantom", tissue, "--json"]));
+    let one: Value = serde_json::from_slice(&one.stdout).unwrap();
+    assert_eq!(one["status"], "out_of_band", "{one}");
 }
 
 /// A criterion that is not met is reported: the step scene judged against a tolerance of 0.1 %

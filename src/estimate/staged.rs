@@ -119,7 +119,7 @@ pub struct Staged {
 
 impl Staged {
     /// The next plan, or `None` when done (or waiting for a point).
-    pub fn next_plan(&mut self, scale: &FrontEndScale) -> Option<PointPlan> {
+    pub fn next_plan(&mut self) -> Option<PointPlan> {
         if self.pending || self.is_complete() {
             return None;
         }
@@ -136,7 +136,7 @@ impl Staged {
         self.tag = self.tag.wrapping_add(1);
         self.pending = true;
         Some(PointPlan {
-            ftw: tuning_word(f as f64, scale.sample_rate.0 as f64),
+            ftw: tuning_word(f as f64, self.fs),
             amplitude_codes: self.amplitude,
             settle_samples: (settle_s * self.fs) as u32,
             cycles,

@@ -653,7 +653,7 @@ impl Plans for Procedure {
     fn next_plan(&mut self) -> Option<PointPlan> {
         match &mut self.inner {
             Inner::Sweep(m) => m.next_plan(),
-            Inner::Staged(m) => m.next_plan(&self.scale),
+            Inner::Staged(m) => m.next_plan(),
             Inner::Hold(m) => m.next_plan(),
             Inner::Auto {
                 hold,
@@ -673,7 +673,7 @@ impl Plans for Procedure {
                 }
                 match fallback {
                     Some(f) => f.next_plan(),
-                    None => first.next_plan(&self.scale),
+                    None => first.next_plan(),
                 }
             }
         }

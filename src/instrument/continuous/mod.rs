@@ -12,7 +12,12 @@
 //!
 //! **Acquisition** is the `hold` method itself ([`crate::estimate::hold`]) with a short hold: a
 //! ring-down seed (searching a quarter band below and above when nothing rings), then a hold on
-//! the seed and one on its estimate. Its estimate is the stream's first reading.
+//! the seed and one on its estimate. Its estimate is the stream's first reading. When no seed
+//! rang (`no_resonance`, `low_snr`: a resonance far from every burst, or outside the band, where
+//! a burst barely excites it) the tracker **searches** with the fit method's stages over its band
+//! ([`crate::estimate::staged`], auto's second stage): a resonance found in the band seeds one
+//! more acquisition there; otherwise the search's failure is the reading, so tissue whose
+//! resonance lies outside the band reads `out_of_band` as a single reading does, not `low_snr`.
 //!
 //! **Tracking** keeps the drive on: every segment is one [`PointPlan`] of gap-free whole-cycle
 //! windows at one frequency `f_h`, loaded phase-continuously as the previous one ends (a gap of
@@ -53,6 +58,7 @@ use crate::engine::{PointPlan, PointRaw};
 use crate::estimate::conductance::GROSS_CHI2;
 use crate::estimate::hold::{Hold, HoldSettings};
 use crate::estimate::resonator::{self, HoldWindow, MAX_WINDOWS};
+use crate::estimate::staged::{Staged, StagedSettings};
 use crate::estimate::track::{Measurement, Process, Sym2, Track, Update};
 use crate::estimate::Estimate;
 use crate::hal::FrontEndScale;
@@ -151,6 +157,16 @@ impl TrackerConfig {
         h
     }
 
+    /// The search's settings: the fit method's defaults over the tracker's band and drive.
+    fn search(&self) -> StagedSettings {
+        StagedSettings {
+            band_start: self.band_start,
+            band_stop: self.band_stop,
+            drive: self.drive,
+            ..StagedSettings::DEFAULT
+        }
+    }
+
     /// [`TrackerConfig::validate`] into `slot`, out of line: the tracker (about 4 KiB) is
     /// built in this call's frame and moved into `slot` (the firmware's measurement task keeps
     /// it in its future), not in the caller's frame, which would grow the stack of every
@@ -199,6 +215,8 @@ impl TrackerConfig {
         }
         let acquisition = self.acquisition(self.seed, unit);
         let hold = acquisition.validate(scale)?;
+        // The search is validated now: the interrupt never sees settings that were not.
+        self.search().validate(scale)?;
         let amplitude = amplitude_codes(self.drive, scale)?;
         let fs = scale.sample_rate.0 as f64;
         Ok(Tracker {
@@ -208,6 +226,7 @@ impl TrackerConfig {
             static_g: acquisition.static_conductance.0 as f64,
             static_c: acquisition.static_capacitance.0 as f64,
             mode: Mode::Acquire(hold),
+            searched: false,
             f_est: self.seed.0 as f64,
             q_est: 0.0,
             side: 1.0,
@@ -255,7 +274,16 @@ pub struct StreamReading {
 #[derive(Clone, Debug)]
 enum Mode {
     Acquire(Hold),
+    /// The acquisition's seeds did not ring: the fit method's stages over the band.
+    Search(Staged),
     Track,
+}
+
+/// Failures of an acquisition that say no seed rang, which a search over the band may cure (a
+/// resonance outside the band reads so to a hold whose bursts lie in the band); the others
+/// (out of band, moved, clipped, a tone, the drive) the acquisition names itself.
+fn search_may_cure(e: &Result<Estimate, Failure>) -> bool {
+    matches!(e, Err(Failure::NoResonance | Failure::LowSnr))
 }
 
 /// Tags of the tracking plans (the hold's count up from 1 and from 0xC0DE).
@@ -270,6 +298,8 @@ pub struct Tracker {
     static_g: f64,
     static_c: f64,
     mode: Mode,
+    /// True when the acquisition in progress was seeded by a search (it searches no more).
+    searched: bool,
     f_est: f64,
     q_est: f64,
     side: f64,
@@ -321,7 +351,7 @@ pub fn force_window(start: u64, end: u64, fs: f64) -> (u64, u64) {
 impl Tracker {
     /// True while acquiring (the seed and the first holds).
     pub fn acquiring(&self) -> bool {
-        matches!(self.mode, Mode::Acquire(_))
+        matches!(self.mode, Mode::Acquire(_) | Mode::Search(_))
     }
 
     /// True while a tracking plan has windows to come (a reading ended one of its segments,
@@ -339,6 +369,7 @@ impl Tracker {
     pub fn next_plan(&mut self) -> Option<PointPlan> {
         match &mut self.mode {
             Mode::Acquire(h) => h.next_plan(),
+            Mode::Search(s) => s.next_plan(),
             Mode::Track => {
                 if self.plan.is_some() {
                     return None;
@@ -408,6 +439,13 @@ impl Tracker {
                     return None;
                 }
                 let est = h.estimate();
+                if search_may_cure(&est) && !self.searched {
+                    // The reading waits for the search; its time counts to the reading.
+                    if let Ok(s) = self.cfg.search().validate(scale) {
+                        self.mode = Mode::Search(s);
+                        return None;
+                    }
+                }
                 let points = h.windows().len() as u16;
                 let took = self.seconds(t.saturating_sub(self.segment_start));
                 let locked = match est {
@@ -445,6 +483,30 @@ impl Tracker {
                 let (from, to) = force_window(self.segment_start, t, self.fs);
                 self.segment_start = t;
                 Some(self.emit(est, unit, t, took, points, locked, force(from, to)))
+            }
+            Mode::Search(s) => {
+                s.accept(raw, scale);
+                if !s.is_complete() {
+                    return None;
+                }
+                let est = s.estimate();
+                let points = s.len() as u16;
+                if let Ok(e) = est {
+                    // Found in the band: one more acquisition, seeded there.
+                    let h = self.cfg.acquisition(e.resonance, unit).validate(scale);
+                    if let Ok(h) = h {
+                        self.mode = Mode::Acquire(h);
+                        self.searched = true;
+                        return None;
+                    }
+                }
+                // Nothing in the band, or no hold to seed: the search's answer is the reading.
+                let took = self.seconds(t.saturating_sub(self.segment_start));
+                let (from, to) = force_window(self.segment_start, t, self.fs);
+                self.segment_start = t;
+                self.reacquire(scale, unit);
+                let est = est.and(Err(Failure::BadSettings));
+                Some(self.emit(est, unit, t, took, points, false, force(from, to)))
             }
             Mode::Track => {
                 let plan = self.plan?;
@@ -550,6 +612,7 @@ impl Tracker {
         }
         self.plan = None;
         self.misses = 0;
+        self.searched = false;
         self.track.clear();
     }
 
