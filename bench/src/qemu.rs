@@ -54,16 +54,31 @@ pub fn scene_lines(target: &Target, scene: &SceneArgs, noise: NoiseScene) -> Vec
     lines
 }
 
+/// `cargo ARGS` in the workspace root, under the workspace's toolchain: the cargo that runs
+/// this program (`CARGO`, set by `cargo run` together with its toolchain), else the `cargo` on
+/// `PATH`, which under rustup takes the workspace's `rust-toolchain.toml` for every compiler it
+/// starts. (The cargo this program was built with, called directly, would leave each compiler
+/// to rustup's choice in the package it compiles, and a dependency's own toolchain file —
+/// fugit's pins a release — would then pick a toolchain that may not be installed.)
+pub(crate) fn workspace_cargo(args: &[&str]) -> Result<()> {
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let status = Command::new(cargo)
+        .current_dir(root())
+        .args(args)
+        .status()
+        .with_context(|| format!("cannot run cargo {}", args.join(" ")))?;
+    if !status.success() {
+        bail!(
+            "cargo {} failed (is the thumbv7em-none-eabihf target installed? scripts/setup)",
+            args.join(" ")
+        );
+    }
+    Ok(())
+}
+
 /// Build the QEMU image (`cargo qemu-build`): its path.
 pub fn build_image() -> Result<PathBuf> {
-    let status = Command::new(env!("CARGO"))
-        .current_dir(root())
-        .args(["qemu-build", "-q"])
-        .status()
-        .context("cannot run cargo to build the QEMU image")?;
-    if !status.success() {
-        bail!("building the QEMU image failed (is the thumbv7em-none-eabihf target installed?)");
-    }
+    workspace_cargo(&["qemu-build", "-q"])?;
     Ok(target_dir().join("thumbv7em-none-eabihf/fw/probe"))
 }
 

@@ -15,7 +15,7 @@
 use crate::cmd::measure::Request;
 use crate::cmd::stream::StreamArgs;
 use crate::defmt_log;
-use crate::qemu::{self, root, target_dir};
+use crate::qemu::{self, target_dir, workspace_cargo};
 use crate::scene::{SceneArgs, Target};
 use anyhow::{bail, Context, Result};
 use hal_sim::NoiseScene;
@@ -24,18 +24,6 @@ use pzt_probe::instrument::continuous::StreamReading;
 use pzt_probe::reading::{Method, Settings};
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
-
-fn cargo(args: &[&str]) -> Result<()> {
-    let status = Command::new(env!("CARGO"))
-        .current_dir(root())
-        .args(args)
-        .status()
-        .with_context(|| format!("cannot run cargo {}", args.join(" ")))?;
-    if !status.success() {
-        bail!("cargo {} failed", args.join(" "));
-    }
-    Ok(())
-}
 
 /// The calibration session's phantoms and their moduli (paper 003), as the user types them.
 const REFERENCES: [(&str, &str); 5] = [
@@ -115,8 +103,8 @@ fn user_path(method: Method, settings: &Settings) -> Result<Schedule> {
 
 /// Build the image and the emulator; their paths.
 fn build() -> Result<(PathBuf, PathBuf)> {
-    cargo(&["fw", "-q"])?;
-    cargo(&["build", "-q", "--release", "-p", "stm32-emu"])?;
+    workspace_cargo(&["fw", "-q"])?;
+    workspace_cargo(&["build", "-q", "--release", "-p", "stm32-emu"])?;
     let target_dir = target_dir();
     Ok((
         target_dir.join("thumbv7em-none-eabihf/fw/probe"),

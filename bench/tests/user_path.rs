@@ -171,6 +171,29 @@ fn the_firmware_in_qemu_agrees_with_the_host() {
     }
 }
 
+/// The release binary run directly, as a newcomer does after `cargo build --release` (no `cargo
+/// run` around it: no `CARGO`, no rustup toolchain in its environment), builds the QEMU image in a
+/// target directory of its own and reads from it as under `cargo run`. A dependency of the image
+/// (fugit) carries its own `rust-toolchain.toml`: built without the workspace's toolchain, its
+/// compiler would be that file's, which a fresh machine does not have.
+#[test]
+fn the_binary_run_directly_builds_the_image_with_the_workspaces_toolchain() {
+    let _image = common::image_lock();
+    let scratch = common::Scratch::new("direct");
+    let out = run_ok(
+        bin()
+            .args(["measure", "--phantom", "B", "--qemu", "--json"])
+            .env_remove("CARGO")
+            .env_remove("RUSTUP_TOOLCHAIN")
+            .env("CARGO_TARGET_DIR", scratch.join("target")),
+    );
+    let fw: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(fw["status"], "ok", "{fw}");
+    assert!(scratch
+        .join("target/thumbv7em-none-eabihf/fw/probe")
+        .is_file());
+}
+
 /// The contact force (issue #13), through the main job's own path (the unit profile
 /// `probe-bench measure` makes, `board::sim::read` on the scene its options build): phantoms
 /// A–D pressed at 15–50 mN read `ok` within 0.5 % of the truth (measured worst 0.29 %, A at
