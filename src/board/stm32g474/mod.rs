@@ -62,18 +62,40 @@ use crate::hal::FrontEndScale;
 use crate::units::Hz;
 use reset::{interrupted_step, reset_cause, Step};
 
-// The image's defmt global logger (RTT) and panic handler: panic-probe logs the panic's
-// message and location over defmt (feature `print-defmt`), then takes a HardFault (`udf`):
-// probe-rs shows the backtrace and, without a debugger, the watchdog resets the core.
+// The image's defmt global logger (RTT).
 use defmt_rtt as _;
-use panic_probe as _;
+
+/// The image's panic handler: say so over defmt, then stop for good ([`stop`]). Where it
+/// panicked is the backtrace's to show: RTT, which carries the log, needs the debug probe that
+/// shows it (probe-rs prints it at the fault), and without one the watchdog resets the core and
+/// the boot reports the reset's cause. Logging the location (or the message) too would keep
+/// every panic site's location in the image (docs/firmware.md).
+#[panic_handler]
+fn panic(_: &core::panic::PanicInfo) -> ! {
+    defmt::error!("panic: the backtrace shows where");
+    stop()
+}
 
 /// `defmt::panic!` and its kin have logged their message already: stop for good without a
-/// second line, with panic-probe's permanent fault (`udf` with UsageFault disabled, so that it
-/// escalates to HardFault).
+/// second line.
 #[defmt::panic_handler]
 fn defmt_panic() -> ! {
-    panic_probe::hard_fault()
+    stop()
+}
+
+/// A permanent fault: interrupts off, UsageFault disabled (SHCSR.USGFAULTENA, bit 18; ARMv7-M
+/// ARM B3.2.13) so that the undefined instruction `udf` escalates to HardFault (B1.5.8), where a
+/// debugger stops and the image never returns.
+fn stop() -> ! {
+    cortex_m::interrupt::disable();
+    // SAFETY: a read-modify-write of one SCB register with interrupts off, on the way to a
+    // fault that never returns.
+    unsafe {
+        (*cortex_m::peripheral::SCB::PTR)
+            .shcsr
+            .modify(|r| r & !(1 << 18));
+    }
+    cortex_m::asm::udf()
 }
 
 /// The device crate RTIC binds to (`device = embassy_stm32`, `peripherals = false`).
