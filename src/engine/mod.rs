@@ -214,6 +214,13 @@ impl SampleEngine {
         self.pending = Some(Some(plan));
     }
 
+    /// The drive's phase accumulator set to `phase` (a turn is 2³²): the drive comes on at
+    /// whatever phase the engine's previous plans left, which the tests vary.
+    #[cfg(test)]
+    pub(crate) fn set_phase(&mut self, phase: u32) {
+        self.dds.phase = phase;
+    }
+
     /// Switch the drive off from the next generated batch on.
     pub fn stop(&mut self) {
         self.pending = Some(None);

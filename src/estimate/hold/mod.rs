@@ -225,9 +225,15 @@ impl Hold {
                 // sums are added up and solved once at the end (half the work per window).
                 let s = &raw.sums;
                 if raw.window == 0 {
-                    // The frequency switch: when this segment's plan took effect.
+                    // The frequency switch: when this segment's plan took effect, half a
+                    // sample after the windows' time base (a window's samples stand for the
+                    // sample periods centred on them — the mean of `k` samples of `e^{λt}` is
+                    // the mean over that interval to `(λ/fs)²` — and its drive's phase 0 lies
+                    // within the half sample before its first; the switch's first new code
+                    // holds from its sample on).
                     self.carry.t_switch =
-                        raw.end_sample.saturating_sub(raw.since_load as u64) as f64 / self.fs;
+                        (raw.end_sample.saturating_sub(raw.since_load as u64) as f64 + 0.5)
+                            / self.fs;
                 }
                 self.clipped |= s.current_rail_hits > 0;
                 add_sums(&mut self.monitor, &s.monitor, &s.reference);
@@ -460,13 +466,13 @@ mod tests {
     use super::*;
     use crate::estimate::resonator::FIRST_WINDOWS;
 
-    /// The fast hold on the simulated probe (500 kPa, bench noise): its first segment's open
-    /// plan keeps the windows that close while the second's plan passes the DAC's pipeline —
-    /// gap-free after the segment's own four, all before the switch, kept for the joint fit —
-    /// and the second segment keeps the room it planned.
+    /// The fast hold run to its end on the simulated probe in `scene` (noise seed `seed`).
     #[cfg(feature = "sim")]
-    #[test]
-    fn the_first_segment_keeps_its_windows_while_the_second_is_on_its_way() {
+    fn run_fast(scene: hal_sim::Scene, seed: u64) -> Hold {
+        run_fast_at(scene, seed, 0)
+    }
+    #[cfg(feature = "sim")]
+    fn run_fast_at(scene: hal_sim::Scene, seed: u64, phase: u32) -> Hold {
         use crate::reading::driver::{block_on, run_plans, Plans, SyncSource};
         struct P(Hold, FrontEndScale);
         impl Plans for P {
@@ -481,14 +487,25 @@ mod tests {
                 self.0.is_complete()
             }
         }
-        let scene = hal_sim::Scene::on_modulus_kpa(500.0).with_noise(hal_sim::NoiseScene::Bench);
-        let mut board = crate::board::sim::SimBoard::new(hal_sim::SimProbe::new(scene, 3));
+        let mut board = crate::board::sim::SimBoard::new(hal_sim::SimProbe::new(scene, seed));
         let scale = crate::hal::SampleStream::scale(&board);
         let mut engine = crate::engine::SampleEngine::new();
+        engine.set_phase(phase);
         let mut src = SyncSource::new(&mut board, &mut engine);
         let mut m = P(HoldSettings::FAST.validate(&scale).unwrap(), scale);
         assert!(block_on(run_plans(&mut src, &mut m, |_, _| {})).is_ok());
-        let h = &m.0;
+        m.0
+    }
+
+    /// The fast hold on the simulated probe (500 kPa, bench noise): its first segment's open
+    /// plan keeps the windows that close while the second's plan passes the DAC's pipeline —
+    /// gap-free after the segment's own four, all before the switch, kept for the joint fit —
+    /// and the second segment keeps the room it planned.
+    #[cfg(feature = "sim")]
+    #[test]
+    fn the_first_segment_keeps_its_windows_while_the_second_is_on_its_way() {
+        let scene = hal_sim::Scene::on_modulus_kpa(500.0).with_noise(hal_sim::NoiseScene::Bench);
+        let h = &run_fast(scene, 3);
         assert!(h.estimate().is_ok(), "{:?}", h.estimate());
         let first = &h.windows()[..h.first_len as usize];
         assert!(first.len() > FIRST_WINDOWS + 1, "{} windows", first.len());
@@ -496,7 +513,56 @@ mod tests {
             assert!((w[1].t0 - (w[0].t0 + w[0].len)).abs() < 1.5 / h.fs, "{w:?}");
         }
         let last = first[first.len() - 1];
-        assert!(last.t0 + last.len <= h.carry.t_switch + 0.5 / h.fs);
+        assert!(last.t0 + last.len <= h.carry.t_switch);
         assert_eq!(h.windows().len() - first.len(), h.n_windows as usize);
+    }
+
+    /// The joint fit against `hal_sim`'s exactly integrated chain (zero-order hold, both
+    /// filters, the resonator) on the quiet scene, the static admittance exact (the settings'
+    /// 210 pF is the simulated plate's), the drive coming on at eight phases: with the frequency
+    /// switch carried by its full response ([`super::super::resonator`]'s `switch_on`, the
+    /// windows' half-sample origin) the fast hold's `Q` is within 0.15 % of the truth on
+    /// average over the phases and within 0.8 % at each, on lossless and lossy tissue
+    /// (measured: 0.11 % and 0.65 %); carried in the envelope's limit it is 0.27–0.34 % high on
+    /// average. What varies with the phase is left to the windows' own phase (each starts up to
+    /// a sample's phase step after its cycle boundary) and is not the switch's. `f0` within
+    /// 0.01 Hz (the steady state's, not the switch's).
+    #[cfg(feature = "sim")]
+    #[test]
+    fn the_frequency_switch_is_carried_by_the_full_response() {
+        for (e, eta) in [
+            (200.0, 0.0),
+            (500.0, 0.0),
+            (1000.0, 0.0),
+            (2500.0, 0.0),
+            (950.0, 0.41),
+            (500.0, 0.5),
+        ] {
+            let scene = hal_sim::Scene::on_modulus_kpa(e)
+                .with_noise(hal_sim::NoiseScene::Quiet)
+                .with_loss_tangent(eta);
+            let mut sum = 0.0;
+            for k in 0..8u32 {
+                let r = run_fast_at(scene, 3, k << 29).estimate().unwrap();
+                let df = r.resonance.0 as f64 - scene.resonance_hz();
+                let dq = r.q.unwrap() as f64 / scene.q() - 1.0;
+                std::eprintln!(
+                    "{e} kPa, tan δ {eta}, phase {k}/8: f0 {df:+.5} Hz, Q {:+.3} %",
+                    dq * 100.0
+                );
+                assert!(dq.abs() < 8e-3, "{e} kPa, tan δ {eta}, {k}/8: Q {dq:+e}");
+                assert!(
+                    df.abs() < 0.01,
+                    "{e} kPa, tan δ {eta}, {k}/8: f0 {df:+e} Hz"
+                );
+                sum += dq;
+            }
+            let mean = sum / 8.0;
+            std::eprintln!("{e} kPa, tan δ {eta}: mean Q {:+.3} %", mean * 100.0);
+            assert!(
+                mean.abs() < 1.5e-3,
+                "{e} kPa, tan δ {eta}: mean Q {mean:+e}"
+            );
+        }
     }
 }

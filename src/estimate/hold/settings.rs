@@ -5,7 +5,7 @@ use crate::dsp::dds::{frequency_hz, tuning_word};
 use crate::engine::sweep::{
     amplitude_codes, check_band, check_durations, check_frequency, SettingsError,
 };
-use crate::estimate::resonator::{first_cycles, Carry, FIRST_WINDOWS};
+use crate::estimate::resonator::{first_cycles, Carry, Filters, FIRST_WINDOWS};
 use crate::estimate::ringdown::RingdownSettings;
 use crate::hal::FrontEndScale;
 use crate::units::{Farads, Hz, Seconds, Siemens, Volts};
@@ -174,6 +174,7 @@ impl HoldSettings {
             carry: Carry {
                 t_switch: 0.0,
                 rho: C64::new(1.0, 0.0),
+                filters: Filters::of(scale),
             },
             n_windows: 0,
             segment: 0,

@@ -20,7 +20,7 @@
 //! the drive model, χ² and its Jacobian, the normal equations and the covariance. `solver`: the
 //! starts (linear, given, searched) and the Levenberg–Marquardt iteration.
 
-mod model;
+pub(crate) mod model;
 mod solver;
 
 #[cfg(test)]
@@ -170,10 +170,40 @@ const MAX_SEGMENTS: usize = 2;
 /// admittance in the second's).
 #[derive(Clone, Copy, Debug)]
 pub struct Carry {
-    /// Time of the frequency switch, s.
+    /// Time of the frequency switch, s, in the windows' time base, whose windows each stand for
+    /// the sample periods centred on their samples: half a sample after the time of the
+    /// sample from which the new drive's first code holds.
     pub t_switch: f64,
     /// Ratio of the first segment's drive phasor to the second's.
     pub rho: C64,
+    /// The front end the switch passes through.
+    pub filters: Filters,
+}
+
+/// The front end between the drive's samples and the measured current as a switch sees it
+/// (`model::DriveModel::switch_on`): the DAC's zero-order hold, the reconstruction filter
+/// between the DAC and the PZT and the anti-alias filter before the ADC, two real poles each
+/// (the drive monitor passes an anti-alias filter identical to the current's).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Filters {
+    /// The hold's length (the sample period), s.
+    pub t_hold: f32,
+    /// Reconstruction filter's corner, rad/s.
+    pub w_r: f32,
+    /// Anti-alias filter's corner, rad/s.
+    pub w_a: f32,
+}
+
+impl Filters {
+    /// The filters of a front end.
+    pub fn of(scale: &crate::hal::FrontEndScale) -> Self {
+        let w = |f: crate::units::Hz| 2.0 * core::f32::consts::PI * f.0;
+        Self {
+            t_hold: 1.0 / scale.sample_rate.0.max(1.0),
+            w_r: w(scale.reconstruction_corner),
+            w_a: w(scale.antialias_corner),
+        }
+    }
 }
 
 #[cfg(test)]

@@ -469,7 +469,11 @@ mod tests {
                 y_s,
                 mirror: mirror(C64::new(1.0, 0.0) / rho),
             };
-            let carry = Carry { t_switch, rho };
+            let carry = Carry {
+                t_switch,
+                rho,
+                filters: crate::estimate::resonator::Filters::of(&crate::hal::FrontEndScale::PROBE),
+            };
             let e = fit_two(first, second, &carry, (f2, 10.0), None, (10.0, 10.0))
                 .unwrap()
                 .estimate;
@@ -483,6 +487,7 @@ mod tests {
             let wrong = Carry {
                 t_switch,
                 rho: C64::new(1.0, 0.0),
+                ..carry
             };
             if rho != C64::new(1.0, 0.0) {
                 // Biased, or refused for the misfit it leaves.
