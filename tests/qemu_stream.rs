@@ -4,8 +4,8 @@
 //! One image run, five streams (`sim` lines put the probe on each scene, whose events count
 //! from the scene's start, 10 ms before the stream's command); every stream's `seq` runs from 0
 //! without gaps (or gaps exactly the dropped count of the `stream end` line):
-//! - phantom C for 3 s: at least 20 `ok` readings per second after the first 0.5 s, RMS
-//!   error at most 1 % of the truth (414 kPa);
+//! - phantom C for 3 s: at least 25 `ok` readings per second after the first 0.5 s, RMS
+//!   error within 1.5× the steady-state bound of a 30 ms segment (issue 28);
 //! - phantom C lifted off 1.5 s into the scene: no `ok` reading later than 0.1 s after;
 //! - phantom B stepping to D 1 s in: within 3 % of D within 0.25 s;
 //! - phantom C pressed at 30 % of the preload 1 s in: no `ok` reading later than 0.1 s after
@@ -145,7 +145,11 @@ fn qemu_streams_phantom_c_and_follows_lift_off_step_and_press() {
         x.check_numbering(&format!("stream {k}"));
     }
 
-    phantom_c(&s[0], 20.0, 0.01, "phantom C");
+    // Issue 28 on the image as on the host: the default setting at least 25 ok readings a
+    // second within 1.5× the steady-state bound of its 30 ms segment on C (0.0455 %, `probe-bench
+    // pareto`, docs/speed-accuracy.md: one stream of 3 s, so a few tens of percent of seed
+    // noise on its RMS); a setting at least 50 a second within 0.5 %.
+    phantom_c(&s[0], 25.0, 1.5 * 0.000455, "phantom C");
     phantom_c(&s[4], 50.0, 0.005, "phantom C, 12 ms segments, four a plan");
 
     // Lift-off 1.5 s into the scene, which starts at most 15 ms before the stream: the tip is

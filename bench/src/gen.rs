@@ -32,7 +32,7 @@ pub fn sim_sweep(
         &pzt_probe::unit::profile::UnitProfile::fallback(),
         |p| pts.push((p.freq.0 as f64, p.g_s as f64, p.b_s as f64)),
     )
-    .map_err(|e| anyhow!("simulated reading failed: {e:?}"))?;
+    .map_err(|e| anyhow!("simulated reading failed: {e}"))?;
     Ok(pts)
 }
 

@@ -260,7 +260,7 @@ pub fn run(
         each(r);
         readings.push(*r);
     })
-    .map_err(|e| anyhow::anyhow!("the stream failed: {e:?}"))?;
+    .map_err(|e| anyhow::anyhow!("the stream failed: {e}"))?;
     Ok(Streamed { readings, truth })
 }
 

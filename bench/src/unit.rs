@@ -49,7 +49,7 @@ pub fn simulated(
         return Ok(p);
     }
     let p = simboard::unit_profile(method, *settings, noise, repeats, seed0)
-        .map_err(|e| anyhow!("the simulated unit's profile failed: {e:?}"))?;
+        .map_err(|e| anyhow!("the simulated unit's profile failed: {e}"))?;
     if let Ok(mut c) = cache.lock() {
         c.insert(key, p);
     }

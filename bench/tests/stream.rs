@@ -212,6 +212,20 @@ fn the_bench_log_and_the_plot() {
     assert!(plot.contains("<svg") && plot.contains("modulus"), "{plot}");
     run_fails_one_line(bin().args(["stream", "--phantom", "B", "--step-to", "D"]));
     run_fails_one_line(bin().args(["stream", "--phantom", "C", "--touch-at-s", "1"]));
+    // A tracker setting outside its range is refused before the stream runs, in the settings
+    // error's words.
+    for (knob, value) in [
+        ("--plan-segments", "9"),
+        ("--segment-s", "1000"),
+        ("--q-prior", "0"),
+    ] {
+        let e = run_fails_one_line(
+            bin()
+                .args(["stream", "--phantom", "C", "--seconds", "0.5", "--json"])
+                .args([knob, value]),
+        );
+        assert!(e.contains("a method setting is outside its range"), "{e}");
+    }
 }
 
 /// `stream --qemu`: the firmware image's `stream` command in QEMU, the same JSON. Lifted off
@@ -428,10 +442,12 @@ fn the_trackers_speed_accuracy_point_on_phantom_c() {
 
 /// Issue 28's fast setting (`pareto::FAST_STREAM`: segments of 12 ms, four a plan): at least
 /// 50 ok readings per second within 0.5 % RMS of the truth, on phantom C (noise seeds 0–4),
-/// phantoms A and E and 2000 kPa (other seeds). On C its error from noise is within 0.85× one
-/// segment's steady-state bound (measured 0.6×: the tracker pools a plan's segments through the
-/// difference of their fits' information, which a fit stopped short of its optimum moves — a
-/// later segment's fit started from the one before it read 1.0×).
+/// phantoms A and E and 2000 kPa (other seeds). Its error from noise is within 0.85× one
+/// segment's steady-state bound on C and within 1.2× on every scene (measured 0.6× and, on A,
+/// 1.01×). The tracker pools a plan's later segments through the difference of their fits'
+/// information: a fit stopped short of its optimum moves that difference, and a difference that
+/// fails the filter's gate must restart it from the plan's whole fit, not from itself (on A,
+/// seeds 20–24, a restart from the difference read 4×).
 #[test]
 fn the_fast_setting_reads_fifty_a_second_within_half_a_percent() {
     use hal_sim::{phantoms, NoiseScene};
@@ -451,9 +467,8 @@ fn the_fast_setting_reads_fifty_a_second_within_half_a_percent() {
         print_point(&name, &s);
         assert!(s.ok_per_s >= 50.0, "{name}: {} ok/s", s.ok_per_s);
         assert!(x.rms_pct() <= 0.5, "{name}: RMS {} %", x.rms_pct());
-        if seed0 == 0 {
-            assert!(s.ratio() <= 0.85, "{name}: {} × its bound", s.ratio());
-        }
+        let most = if seed0 == 0 { 0.85 } else { 1.2 };
+        assert!(s.ratio() <= most, "{name}: {} × its bound", s.ratio());
     }
 }
 

@@ -49,6 +49,10 @@ pub const CCM_ALIAS: u32 = 0x2001_8000;
 /// CCM SRAM size.
 pub const CCM_SIZE: usize = 32 * 1024;
 
+/// xPSR's EPSR.IT bits, IT[7:2] at [15:10] and IT[1:0] at [26:25] (ARMv7-M B1.4.2): non-zero
+/// inside an IT block.
+const IT_BITS: u32 = 0x0600_FC00;
+
 /// Why a run stopped for good.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Exit {
@@ -390,7 +394,9 @@ impl Machine {
                         .execution_priority(0, false, false, b.scs.scb.prigroup)
                 });
             }
-            if b.irq_armed {
+            // Inside an IT block the exception waits ([`Machine::in_it_block`]): the block runs,
+            // or a stop here, mid-IT, would be the run loop's next start, forever.
+            if b.irq_armed && reg(uc, RegisterARM::XPSR) & IT_BITS == 0 {
                 let basepri = reg(uc, RegisterARM::BASEPRI) as u8;
                 let primask = reg(uc, RegisterARM::PRIMASK) & 1 != 0;
                 let faultmask = reg(uc, RegisterARM::FAULTMASK) & 1 != 0;
@@ -570,7 +576,7 @@ impl Machine {
     /// Is the CPU inside an IT block (EPSR.IT non-zero, ARMv7-M A7.3)? An exception is not
     /// taken there by this model (the hardware may; the IT state would be stacked).
     fn in_it_block(&self) -> bool {
-        reg(&self.uc, RegisterARM::XPSR) & 0x0600_FC00 != 0
+        reg(&self.uc, RegisterARM::XPSR) & IT_BITS != 0
     }
 
     /// Take exception `exc` (B1.5.6): push the frame, set LR to EXC_RETURN, enter handler mode
@@ -806,8 +812,20 @@ impl Machine {
                             "CPU stopped at {pc:#010x} without a known cause"
                         ));
                     }
-                    let wake = next_event.unwrap_or(until).min(until).max(b.now);
-                    b.now = wake;
+                    // An exception already takable wakes it at once (ARMv7-M B1.5.19): one
+                    // pended where none is taken, inside an IT block, before its WFI.
+                    let basepri = reg(&self.uc, RegisterARM::BASEPRI) as u8;
+                    let primask = reg(&self.uc, RegisterARM::PRIMASK) & 1 != 0;
+                    let faultmask = reg(&self.uc, RegisterARM::FAULTMASK) & 1 != 0;
+                    let b = self.uc.get_data_mut();
+                    let prigroup = b.scs.scb.prigroup;
+                    if b.scs
+                        .nvic
+                        .takable(basepri, primask, faultmask, prigroup)
+                        .is_none()
+                    {
+                        b.now = next_event.unwrap_or(until).min(until).max(b.now);
+                    }
                 }
                 Err(e) => {
                     let pc = reg(&self.uc, RegisterARM::PC);
@@ -969,5 +987,61 @@ mod tests {
             m.board().executed
         );
         assert_eq!(m.cycles(), 1_000);
+    }
+
+    /// Hand-assembled (llvm-mc, thumbv7em) at 0x0800_0200, with an IT block across the 4 KiB
+    /// boundary at 0x0800_1000 (a translated block ends there, inside the IT block):
+    ///
+    /// ```text
+    /// reset:    IPR[0] = 0x40; ISER0 = 1; r0 = &STIR; r1 = 0; r2 = 0; cmp r1, r1; b.w straddle
+    /// handler:  [0x2000_0000] += 1; [0x2000_0004] = r2; bx lr
+    /// straddle: (0x0800_0FFC) itt eq; streq r1, [r0]  (IRQ0 pending, inside the IT block)
+    ///           (0x0800_1000) addeq r2, #1; add.w r2, r2, #10; loop: wfi; b loop
+    /// ```
+    const IT_HEAD: [u8; 52] = [
+        0x09, 0x48, 0x40, 0x21, 0x01, 0x70, 0x09, 0x48, 0x01, 0x21, 0x01, 0x60, 0x08, 0x48, 0x00,
+        0x21, 0x00, 0x22, 0x89, 0x42, 0x00, 0xf0, 0xf2, 0xbe, 0x4f, 0xf0, 0x00, 0x53, 0x1c, 0x68,
+        0x01, 0x34, 0x1c, 0x60, 0x5a, 0x60, 0x70, 0x47, 0x00, 0x00, 0x00, 0xe4, 0x00, 0xe0, 0x00,
+        0xe1, 0x00, 0xe0, 0x00, 0xef, 0x00, 0xe0,
+    ];
+    const IT_TAIL: [u8; 14] = [
+        0x04, 0xbf, 0x01, 0x60, 0x01, 0x32, 0x02, 0xf1, 0x0a, 0x02, 0x30, 0xbf, 0xfd, 0xe7,
+    ];
+
+    /// An interrupt pended inside an IT block that a translated block's end splits waits for
+    /// the block's end and is then taken once (the model takes none inside an IT block,
+    /// [`Machine::in_it_block`]); the run returns at its limit rather than restarting the
+    /// split block's second half forever. Run on a thread: a livelock fails the test.
+    #[test]
+    fn an_interrupt_pended_inside_a_split_it_block_is_taken_after_it() {
+        let run = std::thread::spawn(|| {
+            let mut vt = vec![0u8; 0x200];
+            let mut put = |i: usize, v: u32| vt[4 * i..4 * i + 4].copy_from_slice(&v.to_le_bytes());
+            put(0, SP0);
+            put(1, 0x0800_0201);
+            put(16, 0x0800_0219);
+            let mut program = vec![0u8; 0xDFC];
+            program[..IT_HEAD.len()].copy_from_slice(&IT_HEAD);
+            program.extend_from_slice(&IT_TAIL);
+            vt.extend_from_slice(&program);
+            let elf = Elf::from_segments(vec![Segment {
+                paddr: FLASH_BASE,
+                data: vt,
+            }]);
+            let mut m = Machine::new(&elf).unwrap();
+            let exit = m.run_until(2_000);
+            let r2 = m.register(RegisterARM::R2);
+            (exit, word(&m, 0x2000_0000), word(&m, 0x2000_0004), r2)
+        });
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || tx.send(run.join()).ok());
+        let got = rx
+            .recv_timeout(std::time::Duration::from_secs(20))
+            .expect("the run did not return: a livelock at the split IT block");
+        let (exit, count, r2_at_entry, r2) = got.unwrap();
+        assert_eq!(exit, Exit::Limit);
+        assert_eq!(count, 1, "handler runs");
+        assert_eq!(r2_at_entry & 1, 1, "the IT block ended before the handler");
+        assert_eq!(r2, 11, "the frame restored r2");
     }
 }

@@ -148,6 +148,28 @@ pub enum SimError {
     Air(Failure),
 }
 
+impl core::fmt::Display for SimError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Settings(e) => write!(f, "the settings were refused: {e}"),
+            Self::Run(RunError::Stalled) => {
+                f.write_str("a point did not complete within its sample budget")
+            }
+            Self::Run(RunError::Stream(e)) => write!(f, "the sample stream failed: {e:?}"),
+            Self::Fit(FitError::TooFewPoints) => f.write_str(
+                "the calibration fit needs at least four readings on three distinct moduli",
+            ),
+            Self::Fit(FitError::BadInput) => f.write_str(
+                "the calibration fit was given a reading that is not finite or a modulus that is not positive",
+            ),
+            Self::Fit(FitError::NotSaturating) => {
+                f.write_str("the calibration fit found no saturating curve in the references")
+            }
+            Self::Air(e) => write!(f, "the air reference failed: {e}"),
+        }
+    }
+}
+
 /// One reading of `scene` (noise stream `seed`) with `method` and `settings`, concluded with
 /// the unit's profile `unit` through the one pipeline; `on_point` sees every measured point.
 pub fn read(

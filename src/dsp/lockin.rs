@@ -252,45 +252,52 @@ pub fn solve(ch: &ChannelSums, r: &ReferenceSums) -> Option<Phasor> {
     })
 }
 
-/// [`solve`]'s complex amplitude and its variance alone (to rounding), at about half the work
-/// on the Cortex-M4F, which emulates `f64`: the normal matrix, ordered (offset, cosine, sine),
-/// factored as `L D Lᵀ` (no square root, no full inverse: the two variances come from `D` and
-/// one entry of `L`), the residual's square root not taken. The hold solves one a window.
-/// `None` where [`solve`] is.
+/// [`solve`]'s complex amplitude and its variance alone (to rounding), at a third of the work on
+/// the Cortex-M4F, which emulates `f64`: the offset is eliminated exactly in integers — the
+/// centred sums `N Σcc − (Σc)²`, `N Σxc − Σx Σc`, `N Σx² − (Σx)²`, … ([`centred`]) — which leaves
+/// a 2×2 system over (cosine, sine) solved by Cramer's rule, the residual `N Σx² − (Σx)² − βᵀu`
+/// of the exact centred `Σx²` (no square root). The hold solves one a window. `None` where the
+/// centred reference is singular to working precision (`det ≤ 10⁻¹³` of its diagonal's
+/// product: the reference does not span a sine) or there are fewer than 4 samples.
 pub fn solve_value(ch: &ChannelSums, r: &ReferenceSums) -> Option<(Complex64, f64)> {
     if r.n < 4 {
         return None;
     }
-    let (n, c, s) = (r.n as f64, r.c as f64, r.s as f64);
-    let (cc, cs, ss) = (r.cc as f64, r.cs as f64, r.ss as f64);
-    // L D Lᵀ of [[n, c, s], [c, cc, cs], [s, cs, ss]].
-    let inv0 = 1.0 / n;
-    let (l10, l20) = (c * inv0, s * inv0);
-    let d1 = cc - c * l10;
-    let t = cs - s * l10;
-    if !(d1 > 0.0) {
+    let n = r.n as i64;
+    // N² times the centred (co)variances of the reference, and N² times the centred products
+    // of the channel with it.
+    let a = centred(n, r.cc, r.c, r.c);
+    let b = centred(n, r.cs, r.c, r.s);
+    let c = centred(n, r.ss, r.s, r.s);
+    let ac = a * c;
+    let det = ac - b * b;
+    if !(det > 1e-13 * ac) || !det.is_finite() {
         return None;
     }
-    let inv1 = 1.0 / d1;
-    let l21 = t * inv1;
-    let d2 = ss - s * l20 - l21 * t;
-    // Singular to working precision as `inverse3` judges it (det / (n cc ss) = d1 d2 / (cc ss)).
-    if !(d2 > 0.0) || !(d1 * d2 > 1e-13 * libm::fabs(cc * ss)) || !d2.is_finite() {
-        return None;
+    let u = centred(n, ch.xc, ch.x, r.c);
+    let v = centred(n, ch.xs, ch.x, r.s);
+    let inv_det = 1.0 / det;
+    let ca = (c * u - b * v) * inv_det;
+    let cb = (a * v - b * u) * inv_det;
+    // N × the residual sum of squares; its variance σ² = rss_n / (N (N − 3)).
+    let rss_n = (centred(n, ch.xx, ch.x, ch.x) - (ca * u + cb * v)).max(0.0);
+    // Each component's variance: half of σ² ((M⁻¹)_aa + (M⁻¹)_bb), the full normal matrix's
+    // `N (C + A) / det` of the centred one (the N's cancel), in the reference's Q15 units.
+    let var = 0.5 * Q15 * Q15 * rss_n / (r.n as f64 - 3.0) * ((a + c) * inv_det);
+    Some((Complex64::new(ca * Q15, -cb * Q15), var.max(0.0)))
+}
+
+/// `N Σpq − Σp Σq` (`N` times a centred sum of products) exactly in integers, then in `f64`:
+/// `i64` while the products fit (every window below 92 000 samples: `N Σc² ≤ N² 32767²`),
+/// `i128` otherwise (any `i64` sums: products below 2¹²⁶).
+fn centred(n: i64, pq: i64, p: i64, q: i64) -> f64 {
+    match (n.checked_mul(pq), p.checked_mul(q)) {
+        (Some(x), Some(y)) => match x.checked_sub(y) {
+            Some(d) => d as f64,
+            None => (x as i128 - y as i128) as f64,
+        },
+        _ => (n as i128 * pq as i128 - p as i128 * q as i128) as f64,
     }
-    let inv2 = 1.0 / d2;
-    // L y = (Σx, Σxc, Σxs); the coefficients of cosine and sine by D⁻¹ y and Lᵀ back.
-    let (x, xc, xs) = (ch.x as f64, ch.xc as f64, ch.xs as f64);
-    let y1 = xc - l10 * x;
-    let y2 = xs - l20 * x - l21 * y1;
-    let b = y2 * inv2;
-    let a = y1 * inv1 - l21 * b;
-    let explained = x * x * inv0 + y1 * y1 * inv1 + y2 * y2 * inv2;
-    let rss = (ch.xx as f64 - explained).max(0.0);
-    let sigma2 = rss / (r.n - 3) as f64;
-    // (M⁻¹)_bb = 1/d2, (M⁻¹)_aa = 1/d1 + l21²/d2.
-    let var_sum = Q15 * Q15 * sigma2 * (inv1 + (l21 * l21 + 1.0) * inv2);
-    Some((Complex64::new(a * Q15, -b * Q15), 0.5 * var_sum.max(0.0)))
 }
 
 /// The sine fit: the amplitude, its variance, the coefficients `(a, b, d)` and the residual
@@ -352,17 +359,17 @@ mod tests {
         // Residual is the rounding of the codes: uniform, rms 1/sqrt(12) = 0.289.
         assert!((p.residual_rms - 0.289).abs() < 0.03, "{}", p.residual_rms);
         // The value-only solve agrees to rounding.
+        let (dv, dvar) = value_solve_error(&sums);
+        assert!(dv <= 1e-12 * p.value.norm(), "{dv:e}");
+        assert!(dvar < 1e-9, "{dvar:e}");
+    }
+
+    /// The value-only solve against the full one on `sums`: the amplitude's distance and the
+    /// variance's relative error.
+    fn value_solve_error(sums: &LockInSums) -> (f64, f64) {
+        let p = solve(&sums.current, &sums.reference).unwrap();
         let (v, var) = solve_value(&sums.current, &sums.reference).unwrap();
-        assert!(
-            (v - p.value).norm() <= 1e-12 * p.value.norm(),
-            "{v} {}",
-            p.value
-        );
-        assert!(
-            (var / p.variance - 1.0).abs() < 1e-9,
-            "{var} {}",
-            p.variance
-        );
+        ((v - p.value).norm(), (var / p.variance - 1.0).abs())
     }
 
     /// `integrate` at the sums' extremes — a code at either rail against a reference held at
@@ -445,6 +452,32 @@ mod tests {
         assert!(solved > 1200, "{solved}");
         assert!(worst_v < 1e-9, "{worst_v:e}");
         assert!(worst_var < 1e-6, "{worst_var:e}");
+    }
+
+    /// A window too long for [`centred`]'s `i64` products (300 000 samples, the `i128` path):
+    /// the value-only solve agrees with the full one to rounding.
+    #[test]
+    fn value_only_solve_of_a_very_long_window() {
+        let ftw = tuning_word(241.3, 10_000.0);
+        let mut rng = probe_rng::Rng::new(3);
+        let mut sums = LockInSums::default();
+        let mut phase = 0x1234_5678u32;
+        for _ in 0..300_000 {
+            let x = phase as f64 / 4_294_967_296.0 * core::f64::consts::TAU;
+            let v = 1500.0 * (x + 0.3).cos() - 700.0 + 3.0 * rng.normal();
+            let xi = (v.round() as i32).clamp(-2048, 2047);
+            sums.accumulate(cos_q15(phase), sin_q15(phase), xi, xi);
+            phase = phase.wrapping_add(ftw);
+        }
+        let r = &sums.reference;
+        assert!(
+            (r.n as i64).checked_mul(r.cc).is_none(),
+            "not the i128 path"
+        );
+        let sigma = solve(&sums.current, r).unwrap().variance.sqrt();
+        let (dv, dvar) = value_solve_error(&sums);
+        assert!(dv <= 1e-9 * sigma, "{dv:e} of σ {sigma:e}");
+        assert!(dvar < 1e-6, "{dvar:e}");
     }
 
     #[test]

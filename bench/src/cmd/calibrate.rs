@@ -48,7 +48,7 @@ pub fn unit_profile(
     );
     let r = simboard::unit_profile_with(method, *settings, noise, repeats, seed, || pb.inc(1));
     pb.finish_and_clear();
-    r.map_err(|e| anyhow::anyhow!("calibration failed: {e:?}"))
+    r.map_err(|e| anyhow::anyhow!("calibration failed: {e}"))
 }
 
 /// Run the subcommand.

@@ -127,7 +127,7 @@ pub fn run(a: MeasureArgs) -> Result<()> {
                 pts.push(*p)
             }
         })
-        .map_err(|e| anyhow::anyhow!("reading failed: {e:?}"))?;
+        .map_err(|e| anyhow::anyhow!("reading failed: {e}"))?;
         if k == 0 {
             first_points = pts;
             first_resonance = reading.resonance.map(|f| f.0);

@@ -307,7 +307,7 @@ pub fn scan(spec: &ScanSpec, mut tick: impl FnMut()) -> Result<ScanResult> {
             &spec.unit,
             |_| {},
         )
-        .map_err(|e| anyhow!("reading at ({x}, {y}) mm failed: {e:?}"))?;
+        .map_err(|e| anyhow!("reading at ({x}, {y}) mm failed: {e}"))?;
         let app = spec
             .phantom
             .apparent(x * 1e-3, y * 1e-3, &spec.base.contact);

@@ -275,7 +275,7 @@ pub fn slide(s: &Slide, config: &TrackerConfig, unit: &UnitProfile) -> Result<Sl
         },
         |r| readings.push(*r),
     )
-    .map_err(|e| anyhow!("stream failed: {e:?}"))?;
+    .map_err(|e| anyhow!("stream failed: {e}"))?;
     let mut profile: Vec<(f64, f64)> = readings
         .iter()
         .filter(|r| r.reading.status == Status::Ok)

@@ -71,8 +71,8 @@ const BATCH_CYCLES: u32 = SYSCLK_HZ / SAMPLE_RATE_HZ * BATCH as u32;
 // board models too.
 const _: () = assert!(crate::engine::PIPELINE_BATCHES == 2);
 
-/// DMA buffers: the DMA owns them once started; the interrupt touches only the DAC half the DMA
-/// has just left, and reads the ADC rings through embassy.
+/// DMA buffers: the DMA owns them once started; the interrupt touches only the halves the DMA
+/// has just left: it refills the DAC's and reads the ADC rings' ([`read_rings`]).
 static mut DAC_BUF: [DacCode; 2 * BATCH] = [DacCode::MID; 2 * BATCH];
 static mut ADC1_RING: [u16; 2 * BATCH] = [0; 2 * BATCH];
 static mut ADC2_RING: [u16; 2 * BATCH] = [0; 2 * BATCH];
@@ -176,7 +176,7 @@ impl Stream {
         // Gap: the DMA writes DHR12R1 only after the first trigger's request, so the first
         // trigger would move DHR's reset value 0 — a full-scale negative drive sample — to the
         // output (RM0440 22, DAC: with TEN1, DHR goes to DOR at the trigger; found by the
-        // emulated board's rule check, emu/). RAW 13/16: DAC_DHR12R1 = mid-scale (no drive)
+        // emulated board's rule check, emu/). RAW 13/17: DAC_DHR12R1 = mid-scale (no drive)
         // before the timer runs, a word write as the DAC requires.
         pac::DAC1.dhr12r(0).write(|w| w.set_dhr(DacCode::MID.0));
         hw.tim.start();
@@ -224,10 +224,8 @@ impl Stream {
             // longer requests data): stop the trigger, so the measurement task's readings end
             // as `stalled` rather than run on with a dead drive or stale samples.
             Some(hw) if self.fault_seen => hw.tim.stop(),
-            Some(hw) => {
-                if !(fill(&mut hw.adc1, &mut self.current, || {})
-                    && fill(&mut hw.adc2, &mut self.monitor, sync_adc2_dma))
-                {
+            Some(_) => {
+                if !read_rings(&mut self.current, &mut self.monitor) {
                     self.late_seen = true;
                 }
             }
@@ -258,33 +256,62 @@ impl Stream {
     }
 }
 
-/// Read the newest [`BATCH`] samples of `adc`'s ring into `out`, waiting a bounded time for the
-/// last ones (the second ADC's DMA may trail the first's interrupt by a few bus cycles).
-/// `sync` runs before each poll: for ADC2's ring, embassy's handler of its DMA channel.
-///
-/// Why: embassy's ring buffer counts the DMA's completed cycles only in the channel's
-/// interrupt handler, and a write position that went back (NDTR reloaded at the end of the
-/// ring) without a counted completion is clamped to the ring's last sample
-/// (`DmaIndex::dma_sync`). ADC2's channel (DMA1 CH2) interrupts at the sample task's own
-/// priority, so its handler cannot run while the task reads: at every full-ring batch the
-/// read found 24 of 25 samples, waited out [`ADC_PAIR_TIMEOUT`], and left the batch's last
-/// drive-monitor sample stale (the batch counted late) — every other batch, found by the
-/// emulated board (emu/tests/image.rs), which models the DMA interrupts' timing.
-fn fill<T: embassy_stm32::adc::Instance>(
-    adc: &mut RingBufferedAdc<'static, T>,
-    out: &mut [u16; BATCH],
-    mut sync: impl FnMut(),
-) -> bool {
-    let mut got = 0;
-    spin_until(ADC_PAIR_TIMEOUT, || {
-        sync();
-        got += adc.read_latest(&mut out[got..]);
-        got == BATCH
-    })
+/// DMA1's channels of the ADC rings (channel `n + 1` is `ch(n)`): CH1 ADC1, CH2 ADC2.
+const ADC1_DMA: usize = 0;
+const ADC2_DMA: usize = 1;
+
+/// The half of a ring of 2 × [`BATCH`] that its DMA channel has completed last, from the
+/// transfers it has remaining (DMA_CNDTRx, RM0440 12: it counts down from 2 × BATCH and reloads
+/// after the last): `2·BATCH ..= BATCH + 1` is the channel writing half 0, so half 1 is the one
+/// completed; `BATCH ..= 1` is half 1 being written, half 0 completed.
+const fn completed_half(remaining: u16) -> usize {
+    if remaining as usize > BATCH {
+        1
+    } else {
+        0
+    }
 }
 
-/// embassy's handler for ADC2's DMA channel (DMA1 CH2), run from the sample task before it
-/// reads that ring ([`fill`]): it acknowledges the half or full transfer and counts the
+/// DMA_CNDTRx of DMA1 channel `ch + 1` (RM0440 12): the transfers it has remaining.
+fn dma_remaining(ch: usize) -> u16 {
+    // RAW 17/17: DMA1 CNDTRx read. Gap: embassy 0.6's ring buffer reads it only inside its
+    // own copy (`read_latest`, a modulo per sample).
+    pac::DMA1.ch(ch).ndtr().read().ndt()
+}
+
+/// Copy the half of `ring` the DMA has completed last (`half`) into `out`.
+fn copy_half(ring: *const [u16; 2 * BATCH], half: usize, out: &mut [u16; BATCH]) {
+    // SAFETY: `half` is the half the channel has left (it writes the other one) and comes back
+    // to only after the other completes, a batch period away; the read is volatile, as the
+    // DMA writes the ring behind the compiler's back.
+    let src = unsafe { (ring as *const u16).add((half & 1) * BATCH) };
+    for (k, o) in out.iter_mut().enumerate() {
+        // SAFETY: `k < BATCH`, within the half.
+        *o = unsafe { core::ptr::read_volatile(src.add(k)) };
+    }
+}
+
+/// Read the batch just captured from both ADC rings: the half ADC1's channel has completed
+/// (its half/full-transfer interrupt is the sample task) into `current`, the same half of
+/// ADC2's ring into `monitor` once ADC2's channel has completed it too — both convert on the
+/// same trigger, so its last sample is there within a few bus cycles; waited for at most
+/// [`ADC_PAIR_TIMEOUT`]. False when it did not come (the batch is late). ADC2's channel's
+/// handler runs here ([`sync_adc2_dma`]), as it did in embassy's ring read.
+fn read_rings(current: &mut [u16; BATCH], monitor: &mut [u16; BATCH]) -> bool {
+    let h = completed_half(dma_remaining(ADC1_DMA));
+    core::sync::atomic::fence(Ordering::Acquire);
+    copy_half(addr_of!(ADC1_RING), h, current);
+    let paired = spin_until(ADC_PAIR_TIMEOUT, || {
+        completed_half(dma_remaining(ADC2_DMA)) == h
+    });
+    sync_adc2_dma();
+    core::sync::atomic::fence(Ordering::Acquire);
+    copy_half(addr_of!(ADC2_RING), h, monitor);
+    paired
+}
+
+/// embassy's handler for ADC2's DMA channel (DMA1 CH2), run from the sample task when it
+/// reads that ring ([`read_rings`]): it acknowledges the half or full transfer and counts the
 /// completed cycle, as the channel's own interrupt would (which then finds nothing to do).
 /// Transfer errors are counted first ([`DmaFaults`]), as on the vector.
 fn sync_adc2_dma() {
@@ -316,7 +343,7 @@ const fn dac_hfsel(hclk_hz: u32) -> u8 {
 /// DAC_SR (RM0440 22, DAC: DAC_SR): CAL_FLAG1 for the calibration, DMAUDR1 for the
 /// stream. Gap: embassy-stm32 0.6's DAC driver reads neither.
 fn dac_sr() -> pac::dac::regs::Sr {
-    // RAW 9/16: DAC_SR read.
+    // RAW 9/17: DAC_SR read.
     pac::DAC1.sr().read()
 }
 
@@ -324,7 +351,7 @@ fn dac_sr() -> pac::dac::regs::Sr {
 /// 0.6 sets DMAEN1 only inside `DacChannel::write`, whose 16-bit DMA the G4's DAC refuses, and
 /// has no calibration.
 fn dac_cr(f: impl FnOnce(&mut pac::dac::regs::Cr)) {
-    // RAW 10/16: DAC_CR modify.
+    // RAW 10/17: DAC_CR modify.
     pac::DAC1.cr().modify(f);
 }
 
@@ -338,7 +365,7 @@ fn calibrate_dac() -> bool {
     dac_cr(|w| w.set_cen(0, true));
     let mut found = false;
     for trim in 0..32 {
-        // RAW 11/16: DAC_CCR.OTRIM1 (RM0440 22, DAC: DAC_CCR); OTRIM2 (channel 2, unused)
+        // RAW 11/17: DAC_CCR.OTRIM1 (RM0440 22, DAC: DAC_CCR); OTRIM2 (channel 2, unused)
         // written 0.
         pac::DAC1.ccr().write(|w| w.set_otrim(0, trim));
         cortex_m::asm::delay(DAC_TRIM_CYCLES);
@@ -375,7 +402,7 @@ pub(super) fn converters(p: ConverterPins) -> Converters {
     // timer clock, which is halved (clocks.rs).
     let tim = Timer::new(p.tim6);
     tim.set_period_clocks(u64::from(TIM6_CLOCK_HZ / SAMPLE_RATE_HZ), RoundTo::Faster);
-    // Gap: embassy 0.6's low-level timer has no master-mode setter. RAW 7/16: TIM6_CR2.MMS =
+    // Gap: embassy 0.6's low-level timer has no master-mode setter. RAW 7/17: TIM6_CR2.MMS =
     // update → TRGO (RM0440 "Basic timers (TIM6/TIM7)" chapter, TIMx_CR2;
     // its number unverified: docs/bringup.md).
     tim.regs_basic()
@@ -403,7 +430,7 @@ pub(super) fn converters(p: ConverterPins) -> Converters {
     dac.set_mode(Mode::NormalExternalBuffered);
     dac.set_triggering(true);
     // Gap: embassy sets DAC_MCR.HFSEL from its record of HCLK, which is halved (clocks.rs): the
-    // mode for 80–160 MHz where HCLK is 170 MHz. RAW 16/16: DAC_MCR.HFSEL from the real HCLK
+    // mode for 80–160 MHz where HCLK is 170 MHz. RAW 16/17: DAC_MCR.HFSEL from the real HCLK
     // ([`dac_hfsel`]), with the channel off.
     pac::DAC1.mcr().modify(|w| w.set_hfsel(dac_hfsel(HCLK_HZ)));
     // A DAC whose calibration never settles is not trusted with the drive: the stream is not

@@ -132,18 +132,18 @@ pub(super) fn start(clock: ClockSource) -> embassy_stm32::Peripherals {
 /// (the watchdog resets, the next boot runs on HSI16 and says `clock_hang`).
 fn full_speed() {
     // Gap: embassy 0.6 sets the wait states for the HCLK of its configuration only, and never
-    // sets FLASH_ACR.PRFTEN. RAW 5/16: FLASH_ACR.LATENCY = 4 WS and PRFTEN (RM0440 3.3.3
+    // sets FLASH_ACR.PRFTEN. RAW 5/17: FLASH_ACR.LATENCY = 4 WS and PRFTEN (RM0440 3.3.3
     // Table 9, 3.3.4 prefetch; FLASH_ACR) in one read-modify-write.
     pac::FLASH.acr().modify(|w| {
         w.set_latency(WAIT_STATES_170_MHZ);
         w.set_prften(true);
     });
-    // RAW 14/16: FLASH_ACR.LATENCY read back until it holds (RM0440 3.3.3).
+    // RAW 14/17: FLASH_ACR.LATENCY read back until it holds (RM0440 3.3.3).
     while pac::FLASH.acr().read().latency() != WAIT_STATES_170_MHZ {}
     // The hold, counted on the cycle counter from here: after the switch (embassy waited for
     // SWS = PLL before it returned).
     spin_until(BOOST_HOLD_CYCLES, || false);
-    // Gap: embassy 0.6 writes SW and HPRE together. RAW 15/16: RCC_CFGR.HPRE = /1 (RM0440
+    // Gap: embassy 0.6 writes SW and HPRE together. RAW 15/17: RCC_CFGR.HPRE = /1 (RM0440
     // 6.1.5 step 5; 7.4.3 RCC_CFGR).
     pac::RCC
         .cfgr()
@@ -154,7 +154,7 @@ fn full_speed() {
 /// `rcc::init` (g4.rs) sets HSEON and then spins on HSERDY without a bound: it is given the HSE
 /// only once it runs. embassy 0.6 has no CSS for the G4.
 fn hse_starts() -> bool {
-    // RAW 3/16: RCC_CR.HSEON and CSSON in one read-modify-write (RM0440 7.4.1 RCC_CR; 7.2
+    // RAW 3/17: RCC_CR.HSEON and CSSON in one read-modify-write (RM0440 7.4.1 RCC_CR; 7.2
     // "HSE clock", "Clock security system (CSS)"). HSEBYP stays 0 (crystal). The clock detector
     // turns itself on once the HSE is ready and off when it is stopped: if the crystal does not
     // start, embassy's init (`hse: None`) clears HSEON again and the CSS never arms. A failure
@@ -164,7 +164,7 @@ fn hse_starts() -> bool {
         w.set_hseon(true);
         w.set_csson(true);
     });
-    // RAW 4/16: RCC_CR.HSERDY, polled with a bound (RM0440 7.4.1 RCC_CR).
+    // RAW 4/17: RCC_CR.HSERDY, polled with a bound (RM0440 7.4.1 RCC_CR).
     spin_until(HSE_TIMEOUT, || pac::RCC.cr().read().hserdy())
 }
 

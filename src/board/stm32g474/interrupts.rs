@@ -56,9 +56,9 @@ pub(super) struct DmaFaults;
 
 impl<I: interrupt::typelevel::Interrupt> Handler<I> for DmaFaults {
     unsafe fn on_interrupt() {
-        // RAW 1/16: DMA1_ISR TEIF1..6 (RM0440 12, DMA: DMA_ISR).
+        // RAW 1/17: DMA1_ISR TEIF1..6 (RM0440 12, DMA: DMA_ISR).
         let isr = pac::DMA1.isr().read();
-        // RAW 2/16: DMA1_IFCR CTEIF1..6, write-one-to-clear (RM0440 12, DMA: DMA_IFCR).
+        // RAW 2/17: DMA1_IFCR CTEIF1..6, write-one-to-clear (RM0440 12, DMA: DMA_IFCR).
         let failed = pac::DMA1.ifcr().write(|w| {
             let mut failed = 0u8;
             for ch in 0..CHANNELS {

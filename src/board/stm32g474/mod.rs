@@ -1,8 +1,8 @@
 //! The STM32G474RE board (NUCLEO-G474RE) on `embassy-stm32` 0.6: clocks, TIM6, DAC1, ADC1/ADC2
 //! on DMA ring buffers, the bank-2 flash of the calibration store, LPUART1 and the independent
 //! watchdog are embassy drivers, used from RTIC 2 tasks without an embassy executor. Raw
-//! register code remains only where embassy 0.6 lacks the feature: sixteen accesses, each
-//! marked `RAW n/16` with the gap and the RM0440 section, listed in `docs/bringup.md`. The
+//! register code remains only where embassy 0.6 lacks the feature: seventeen accesses, each
+//! marked `RAW n/17` with the gap and the RM0440 section, listed in `docs/bringup.md`. The
 //! HSE runs under the clock security system (CSSON with HSEON in one access); its NMI resets
 //! the core into a boot on HSI16 through the PLL ([`BootError::HseFailure`]).
 //!

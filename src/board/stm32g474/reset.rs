@@ -86,7 +86,7 @@ pub(super) struct ResetCause {
 /// What caused the last reset; the reset flags are cleared, so the next boot reads its own
 /// cause (they are sticky until RMVF).
 ///
-/// Gap: embassy-stm32 0.6 has no reset-cause API. RAW 12/16: RCC_CSR read-modify-write,
+/// Gap: embassy-stm32 0.6 has no reset-cause API. RAW 12/17: RCC_CSR read-modify-write,
 /// IWDGRSTF and SFTRSTF read and RMVF set in one access (RM0440 7.4.28 RCC_CSR, numbered by
 /// the register order: see docs/bringup.md).
 pub(super) fn reset_cause() -> ResetCause {

@@ -107,7 +107,7 @@ impl NorFlash for InternalFlash {
 /// access to it is then refused.
 pub(super) fn open(flash: Peri<'static, peripherals::FLASH>, hung: bool) -> InternalFlash {
     // Gap: embassy's `Flash::new_blocking` panics when FLASH_OPTR.DBANK does not match its
-    // `dual-bank` feature (flash/g.rs `check_bank_setup`). RAW 6/16: DBANK read first
+    // `dual-bank` feature (flash/g.rs `check_bank_setup`). RAW 6/17: DBANK read first
     // (RM0440 3.3.1 "Flash memory organization"; FLASH_OPTR), a typed boot error instead.
     InternalFlash(if hung {
         record(BootError::FlashHang);

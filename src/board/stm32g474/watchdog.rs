@@ -24,7 +24,7 @@ impl crate::instrument::watchdog::Watchdog for Watchdog {
 /// Freeze the IWDG under the debugger, then start it: 500 ms, or eleven times that when the
 /// core runs on HSI16 without the PLL (`safe_clock`).
 pub(super) fn start(safe_clock: bool) -> Watchdog {
-    // Gap: embassy 0.6 has no DBGMCU API. RAW 8/16: DBGMCU_APB1FZR1.DBG_IWDG_STOP (RM0440
+    // Gap: embassy 0.6 has no DBGMCU API. RAW 8/17: DBGMCU_APB1FZR1.DBG_IWDG_STOP (RM0440
     // "Debug support (DBG)" chapter, DBGMCU_APB1FZR1; its number unverified:
     // docs/bringup.md), before the IWDG starts.
     pac::DBGMCU.apb1lfzr().modify(|w| w.set_iwdg(true));

@@ -427,7 +427,8 @@ pub(super) fn evaluate(
                 let ci = cols[i];
                 jtr32[i] += ci.re * rw.re + ci.im * rw.im;
                 let cw = ci * x.wl;
-                for j in 0..=i {
+                // (`0..i + 1`: `0..=i` is an out-of-line iterator call at `opt-level = "z"`.)
+                for j in 0..i + 1 {
                     jtj32[i][j] += cw.re * cols[j].re + cw.im * cols[j].im;
                 }
             }

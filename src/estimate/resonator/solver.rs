@@ -15,13 +15,14 @@ impl Problem<'_> {
         evaluate(self, p, jac, None)
     }
 
-    /// A candidate of the start search of a one-segment problem: the linear parameters
+    /// A candidate of the start search of a one-segment problem, and its start at a given
+    /// `f0`, `Q` ([`Self::linear_start`]): the linear parameters
     /// `(g, z)` at `f0`, `q` solved by least squares (the model is linear in them:
     /// `y_k = g a_k + Re z b_k + Im z c_k`, the three columns formed once, in `f32`, a 3×3
     /// Cholesky solve), and the χ² there in units of the weight `1/var` (from the residuals,
     /// not the normal equations, so no cancellation; `f32`, compared between candidates
-    /// alone). A third of the work of [`Self::linear_start`], which forms all five columns and
-    /// evaluates twice. `None` for two segments, a singular system or a non-finite χ².
+    /// alone). A third of the work of an evaluation with the Jacobian, which forms all five
+    /// columns. `None` for two segments, a singular system or a non-finite χ².
     fn linear_candidate(&self, f0: f64, q: f64) -> Option<([f32; 3], f32)> {
         let [(f_h, _, mirror)] = self.segs[..] else {
             return None;
@@ -82,9 +83,19 @@ impl Problem<'_> {
         chi2.is_finite().then_some((sol, chi2))
     }
 
-    /// The linear parameters (g, z) at `p`'s `f0`, `Q`: one Gauss–Newton step on them alone
-    /// (the model is linear in them).
+    /// The linear parameters (g, z) at `p`'s `f0`, `Q` (the model is linear in them): one
+    /// segment's by [`Self::linear_candidate`]'s three columns, two segments' by one
+    /// Gauss–Newton step on them alone (the evaluation with the Jacobian, which carries the
+    /// state through the switch).
     fn linear_start(&self, p: &Params) -> Option<Params> {
+        if self.segs.len() == 1 {
+            let (sol, _) = self.linear_candidate(p.f0, p.q)?;
+            return Some(Params {
+                g: sol[0] as f64,
+                z: C64::new(sol[1] as f64, sol[2] as f64),
+                ..*p
+            });
+        }
         // The linear parameters' columns are not scaled (their scale is 1).
         let (_, n) = self.eval(p, true);
         let m3: [[f32; 3]; 3] =

@@ -625,7 +625,20 @@ impl Tracker {
             None => Some(fit),
             Some(prev) => added_information(&fit, &prev),
         };
-        let update = m.map_or(Update::Refused, |m| self.track.update(&m, &self.process()));
+        let update = match m {
+            None => Update::Refused,
+            Some(m) => match self.track.update(&m, &self.process()) {
+                // What a later segment added failed the filter's gate: a real change, or a
+                // difference of two fits too thin to stand alone (nearly singular, linearised
+                // where the fits are not linear). The filter restarts from the plan's whole fit,
+                // which stands alone, never from the difference.
+                Update::Restarted if m != fit => {
+                    self.track.clear();
+                    self.track.update(&fit, &self.process())
+                }
+                u => u,
+            },
+        };
         let pooled = match update {
             // Nothing the filter can take (a later segment that adds no information the
             // linearised fits tell apart): what it knows, predicted to the segment's end.
