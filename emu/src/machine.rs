@@ -247,6 +247,18 @@ fn reg<R: Into<i32>>(uc: &Unicorn<'_, Board>, r: R) -> u32 {
     uc.reg_read(r).unwrap_or(0) as u32
 }
 
+/// The exception the core would take now under its masks (BASEPRI, PRIMASK, FAULTMASK) and
+/// PRIGROUP, if any (ARMv7-M B1.5.4).
+fn takable_exception(uc: &Unicorn<'_, Board>) -> Option<usize> {
+    let basepri = reg(uc, RegisterARM::BASEPRI) as u8;
+    let primask = reg(uc, RegisterARM::PRIMASK) & 1 != 0;
+    let faultmask = reg(uc, RegisterARM::FAULTMASK) & 1 != 0;
+    let b = uc.get_data();
+    b.scs
+        .nvic
+        .takable(basepri, primask, faultmask, b.scs.scb.prigroup)
+}
+
 fn set<R: Into<i32>>(uc: &mut Unicorn<'_, Board>, r: R, v: u32) {
     uc.reg_write(r, v as u64).expect("register write");
 }
@@ -396,21 +408,14 @@ impl Machine {
             }
             // Inside an IT block the exception waits ([`Machine::in_it_block`]): the block runs,
             // or a stop here, mid-IT, would be the run loop's next start, forever.
-            if b.irq_armed && reg(uc, RegisterARM::XPSR) & IT_BITS == 0 {
-                let basepri = reg(uc, RegisterARM::BASEPRI) as u8;
-                let primask = reg(uc, RegisterARM::PRIMASK) & 1 != 0;
-                let faultmask = reg(uc, RegisterARM::FAULTMASK) & 1 != 0;
-                let b = uc.get_data_mut();
-                if b.scs
-                    .nvic
-                    .takable(basepri, primask, faultmask, b.scs.scb.prigroup)
-                    .is_some()
-                {
-                    // Not executed: stop before the block and take the exception.
-                    b.stopped = true;
-                    uc.emu_stop().ok();
-                    return;
-                }
+            if b.irq_armed
+                && reg(uc, RegisterARM::XPSR) & IT_BITS == 0
+                && takable_exception(uc).is_some()
+            {
+                // Not executed: stop before the block and take the exception.
+                uc.get_data_mut().stopped = true;
+                uc.emu_stop().ok();
+                return;
             }
             let b = uc.get_data_mut();
             b.now += n;
@@ -764,9 +769,6 @@ impl Machine {
             if now >= until {
                 return Exit::Limit;
             }
-            let basepri = reg(&self.uc, RegisterARM::BASEPRI) as u8;
-            let primask = reg(&self.uc, RegisterARM::PRIMASK) & 1 != 0;
-            let faultmask = reg(&self.uc, RegisterARM::FAULTMASK) & 1 != 0;
             let b = self.uc.get_data_mut();
             let next_event = b
                 .periph
@@ -774,11 +776,7 @@ impl Machine {
                 .into_iter()
                 .chain(b.scs.systick.next_event())
                 .min();
-            let b = self.uc.get_data();
-            let takable = b
-                .scs
-                .nvic
-                .takable(basepri, primask, faultmask, b.scs.scb.prigroup);
+            let takable = takable_exception(&self.uc);
             let mut deadline = next_event.unwrap_or(u64::MAX).min(until);
             if let Some(exc) = takable {
                 if self.in_it_block() {
@@ -814,16 +812,8 @@ impl Machine {
                     }
                     // An exception already takable wakes it at once (ARMv7-M B1.5.19): one
                     // pended where none is taken, inside an IT block, before its WFI.
-                    let basepri = reg(&self.uc, RegisterARM::BASEPRI) as u8;
-                    let primask = reg(&self.uc, RegisterARM::PRIMASK) & 1 != 0;
-                    let faultmask = reg(&self.uc, RegisterARM::FAULTMASK) & 1 != 0;
-                    let b = self.uc.get_data_mut();
-                    let prigroup = b.scs.scb.prigroup;
-                    if b.scs
-                        .nvic
-                        .takable(basepri, primask, faultmask, prigroup)
-                        .is_none()
-                    {
+                    if takable_exception(&self.uc).is_none() {
+                        let b = self.uc.get_data_mut();
                         b.now = next_event.unwrap_or(until).min(until).max(b.now);
                     }
                 }

@@ -199,15 +199,16 @@ impl Stream {
             .is_some_and(|t| now.wrapping_sub(t) > BATCH_CYCLES + BATCH_CYCLES / 2);
         self.last = Some(now);
         self.started = now;
-        // The DAC half just played is the one its DMA is not in (from the channel's remaining
-        // count: 2 × BATCH .. BATCH + 1 in half 0, BATCH .. 1 in half 1). Both DMA streams run
-        // off the same trigger, so it is the half of the ADC batch just captured; the DAC's
-        // output register holds the last sample of that half already (it is fetched one trigger
-        // ahead), so the whole half can be refilled.
-        let h = match self.hw.as_ref().and_then(|hw| hw.dac_transfer.as_ref()) {
-            Some(t) if t.get_remaining_transfers() as usize > BATCH => 1,
-            _ => 0,
-        };
+        // The DAC half just played is the one its DMA is not in ([`completed_half`] of the
+        // channel's remaining count). Both DMA streams run off the same trigger, so it is the
+        // half of the ADC batch just captured; the DAC's output register holds the last sample
+        // of that half already (it is fetched one trigger ahead), so the whole half can be
+        // refilled.
+        let h = self
+            .hw
+            .as_ref()
+            .and_then(|hw| hw.dac_transfer.as_ref())
+            .map_or(0, |t| completed_half(t.get_remaining_transfers()));
 
         // Gap: embassy 0.6's DAC driver has no underrun check: DAC_SR.DMAUDR1 (RM0440 22, DAC:
         // "DMA underrun"), read through [`dac_sr`]. Not cleared: the stream stops on
@@ -264,7 +265,7 @@ const ADC2_DMA: usize = 1;
 /// transfers it has remaining (DMA_CNDTRx, RM0440 12: it counts down from 2 × BATCH and reloads
 /// after the last): `2·BATCH ..= BATCH + 1` is the channel writing half 0, so half 1 is the one
 /// completed; `BATCH ..= 1` is half 1 being written, half 0 completed.
-const fn completed_half(remaining: u16) -> usize {
+const fn completed_half(remaining: u32) -> usize {
     if remaining as usize > BATCH {
         1
     } else {
@@ -273,10 +274,10 @@ const fn completed_half(remaining: u16) -> usize {
 }
 
 /// DMA_CNDTRx of DMA1 channel `ch + 1` (RM0440 12): the transfers it has remaining.
-fn dma_remaining(ch: usize) -> u16 {
+fn dma_remaining(ch: usize) -> u32 {
     // RAW 17/17: DMA1 CNDTRx read. Gap: embassy 0.6's ring buffer reads it only inside its
     // own copy (`read_latest`, a modulo per sample).
-    pac::DMA1.ch(ch).ndtr().read().ndt()
+    pac::DMA1.ch(ch).ndtr().read().ndt() as u32
 }
 
 /// Copy the half of `ring` the DMA has completed last (`half`) into `out`.
