@@ -74,11 +74,16 @@ pub(crate) fn current_window(raw: &PointRaw, scale: &FrontEndScale, fs: f64) -> 
     let (value, variance) = solve_value(&s.current, &s.reference)?;
     let ai = scale.amps_per_code as f64;
     let len = s.reference.n as f64 / fs;
+    // The window's span in the windows' time base (each sample the period centred on it)
+    // starts half a phase step before its first sample's phase and ends `n` steps later.
+    let ftw = raw.plan.ftw;
+    let start = raw.start_phase.wrapping_sub(ftw / 2);
     Some(HoldWindow {
         t0: raw.end_sample as f64 / fs - len,
         len,
         y: value * ai,
         var: variance * ai * ai,
+        phase: [start, start.wrapping_add(ftw.wrapping_mul(s.reference.n))],
     })
 }
 
@@ -109,6 +114,11 @@ pub struct HoldWindow {
     pub y: C64,
     /// Variance of each component of `y` (the window's sine-fit residual), S².
     pub var: f64,
+    /// The drive's reference phase at the window's start and at its end (2³² a turn), in the
+    /// windows' time base: a window starts within a sample's phase step of its cycle boundary
+    /// and spans whole cycles to within one step, which its sine fit's view of a transient
+    /// depends on ([`mirror`]). `[0, 0]`: whole cycles from the boundary.
+    pub phase: [u32; 2],
 }
 
 /// A hold fit: the estimate and the standard uncertainty of its `Q`.
@@ -151,7 +161,10 @@ pub struct Segment<'a> {
 /// counter-rotating (mirror) image. A steady `c` leaves no image over whole cycles; a transient
 /// `T e^{λt}` does: `mirror · conj(T e^{λ a}) · (e^{λ̄ L} − 1) / ((λ̄ − j4π f_h) L)` in the
 /// admittance, about `|λ| / (4 ω_h)` of the transient (2 % at `Q` 10), which, left out of the
-/// model, biases a detuned first segment's `f0` by 4 % of the detuning.
+/// model, biases a detuned first segment's `f0` by 4 % of the detuning. A window that starts
+/// off its cycle boundary and spans whole cycles only to within a phase step
+/// ([`HoldWindow::phase`]) sees the transient through its sine fit's normal equations
+/// (`model::SineFit`).
 pub fn mirror(v: C64) -> C64 {
     let n = v.norm_sqr();
     if n > 0.0 && n.is_finite() {

@@ -2,7 +2,7 @@
 //! the Levenberg–Marquardt iteration with its prior on `Q`, the checks of the windows and of the
 //! result.
 
-use super::model::{c32, cexp, evaluate, prepare, DriveModel, Normal, Params, Problem, C32};
+use super::model::{c32, cexp, evaluate, prepare, DriveModel, Normal, Params, Problem, Rates, C32};
 use super::{Carry, HoldFit, HoldWindow, Segment, FIRST_WINDOWS, MAX_SEGMENTS, MAX_WINDOWS};
 use crate::estimate::Estimate;
 use crate::status::Failure;
@@ -36,7 +36,7 @@ impl Problem<'_> {
             z: C64::new(0.0, 0.0),
         };
         let m = DriveModel::new(&at, f_h);
-        let (inv_lam, inv_mu) = (one / m.lam, one / m.mu);
+        let rates = Rates::of(&m);
         let mut cols = [[C32::new(0.0, 0.0); 3]; MAX_WINDOWS];
         let mut a = [[0.0f32; 3]; 3];
         let mut b = [0.0f32; 3];
@@ -55,16 +55,16 @@ impl Problem<'_> {
                 cache[0] = (x.len, cexp(m.lam * x.len));
                 cache[0].1
             };
-            let eb = ea * decay;
-            let e = (eb - ea) * inv_lam / x.len;
-            // The mirror image's factor on conj(transient at the window's start).
-            let mp = mirror * (decay.conj() - one) * inv_mu / x.len;
-            let image = mp * ea.conj();
+            // The window's sine fit of the transient `tr`: `α tr + mirror β conj(tr)`.
+            let [alpha, beta, ..] = x.transient(decay, &rates, false);
+            let (e, mb) = (alpha * ea, mirror * beta);
+            let image = mb * ea.conj();
             *c = [
-                m.h * (one - e) - mp * (m.h * ea).conj(),
+                m.h * (one - e) - mb * (m.h * ea).conj(),
                 e + image,
                 j * (e - image),
             ];
+            let eb = ea * decay;
             for i in 0..3 {
                 let ci = c[i] * x.wl;
                 b[i] += ci.re * x.y.re + ci.im * x.y.im;
