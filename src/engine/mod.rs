@@ -88,6 +88,11 @@ pub struct PointRaw {
     /// (`plan.ftw`) after the cycle boundary the window starts at. The phase after its last
     /// sample is this plus `ftw` times its samples (`sums.reference.n`), wrapping.
     pub start_phase: u32,
+    /// Samples the drive had been off (amplitude 0, or no plan) when the plan took effect,
+    /// saturating; [`u32::MAX`] when the engine has not driven since it started; 0: the drive
+    /// was on up to the switch. A drive off for many of the resonator's time constants left it
+    /// at rest.
+    pub quiet_before: u32,
 }
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -97,6 +102,8 @@ struct BatchInfo {
     plan: Option<PointPlan>,
     /// Which load of the engine the batch belongs to ([`SampleEngine::load`] or `stop`).
     load: u32,
+    /// Samples the drive had been off before this batch ([`PointRaw::quiet_before`]).
+    quiet: u32,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -133,6 +140,9 @@ pub enum EngineError {
 pub struct SampleEngine {
     dds: Dds,
     amplitude: i32,
+    /// Samples generated with the drive off since it was last on (saturating; `u32::MAX`: never
+    /// on since the start).
+    quiet: u32,
     plan: Option<PointPlan>,
     pending: Option<Option<PointPlan>>,
     ring: [BatchInfo; RING],
@@ -152,6 +162,8 @@ pub struct SampleEngine {
     samples: u64,
     /// Sample count when the demodulated plan took effect.
     load_sample: u64,
+    /// [`BatchInfo::quiet`] of the batch in which the plan being demodulated took effect.
+    load_quiet: u32,
     overruns: u32,
     /// Scratch of [`LockInSums::integrate`]: a run's reference.
     run_reference: [u32; RUN_MAX],
@@ -169,6 +181,7 @@ impl SampleEngine {
         Self {
             dds: Dds { phase: 0, ftw: 0 },
             amplitude: 0,
+            quiet: u32::MAX,
             plan: None,
             pending: None,
             ring: [BatchInfo {
@@ -176,6 +189,7 @@ impl SampleEngine {
                 ftw: 0,
                 plan: None,
                 load: 0,
+                quiet: u32::MAX,
             }; RING],
             generated: 0,
             demodulated: 0,
@@ -211,6 +225,7 @@ impl SampleEngine {
             window_phase: 0,
             samples: 0,
             load_sample: 0,
+            load_quiet: u32::MAX,
             overruns: 0,
             run_reference: [0; RUN_MAX],
         }
@@ -283,6 +298,12 @@ impl SampleEngine {
             ftw: self.dds.ftw,
             plan: self.plan,
             load: self.loads,
+            quiet: self.quiet,
+        };
+        self.quiet = if self.amplitude == 0 {
+            self.quiet.saturating_add(dac.len() as u32)
+        } else {
+            0
         };
         self.generated = self.generated.wrapping_add(1);
         let amp = self.amplitude;
@@ -380,6 +401,7 @@ impl SampleEngine {
             self.demod_tag = tag;
             self.demod_load = info.load;
             self.load_sample = self.samples;
+            self.load_quiet = info.quiet;
             self.sums = LockInSums::default();
             self.window = 0;
             self.stage = match info.plan {
@@ -412,6 +434,7 @@ impl SampleEngine {
                     since_load: (self.samples.saturating_sub(self.load_sample)).min(u32::MAX as u64)
                         as u32,
                     start_phase: self.window_phase,
+                    quiet_before: self.load_quiet,
                 };
                 if plan.open || self.window.saturating_add(1) < plan.windows {
                     self.window = self.window.saturating_add(1);

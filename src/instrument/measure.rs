@@ -379,6 +379,7 @@ mod tests {
             window: 0,
             since_load: 0,
             start_phase: 0,
+            quiet_before: 0,
         }
     }
 

@@ -55,5 +55,6 @@ fn arbitrary_window(
         window,
         since_load: 0,
         start_phase: 0,
+        quiet_before: 0,
     }
 }

@@ -26,6 +26,8 @@ mod solver;
 #[cfg(test)]
 mod fixtures;
 
+#[cfg(test)]
+pub(crate) use model::rest_state;
 pub use solver::{fit, fit_searched, fit_two};
 
 use super::Estimate;
@@ -39,8 +41,10 @@ use num_complex::Complex64 as C64;
 pub const MAX_WINDOWS: usize = 16;
 
 /// Windows of a hold's first segment with no seed: the fewest its searched fit takes
-/// ([`fit_searched`]; `hold::HoldSettings::min_first`).
-pub(crate) const FIRST_WINDOWS: usize = 3;
+/// ([`fit_searched`]; `hold::HoldSettings::min_first`): four numbers for `f0`, `g` and the start
+/// state with the start from rest ([`SwitchOn`]) and the prior on `Q`; with the state free,
+/// only a rough placement for the second segment.
+pub(crate) const FIRST_WINDOWS: usize = 2;
 
 /// Whole cycles of the shortest window the engine passes on at `f` Hz sampled at `fs` (a
 /// hold's first segment's, a tracker segment's): the fewest that span half a batch
@@ -137,6 +141,9 @@ pub struct HoldFit {
     /// The fitted motional peak conductance `g` (S) and state `z` at the start of the first
     /// window (S): a joint fit that takes these windows goes on from them ([`fit_two`]).
     pub linear: (f64, C64),
+    /// The start state was the resonator's response from rest ([`SwitchOn`]); false when no
+    /// switch-on was given or the windows disagreed with it.
+    pub at_rest: bool,
 }
 
 /// One segment of a hold: consecutive windows driven at one frequency `f_h`, with the static
@@ -205,6 +212,23 @@ pub struct Filters {
     pub w_r: f32,
     /// Anti-alias filter's corner, rad/s.
     pub w_a: f32,
+}
+
+/// The drive's switch-on before a first segment with the resonator at rest: the segment's start
+/// state is the resonator's response from rest (`model::DriveModel::switch_on` from the state 0,
+/// a function of `f0`, `Q`, `g` and the drive), known to within `width` of the windows'
+/// admittance scale (the model's own residue and what the drive's history may have left
+/// ringing). The fit takes it as a prior and drops it when the windows disagree
+/// ([`HoldFit::at_rest`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SwitchOn {
+    /// When the drive came on, s, in the windows' time base (as [`Carry::t_switch`]).
+    pub t_on: f64,
+    /// The front end the switch-on passes through.
+    pub filters: Filters,
+    /// The prior's standard uncertainty of each component of the start state, relative to the
+    /// largest windowed admittance less its static part.
+    pub width: f32,
 }
 
 impl Filters {

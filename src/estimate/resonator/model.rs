@@ -48,6 +48,11 @@ impl Win32 {
     pub(super) fn transient(&self, decay: C32, r: &Rates, jac: bool) -> [C32; 4] {
         self.fit.transient(decay, self.len, r, jac)
     }
+
+    /// [`SineFit::origin`] of this window.
+    pub(super) fn origin(&self, mirror: C32) -> C32 {
+        self.fit.origin(mirror)
+    }
 }
 
 impl SineFit {
@@ -288,17 +293,21 @@ impl DriveModel {
     /// on at `t = 0` from rest, through the front end's filters, divided by the measured drive
     /// `H(jω) U` and expressed as a start state, less the envelope's start state from rest (0):
     ///
-    /// `k = h + T`,  `T = A R [1/λ + M/(λ + 2jω)]`,  `A = (ω0/Q) s_p / (2j ω_d)` (the pole's
+    /// `k = h + T`,  `T = A R [S(λ) + M S(λ + 2jω)]`,  `A = (ω0/Q) s_p / (2j ω_d)` (the pole's
     /// residue of the motional admittance `(g ω0/Q) s / ((s − s_p)(s − s̄_p))` per `g`),
     /// `R = H(s_p)/H(jω)`, `M = mirror · (H/H̄)(jω) · e^{2jωd}` (`Ū/U` at the switch-on, `d`
-    /// seconds before the segment's frame origin, phase 0 of the drive),
+    /// seconds before the segment's frame origin, whose drive phase `mirror` carries:
+    /// [`SineFit::origin`]), `S(x) = T/(1 − e^{−xT})` the sum over the switched sine's samples
+    /// (its Laplace transform at the pole: `1/x + T/2 + O(xT²)`, where the continuous sine has
+    /// `1/x`),
     ///
     /// `H` the zero-order hold `(1 − e^{−sT})/(sT)` of the DAC (sample period `T`), the
     /// reconstruction filter and the anti-alias filter (two real poles each). In the envelope's
     /// limit `T → −h` (`R → 1`, `M → 0`) and `k → 0`. Ours, from the equation of motion and
-    /// the Laplace transform of the switched sine; `hal_sim::plant` integrates the same chain
-    /// exactly (test `the_frequency_switch_is_carried_by_the_full_response`). Returns `k` and
-    /// its derivatives with respect to (f0, Q).
+    /// the Laplace transform of the sampled switched sine through the hold; `hal_sim::plant`
+    /// integrates the same chain exactly (tests `the_frequency_switch_is_carried_by_the_full_response`,
+    /// `the_start_from_rest_is_the_resonators_response`). Returns `k` and its derivatives with
+    /// respect to (f0, Q).
     pub(super) fn switch_on(
         &self,
         q: f32,
@@ -337,14 +346,27 @@ impl DriveModel {
         let (sz, cz) = crate::dsp::trig::sincos(-w * filters.t_hold);
         let (sn, cs) = crate::dsp::trig::sincos(2.0 * w * d);
         let m = mirror * tr * ta * C32::new(cz, sz) * C32::new(cs, sn);
-        let inv_l = one / lam;
-        let inv_l2 = one / (lam + jw * 2.0);
+        // The samples' sums `S(x)` and their derivatives `dS/dx = −S² e^{−xT}`; `1 − e^{−y}`
+        // by its series where `|y| < 0.1` (`λT`: no cancellation in f32; to `y⁵/120`).
+        let sum = |x: C32| {
+            let y = x * filters.t_hold;
+            let e = cexp(-y);
+            let less = if y.norm_sqr() < 0.01 {
+                y * (one - y * (one * 0.5 - y * (one / 6.0 - y / 24.0)))
+            } else {
+                one - e
+            };
+            let s = one / less * filters.t_hold;
+            (s, -s * s * e)
+        };
+        let (s1, ds1) = sum(lam);
+        let (s2, ds2) = sum(lam + jw * 2.0);
         let big_r = rr * ra * rz;
-        let b = inv_l + m * inv_l2;
+        let b = s1 + m * s2;
         let t = a * big_r * b;
         // ∂/∂λ of R B, then of the whole: ∂k/∂p = ∂h/∂p + ∂A/∂p R B + A ∂(RB)/∂λ ∂λ/∂p.
         let d_big_r = (drr * ra + rr * dra) * rz - big_r * half;
-        let d_rb = d_big_r * b - big_r * (inv_l * inv_l + m * inv_l2 * inv_l2);
+        let d_rb = d_big_r * b + big_r * (ds1 + m * ds2);
         let via_lam = a * d_rb;
         let rb = big_r * b;
         let da = [self.dlam[0] * c, self.dlam[1] * c + s_p * dc_dq];
@@ -430,7 +452,7 @@ fn seg_models(
         let origin = |s: u8, mirror: C32| {
             w.iter()
                 .find(|x| x.seg == s)
-                .map_or(mirror, |x| x.fit.origin(mirror))
+                .map_or(mirror, |x| x.origin(mirror))
         };
         let (k1, dk1) = m0.switch_on(q, f_first as f32, -ds, origin(0, mirror0), &c.filters);
         let (k2, dk2) = m1.switch_on(q, f_second as f32, d2, origin(1, mirror1), &c.filters);
@@ -562,6 +584,21 @@ pub(super) fn evaluate(
         }
         ea = eb;
     }
+    if let Some(rest) = &pb.rest {
+        let (r, cols) = rest.residual(p, jac, &scale);
+        chi2 += rest.w * r.norm_sqr();
+        if jac {
+            let rw = r * rest.w;
+            for i in 0..5 {
+                let ci = cols[i];
+                jtr32[i] += ci.re * rw.re + ci.im * rw.im;
+                let cw = ci * rest.w;
+                for j in 0..i + 1 {
+                    jtj32[i][j] += cw.re * cols[j].re + cw.im * cols[j].im;
+                }
+            }
+        }
+    }
     let normal = Normal {
         jtj: jtj32,
         jtr: jtr32,
@@ -654,6 +691,92 @@ pub(super) struct Problem<'a> {
     pub(super) segs: heapless::Vec<(f64, f64, C32), MAX_SEGMENTS>,
     pub(super) carry: Option<&'a Carry>,
     pub(super) wt: f64,
+    /// The prior on the first segment's start state, when the drive came on from rest.
+    pub(super) rest: Option<RestPrior>,
+}
+
+/// The prior on the state at the first segment's first window: the resonator's response from
+/// rest to the segment's drive switched on `d` seconds earlier, `g K(f0, Q)`,
+/// `K = h + (k − h) e^{λd}` ([`DriveModel::switch_on`]'s `k` from the state 0, the drive's
+/// phase at the switch-on from the segment's origin, `origin` = [`SineFit::origin`] of its first
+/// window), with weight `w` per unit of the windows' weighted squared residual (`1/σ_z²` over
+/// the windows' `1/var`: the same units as the windows' terms of χ²).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct RestPrior {
+    pub(super) f_h: f64,
+    pub(super) d: f32,
+    pub(super) origin: C32,
+    pub(super) filters: Filters,
+    pub(super) w: f32,
+}
+
+impl RestPrior {
+    /// `K(f0, Q)` and its derivatives with respect to (f0, Q).
+    pub(super) fn k(&self, f0: f64, q: f64) -> (C32, [C32; 2]) {
+        let at = Params {
+            f0,
+            q,
+            g: 0.0,
+            z: C64::new(0.0, 0.0),
+        };
+        let m = DriveModel::new(&at, self.f_h);
+        let (k, dk) = m.switch_on(
+            q as f32,
+            self.f_h as f32,
+            self.d,
+            self.origin,
+            &self.filters,
+        );
+        let e = cexp(m.lam * self.d);
+        let t = (k - m.h) * e;
+        let dk = core::array::from_fn(|i| m.dh[i] + (dk[i] - m.dh[i]) * e + t * m.dlam[i] * self.d);
+        (m.h + t, dk)
+    }
+
+    /// The prior's residual `g K − z` at `p` and, with `jac`, its columns over (f0, Q, g, Re z,
+    /// Im z) — those of the model `z − g K` — the first two multiplied by `scale` as
+    /// [`evaluate`]'s.
+    pub(super) fn residual(&self, p: &Params, jac: bool, scale: &[f32; 5]) -> (C32, [C32; 5]) {
+        let g = p.g as f32;
+        let (k, dk) = self.k(p.f0, p.q);
+        let r = k * g - c32(p.z);
+        let zero = C32::new(0.0, 0.0);
+        if !jac {
+            return (r, [zero; 5]);
+        }
+        let cols = [
+            -dk[0] * g * scale[0],
+            -dk[1] * g * scale[1],
+            -k,
+            C32::new(1.0, 0.0),
+            C32::new(0.0, 1.0),
+        ];
+        (r, cols)
+    }
+}
+
+/// The state per unit `g` at `d` seconds after a drive at `f_h` came on with the resonator at
+/// rest, in the frame of a segment whose first window is `first` and whose drive phasor's
+/// [`super::mirror`] factor is `mirror` ([`RestPrior::k`]), for the tests.
+#[cfg(test)]
+pub(crate) fn rest_state(
+    (f0, q): (f64, f64),
+    f_h: f64,
+    d: f64,
+    first: &super::HoldWindow,
+    mirror: C64,
+    filters: &Filters,
+) -> C64 {
+    let fit = SineFit::new(first.phase[0], first.phase[1], f_h, first.len);
+    let r = RestPrior {
+        f_h,
+        d: d as f32,
+        origin: fit.origin(c32(mirror)),
+        filters: *filters,
+        w: 0.0,
+    };
+    let k = r.k(f0, q).0;
+    C64::new(k.re as f64, k.im as f64)
 }
 
 /// `exp(z)` by the `libm` crate's `expf` and [`crate::dsp::trig::sincos`] (`f32` arithmetic
@@ -707,6 +830,7 @@ mod gradcheck {
                 segs: [(f_h, w0, c32(m))].into_iter().collect(),
                 carry: None,
                 wt: 1e14,
+                rest: None,
             };
             let n = evaluate(&pb, &p, true, None).1;
             let (jtj, jtr) = n.unscaled(pb.wt);
@@ -758,7 +882,7 @@ mod gradcheck {
 
     /// The same check for a joint fit of two segments: the state carried through the switch,
     /// the switch's full response ([`DriveModel::switch_on`]) and its derivatives included,
-    /// to 5e-4 of each component.
+    /// and the prior on the start state from rest ([`RestPrior`]), to 5e-4 of each component.
     #[test]
     fn gradient_through_the_switch_matches_finite_differences() {
         use crate::estimate::resonator::{Carry, Filters};
@@ -802,6 +926,14 @@ mod gradcheck {
                 .collect(),
             carry: Some(&carry),
             wt: 1e14,
+            // The start from rest's prior, its derivatives through the switch-on's.
+            rest: Some(RestPrior {
+                f_h: f1,
+                d: 0.004,
+                origin: c32(m1),
+                filters: carry.filters,
+                w: 0.5,
+            }),
         };
         let p = Params {
             f0: 240.6,
