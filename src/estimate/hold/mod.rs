@@ -85,8 +85,10 @@ const MIN_SINGLE_CYCLES: f64 = 4.0;
 /// Relative standard uncertainty given to the seed ring-down's `Q` as the first hold's prior
 /// (a one-stage ring-down of two to four windows measures the decay to 5–20 %).
 const SEED_Q_SD: f64 = 0.25;
-/// Tag of the hold plan (the seed's tags count up from 1).
+/// Tag of the hold plan (the seed's tags count up from 1); the second segment's is one more, a
+/// first segment's continuation ([`FREE_FIRST_WINDOWS`]) two more.
 const HOLD_TAG: u16 = 0xC0DE;
+const MORE_TAG: u16 = HOLD_TAG + 2;
 /// Standard uncertainty of the start state from rest ([`SwitchOn`]), relative to the windows'
 /// admittance scale, with the resonator quiet: what the model leaves out of the response from
 /// rest (the static branch's own switch-on transient, the DAC's codes), above the residue
@@ -95,6 +97,16 @@ const HOLD_TAG: u16 = 0xC0DE;
 const REST_WIDTH: f32 = 0.002;
 /// `Q` of the longest ring a drive can leave behind in the band: the free probe's (about 40).
 const RING_Q: f32 = 40.0;
+/// One-cycle windows a seedless first segment takes when its start from rest is not known (the
+/// drive was on shortly before — a power-on self-test, a reading just ended — and what it may
+/// have left ringing outweighs [`REST_WIDTH`]): with the start state free, two windows do not
+/// place the second segment at the band's edges. The first plan's own windows are continued by
+/// a plan at the same drive ([`MORE_TAG`]; the drive goes on phase-continuously, the window its
+/// switch cuts is dropped).
+const FREE_FIRST_WINDOWS: u16 = 4;
+/// Ring times after which what a drive left is within `√3` [`REST_WIDTH`] (the start from rest's
+/// width within twice its own): `ln(1/(√3 · 0.002))`.
+const UNKNOWN_RING: f32 = 5.67;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Phase {
@@ -142,6 +154,12 @@ pub struct Hold {
     quiet: f32,
     /// The first segment's fit took its start state from rest: the joint fit may too.
     at_rest: bool,
+    /// Windows of the first segment's continuation still to plan (0: none, or planned), and
+    /// whether it has been planned.
+    more: u16,
+    continued: bool,
+    /// The hold's latest plan.
+    plan: PointPlan,
     n_windows: u16,
     segment: u8,
     seeds_tried: u8,
@@ -164,6 +182,16 @@ impl Hold {
                     return None;
                 }
                 self.pending = true;
+                if self.more > 0 {
+                    // The first segment's continuation: its plan, no settle.
+                    self.continued = true;
+                    return Some(PointPlan {
+                        settle_samples: 0,
+                        windows: core::mem::take(&mut self.more),
+                        tag: MORE_TAG,
+                        ..self.plan
+                    });
+                }
                 // Windows of whole cycles, at least two, at most MAX_WINDOWS of them in all; a
                 // first segment (refine) takes at most half of them, the second the rest. A
                 // single hold (no refine segment) takes windows of at least four cycles: five or
@@ -202,7 +230,7 @@ impl Hold {
                     let extra = libm::floor(wait as f64 / window) as u8;
                     self.first_cap = (self.n_windows as u8).saturating_add(extra);
                 }
-                Some(PointPlan {
+                self.plan = PointPlan {
                     ftw: self.ftw,
                     amplitude_codes: self.amplitude,
                     settle_samples: (settle * self.fs) as u32,
@@ -210,7 +238,8 @@ impl Hold {
                     windows: self.n_windows,
                     open,
                     tag: HOLD_TAG + self.segment as u16,
-                })
+                };
+                Some(self.plan)
             }
         }
     }
@@ -228,17 +257,20 @@ impl Hold {
                 }
             }
             Phase::Hold => {
-                if raw.plan.tag == HOLD_TAG && self.segment == 1 {
+                let first_tag = matches!(raw.plan.tag, HOLD_TAG | MORE_TAG);
+                if first_tag && self.segment == 1 {
                     self.accept_late_first(raw, scale);
                     return;
                 }
-                if raw.plan.tag != HOLD_TAG + self.segment as u16 {
+                if raw.plan.tag != HOLD_TAG + self.segment as u16
+                    && !(first_tag && self.segment == 0)
+                {
                     return;
                 }
                 // Each window's current phasor; the drive is steady during a hold, so its monitor
                 // sums are added up and solved once at the end (half the work per window).
                 let s = &raw.sums;
-                if raw.window == 0 {
+                if raw.window == 0 && raw.plan.tag != MORE_TAG {
                     // The frequency switch: when this segment's plan took effect, half a
                     // sample after the windows' time base (a window's samples stand for the
                     // sample periods centred on them — the mean of `k` samples of `e^{λt}` is
@@ -254,6 +286,16 @@ impl Hold {
                             u32::MAX => f32::INFINITY,
                             n => (n as f64 / self.fs) as f32,
                         };
+                        // Not known at rest: the first segment goes on.
+                        if self.seed.is_none() && self.quiet < self.ring_tau() * UNKNOWN_RING {
+                            self.more = FREE_FIRST_WINDOWS.saturating_sub(self.n_windows);
+                            // Its windows and as many late ones as the first plan's.
+                            let late = self.first_cap.saturating_sub(self.n_windows as u8);
+                            self.first_cap = self
+                                .first_cap
+                                .saturating_add(self.more as u8)
+                                .saturating_add(late);
+                        }
                     } else {
                         self.carry.t_switch = t;
                     }
@@ -266,7 +308,18 @@ impl Hold {
                     }
                     None => self.finish(Err(Failure::BadSettings)),
                 }
-                if raw.window + 1 >= self.n_windows && self.phase == Phase::Hold {
+                // The plan's last window (a first segment's continuation: its own last).
+                let last = match raw.plan.tag {
+                    MORE_TAG => raw.window + 1 >= FREE_FIRST_WINDOWS - self.n_windows,
+                    HOLD_TAG if self.continued => false,
+                    _ => raw.window + 1 >= self.n_windows,
+                };
+                if last && self.more > 0 && raw.plan.tag == HOLD_TAG {
+                    // The continuation's turn ([`Self::next_plan`]).
+                    self.pending = false;
+                    return;
+                }
+                if last && self.phase == Phase::Hold {
                     if let Err(f) = self.currents_to_admittances(scale) {
                         self.finish(Err(f));
                         return;
@@ -436,12 +489,16 @@ impl Hold {
     /// drive's history may have left ringing — a drive off for `quiet` seconds leaves at most
     /// `e^{−quiet/τ}` of a steady state at most as large as this one (the methods drive at
     /// their default 5 V), `τ` the longest ring in the band ([`RING_Q`] at its bottom).
+    /// The longest ring in the band, s: [`RING_Q`] at its bottom.
+    fn ring_tau(&self) -> f32 {
+        RING_Q / (core::f32::consts::PI * self.s.band_start.0.max(1.0))
+    }
+
     fn switch_on(&self) -> Option<SwitchOn> {
         if self.seed.is_some() {
             return None;
         }
-        let tau = RING_Q / (core::f32::consts::PI * self.s.band_start.0.max(1.0));
-        let left = libm::expf(-self.quiet / tau);
+        let left = libm::expf(-self.quiet / self.ring_tau());
         Some(SwitchOn {
             t_on: self.t_on,
             filters: self.carry.filters,
@@ -525,6 +582,12 @@ mod tests {
     }
     #[cfg(feature = "sim")]
     fn run_fast_at(scene: hal_sim::Scene, seed: u64, phase: u32) -> Hold {
+        run_fast_after(scene, seed, phase, 0)
+    }
+    /// [`run_fast_at`] after `before` fast holds on the same probe and engine, one after the
+    /// other (the drive off for a batch or two between them).
+    #[cfg(feature = "sim")]
+    fn run_fast_after(scene: hal_sim::Scene, seed: u64, phase: u32, before: usize) -> Hold {
         use crate::reading::driver::{block_on, run_plans, Plans, SyncSource};
         struct P(Hold, FrontEndScale);
         impl Plans for P {
@@ -544,9 +607,15 @@ mod tests {
         let mut engine = crate::engine::SampleEngine::new();
         engine.set_phase(phase);
         let mut src = SyncSource::new(&mut board, &mut engine);
-        let mut m = P(HoldSettings::FAST.validate(&scale).unwrap(), scale);
-        assert!(block_on(run_plans(&mut src, &mut m, |_, _| {})).is_ok());
-        m.0
+        let mut run = || {
+            let mut m = P(HoldSettings::FAST.validate(&scale).unwrap(), scale);
+            assert!(block_on(run_plans(&mut src, &mut m, |_, _| {})).is_ok());
+            m.0
+        };
+        for _ in 0..before {
+            run();
+        }
+        run()
     }
 
     /// The fast hold on the simulated probe (500 kPa, bench noise): its first segment's open
@@ -691,5 +760,32 @@ mod tests {
         std::eprintln!("worst {worst:.5}, mean {mean:.5}, unfiltered {unfiltered:.5}");
         assert!(mean < 0.5 * REST_WIDTH as f64, "mean {mean}");
         assert!(unfiltered > 0.02, "unfiltered {unfiltered}");
+    }
+
+    /// A fast hold right after another (the drive off for a batch or two, as after a power-on
+    /// self-test): its start from rest is not known, so its first segment takes
+    /// [`FREE_FIRST_WINDOWS`] windows, continued by a second plan at the same drive, and reads
+    /// the resonance within 0.05 Hz (bench noise) from 170 kPa to beyond the range (6000 kPa, at
+    /// the band's top); the first of the two, the probe at rest, takes two.
+    #[cfg(feature = "sim")]
+    #[test]
+    fn a_first_segment_not_known_at_rest_takes_more_windows() {
+        for e in [170.0, 500.0, 2500.0, 6000.0] {
+            let scene = hal_sim::Scene::on_modulus_kpa(e).with_noise(hal_sim::NoiseScene::Bench);
+            for seed in 0..4 {
+                let h = run_fast_after(scene, seed, 0, 1);
+                assert!(h.quiet < 0.01, "{e} kPa: quiet {} s", h.quiet);
+                assert!(h.continued, "{e} kPa, seed {seed}");
+                assert!(h.first_len as u16 >= FREE_FIRST_WINDOWS, "{}", h.first_len);
+                let f = h.estimate().unwrap().resonance.0 as f64;
+                let truth = scene.resonance_hz();
+                assert!(
+                    (f - truth).abs() < 0.05,
+                    "{e} kPa, seed {seed}: {f} vs {truth}"
+                );
+                let rested = run_fast_at(scene, seed, 0);
+                assert!(!rested.continued && rested.at_rest, "{e} kPa, seed {seed}");
+            }
+        }
     }
 }
