@@ -638,6 +638,20 @@ mod tests {
         assert_eq!(h.windows().len() - first.len(), h.n_windows as usize);
     }
 
+    /// The quiet scenes the model is held to on `hal_sim`'s exact chain (modulus kPa, loss
+    /// tangent): across the band, lossless and lossy.
+    #[cfg(feature = "sim")]
+    const QUIET_SCENES: [(f64, f64); 8] = [
+        (200.0, 0.0),
+        (500.0, 0.0),
+        (1000.0, 0.0),
+        (2500.0, 0.0),
+        (950.0, 0.41),
+        (170.0, 0.23),
+        (500.0, 0.5),
+        (2300.0, 0.5),
+    ];
+
     /// The joint fit against `hal_sim`'s exactly integrated chain (zero-order hold, both
     /// filters, the resonator) on the quiet scene, the static admittance exact (the settings'
     /// 210 pF is the simulated plate's), the drive coming on at eight phases: with the frequency
@@ -651,14 +665,7 @@ mod tests {
     #[cfg(feature = "sim")]
     #[test]
     fn the_frequency_switch_is_carried_by_the_full_response() {
-        for (e, eta) in [
-            (200.0, 0.0),
-            (500.0, 0.0),
-            (1000.0, 0.0),
-            (2500.0, 0.0),
-            (950.0, 0.41),
-            (500.0, 0.5),
-        ] {
+        for (e, eta) in QUIET_SCENES {
             let scene = hal_sim::Scene::on_modulus_kpa(e)
                 .with_noise(hal_sim::NoiseScene::Quiet)
                 .with_loss_tangent(eta);
@@ -697,16 +704,7 @@ mod tests {
     fn the_start_from_rest_is_the_resonators_response() {
         use crate::estimate::resonator::{rest_state, Filters};
         let (mut worst, mut sum, mut sum_unfiltered, mut n) = (0.0f64, 0.0, 0.0, 0.0);
-        for (e, eta) in [
-            (200.0, 0.0),
-            (500.0, 0.0),
-            (1000.0, 0.0),
-            (2500.0, 0.0),
-            (950.0, 0.41),
-            (170.0, 0.23),
-            (500.0, 0.5),
-            (2300.0, 0.5),
-        ] {
+        for (e, eta) in QUIET_SCENES {
             let scene = hal_sim::Scene::on_modulus_kpa(e)
                 .with_noise(hal_sim::NoiseScene::Quiet)
                 .with_loss_tangent(eta);

@@ -578,16 +578,7 @@ pub(super) fn evaluate(
                 linear(m.dz[3]),
                 linear(m.dz[4]),
             ];
-            let rw = r * x.wl;
-            for i in 0..5 {
-                let ci = cols[i];
-                jtr32[i] += ci.re * rw.re + ci.im * rw.im;
-                let cw = ci * x.wl;
-                // (`0..i + 1`: `0..=i` is an out-of-line iterator call at `opt-level = "z"`.)
-                for j in 0..i + 1 {
-                    jtj32[i][j] += cw.re * cols[j].re + cw.im * cols[j].im;
-                }
-            }
+            add_row(&mut jtj32, &mut jtr32, &cols, r, x.wl);
         }
         ea = eb;
     }
@@ -595,15 +586,7 @@ pub(super) fn evaluate(
         let (r, cols) = rest.residual(p, jac, &scale);
         chi2 += rest.w * r.norm_sqr();
         if jac {
-            let rw = r * rest.w;
-            for i in 0..5 {
-                let ci = cols[i];
-                jtr32[i] += ci.re * rw.re + ci.im * rw.im;
-                let cw = ci * rest.w;
-                for j in 0..i + 1 {
-                    jtj32[i][j] += cw.re * cols[j].re + cw.im * cols[j].im;
-                }
-            }
+            add_row(&mut jtj32, &mut jtr32, &cols, r, rest.w);
         }
     }
     let normal = Normal {
@@ -612,6 +595,21 @@ pub(super) fn evaluate(
         scale,
     };
     (chi2 as f64 * wt, normal)
+}
+
+/// One complex row (a window's, the start's prior) into the normal equations' sums: its
+/// columns `cols`, residual `r` and weight `w`.
+fn add_row(jtj: &mut [[f32; 5]; 5], jtr: &mut [f32; 5], cols: &[C32; 5], r: C32, w: f32) {
+    let rw = r * w;
+    for i in 0..5 {
+        let ci = cols[i];
+        jtr[i] += ci.re * rw.re + ci.im * rw.im;
+        let cw = ci * w;
+        // (`0..i + 1`: `0..=i` is an out-of-line iterator call at `opt-level = "z"`.)
+        for j in 0..i + 1 {
+            jtj[i][j] += cw.re * cols[j].re + cw.im * cols[j].im;
+        }
+    }
 }
 
 /// The normal equations of the fit over (f0, Q, g, Re z, Im z) in `f32`, each column of the
