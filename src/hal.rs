@@ -52,17 +52,24 @@ pub struct FrontEndScale {
     pub amps_per_code: f32,
     /// PZT volts per drive-monitor ADC code.
     pub monitor_volts_per_code: f32,
+    /// Corner of the reconstruction filter between the DAC and the PZT (two real poles).
+    pub reconstruction_corner: Hz,
+    /// Corner of the anti-alias filters before both ADC channels (two real poles each).
+    pub antialias_corner: Hz,
 }
 
 impl FrontEndScale {
     /// The probe's front end (the STM32 board's): 12-bit DAC and ADC on a 3.3 V reference at
-    /// 10 kHz, drive amplifier gain 5, transimpedance 300 kΩ, drive-monitor divider 0.15 — the
+    /// 10 kHz, drive amplifier gain 5, transimpedance 300 kΩ, drive-monitor divider 0.15,
+    /// reconstruction and anti-alias filters of two real poles at 1 kHz — the
     /// front end `hal_sim::FrontEnd::default()` simulates (`board::sim` tests that they agree).
     pub const PROBE: FrontEndScale = FrontEndScale {
         sample_rate: Hz(10_000.0),
         drive_volts_per_code: 5.0 * 3.3 / 4096.0,
         amps_per_code: 3.3 / 4096.0 / 300e3,
         monitor_volts_per_code: 3.3 / 4096.0 / 0.15,
+        reconstruction_corner: Hz(1_000.0),
+        antialias_corner: Hz(1_000.0),
     };
 
     /// Largest drive amplitude in codes (mid-scale to rail).

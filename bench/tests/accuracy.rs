@@ -110,8 +110,8 @@ fn measured_terms_agree_with_their_predictions() {
 /// resonance (measured here from a reading with the free resonance moved by 0.1 Hz), at 300,
 /// 1000 and 2500 kPa in the bench noise (the same noise stream in every reading, so it cancels
 /// in the differences; the quiet front end's noise-free windows read a drift as interference):
-/// within 0.07 of `DRIFT_EPOCH`. The drift moves a 0.13 s reading by only 0.05 Hz, and where its
-/// second segment lands moves with it: the epochs measured scatter by ±0.06 about their mean.
+/// within 0.09 of `DRIFT_EPOCH`. The drift moves a 0.13 s reading by only 0.05 Hz, and where its
+/// second segment lands moves with it: the epochs measured scatter by ±0.08 about their mean.
 /// The reference is the simulator's drift, not the allowance's formula.
 #[test]
 fn a_steady_drift_moves_the_reading_by_its_epoch() {
@@ -140,7 +140,7 @@ fn a_steady_drift_moves_the_reading_by_its_epoch() {
             let k = (f - f0) / (per_hz * rate * t);
             println!("{e} kPa, {rate} Hz/s over {t:.3} s: epoch {k:.3}");
             assert!(
-                (k - DRIFT_EPOCH as f64).abs() < 0.07,
+                (k - DRIFT_EPOCH as f64).abs() < 0.09,
                 "{e} kPa, {rate} Hz/s: {k}"
             );
         }

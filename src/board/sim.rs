@@ -76,6 +76,8 @@ pub fn scale_of(fe: &hal_sim::FrontEnd) -> FrontEndScale {
         drive_volts_per_code: (fe.drive_gain * fe.vref_v / hal_sim::frontend::CODES) as f32,
         amps_per_code: fe.amps_per_code() as f32,
         monitor_volts_per_code: fe.monitor_volts_per_code() as f32,
+        reconstruction_corner: Hz(fe.reconstruction_hz as f32),
+        antialias_corner: Hz(fe.antialias_hz as f32),
     }
 }
 

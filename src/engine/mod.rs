@@ -84,6 +84,15 @@ pub struct PointRaw {
     /// Samples from the start of the batch in which the plan took effect (its frequency switch,
     /// phase-continuous) to the end of this window (saturating).
     pub since_load: u32,
+    /// The drive's phase at the window's first sample (2³² a turn): within one phase step
+    /// (`plan.ftw`) after the cycle boundary the window starts at. The phase after its last
+    /// sample is this plus `ftw` times its samples (`sums.reference.n`), wrapping.
+    pub start_phase: u32,
+    /// Samples the drive had been off (amplitude 0, or no plan) when the plan took effect,
+    /// saturating; [`u32::MAX`] when the engine has not driven since it started; 0: the drive
+    /// was on up to the switch. A drive off for many of the resonator's time constants left it
+    /// at rest.
+    pub quiet_before: u32,
 }
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -93,6 +102,8 @@ struct BatchInfo {
     plan: Option<PointPlan>,
     /// Which load of the engine the batch belongs to ([`SampleEngine::load`] or `stop`).
     load: u32,
+    /// Samples the drive had been off before this batch ([`PointRaw::quiet_before`]).
+    quiet: u32,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -129,6 +140,9 @@ pub enum EngineError {
 pub struct SampleEngine {
     dds: Dds,
     amplitude: i32,
+    /// Samples generated with the drive off since it was last on (saturating; `u32::MAX`: never
+    /// on since the start).
+    quiet: u32,
     plan: Option<PointPlan>,
     pending: Option<Option<PointPlan>>,
     ring: [BatchInfo; RING],
@@ -143,9 +157,13 @@ pub struct SampleEngine {
     stage: Stage,
     sums: LockInSums,
     window: u16,
+    /// The drive's phase at the first sample of the window being integrated.
+    window_phase: u32,
     samples: u64,
     /// Sample count when the demodulated plan took effect.
     load_sample: u64,
+    /// [`BatchInfo::quiet`] of the batch in which the plan being demodulated took effect.
+    load_quiet: u32,
     overruns: u32,
     /// Scratch of [`LockInSums::integrate`]: a run's reference.
     run_reference: [u32; RUN_MAX],
@@ -163,6 +181,7 @@ impl SampleEngine {
         Self {
             dds: Dds { phase: 0, ftw: 0 },
             amplitude: 0,
+            quiet: u32::MAX,
             plan: None,
             pending: None,
             ring: [BatchInfo {
@@ -170,6 +189,7 @@ impl SampleEngine {
                 ftw: 0,
                 plan: None,
                 load: 0,
+                quiet: u32::MAX,
             }; RING],
             generated: 0,
             demodulated: 0,
@@ -202,8 +222,10 @@ impl SampleEngine {
                 monitor_rail_hits: 0,
             },
             window: 0,
+            window_phase: 0,
             samples: 0,
             load_sample: 0,
+            load_quiet: u32::MAX,
             overruns: 0,
             run_reference: [0; RUN_MAX],
         }
@@ -212,6 +234,13 @@ impl SampleEngine {
     /// Ask for `plan`, applied from the next generated batch on (phase-continuous).
     pub fn load(&mut self, plan: PointPlan) {
         self.pending = Some(Some(plan));
+    }
+
+    /// The drive's phase accumulator set to `phase` (a turn is 2³²): the drive comes on at
+    /// whatever phase the engine's previous plans left, which the tests vary.
+    #[cfg(test)]
+    pub(crate) fn set_phase(&mut self, phase: u32) {
+        self.dds.phase = phase;
     }
 
     /// Switch the drive off from the next generated batch on.
@@ -269,6 +298,12 @@ impl SampleEngine {
             ftw: self.dds.ftw,
             plan: self.plan,
             load: self.loads,
+            quiet: self.quiet,
+        };
+        self.quiet = if self.amplitude == 0 {
+            self.quiet.saturating_add(dac.len() as u32)
+        } else {
+            0
         };
         self.generated = self.generated.wrapping_add(1);
         let amp = self.amplitude;
@@ -338,7 +373,8 @@ impl SampleEngine {
             rest = rest.get(used..).unwrap_or_default();
             self.samples += used as u64;
             if wrapped {
-                if let Some(p) = self.boundary(&info) {
+                // `phase` is now the next sample's: the first of a window that starts here.
+                if let Some(p) = self.boundary(&info, phase) {
                     closed += 1;
                     if closed <= MAX_POINTS_PER_BATCH {
                         point(p);
@@ -365,6 +401,7 @@ impl SampleEngine {
             self.demod_tag = tag;
             self.demod_load = info.load;
             self.load_sample = self.samples;
+            self.load_quiet = info.quiet;
             self.sums = LockInSums::default();
             self.window = 0;
             self.stage = match info.plan {
@@ -375,14 +412,15 @@ impl SampleEngine {
         info
     }
 
-    /// The stage change at a cycle boundary (a sample whose phase step wrapped): integration
-    /// starts, or a cycle is counted, or the window closes and is returned (and the next one
-    /// starts when the plan has more, or is open).
-    fn boundary(&mut self, info: &BatchInfo) -> Option<PointRaw> {
+    /// The stage change at a cycle boundary (a sample whose phase step wrapped; `phase` the
+    /// next sample's): integration starts, or a cycle is counted, or the window closes and is
+    /// returned (and the next one starts when the plan has more, or is open).
+    fn boundary(&mut self, info: &BatchInfo, phase: u32) -> Option<PointRaw> {
         match self.stage {
             Stage::AwaitBoundary => {
                 let cycles = info.plan.map_or(0, |p| p.cycles);
                 self.stage = Stage::Integrating(cycles);
+                self.window_phase = phase;
                 None
             }
             Stage::Integrating(k) if k <= 1 => {
@@ -395,11 +433,14 @@ impl SampleEngine {
                     window: self.window,
                     since_load: (self.samples.saturating_sub(self.load_sample)).min(u32::MAX as u64)
                         as u32,
+                    start_phase: self.window_phase,
+                    quiet_before: self.load_quiet,
                 };
                 if plan.open || self.window.saturating_add(1) < plan.windows {
                     self.window = self.window.saturating_add(1);
                     self.sums = LockInSums::default();
                     self.stage = Stage::Integrating(plan.cycles);
+                    self.window_phase = phase;
                 }
                 Some(point)
             }
@@ -483,22 +524,36 @@ mod tests {
         assert!(!e.busy());
     }
 
-    /// Consecutive windows follow each other without a gap.
+    /// Consecutive windows follow each other without a gap, each starting at the first sample
+    /// after a cycle boundary: its `start_phase` is the drive's phase at that sample (sample
+    /// `k` of a drive loaded from phase 0 plays phase `k · ftw`), within one step after the
+    /// boundary, and the next window's is this one's `n` steps on.
     #[test]
     fn consecutive_windows() {
         // 241 Hz, 800 codes, settle 10 samples, 2 cycles a window, six windows, tag 3.
         let mut e = loaded(241.0, 800, 10, 2, 6, 3);
+        let ftw = tuning_word(241.0, 10_000.0);
         let mut got = std::vec::Vec::new();
         for _ in 0..40 {
             got.extend(loopback_batch(&mut e));
         }
         assert_eq!(got.len(), 6);
+        for w in &got {
+            let first = w.end_sample - w.sums.reference.n as u64;
+            assert_eq!(w.start_phase, (first as u32).wrapping_mul(ftw));
+            assert!(w.start_phase < ftw, "{w:?}");
+        }
         for (k, w) in got.windows(2).enumerate() {
             assert_eq!(w[0].window as usize, k);
             // The next window ends exactly its own length after the previous one.
             assert_eq!(
                 w[1].end_sample - w[0].end_sample,
                 w[1].sums.reference.n as u64
+            );
+            let n = w[0].sums.reference.n;
+            assert_eq!(
+                w[1].start_phase,
+                w[0].start_phase.wrapping_add(ftw.wrapping_mul(n))
             );
         }
         assert!(!e.busy());
@@ -556,7 +611,7 @@ mod tests {
             let wrapped = next < phase;
             phase = next;
             e.samples += 1;
-            if let Some(p) = wrapped.then(|| e.boundary(&info)).flatten() {
+            if let Some(p) = wrapped.then(|| e.boundary(&info, phase)).flatten() {
                 if out.push(p).is_err() {
                     e.overruns = e.overruns.saturating_add(1);
                 }

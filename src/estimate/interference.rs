@@ -444,6 +444,7 @@ mod tests {
             len,
             y: Complex64::new(0.0, 0.0),
             var: 1.0,
+            phase: [0, 0],
         });
         let noise: [C32; 14] = core::array::from_fn(|_| C32::new(gauss() as f32, gauss() as f32));
         let seg = Segment {

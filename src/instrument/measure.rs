@@ -378,6 +378,8 @@ mod tests {
             end_sample: 0,
             window: 0,
             since_load: 0,
+            start_phase: 0,
+            quiet_before: 0,
         }
     }
 

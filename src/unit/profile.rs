@@ -155,7 +155,7 @@ pub const FREE_RESONANCE_DRIFT_HZ_S: f32 = 0.3;
 /// `bench/tests/accuracy.rs::a_steady_drift_moves_the_reading_by_its_epoch` measures). Uniform weighting
 /// would give 0.5; hold's information builds up with the response, so its later windows weigh
 /// more.
-pub const DRIFT_EPOCH: f32 = 0.63;
+pub const DRIFT_EPOCH: f32 = 0.61;
 
 /// The free resonance's allowance of a reading that took `probe_time`:
 /// [`FREE_RESONANCE_ALLOWANCE`] and [`FREE_RESONANCE_DRIFT_HZ_S`] × [`DRIFT_EPOCH`] ×

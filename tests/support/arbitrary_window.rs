@@ -54,5 +54,7 @@ fn arbitrary_window(
         end_sample,
         window,
         since_load: 0,
+        start_phase: 0,
+        quiet_before: 0,
     }
 }

@@ -110,12 +110,10 @@ pub const SAMPLE_RATE_HZ: u32 = 10_000;
 
 /// Converter scale of the probe's front end on this board: 12-bit DAC and ADC on a 3.3 V
 /// reference, drive amplifier gain 5, transimpedance 300 kΩ, drive monitor divider 0.15 — the
-/// same front end `hal_sim::FrontEnd::default()` simulates.
+/// same front end `hal_sim::FrontEnd::default()` simulates ([`FrontEndScale::PROBE`]).
 pub const SCALE: FrontEndScale = FrontEndScale {
     sample_rate: Hz(SAMPLE_RATE_HZ as f32),
-    drive_volts_per_code: 5.0 * 3.3 / 4096.0,
-    amps_per_code: 3.3 / 4096.0 / 300e3,
-    monitor_volts_per_code: 3.3 / 4096.0 / 0.15,
+    ..FrontEndScale::PROBE
 };
 
 /// The board's converter scale.

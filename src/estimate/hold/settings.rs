@@ -5,7 +5,7 @@ use crate::dsp::dds::{frequency_hz, tuning_word};
 use crate::engine::sweep::{
     amplitude_codes, check_band, check_durations, check_frequency, SettingsError,
 };
-use crate::estimate::resonator::{first_cycles, Carry, FIRST_WINDOWS};
+use crate::estimate::resonator::{first_cycles, Carry, Filters, FIRST_WINDOWS};
 use crate::estimate::ringdown::RingdownSettings;
 use crate::hal::FrontEndScale;
 use crate::units::{Farads, Hz, Seconds, Siemens, Volts};
@@ -60,23 +60,23 @@ impl HoldSettings {
         static_conductance: Siemens(0.0),
     };
 
-    /// The fast hold, auto's first stage (`measure::auto_hold`): no seed ring-down; a 20 ms
-    /// first segment at `seed` (the band centre): the filters' settle and four one-cycle
-    /// windows, whose searched fit places the second; its plan stays open, so that its windows
-    /// go on while the second's plan passes the DAC's pipeline; 100 ms on that estimate; both
-    /// segments in one fit. 134.6 ms in all at 500 kPa (9.8 τ), 1.28× the Cramér–Rao bound
-    /// (`docs/speed-accuracy.md`).
+    /// The fast hold, auto's first stage (`measure::auto_hold`): no seed ring-down; an 11.5 ms
+    /// first segment at `seed` (the band centre): the filters' settle and two one-cycle windows,
+    /// whose searched fit — the start state the resonator's response from rest — places the
+    /// second; its plan stays open, so that its windows go on while the second's plan passes the
+    /// DAC's pipeline; the rest of 120 ms on that estimate; both segments in one fit
+    /// (`docs/speed-accuracy.md`, `docs/methods.md`).
     pub const FAST: Self = Self {
         seed_burst: Seconds(0.0),
         seed_ring: Seconds(0.0),
-        refine: Seconds(0.02),
+        refine: Seconds(0.0115),
         hold: Seconds(0.12),
         ..Self::DEFAULT
     };
 
     /// The shortest first segment of a hold with no seed driven at `seed` on a front end
-    /// sampling at `fs`: the filters' settle and three of the first segment's windows (the
-    /// fewest its searched fit takes, [`first_cycles`] each), s.
+    /// sampling at `fs`: the filters' settle and [`FIRST_WINDOWS`] of the first segment's
+    /// windows (the fewest its searched fit takes, [`first_cycles`] each), s.
     pub fn min_first(seed: Hz, fs: Hz) -> Seconds {
         let f = seed.0.max(1.0);
         let cycles = first_cycles(f as f64, fs.0 as f64) as f32;
@@ -174,7 +174,14 @@ impl HoldSettings {
             carry: Carry {
                 t_switch: 0.0,
                 rho: C64::new(1.0, 0.0),
+                filters: Filters::of(scale),
             },
+            t_on: 0.0,
+            quiet: f32::INFINITY,
+            at_rest: false,
+            more: 0,
+            plan: Default::default(),
+            continued: false,
             n_windows: 0,
             segment: 0,
             seeds_tried: 1,

@@ -56,6 +56,7 @@ pub(super) fn synthetic(
             len,
             y: y_s + demodulate(&y, C64::new(1.0, 0.0), 4.0),
             var: 1e-24,
+            phase: [0, 0],
         };
     }
     out
@@ -138,6 +139,7 @@ pub(super) fn stepped_two(
                 // 1e-4 of the motional peak: noise-free data weighted as a long
                 // hold's.
                 var: 2e-22,
+                phase: [0, 0],
             };
         }
     };

@@ -20,12 +20,14 @@
 //! the drive model, χ² and its Jacobian, the normal equations and the covariance. `solver`: the
 //! starts (linear, given, searched) and the Levenberg–Marquardt iteration.
 
-mod model;
+pub(crate) mod model;
 mod solver;
 
 #[cfg(test)]
 mod fixtures;
 
+#[cfg(test)]
+pub(crate) use model::rest_state;
 pub use solver::{fit, fit_searched, fit_two};
 
 use super::Estimate;
@@ -39,8 +41,10 @@ use num_complex::Complex64 as C64;
 pub const MAX_WINDOWS: usize = 16;
 
 /// Windows of a hold's first segment with no seed: the fewest its searched fit takes
-/// ([`fit_searched`]; `hold::HoldSettings::min_first`).
-pub(crate) const FIRST_WINDOWS: usize = 3;
+/// ([`fit_searched`]; `hold::HoldSettings::min_first`): four numbers for `f0`, `g` and the start
+/// state with the start from rest ([`SwitchOn`]) and the prior on `Q`; with the state free,
+/// only a rough placement for the second segment.
+pub(crate) const FIRST_WINDOWS: usize = 2;
 
 /// Whole cycles of the shortest window the engine passes on at `f` Hz sampled at `fs` (a
 /// hold's first segment's, a tracker segment's): the fewest that span half a batch
@@ -74,11 +78,16 @@ pub(crate) fn current_window(raw: &PointRaw, scale: &FrontEndScale, fs: f64) -> 
     let (value, variance) = solve_value(&s.current, &s.reference)?;
     let ai = scale.amps_per_code as f64;
     let len = s.reference.n as f64 / fs;
+    // The window's span in the windows' time base (each sample the period centred on it)
+    // starts half a phase step before its first sample's phase and ends `n` steps later.
+    let ftw = raw.plan.ftw;
+    let start = raw.start_phase.wrapping_sub(ftw / 2);
     Some(HoldWindow {
         t0: raw.end_sample as f64 / fs - len,
         len,
         y: value * ai,
         var: variance * ai * ai,
+        phase: [start, start.wrapping_add(ftw.wrapping_mul(s.reference.n))],
     })
 }
 
@@ -109,6 +118,11 @@ pub struct HoldWindow {
     pub y: C64,
     /// Variance of each component of `y` (the window's sine-fit residual), S².
     pub var: f64,
+    /// The drive's reference phase at the window's start and at its end (2³² a turn), in the
+    /// windows' time base: a window starts within a sample's phase step of its cycle boundary
+    /// and spans whole cycles to within one step, which its sine fit's view of a transient
+    /// depends on ([`mirror`]). `[0, 0]`: whole cycles from the boundary.
+    pub phase: [u32; 2],
 }
 
 /// A hold fit: the estimate and the standard uncertainty of its `Q`.
@@ -127,6 +141,9 @@ pub struct HoldFit {
     /// The fitted motional peak conductance `g` (S) and state `z` at the start of the first
     /// window (S): a joint fit that takes these windows goes on from them ([`fit_two`]).
     pub linear: (f64, C64),
+    /// The start state was the resonator's response from rest ([`SwitchOn`]); false when no
+    /// switch-on was given or the windows disagreed with it.
+    pub at_rest: bool,
 }
 
 /// One segment of a hold: consecutive windows driven at one frequency `f_h`, with the static
@@ -151,7 +168,10 @@ pub struct Segment<'a> {
 /// counter-rotating (mirror) image. A steady `c` leaves no image over whole cycles; a transient
 /// `T e^{λt}` does: `mirror · conj(T e^{λ a}) · (e^{λ̄ L} − 1) / ((λ̄ − j4π f_h) L)` in the
 /// admittance, about `|λ| / (4 ω_h)` of the transient (2 % at `Q` 10), which, left out of the
-/// model, biases a detuned first segment's `f0` by 4 % of the detuning.
+/// model, biases a detuned first segment's `f0` by 4 % of the detuning. A window that starts
+/// off its cycle boundary and spans whole cycles only to within a phase step
+/// ([`HoldWindow::phase`]) sees the transient through its sine fit's normal equations
+/// (`model::SineFit`).
 pub fn mirror(v: C64) -> C64 {
     let n = v.norm_sqr();
     if n > 0.0 && n.is_finite() {
@@ -170,10 +190,57 @@ const MAX_SEGMENTS: usize = 2;
 /// admittance in the second's).
 #[derive(Clone, Copy, Debug)]
 pub struct Carry {
-    /// Time of the frequency switch, s.
+    /// Time of the frequency switch, s, in the windows' time base, whose windows each stand for
+    /// the sample periods centred on their samples: half a sample after the time of the
+    /// sample from which the new drive's first code holds.
     pub t_switch: f64,
     /// Ratio of the first segment's drive phasor to the second's.
     pub rho: C64,
+    /// The front end the switch passes through.
+    pub filters: Filters,
+}
+
+/// The front end between the drive's samples and the measured current as a switch sees it
+/// (`model::DriveModel::switch_on`): the DAC's zero-order hold, the reconstruction filter
+/// between the DAC and the PZT and the anti-alias filter before the ADC, two real poles each
+/// (the drive monitor passes an anti-alias filter identical to the current's).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Filters {
+    /// The hold's length (the sample period), s.
+    pub t_hold: f32,
+    /// Reconstruction filter's corner, rad/s.
+    pub w_r: f32,
+    /// Anti-alias filter's corner, rad/s.
+    pub w_a: f32,
+}
+
+/// The drive's switch-on before a first segment with the resonator at rest: the segment's start
+/// state is the resonator's response from rest (`model::DriveModel::switch_on` from the state 0,
+/// a function of `f0`, `Q`, `g` and the drive), known to within `width` of the windows'
+/// admittance scale (the model's own residue and what the drive's history may have left
+/// ringing). The fit takes it as a prior and drops it when the windows disagree
+/// ([`HoldFit::at_rest`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SwitchOn {
+    /// When the drive came on, s, in the windows' time base (as [`Carry::t_switch`]).
+    pub t_on: f64,
+    /// The front end the switch-on passes through.
+    pub filters: Filters,
+    /// The prior's standard uncertainty of each component of the start state, relative to the
+    /// largest windowed admittance less its static part.
+    pub width: f32,
+}
+
+impl Filters {
+    /// The filters of a front end.
+    pub fn of(scale: &crate::hal::FrontEndScale) -> Self {
+        let w = |f: crate::units::Hz| 2.0 * core::f32::consts::PI * f.0;
+        Self {
+            t_hold: 1.0 / scale.sample_rate.0.max(1.0),
+            w_r: w(scale.reconstruction_corner),
+            w_a: w(scale.antialias_corner),
+        }
+    }
 }
 
 #[cfg(test)]

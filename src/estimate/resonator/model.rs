@@ -2,7 +2,7 @@
 //! transient and their derivatives), the state carried between segments, χ² with its Jacobian,
 //! the normal equations and the covariance.
 
-use super::{Carry, Segment, MAX_SEGMENTS, MAX_WINDOWS};
+use super::{Carry, Filters, Segment, MAX_SEGMENTS, MAX_WINDOWS};
 use num_complex::Complex64 as C64;
 
 /// A window as the fit's inner loop uses it: start relative to its segment's first window,
@@ -18,6 +18,141 @@ pub(super) struct Win32 {
     /// Weight relative to a window of the mean length (the noise variance of a window's mean
     /// falls as its length).
     pub(super) wl: f32,
+    /// The sine fit's view of the window ([`SineFit`]).
+    fit: SineFit,
+}
+
+/// How the lock-in's sine fit (`Re(P e^{jφ}) +` offset, least squares over the window:
+/// [`crate::dsp::lockin::solve_value`]) sees a varying current over a window that starts at
+/// the drive's phase `φ_a` and ends at `φ_b` ([`super::HoldWindow::phase`]), within a phase
+/// step of whole cycles: `e^{jφ_a}`, `e^{j(φ_b − φ_a)}`, and the means `m1 = ⟨e^{−jφ}⟩`,
+/// `m2 = ⟨e^{−2jφ}⟩` over the window, which set the fit's normal equations. For a current
+/// `Re(c(t) e^{jφ})` the fit's `P` solves `p P + q P̄ = R`, `p = 1 − |m1|²`, `q = m2 − m1²`,
+/// `R = ⟨c⟩ + ⟨c̄ e^{−2jφ}⟩ − 2 m1 ⟨Re(c e^{jφ})⟩` (the normal equations of the cosine, the
+/// sine and the offset over the window's span, the samples' sums as its integral: their
+/// difference is of order `(ω T)²`). A steady `c` comes out exact; whole cycles from phase 0
+/// (`m1 = m2 = 0`) leave `⟨c⟩ + ⟨c̄ e^{−2jφ}⟩`. Ours, from the least-squares normal
+/// equations.
+#[derive(Clone, Copy, Debug, Default)]
+struct SineFit {
+    u1: C32,
+    rb: C32,
+    /// `e^{−2jφ_a}` and `e^{−2j(φ_b − φ_a)}`.
+    pa: C32,
+    pb: C32,
+    m1: C32,
+    q: C32,
+    p: f32,
+    inv_det: f32,
+}
+
+impl Win32 {
+    /// [`SineFit::transient`] of this window.
+    pub(super) fn transient(&self, decay: C32, r: &Rates, jac: bool) -> [C32; 4] {
+        self.fit.transient(decay, self.len, r, jac)
+    }
+
+    /// [`SineFit::origin`] of this window.
+    pub(super) fn origin(&self, mirror: C32) -> C32 {
+        self.fit.origin(mirror)
+    }
+}
+
+impl SineFit {
+    /// The fit of a window of `len` s at `f_h` Hz from phase `pa` to `pb` (2³² a turn).
+    fn new(pa: u32, pb: u32, f_h: f64, len: f64) -> Self {
+        let turn = |phi: u32| {
+            // The phase in (−π, π]: the full turn's bits kept in f32's 24.
+            let x = (phi as i32 as f32) * (core::f32::consts::TAU / 4_294_967_296.0);
+            let (sin, cos) = crate::dsp::trig::sincos(x);
+            C32::new(cos, sin)
+        };
+        let (u1, ub) = (turn(pa), turn(pb));
+        // ⟨e^{−jkφ}⟩ = (e^{−jkφ_b} − e^{−jkφ_a}) / (−jkωL) = (…) · j/(kωL).
+        let wl = (2.0 * core::f64::consts::PI * f_h * len) as f32;
+        let mean = |k: f32, a: C32, b: C32| (b - a) * C32::new(0.0, 1.0 / (k * wl));
+        let m1 = mean(1.0, u1.conj(), ub.conj());
+        let m2 = mean(2.0, (u1 * u1).conj(), (ub * ub).conj());
+        let p = 1.0 - m1.norm_sqr();
+        let q = m2 - m1 * m1;
+        let det = p * p - q.norm_sqr();
+        let rb = ub * u1.conj();
+        Self {
+            u1,
+            rb,
+            pa: (u1 * u1).conj(),
+            pb: (rb * rb).conj(),
+            m1,
+            q,
+            p,
+            inv_det: if det > 0.0 { 1.0 / det } else { 1.0 },
+        }
+    }
+
+    /// What the fit makes of a transient `tr e^{λs}` over the window (`s` from its start, `tr`
+    /// there) in the admittance: `α tr + mirror β conj(tr)`, `mirror` the drive phasor's
+    /// ([`super::mirror`]), with `decay = e^{λL}` and the segment's [`Rates`]; and (`jac`) the
+    /// derivatives `α' = dα/dλ`, `β' = dβ/dλ̄`. The means over the window: `E = ⟨e^{λs}⟩`,
+    /// `P = ⟨e^{λ̄s} e^{−2jφ}⟩`, `B = ⟨e^{λs} e^{jφ}⟩`;
+    /// `α = (p (E − m1 B) − q (P̄ − m̄1 B)) / det`, `β = (p (P − m1 B̄) − q (Ē − m̄1 B̄)) / det`,
+    /// `det = p² − |q|²`.
+    fn transient(&self, decay: C32, len: f32, r: &Rates, jac: bool) -> [C32; 4] {
+        let one = C32::new(1.0, 0.0);
+        let pa = self.pa;
+        let end_p = pa * decay.conj() * self.pb;
+        let end_b = self.u1 * decay * self.rb;
+        let e = (decay - one) * r.inv_lam / len;
+        let pm = (end_p - pa) * r.inv_mu / len;
+        let b = (end_b - self.u1) * r.inv_lw / len;
+        let (p, q, m1) = (self.p, self.q, self.m1);
+        let comb = |e: C32, pm: C32, b: C32| {
+            let eb = e - m1 * b;
+            (
+                (eb * p - q * (pm.conj() - m1.conj() * b)) * self.inv_det,
+                ((pm - m1 * b.conj()) * p - q * eb.conj()) * self.inv_det,
+            )
+        };
+        let (alpha, beta) = comb(e, pm, b);
+        if !jac {
+            return [alpha, beta, C32::new(0.0, 0.0), C32::new(0.0, 0.0)];
+        }
+        // d/dλ of (e^{λL} − 1)/(λL), (e^{(λ+jω)L} − 1)/((λ + jω)L) and d/dλ̄ of P: each
+        // (its end value − itself) over its exponent.
+        let de = (decay - e) * r.inv_lam;
+        let dpm = (end_p - pm) * r.inv_mu;
+        let db = (end_b - b) * r.inv_lw;
+        // α' takes P̄'s derivative in λ (conj of P's in λ̄); β' takes Ē's and B̄'s in λ̄.
+        let eb = de - m1 * db;
+        let d_alpha = (eb * p - q * (dpm.conj() - m1.conj() * db)) * self.inv_det;
+        let d_beta = ((dpm - m1 * db.conj()) * p - q * eb.conj()) * self.inv_det;
+        [alpha, beta, d_alpha, d_beta]
+    }
+
+    /// `mirror · e^{−2jφ_a}`: the drive's counter-rotating phase at the window's start.
+    fn origin(&self, mirror: C32) -> C32 {
+        mirror * self.pa
+    }
+}
+
+/// A segment's rates for [`SineFit::transient`]: `1/λ`, `1/μ` ([`DriveModel::mu`]) and
+/// `1/(λ + jω)`.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Rates {
+    inv_lam: C32,
+    inv_mu: C32,
+    inv_lw: C32,
+}
+
+impl Rates {
+    pub(super) fn of(m: &DriveModel) -> Self {
+        let one = C32::new(1.0, 0.0);
+        // λ + jω = (λ + conj(μ)) / 2, conj(μ) = λ + 2jω.
+        Self {
+            inv_lam: one / m.lam,
+            inv_mu: one / m.mu,
+            inv_lw: one / ((m.lam + m.mu.conj()) * 0.5),
+        }
+    }
 }
 
 /// The segments' windows in `f32` (less their static admittance), the scale of their
@@ -51,6 +186,7 @@ pub(super) fn prepare(segs: &[Segment]) -> (heapless::Vec<Win32, MAX_WINDOWS>, f
                 gap: k == 0 || libm::fabs(a - next) > 1e-6,
                 seg: s as u8,
                 wl: len / mean32,
+                fit: SineFit::new(x.phase[0], x.phase[1], seg.f_h, x.len),
             });
             next = a + x.len;
         }
@@ -157,6 +293,95 @@ impl DriveModel {
     }
 }
 
+impl DriveModel {
+    /// What a switch-on of this drive leaves beyond the envelope's limit, per unit `g`: the
+    /// resonator's free response at its pole `s_p = λ + jω` to the drive `Re(U e^{jωt})` switched
+    /// on at `t = 0` from rest, through the front end's filters, divided by the measured drive
+    /// `H(jω) U` and expressed as a start state, less the envelope's start state from rest (0):
+    ///
+    /// `k = h + T`,  `T = A R [S(λ) + M S(λ + 2jω)]`,  `A = (ω0/Q) s_p / (2j ω_d)` (the pole's
+    /// residue of the motional admittance `(g ω0/Q) s / ((s − s_p)(s − s̄_p))` per `g`),
+    /// `R = H(s_p)/H(jω)`, `M = mirror · (H/H̄)(jω) · e^{2jωd}` (`Ū/U` at the switch-on, `d`
+    /// seconds before the segment's frame origin, whose drive phase `mirror` carries:
+    /// [`SineFit::origin`]), `S(x) = T/(1 − e^{−xT})` the sum over the switched sine's samples
+    /// (its Laplace transform at the pole: `1/x + T/2 + O(xT²)`, where the continuous sine has
+    /// `1/x`),
+    ///
+    /// `H` the zero-order hold `(1 − e^{−sT})/(sT)` of the DAC (sample period `T`), the
+    /// reconstruction filter and the anti-alias filter (two real poles each). In the envelope's
+    /// limit `T → −h` (`R → 1`, `M → 0`) and `k → 0`. Ours, from the equation of motion and
+    /// the Laplace transform of the sampled switched sine through the hold; `hal_sim::plant`
+    /// integrates the same chain exactly (tests `the_frequency_switch_is_carried_by_the_full_response`,
+    /// `the_start_from_rest_is_the_resonators_response`). Returns `k` and its derivatives with
+    /// respect to (f0, Q).
+    pub(super) fn switch_on(
+        &self,
+        q: f32,
+        f_h: f32,
+        d: f32,
+        mirror: C32,
+        filters: &Filters,
+    ) -> (C32, [C32; 2]) {
+        use core::f32::consts::PI as PI32;
+        let one = C32::new(1.0, 0.0);
+        let w = 2.0 * PI32 * f_h;
+        let jw = C32::new(0.0, w);
+        let lam = self.lam;
+        let s_p = lam + jw;
+        // A = s_p (ω0/Q)/(2j ω_d) = s_p c, c = 1/(2j Q sqrt(1 − 1/(4Q²))) (no f0 in c).
+        let root2 = (1.0 - 0.25 / (q * q)).max(1e-12);
+        let c = one / C32::new(0.0, 2.0 * q * crate::dsp::trig::sqrtf(root2));
+        let dc_dq = -c * (1.0 / q + 0.25 / (q * q * q * root2));
+        let a = s_p * c;
+        // One filter's two poles: `r² = 1/(1 + λ/(ω_c + jω))²`, the ratio of its response at
+        // s_p to that at jω, its derivative in λ `−2 r³/(ω_c + jω)`, and its phase turn
+        // `(H/H̄)(jω) = ((1 − jω/ω_c)/(1 + jω/ω_c))²`.
+        let pole = |w_c: f32| {
+            let k = one / C32::new(w_c, w);
+            let r = one / (one + lam * k);
+            let t = C32::new(1.0, -w / w_c) / C32::new(1.0, w / w_c);
+            (r * r, -r * r * r * k * 2.0, t * t)
+        };
+        let (rr, drr, tr) = pole(filters.w_r);
+        let (ra, dra, ta) = pole(filters.w_a);
+        // The hold: `H(s_p)/H(jω) = e^{−λT/2} · sinh(s_pT/2)/(s_pT/2) · (jωT/2)/sin(ωT/2)`
+        // = `e^{−λT/2}` to `(λT)²/24` (1e-5 in any band the engine drives), its derivative in λ
+        // `−T/2` of it, its phase turn `e^{−jωT}`.
+        let half = 0.5 * filters.t_hold;
+        let rz = cexp(-lam * half);
+        let (sz, cz) = crate::dsp::trig::sincos(-w * filters.t_hold);
+        let (sn, cs) = crate::dsp::trig::sincos(2.0 * w * d);
+        let m = mirror * tr * ta * C32::new(cz, sz) * C32::new(cs, sn);
+        // The samples' sums `S(x) = T y/(1 − e^{−y})/y` (`y = xT`) by the Bernoulli series of
+        // `y/(1 − e^{−y})`, `1 + y/2 + y²/12 − y⁴/720`, and `dS/dx = T² (−1/y² + 1/12 − y²/240)`:
+        // no cancellation in f32 where `λT` is small; `|y| < 0.4` in any band the engine drives,
+        // where the series' remainder `y⁶/30240` is below 2e-7.
+        let sum = |x: C32| {
+            let t = filters.t_hold;
+            let y = x * t;
+            let inv = one / y;
+            let y2 = y * y;
+            (
+                (inv + 0.5 + y * (one / 12.0 - y2 / 720.0)) * t,
+                (one / 12.0 - inv * inv - y2 / 240.0) * (t * t),
+            )
+        };
+        let (s1, ds1) = sum(lam);
+        let (s2, ds2) = sum(lam + jw * 2.0);
+        let big_r = rr * ra * rz;
+        let b = s1 + m * s2;
+        let t = a * big_r * b;
+        // ∂/∂λ of R B, then of the whole: ∂k/∂p = ∂h/∂p + ∂A/∂p R B + A ∂(RB)/∂λ ∂λ/∂p.
+        let d_big_r = (drr * ra + rr * dra) * rz - big_r * half;
+        let d_rb = d_big_r * b + big_r * (ds1 + m * ds2);
+        let via_lam = a * d_rb;
+        let rb = big_r * b;
+        let da = [self.dlam[0] * c, self.dlam[1] * c + s_p * dc_dq];
+        let dk = core::array::from_fn(|i| self.dh[i] + da[i] * rb + via_lam * self.dlam[i]);
+        (self.h + t, dk)
+    }
+}
+
 /// One segment's constants for the inner loop: the model at its drive, its initial state `z`
 /// and that state's derivatives `dz` with respect to (f0, Q, g, Re z₀, Im z₀) — `z₀` itself for
 /// the first segment, the carried state for the second.
@@ -165,39 +390,38 @@ struct SegModel {
     gh: C32,
     g_dh: [C32; 2],
     lam: C32,
-    inv_lam: C32,
     dl: [C32; 2],
     z: C32,
     dz: [C32; 5],
-    /// The segment's [`super::mirror`] factor and `1/μ` of [`DriveModel::mu`].
+    /// The segment's [`super::mirror`] factor and its [`Rates`].
     mirror: C32,
-    inv_mu: C32,
+    rates: Rates,
 }
 
 impl SegModel {
     fn new(g: f32, m: &DriveModel, z: C32, dz: [C32; 5], mirror: C32) -> Self {
-        let one = C32::new(1.0, 0.0);
         Self {
             h: m.h,
             gh: m.h * g,
             g_dh: [m.dh[0] * g, m.dh[1] * g],
             lam: m.lam,
-            inv_lam: one / m.lam,
             dl: m.dlam,
             z,
             dz,
             mirror,
-            inv_mu: one / m.mu,
+            rates: Rates::of(m),
         }
     }
 }
 
 /// The segments' models at `p`: the first starts from `p.z`; the second (with `carry`) from
-/// the first's state carried to the switch and on under the second's drive to its first window.
+/// the first's state carried to the switch and on under the second's drive to its first window
+/// (the drive's phase at each segment's origin from its first window in `w`).
 fn seg_models(
     p: &Params,
     segs: &[(f64, f64, C32)],
     carry: Option<&Carry>,
+    w: &[Win32],
 ) -> heapless::Vec<SegModel, MAX_SEGMENTS> {
     let zero = C32::new(0.0, 0.0);
     let one = C32::new(1.0, 0.0);
@@ -221,16 +445,35 @@ fn seg_models(
         let rho = c32(c.rho);
         // To the switch under the first drive, then to the second's first window under its own.
         let (u, du, eu) = m0.advance(g, z0, (c.t_switch - t_first).max(0.0) as f32);
-        let (z1, dz1, e1) = m1.advance(g, rho * u, (t_second - c.t_switch).max(0.0) as f32);
+        let (ds, d2) = (
+            (c.t_switch - t_first).max(0.0) as f32,
+            (t_second - c.t_switch).max(0.0) as f32,
+        );
+        let (z1, dz1, e1) = m1.advance(g, rho * u, d2);
         let via = rho * e1;
+        // The switch beyond the envelope's limit: drive 1 switched off (its switch-on's `k`
+        // with the phase it has there, `ds` after the first segment's origin), drive 2 switched
+        // on, the difference carried to the second segment's origin
+        // ([`DriveModel::switch_on`]).
+        let q = p.q as f32;
+        let origin = |s: u8, mirror: C32| {
+            w.iter()
+                .find(|x| x.seg == s)
+                .map_or(mirror, |x| x.origin(mirror))
+        };
+        let (k1, dk1) = m0.switch_on(q, f_first as f32, -ds, origin(0, mirror0), &c.filters);
+        let (k2, dk2) = m1.switch_on(q, f_second as f32, d2, origin(1, mirror1), &c.filters);
+        let jump = k2 - rho * k1;
+        let x = jump * g * e1;
+        let dx = |i: usize| (dk2[i] - rho * dk1[i]) * g * e1 + x * m1.dlam[i] * d2;
         let _ = out.push(SegModel::new(
             g,
             &m1,
-            z1,
+            z1 + x,
             [
-                dz1[0] + via * du[0],
-                dz1[1] + via * du[1],
-                dz1[2] + via * du[2],
+                dz1[0] + via * du[0] + dx(0),
+                dz1[1] + via * du[1] + dx(1),
+                dz1[2] + via * du[2] + jump * e1,
                 via * eu,
                 via * eu * j,
             ],
@@ -260,7 +503,7 @@ pub(super) fn evaluate(
     let (segs, carry) = (&pb.segs[..], pb.carry);
     let one = C32::new(1.0, 0.0);
     let (f0, q) = (p.f0, p.q);
-    let models = seg_models(p, segs, carry);
+    let models = seg_models(p, segs, carry, w);
     // The normal equations' sums (at most 16 products each) in f32, each column scaled to about
     // unit size first ([`Normal`]); f32's relative precision (1e-7) is far finer than what the
     // steps and the covariance need.
@@ -302,53 +545,49 @@ pub(super) fn evaluate(
             cache[0] = (len, cexp(m.lam * len));
             cache[0].1
         };
-        // exp(λ a), exp(λ (a + len)); their mean over the window and its λ-derivative.
+        // The transient at the window's start, `tr`, and what the window's sine fit makes of it
+        // ([`SineFit::transient`]): `α tr + mirror β conj(tr)`.
         let eb = ea * decay;
-        let e = (eb - ea) * m.inv_lam / len;
-        // The transient at the window's start and its mirror image's mean over the window
-        // (`mirror`): `P = (e^{λ̄ len} − 1) / (μ len)`.
         let tr = (m.z - m.gh) * ea;
-        let pm = (decay.conj() - one) * m.inv_mu / len;
-        let model = m.gh * (one - e) + m.z * e + m.mirror * pm * tr.conj();
+        let [alpha, beta, d_alpha, d_beta] = x.transient(decay, &m.rates, jac);
+        let mb = m.mirror * beta;
+        let model = m.gh + alpha * tr + mb * tr.conj();
         let r = x.y - model;
         if let Some(o) = res.as_deref_mut().and_then(|o| o.get_mut(i)) {
             *o = r;
         }
         chi2 += x.wl * r.norm_sqr();
         if jac {
-            let de = ((eb * (a + len) - ea * a) / len - e) * m.inv_lam;
-            let k = (m.z - m.gh) * de;
-            // The image: d(tr)/dp and d(P)/dp = (e^{λ̄ len} − P)/μ · conj(dλ/dp) (real p).
-            let dp = (decay.conj() - pm) * m.inv_mu;
-            // The image's derivative `mirror (dP conj(dλ) conj(tr) + P conj(d tr))`, `d tr =
-            // (dz − d(gh)) e^{λa} + tr a dλ`, with its common factors taken once and the terms
-            // that vanish (g and z do not move λ; z does not move gh) left out.
-            let (ia, ib, ta) = (m.mirror * dp * tr.conj(), m.mirror * pm, tr * a);
+            // d model = d(gh) + α d tr + α' tr dλ + mirror (β' conj(dλ) conj(tr) + β conj(d tr)),
+            // d tr = (dz − d(gh)) e^{λa} + tr a dλ, with the terms that vanish (g and z do not
+            // move λ; z does not move gh) left out.
+            let (ta, at, ia) = (tr * a, d_alpha * tr, m.mirror * d_beta * tr.conj());
             let moving = |i: usize| {
                 let dtr = (m.dz[i] - m.g_dh[i]) * ea + ta * m.dl[i];
-                ia * m.dl[i].conj() + ib * dtr.conj()
+                m.g_dh[i] + alpha * dtr + at * m.dl[i] + ia * m.dl[i].conj() + mb * dtr.conj()
             };
-            let one_e = one - e;
+            let linear = |d: C32| {
+                let dtr = d * ea;
+                alpha * dtr + mb * dtr.conj()
+            };
             let cols = [
-                (m.g_dh[0] * one_e + k * m.dl[0] + e * m.dz[0] + moving(0)) * scale[0],
-                (m.g_dh[1] * one_e + k * m.dl[1] + e * m.dz[1] + moving(1)) * scale[1],
+                moving(0) * scale[0],
+                moving(1) * scale[1],
                 // The linear parameters' columns are not scaled.
-                m.h * one_e + e * m.dz[2] + ib * ((m.dz[2] - m.h) * ea).conj(),
-                e * m.dz[3] + ib * (m.dz[3] * ea).conj(),
-                e * m.dz[4] + ib * (m.dz[4] * ea).conj(),
+                m.h + linear(m.dz[2] - m.h),
+                linear(m.dz[3]),
+                linear(m.dz[4]),
             ];
-            let rw = r * x.wl;
-            for i in 0..5 {
-                let ci = cols[i];
-                jtr32[i] += ci.re * rw.re + ci.im * rw.im;
-                let cw = ci * x.wl;
-                // (`0..i + 1`: `0..=i` is an out-of-line iterator call at `opt-level = "z"`.)
-                for j in 0..i + 1 {
-                    jtj32[i][j] += cw.re * cols[j].re + cw.im * cols[j].im;
-                }
-            }
+            add_row(&mut jtj32, &mut jtr32, &cols, r, x.wl);
         }
         ea = eb;
+    }
+    if let Some(rest) = &pb.rest {
+        let (r, cols) = rest.residual(p, jac, &scale);
+        chi2 += rest.w * r.norm_sqr();
+        if jac {
+            add_row(&mut jtj32, &mut jtr32, &cols, r, rest.w);
+        }
     }
     let normal = Normal {
         jtj: jtj32,
@@ -356,6 +595,21 @@ pub(super) fn evaluate(
         scale,
     };
     (chi2 as f64 * wt, normal)
+}
+
+/// One complex row (a window's, the start's prior) into the normal equations' sums: its
+/// columns `cols`, residual `r` and weight `w`.
+fn add_row(jtj: &mut [[f32; 5]; 5], jtr: &mut [f32; 5], cols: &[C32; 5], r: C32, w: f32) {
+    let rw = r * w;
+    for i in 0..5 {
+        let ci = cols[i];
+        jtr[i] += ci.re * rw.re + ci.im * rw.im;
+        let cw = ci * w;
+        // (`0..i + 1`: `0..=i` is an out-of-line iterator call at `opt-level = "z"`.)
+        for j in 0..i + 1 {
+            jtj[i][j] += cw.re * cols[j].re + cw.im * cols[j].im;
+        }
+    }
 }
 
 /// The normal equations of the fit over (f0, Q, g, Re z, Im z) in `f32`, each column of the
@@ -442,6 +696,92 @@ pub(super) struct Problem<'a> {
     pub(super) segs: heapless::Vec<(f64, f64, C32), MAX_SEGMENTS>,
     pub(super) carry: Option<&'a Carry>,
     pub(super) wt: f64,
+    /// The prior on the first segment's start state, when the drive came on from rest.
+    pub(super) rest: Option<RestPrior>,
+}
+
+/// The prior on the state at the first segment's first window: the resonator's response from
+/// rest to the segment's drive switched on `d` seconds earlier, `g K(f0, Q)`,
+/// `K = h + (k − h) e^{λd}` ([`DriveModel::switch_on`]'s `k` from the state 0, the drive's
+/// phase at the switch-on from the segment's origin, `origin` = [`SineFit::origin`] of its first
+/// window), with weight `w` per unit of the windows' weighted squared residual (`1/σ_z²` over
+/// the windows' `1/var`: the same units as the windows' terms of χ²).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct RestPrior {
+    pub(super) f_h: f64,
+    pub(super) d: f32,
+    pub(super) origin: C32,
+    pub(super) filters: Filters,
+    pub(super) w: f32,
+}
+
+impl RestPrior {
+    /// `K(f0, Q)` and its derivatives with respect to (f0, Q).
+    pub(super) fn k(&self, f0: f64, q: f64) -> (C32, [C32; 2]) {
+        let at = Params {
+            f0,
+            q,
+            g: 0.0,
+            z: C64::new(0.0, 0.0),
+        };
+        let m = DriveModel::new(&at, self.f_h);
+        let (k, dk) = m.switch_on(
+            q as f32,
+            self.f_h as f32,
+            self.d,
+            self.origin,
+            &self.filters,
+        );
+        let e = cexp(m.lam * self.d);
+        let t = (k - m.h) * e;
+        let dk = core::array::from_fn(|i| m.dh[i] + (dk[i] - m.dh[i]) * e + t * m.dlam[i] * self.d);
+        (m.h + t, dk)
+    }
+
+    /// The prior's residual `g K − z` at `p` and, with `jac`, its columns over (f0, Q, g, Re z,
+    /// Im z) — those of the model `z − g K` — the first two multiplied by `scale` as
+    /// [`evaluate`]'s.
+    pub(super) fn residual(&self, p: &Params, jac: bool, scale: &[f32; 5]) -> (C32, [C32; 5]) {
+        let g = p.g as f32;
+        let (k, dk) = self.k(p.f0, p.q);
+        let r = k * g - c32(p.z);
+        let zero = C32::new(0.0, 0.0);
+        if !jac {
+            return (r, [zero; 5]);
+        }
+        let cols = [
+            -dk[0] * g * scale[0],
+            -dk[1] * g * scale[1],
+            -k,
+            C32::new(1.0, 0.0),
+            C32::new(0.0, 1.0),
+        ];
+        (r, cols)
+    }
+}
+
+/// The state per unit `g` at `d` seconds after a drive at `f_h` came on with the resonator at
+/// rest, in the frame of a segment whose first window is `first` and whose drive phasor's
+/// [`super::mirror`] factor is `mirror` ([`RestPrior::k`]), for the tests.
+#[cfg(test)]
+pub(crate) fn rest_state(
+    (f0, q): (f64, f64),
+    f_h: f64,
+    d: f64,
+    first: &super::HoldWindow,
+    mirror: C64,
+    filters: &Filters,
+) -> C64 {
+    let fit = SineFit::new(first.phase[0], first.phase[1], f_h, first.len);
+    let r = RestPrior {
+        f_h,
+        d: d as f32,
+        origin: fit.origin(c32(mirror)),
+        filters: *filters,
+        w: 0.0,
+    };
+    let k = r.k(f0, q).0;
+    C64::new(k.re as f64, k.im as f64)
 }
 
 /// `exp(z)` by the `libm` crate's `expf` and [`crate::dsp::trig::sincos`] (`f32` arithmetic
@@ -462,7 +802,8 @@ mod gradcheck {
     use crate::estimate::resonator::mirror;
 
     /// The analytic gradient of χ² over all five parameters, the mirror image's terms
-    /// included (a rotated drive, a transient far from the fit's point), against central
+    /// included (a rotated drive, a transient far from the fit's point, windows off their
+    /// cycle boundaries), against central
     /// differences of χ² (f64 reference on the same windows).
     #[test]
     fn gradient_matches_finite_differences() {
@@ -471,7 +812,8 @@ mod gradcheck {
             (241.3, C64::new(1.0, 0.0)),
             (238.0, mirror(C64::new(0.6, 0.8))),
         ] {
-            let w = synthetic(241.3, 10.4, 1.5e-7, f_h, C64::new(1e-8, 0.0), y_s, 16);
+            let mut w = synthetic(241.3, 10.4, 1.5e-7, f_h, C64::new(1e-8, 0.0), y_s, 16);
+            off_the_boundary(&mut w);
             let w = &w[..16];
             let w0 = w[0].t0;
             let p = Params {
@@ -493,6 +835,7 @@ mod gradcheck {
                 segs: [(f_h, w0, c32(m))].into_iter().collect(),
                 carry: None,
                 wt: 1e14,
+                rest: None,
             };
             let n = evaluate(&pb, &p, true, None).1;
             let (jtj, jtr) = n.unscaled(pb.wt);
@@ -508,19 +851,197 @@ mod gradcheck {
                     inv[i][j]
                 );
             }
-            for (i, g) in jtr.iter().enumerate() {
-                let mut step = [0.0; 5];
-                step[i] = [1e-2, 1e-2, 1e-10, 1e-10, 1e-10][i];
-                let (a, b) = (p.stepped(&step), p.stepped(&step.map(|x| -x)));
-                let num = (evaluate(&pb, &a, false, None).0 - evaluate(&pb, &b, false, None).0)
-                    / (2.0 * step[i]);
-                let ana = -2.0 * g;
-                std::eprintln!("{f_h} param {i}: numeric {num:e} analytic {ana:e}");
-                assert!(
-                    (ana / num - 1.0).abs() < 0.05,
-                    "{f_h} param {i}: {ana:e} vs {num:e}"
-                );
+            check_gradient(&pb, &p, &jtr, 0.05);
+        }
+    }
+
+    /// Windows starting and ending off their cycle boundaries (within ±6° of it), so that the
+    /// windows' sine fit ([`SineFit`]) is in the gradient.
+    fn off_the_boundary(w: &mut [crate::estimate::resonator::HoldWindow]) {
+        for (k, x) in w.iter_mut().enumerate() {
+            let step = 0x0100_0000u32;
+            x.phase = [
+                (k as u32 * 7 % 9).wrapping_mul(step).wrapping_sub(4 * step),
+                (k as u32 * 5 % 9).wrapping_mul(step).wrapping_sub(4 * step),
+            ];
+        }
+    }
+
+    /// The analytic gradient `−2 JᵀW r` (`jtr`) of χ² at `p` against central differences of
+    /// χ² over all five parameters, each component within `tol` of itself.
+    fn check_gradient(pb: &Problem, p: &Params, jtr: &[f64; 5], tol: f64) {
+        for (i, g) in jtr.iter().enumerate() {
+            let mut step = [0.0; 5];
+            step[i] = [1e-2, 1e-2, 1e-9, 1e-9, 1e-9][i];
+            let (a, b) = (p.stepped(&step), p.stepped(&step.map(|x| -x)));
+            let num = (evaluate(pb, &a, false, None).0 - evaluate(pb, &b, false, None).0)
+                / (2.0 * step[i]);
+            let ana = -2.0 * g;
+            std::eprintln!("param {i}: numeric {num:e} analytic {ana:e}");
+            assert!(
+                (ana / num - 1.0).abs() < tol,
+                "param {i}: {ana:e} vs {num:e}"
+            );
+        }
+    }
+
+    /// The same check for a joint fit of two segments: the state carried through the switch,
+    /// the switch's full response ([`DriveModel::switch_on`]) and its derivatives included,
+    /// and the prior on the start state from rest ([`RestPrior`]), to 5e-4 of each component.
+    #[test]
+    fn gradient_through_the_switch_matches_finite_differences() {
+        use crate::estimate::resonator::{Carry, Filters};
+        let y_s = C64::new(0.0, 0.0);
+        let (f1, f2) = (230.0, 241.0);
+        let mut w1 = synthetic(241.3, 10.4, 1.5e-7, f1, C64::new(0.0, 0.0), y_s, 6);
+        let mut w2 = synthetic(241.3, 10.4, 1.5e-7, f2, C64::new(5e-8, 2e-8), y_s, 10);
+        off_the_boundary(&mut w1);
+        off_the_boundary(&mut w2);
+        let t_switch = w1[5].t0 + w1[5].len;
+        let mut w2 = w2[..10].to_vec();
+        for x in &mut w2 {
+            x.t0 += t_switch + 0.001;
+        }
+        let (m1, m2) = (mirror(C64::new(0.6, 0.8)), mirror(C64::new(0.8, -0.6)));
+        let segs = [
+            Segment {
+                windows: &w1[..6],
+                f_h: f1,
+                y_s,
+                mirror: m1,
+            },
+            Segment {
+                windows: &w2,
+                f_h: f2,
+                y_s,
+                mirror: m2,
+            },
+        ];
+        let carry = Carry {
+            t_switch,
+            rho: C64::new(0.9, 0.1),
+            filters: Filters::of(&crate::hal::FrontEndScale::PROBE),
+        };
+        let (w, gs, _) = prepare(&segs);
+        let pb = Problem {
+            w,
+            gs,
+            segs: [(f1, w1[0].t0, c32(m1)), (f2, w2[0].t0, c32(m2))]
+                .into_iter()
+                .collect(),
+            carry: Some(&carry),
+            wt: 1e14,
+            // The start from rest's prior, its derivatives through the switch-on's.
+            rest: Some(RestPrior {
+                f_h: f1,
+                d: 0.004,
+                origin: c32(m1),
+                filters: carry.filters,
+                w: 0.5,
+            }),
+        };
+        let p = Params {
+            f0: 240.6,
+            q: 9.1,
+            g: 1.3e-7,
+            z: C64::new(2e-8, -1e-8),
+        };
+        let jtr = evaluate(&pb, &p, true, None).1.unscaled(pb.wt).1;
+        // f32 model arithmetic leaves 3e-4 at most here; leaving out the switch's own
+        // derivatives moves the f0 component by 1e-3.
+        check_gradient(&pb, &p, &jtr, 5e-4);
+    }
+}
+
+#[cfg(test)]
+mod sine_fit {
+    use super::*;
+    use crate::dsp::dds::{frequency_hz, tuning_word};
+    use core::f64::consts::PI;
+
+    /// [`SineFit::transient`] against the lock-in's own least squares on the samples (f64
+    /// reference: the cosine, sine and offset fit of `Re(T e^{λt} e^{jφ})` at each sample's
+    /// phase, solved by [`crate::linalg::inverse3`]): windows of one, two and four cycles at
+    /// 170–290 Hz (the band) starting anywhere within the phase step after their cycle
+    /// boundary, `Q` 6–30, the drive on the resonance and two half-widths either side. Within
+    /// 6e-4 of the transient: the samples' sums against the span's integral differ by about
+    /// `(μT)²/24` of the mirror image (`μ ≈ −2jω`, 1 % at 290 Hz) and `(λT)²/24` of the rest.
+    /// Whole cycles from phase 0 (the model without the windows' phases) miss by more than
+    /// 1e-3 somewhere.
+    #[test]
+    fn the_sine_fit_of_a_transient_is_modelled() {
+        let fs = 10_000.0;
+        let mut rng = probe_rng::Rng::new(11);
+        let (mut worst, mut worst_whole) = (0.0f64, 0.0f64);
+        for f_set in [170.0, 241.0, 290.0] {
+            let ftw = tuning_word(f_set, fs);
+            let f_h = frequency_hz(ftw, fs);
+            for q in [6.0, 10.0, 30.0] {
+                for offset in [-2.0, 0.0, 2.0] {
+                    let f0 = f_h * (1.0 - offset / (2.0 * q));
+                    let lam = C64::new(
+                        -PI * f0 / q,
+                        2.0 * PI * (f0 * (1.0 - 0.25 / (q * q)).sqrt() - f_h),
+                    );
+                    let m = DriveModel::new(
+                        &Params {
+                            f0,
+                            q,
+                            g: 0.0,
+                            z: C64::new(0.0, 0.0),
+                        },
+                        f_h,
+                    );
+                    let rates = Rates::of(&m);
+                    for cycles in [1u64, 2, 4] {
+                        for _ in 0..20 {
+                            let start = (rng.uniform() * ftw as f64) as u32;
+                            // Samples to the `cycles`-th wrap.
+                            let n = ((cycles << 32) - start as u64).div_ceil(ftw as u64);
+                            let t = C64::from_polar(1.0, 2.0 * PI * rng.uniform());
+                            let (mut m3, mut rhs) = ([[0.0f64; 3]; 3], [0.0f64; 3]);
+                            for k in 0..n {
+                                let ph = start.wrapping_add((k as u32).wrapping_mul(ftw));
+                                let ph = ph as f64 / 4_294_967_296.0 * 2.0 * PI;
+                                let b = [ph.cos(), ph.sin(), 1.0];
+                                let tk = k as f64 / fs;
+                                let x = (t * (lam * tk).exp() * C64::from_polar(1.0, ph)).re;
+                                for i in 0..3 {
+                                    rhs[i] += b[i] * x;
+                                    for j in 0..3 {
+                                        m3[i][j] += b[i] * b[j];
+                                    }
+                                }
+                            }
+                            let inv = crate::linalg::inverse3(&m3).unwrap();
+                            let ab: [f64; 3] = core::array::from_fn(|i| {
+                                (0..3).map(|j| inv[i][j] * rhs[j]).sum::<f64>()
+                            });
+                            let want = C64::new(ab[0], -ab[1]);
+                            // The window's span starts half a sample before its first sample,
+                            // half a phase step before its phase.
+                            let len = n as f64 / fs;
+                            let tr = t * (-lam * (0.5 / fs)).exp();
+                            let pa = start.wrapping_sub(ftw / 2);
+                            let pb = pa.wrapping_add(ftw.wrapping_mul(n as u32));
+                            let decay = c32((lam * len).exp());
+                            let got = |fit: SineFit| {
+                                let [a, b, ..] = fit.transient(decay, len as f32, &rates, false);
+                                let tr = c32(tr);
+                                let v = a * tr + b * tr.conj();
+                                C64::new(v.re as f64, v.im as f64)
+                            };
+                            let exact = got(SineFit::new(pa, pb, f_h, len));
+                            let whole = got(SineFit::new(0, 0, f_h, len));
+                            worst = worst.max((exact - want).norm());
+                            worst_whole = worst_whole.max((whole - want).norm());
+                        }
+                    }
+                }
             }
         }
+        std::eprintln!("worst: {worst:e} of the transient ({worst_whole:e} as whole cycles)");
+        assert!(worst < 6e-4, "{worst:e}");
+        assert!(worst_whole > 1e-3, "{worst_whole:e}");
     }
 }

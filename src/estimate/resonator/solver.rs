@@ -2,8 +2,12 @@
 //! the Levenberg–Marquardt iteration with its prior on `Q`, the checks of the windows and of the
 //! result.
 
-use super::model::{c32, cexp, evaluate, prepare, DriveModel, Normal, Params, Problem, C32};
-use super::{Carry, HoldFit, HoldWindow, Segment, FIRST_WINDOWS, MAX_SEGMENTS, MAX_WINDOWS};
+use super::model::{
+    c32, cexp, evaluate, prepare, DriveModel, Normal, Params, Problem, Rates, RestPrior, C32,
+};
+use super::{
+    Carry, HoldFit, HoldWindow, Segment, SwitchOn, FIRST_WINDOWS, MAX_SEGMENTS, MAX_WINDOWS,
+};
 use crate::estimate::Estimate;
 use crate::status::Failure;
 use crate::units::bounded;
@@ -36,7 +40,7 @@ impl Problem<'_> {
             z: C64::new(0.0, 0.0),
         };
         let m = DriveModel::new(&at, f_h);
-        let (inv_lam, inv_mu) = (one / m.lam, one / m.mu);
+        let rates = Rates::of(&m);
         let mut cols = [[C32::new(0.0, 0.0); 3]; MAX_WINDOWS];
         let mut a = [[0.0f32; 3]; 3];
         let mut b = [0.0f32; 3];
@@ -55,16 +59,16 @@ impl Problem<'_> {
                 cache[0] = (x.len, cexp(m.lam * x.len));
                 cache[0].1
             };
-            let eb = ea * decay;
-            let e = (eb - ea) * inv_lam / x.len;
-            // The mirror image's factor on conj(transient at the window's start).
-            let mp = mirror * (decay.conj() - one) * inv_mu / x.len;
-            let image = mp * ea.conj();
+            // The window's sine fit of the transient `tr`: `α tr + mirror β conj(tr)`.
+            let [alpha, beta, ..] = x.transient(decay, &rates, false);
+            let (e, mb) = (alpha * ea, mirror * beta);
+            let image = mb * ea.conj();
             *c = [
-                m.h * (one - e) - mp * (m.h * ea).conj(),
+                m.h * (one - e) - mb * (m.h * ea).conj(),
                 e + image,
                 j * (e - image),
             ];
+            let eb = ea * decay;
             for i in 0..3 {
                 let ci = c[i] * x.wl;
                 b[i] += ci.re * x.y.re + ci.im * x.y.im;
@@ -74,11 +78,25 @@ impl Problem<'_> {
             }
             ea = eb;
         }
+        // The prior on the start state (`g K − z = 0`, weight `w`): two rows `(K, −1, −j)`.
+        let k = self.rest.map(|r| (r.k(f0, q).0, r.w));
+        if let Some((k, w)) = k {
+            for row in [[k.re, -1.0, 0.0], [k.im, 0.0, -1.0]] {
+                for i in 0..3 {
+                    for m in 0..=i {
+                        a[i][m] += w * row[i] * row[m];
+                    }
+                }
+            }
+        }
         let sol = crate::linalg::spd_solve(&a, &b)?;
         let mut chi2 = 0.0f32;
         for (x, c) in self.w.iter().zip(cols.iter()) {
             let r = x.y - c[0] * sol[0] - c[1] * sol[1] - c[2] * sol[2];
             chi2 += x.wl * r.norm_sqr();
+        }
+        if let Some((k, w)) = k {
+            chi2 += w * (k * sol[0] - C32::new(sol[1], sol[2])).norm_sqr();
         }
         chi2.is_finite().then_some((sol, chi2))
     }
@@ -118,7 +136,14 @@ fn noise_variance(w: &[HoldWindow]) -> f64 {
 /// `Q = q_prior.0 ± q_prior.1` (a hold at one frequency measures the phase well and `Q` poorly;
 /// the prior — the seed's `Q` — keeps a noisy hold from trading one for the other).
 pub fn fit(seg: Segment, f_start: f64, q_prior: (f64, f64)) -> Result<HoldFit, Failure> {
-    fit_segments(&[seg], None, (f_start, q_prior.0), q_prior, Start::Linear)
+    fit_segments(
+        &[seg],
+        None,
+        (f_start, q_prior.0),
+        q_prior,
+        Start::Linear,
+        None,
+    )
 }
 
 /// The joint fit of two consecutive segments: one `f0`, `Q`, `g`, and the first segment's
@@ -130,7 +155,8 @@ pub fn fit(seg: Segment, f_start: f64, q_prior: (f64, f64)) -> Result<HoldFit, F
 /// parameters (`g`, `z`: [`HoldFit::linear`]) to go on from — one evaluation of the joint
 /// problem fewer, the Levenberg–Marquardt steps move them with `f0` and `Q` — or `None` to solve
 /// them anew at `start`; `q_prior`: the prior on `Q` (the seed's, not the first segment's,
-/// whose windows are in this fit).
+/// whose windows are in this fit); `rest`: the drive's switch-on before the first segment with
+/// the resonator at rest, when known ([`SwitchOn`]).
 pub fn fit_two(
     first: Segment,
     second: Segment,
@@ -138,12 +164,20 @@ pub fn fit_two(
     start: (f64, f64),
     linear: Option<(f64, C64)>,
     q_prior: (f64, f64),
+    rest: Option<&SwitchOn>,
 ) -> Result<HoldFit, Failure> {
     let start_linear = match linear {
         Some((g, z)) => Start::Given(g, z),
         None => Start::Linear,
     };
-    fit_segments(&[first, second], Some(carry), start, q_prior, start_linear)
+    fit_segments(
+        &[first, second],
+        Some(carry),
+        start,
+        q_prior,
+        start_linear,
+        rest,
+    )
 }
 
 /// Where a fit's linear parameters start.
@@ -163,11 +197,13 @@ const SEARCH_STEP_HALF_WIDTHS: f64 = 1.5;
 const SEARCH_MAX: usize = 64;
 
 /// The fit of one segment with no seed: the start is the best of a search over `band` (each
-/// candidate `f0` at the prior `Q`, its linear parameters solved), then the fit from there.
+/// candidate `f0` at the prior `Q`, its linear parameters solved), then the fit from there;
+/// `rest` as [`fit_two`]'s.
 pub fn fit_searched(
     seg: Segment,
     band: (f64, f64),
     q_prior: (f64, f64),
+    rest: Option<&SwitchOn>,
 ) -> Result<HoldFit, Failure> {
     fit_segments(
         &[seg],
@@ -175,20 +211,51 @@ pub fn fit_searched(
         (seg.f_h, q_prior.0),
         q_prior,
         Start::Search(band.0, band.1),
+        rest,
     )
+}
+
+/// Largest χ² the prior on the start state may add at the fit before the windows are taken to
+/// disagree with a start from rest: the prior's two components, 16 (a 4σ disagreement; a χ² of
+/// two degrees of freedom exceeds it 3e-4 of the time).
+const REST_MISFIT: f64 = 16.0;
+
+/// The fit over the segments ([`fit_with`]) with the start state from rest when `rest` is
+/// given and the windows agree with it, else with the state free ([`HoldFit::at_rest`] false:
+/// the resonator was not at rest, or is not the model's alone — a knock or a drive shortly
+/// before left it ringing, a second mode answers the switch-on).
+fn fit_segments(
+    segs: &[Segment],
+    carry: Option<&Carry>,
+    start: (f64, f64),
+    q_prior: (f64, f64),
+    from: Start,
+    rest: Option<&SwitchOn>,
+) -> Result<HoldFit, Failure> {
+    if rest.is_some() {
+        if let Ok((h, misfit)) = fit_with(segs, carry, start, q_prior, from, rest) {
+            if misfit <= REST_MISFIT {
+                return Ok(h);
+            }
+        }
+    }
+    fit_with(segs, carry, start, q_prior, from, None).map(|(h, _)| h)
 }
 
 /// The fit over the segments from `start` (`f0`, `Q`); `search`: the band to search for a start
 /// `f0` instead. Knocks and mains hum in the windows are `interference` (a first segment's fit
 /// that only places the second judges them too: hum that pulls the placement off the resonance
-/// would otherwise end the hold as `not_locked`, which the default strategy retries).
-fn fit_segments(
+/// would otherwise end the hold as `not_locked`, which the default strategy retries). With
+/// `rest`, the start state's prior ([`RestPrior`]); the χ² it adds at the fit comes with the
+/// result.
+fn fit_with(
     segs: &[Segment],
     carry: Option<&Carry>,
     (f_start, q_begin): (f64, f64),
     q_prior: (f64, f64),
     start: Start,
-) -> Result<HoldFit, Failure> {
+    rest: Option<&SwitchOn>,
+) -> Result<(HoldFit, f64), Failure> {
     let search = match start {
         Start::Search(lo, hi) => Some((lo, hi)),
         _ => None,
@@ -230,7 +297,22 @@ fn fit_segments(
     if !(var > 0.0) || !var.is_finite() || !f_start.is_finite() || !(f_start > 0.0) {
         return Err(Failure::NoResonance);
     }
+    // The prior on the start state: the first segment's first window `d` after the switch-on.
+    let rest = rest.and_then(|r| {
+        let first = segs.first()?;
+        let d = first.windows.first()?.t0 - r.t_on;
+        let sd = r.width as f64 * gs as f64;
+        let origin = w.first()?.origin(c32(first.mirror));
+        (d >= 0.0 && d.is_finite() && sd > 0.0 && sd.is_finite()).then(|| RestPrior {
+            f_h: first.f_h,
+            d: d as f32,
+            origin,
+            filters: r.filters,
+            w: (var / (sd * sd)) as f32,
+        })
+    });
     let pb = Problem {
+        rest,
         w,
         gs,
         segs: segs
@@ -380,19 +462,27 @@ fn fit_segments(
         return Err(Failure::NoResonance);
     }
     crate::estimate::resolved(sigma, f0 / q)?;
-    Ok(HoldFit {
-        estimate: Estimate {
-            resonance: Hz(f0 as f32),
-            sigma: Hz(sigma as f32),
-            q: Some(q as f32),
-            q_sigma: Some(sigma_q as f32),
-            points_used: pb.w.len() as u16,
+    // The χ² the start's prior adds at the fit (its residual at the final point).
+    let misfit = pb.rest.map_or(0.0, |r| {
+        (r.w * r.residual(&p, false, &[1.0; 5]).0.norm_sqr()) as f64 * pb.wt
+    });
+    Ok((
+        HoldFit {
+            estimate: Estimate {
+                resonance: Hz(f0 as f32),
+                sigma: Hz(sigma as f32),
+                q: Some(q as f32),
+                q_sigma: Some(sigma_q as f32),
+                points_used: pb.w.len() as u16,
+            },
+            sigma_q,
+            cov_f0_q,
+            reduced_chi2: red,
+            linear: (p.g, p.z),
+            at_rest: pb.rest.is_some(),
         },
-        sigma_q,
-        cov_f0_q,
-        reduced_chi2: red,
-        linear: (p.g, p.z),
-    })
+        misfit,
+    ))
 }
 
 /// The Levenberg–Marquardt step of the scaled normal equations `n` with damping `lambda`
@@ -480,8 +570,12 @@ mod tests {
                 y_s,
                 mirror: mirror(C64::new(1.0, 0.0) / rho),
             };
-            let carry = Carry { t_switch, rho };
-            let e = fit_two(first, second, &carry, (f2, 10.0), None, (10.0, 10.0))
+            let carry = Carry {
+                t_switch,
+                rho,
+                filters: crate::estimate::resonator::Filters::of(&crate::hal::FrontEndScale::PROBE),
+            };
+            let e = fit_two(first, second, &carry, (f2, 10.0), None, (10.0, 10.0), None)
                 .unwrap()
                 .estimate;
             assert!(
@@ -494,10 +588,12 @@ mod tests {
             let wrong = Carry {
                 t_switch,
                 rho: C64::new(1.0, 0.0),
+                ..carry
             };
             if rho != C64::new(1.0, 0.0) {
                 // Biased, or refused for the misfit it leaves.
-                if let Ok(b) = fit_two(first, second, &wrong, (f2, 10.0), None, (10.0, 10.0)) {
+                if let Ok(b) = fit_two(first, second, &wrong, (f2, 10.0), None, (10.0, 10.0), None)
+                {
                     let b = b.estimate.resonance.0 as f64;
                     assert!((b - f0).abs() > 5e-3, "{b}");
                 }
@@ -527,7 +623,7 @@ mod tests {
                 y_s,
                 mirror: C64::new(1.0, 0.0),
             };
-            let e = fit_searched(seg, (170.0, 290.0), (10.0, 10.0))
+            let e = fit_searched(seg, (170.0, 290.0), (10.0, 10.0), None)
                 .unwrap()
                 .estimate;
             assert!(
@@ -609,7 +705,7 @@ mod tests {
                 y_s: C64::new(0.0, 0.0),
                 mirror: mirror(C64::new(1.0, 0.0)),
             };
-            let r = fit_searched(seg, (170.0, 290.0), (10.0, 10.0));
+            let r = fit_searched(seg, (170.0, 290.0), (10.0, 10.0), None);
             assert!(
                 matches!(r, Err(Failure::OutOfBand | Failure::NoResonance)),
                 "{f0}: {r:?}"
