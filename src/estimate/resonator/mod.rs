@@ -73,10 +73,12 @@ pub(crate) fn current_window(raw: &PointRaw, scale: &FrontEndScale, fs: f64) -> 
     let s = &raw.sums;
     let (value, variance) = solve_value(&s.current, &s.reference)?;
     let ai = scale.amps_per_code as f64;
-    let len = s.reference.n as f64 / fs;
+    // Times from whole sample counts (one division, not two and a difference).
+    let dt = 1.0 / fs;
+    let n = s.reference.n as u64;
     Some(HoldWindow {
-        t0: raw.end_sample as f64 / fs - len,
-        len,
+        t0: raw.end_sample.saturating_sub(n) as f64 * dt,
+        len: n as f64 * dt,
         y: value * ai,
         var: variance * ai * ai,
     })
