@@ -191,7 +191,8 @@ pub fn hum(
         let (Some(first), true) = (w.first(), r.len() == w.len() && w.len() >= 3) else {
             continue;
         };
-        let var: f64 = w.iter().map(|x| x.var).sum();
+        // (`f32`: a sum of positive terms for a threshold.)
+        let var: f32 = w.iter().map(|x| x.var as f32).sum();
         if !(var > 0.0) || !var.is_finite() {
             continue;
         }
@@ -211,7 +212,7 @@ pub fn hum(
         let own = (f0 - seg.f_h) as f32;
         // `|S|² / (2 Σ var) > HUM_THRESHOLD`, the division taken once, compared in f32 (a
         // threshold: f32's 1e-7 moves it by nothing the exponential statistic resolves).
-        let limit = (HUM_THRESHOLD * 2.0 * var) as f32;
+        let limit = (HUM_THRESHOLD * 2.0) as f32 * var;
         for fm in MAINS_HZ {
             for k in 1..=MAINS_HARMONICS {
                 let d = fm as f32 * k as f32 - f_h;

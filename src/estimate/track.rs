@@ -232,12 +232,11 @@ impl Track {
         // K = P S⁻¹ (not symmetric), by rows.
         let (p, s) = (pred.cov, s_inv);
         let k = [s.mul([p.a, p.b]), s.mul([p.b, p.c])];
-        // x + K ν and P S⁻¹ R = K R (symmetric; its two off-diagonal products averaged).
-        let kr = [r.mul(k[0]), r.mul(k[1])];
+        // x + K ν and P S⁻¹ R = K R (symmetric: its upper triangle).
         let cov = Sym2 {
-            a: kr[0][0],
-            b: 0.5 * (kr[0][1] + kr[1][0]),
-            c: kr[1][1],
+            a: k[0][0] * r.a + k[0][1] * r.b,
+            b: k[0][0] * r.b + k[0][1] * r.c,
+            c: k[1][0] * r.b + k[1][1] * r.c,
         };
         let x = [
             pred.f0 + k[0][0] * nu[0] + k[0][1] * nu[1],

@@ -90,8 +90,10 @@ pub(crate) fn current_window(raw: &PointRaw, scale: &FrontEndScale, fs: f64) -> 
 /// and `1/|V|²` formed once, each window's in f32 (emulated f64 is dear on the Cortex-M4F; f32's
 /// 1e-7 is far below any window's noise, 1e-3 of |Y| and more).
 pub(crate) fn to_admittance(windows: &mut [HoldWindow], v: C64, var_v: f64) {
-    let inv_v = C64::new(1.0, 0.0) / v;
-    let (inv_v32, inv_n) = (c32(inv_v), inv_v.norm_sqr() as f32);
+    // 1/V = V̄/|V|², 1/|V|² once.
+    let inv_n64 = 1.0 / v.norm_sqr();
+    let inv_v = v.conj() * inv_n64;
+    let (inv_v32, inv_n) = (c32(inv_v), inv_n64 as f32);
     let var_v = var_v as f32;
     for x in windows {
         let y = c32(x.y) * inv_v32;

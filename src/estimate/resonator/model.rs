@@ -20,15 +20,15 @@ pub(super) struct Win32 {
     pub(super) wl: f32,
 }
 
-/// The segments' windows in `f32` (less their static admittance), the scale of their
-/// admittances and the mean window length (s).
+/// The segments' windows in `f32` (less their static admittance) and the scale of their
+/// admittances.
 ///
 /// Only the starts' difference from the segment's first is taken in `f64` (times from the
 /// reading's start, seconds of probe time): the rest in `f32` (`f64` is emulated on the
 /// Cortex-M4F). The admittances come from [`super::to_admittance`] in `f32` already, so `y − y_s`
 /// rounds once, to 6e-8 of itself, far below any window's noise; a start relative to its
 /// segment (under a second) is held to 6e-8 s, a gap of a sample (1e-4 s) stands out of that.
-pub(super) fn prepare(segs: &[Segment]) -> (heapless::Vec<Win32, MAX_WINDOWS>, f32, f64) {
+pub(super) fn prepare(segs: &[Segment]) -> (heapless::Vec<Win32, MAX_WINDOWS>, f32) {
     let mut out = heapless::Vec::new();
     let mut big = 0.0f32;
     let all = || segs.iter().flat_map(|s| s.windows.iter());
@@ -59,7 +59,7 @@ pub(super) fn prepare(segs: &[Segment]) -> (heapless::Vec<Win32, MAX_WINDOWS>, f
             next = a + len;
         }
     }
-    (out, crate::dsp::trig::sqrtf(big).max(1e-30), mean32 as f64)
+    (out, crate::dsp::trig::sqrtf(big).max(1e-30))
 }
 
 /// The model's parameters: resonance, quality factor, motional peak conductance, and the state
@@ -525,7 +525,7 @@ mod gradcheck {
                                 y_s: C64::new(0.0, 0.0),
                                 mirror: mirror(C64::new(0.6, 0.8)),
                             };
-                            let (w32, gs, _) = prepare(&[seg]);
+                            let (w32, gs) = prepare(&[seg]);
                             let pb = Problem {
                                 w: w32,
                                 gs,
@@ -607,7 +607,7 @@ mod gradcheck {
                 y_s,
                 mirror: C64::new(1.0, 0.0),
             };
-            let (p, _, _) = prepare(&[seg]);
+            let (p, _) = prepare(&[seg]);
             for (k, (x, o)) in w.iter().zip(p.iter()).enumerate() {
                 worst_a = worst_a.max((o.a as f64 - (x.t0 - w[0].t0)).abs());
                 let want = x.y - y_s;
@@ -646,7 +646,7 @@ mod gradcheck {
                 y_s,
                 mirror: m,
             };
-            let (w, gs, _) = prepare(&[seg]);
+            let (w, gs) = prepare(&[seg]);
             let pb = Problem {
                 w,
                 gs,

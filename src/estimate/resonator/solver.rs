@@ -107,10 +107,12 @@ impl Problem<'_> {
 }
 
 /// Noise variance per component common to all windows: the mean of the second half's own
-/// residual variances (earlier windows' residuals also hold the transient).
+/// residual variances (earlier windows' residuals also hold the transient). Summed in `f32`
+/// (a few positive terms, 1e-7 of the mean; any window's variance, 1e-30 S² and more, lies
+/// within its range).
 fn noise_variance(w: &[HoldWindow]) -> f64 {
     let tail = &w[w.len() / 2..];
-    tail.iter().map(|x| x.var).sum::<f64>() / tail.len().max(1) as f64
+    (tail.iter().map(|x| x.var as f32).sum::<f32>() / tail.len().max(1) as f32) as f64
 }
 
 /// The least-squares fit of the switched-on response ([`super`]) to one segment's
@@ -224,9 +226,12 @@ fn fit_segments(
     }
     // The noise from the last segment, where the transients have gone furthest, as the variance
     // of a window of the mean length.
-    let (w, gs, mean_len) = prepare(segs);
-    let last_len = last.windows.iter().map(|x| x.len).sum::<f64>() / last.windows.len() as f64;
-    let var = noise_variance(last.windows) * last_len / mean_len;
+    let (w, gs) = prepare(segs);
+    // Its windows' mean length over all windows': the mean of their weights (`f32`, a ratio
+    // near 1).
+    let tail = &w[w.len().saturating_sub(last.windows.len())..];
+    let rel = tail.iter().map(|x| x.wl).sum::<f32>() / tail.len().max(1) as f32;
+    let var = noise_variance(last.windows) * rel as f64;
     if !(var > 0.0) || !var.is_finite() || !f_start.is_finite() || !(f_start > 0.0) {
         return Err(Failure::NoResonance);
     }
@@ -297,12 +302,13 @@ fn fit_segments(
     let mut res = [C32::new(0.0, 0.0); MAX_WINDOWS];
     // The start's χ² comes with them (the same sum a χ²-only evaluation makes).
     // The prior in the normal equations' units ([`Normal`]).
-    let q_w_scaled = q_w / pb.wt;
+    // (`f32`, as the sums it joins.)
+    let q_w_scaled = (q_w / pb.wt) as f32;
     let normal = |p: &Params, res: &mut [C32]| {
         let (chi2, mut n) = evaluate(&pb, p, true, Some(res));
-        let s1 = n.scale[1] as f64;
-        n.jtj[1][1] += (q_w_scaled * s1 * s1) as f32;
-        n.jtr[1] += ((q_start - p.q) * q_w_scaled * s1) as f32;
+        let s1 = n.scale[1];
+        n.jtj[1][1] += q_w_scaled * s1 * s1;
+        n.jtr[1] += (q_start - p.q) as f32 * q_w_scaled * s1;
         (chi2 + prior(p.q), n)
     };
     let (mut c, mut n) = normal(&p, &mut res);
@@ -325,9 +331,8 @@ fn fit_segments(
         if pred <= 1e-2 && lambda <= 1.0 {
             break;
         }
-        let t = p.stepped(&core::array::from_fn(|i| {
-            step[i] as f64 * n.scale[i] as f64
-        }));
+        // The step in the parameters' units, in `f32` as it was solved.
+        let t = p.stepped(&core::array::from_fn(|i| (step[i] * n.scale[i]) as f64));
         let mut trial_res = [C32::new(0.0, 0.0); MAX_WINDOWS];
         let tc = if t.f0 > 0.0 && t.q > 0.5 {
             evaluate(&pb, &t, false, Some(&mut trial_res)).0 + prior(t.q)
