@@ -157,9 +157,12 @@ pub struct Segment<'a> {
 /// admittance, about `|λ| / (4 ω_h)` of the transient (2 % at `Q` 10), which, left out of the
 /// model, biases a detuned first segment's `f0` by 4 % of the detuning.
 pub fn mirror(v: C64) -> C64 {
-    let n = v.norm_sqr();
+    // `v̄² / |v|²` from the squares of its parts, once each.
+    let (rr, ii) = (v.re * v.re, v.im * v.im);
+    let n = rr + ii;
     if n > 0.0 && n.is_finite() {
-        v.conj() * v.conj() / n
+        let inv = 1.0 / n;
+        C64::new((rr - ii) * inv, -2.0 * (v.re * v.im) * inv)
     } else {
         C64::new(1.0, 0.0)
     }

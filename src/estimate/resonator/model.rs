@@ -267,14 +267,9 @@ pub(super) fn evaluate(
     let models = seg_models(p, segs, carry);
     // The normal equations' sums (at most 16 products each) in f32, each column scaled to about
     // unit size first ([`Normal`]); f32's relative precision (1e-7) is far finer than what the
-    // steps and the covariance need.
-    let scale: [f32; 5] = [
-        1.0 / (gs * (q / f0) as f32),
-        1.0 / (gs / q as f32),
-        1.0,
-        1.0,
-        1.0,
-    ];
+    // steps and the covariance need. (Any scale serves: it is undone by the same numbers.)
+    let (q32, f32_0) = (q as f32, f0 as f32);
+    let scale: [f32; 5] = [1.0 / (gs * (q32 / f32_0)), 1.0 / (gs / q32), 1.0, 1.0, 1.0];
     let mut jtj32 = [[0.0f32; 5]; 5];
     let mut jtr32 = [0.0f32; 5];
     let mut seg = u8::MAX;
