@@ -196,20 +196,21 @@ impl SegModel {
     }
 }
 
-/// The segments' models at `p`: the first starts from `p.z`; the second (with `carry`) from
-/// the first's state carried to the switch and on under the second's drive to its first window.
+/// The segments' models at `p` into `out` (the caller's: a returned list is copied out): the
+/// first starts from `p.z`; the second (with `carry`) from the first's state carried to the
+/// switch and on under the second's drive to its first window.
 fn seg_models(
     p: &Params,
     segs: &[(f64, f64, C32)],
     carry: Option<&Carry>,
-) -> heapless::Vec<SegModel, MAX_SEGMENTS> {
+    out: &mut heapless::Vec<SegModel, MAX_SEGMENTS>,
+) {
     let zero = C32::new(0.0, 0.0);
     let one = C32::new(1.0, 0.0);
     let j = C32::new(0.0, 1.0);
     let g = p.g as f32;
-    let mut out = heapless::Vec::new();
     let Some(&(f_first, t_first, mirror0)) = segs.first() else {
-        return out;
+        return;
     };
     let m0 = DriveModel::new(p, f_first);
     let z0 = c32(p.z);
@@ -241,7 +242,6 @@ fn seg_models(
             mirror1,
         ));
     }
-    out
 }
 
 /// χ² of `p` against the windows (`y` already without the static part) of segments driven at
@@ -264,14 +264,20 @@ pub(super) fn evaluate(
     let (segs, carry) = (&pb.segs[..], pb.carry);
     let one = C32::new(1.0, 0.0);
     let (f0, q) = (p.f0, p.q);
-    let models = seg_models(p, segs, carry);
+    let mut models = heapless::Vec::new();
+    seg_models(p, segs, carry, &mut models);
     // The normal equations' sums (at most 16 products each) in f32, each column scaled to about
     // unit size first ([`Normal`]); f32's relative precision (1e-7) is far finer than what the
     // steps and the covariance need. (Any scale serves: it is undone by the same numbers.)
     let (q32, f32_0) = (q as f32, f0 as f32);
     let scale: [f32; 5] = [1.0 / (gs * (q32 / f32_0)), 1.0 / (gs / q32), 1.0, 1.0, 1.0];
-    let mut jtj32 = [[0.0f32; 5]; 5];
-    let mut jtr32 = [0.0f32; 5];
+    // Summed in place (a finished pair of arrays would be copied into the result).
+    let mut normal = Normal {
+        jtj: [[0.0f32; 5]; 5],
+        jtr: [0.0f32; 5],
+        scale,
+    };
+    let (jtj32, jtr32) = (&mut normal.jtj, &mut normal.jtr);
     let mut seg = u8::MAX;
     // exp(λ a) carried from window to window (they are gap-free), exp(λ len) cached per window
     // length (they differ by at most a sample): no transcendental per window.
@@ -349,11 +355,6 @@ pub(super) fn evaluate(
         }
         ea = eb;
     }
-    let normal = Normal {
-        jtj: jtj32,
-        jtr: jtr32,
-        scale,
-    };
     (chi2 as f64 * wt, normal)
 }
 

@@ -372,7 +372,8 @@ fn fit_segments(
         }
     }
     // Mains hum near the drive turns in the residuals at its offset: no reading.
-    crate::estimate::interference::hum(segs, &res, p.f0)?;
+    let starts: [f32; MAX_WINDOWS] = core::array::from_fn(|i| pb.w.get(i).map_or(0.0, |x| x.a));
+    crate::estimate::interference::hum(segs, &starts[..pb.w.len()], &res, p.f0)?;
     let cov = n.variances(pb.wt).ok_or(Failure::NoResonance)?;
     let dof = (2 * pb.w.len() + 1).saturating_sub(5).max(1) as f64;
     let red = c / dof;
