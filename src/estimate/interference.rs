@@ -206,12 +206,19 @@ pub fn hum(
         }
         // The centres' span and the steps between consecutive centres, s, from the starts
         // (f32: once per segment, not per harmonic; the windows are gap-free, so two lengths a
-        // sample apart give one step).
+        // sample apart give one step). A step within 1e-6 of itself of the one before is that
+        // one (the starts' f32 rounding; the turn then moves by under 1e-4 rad over a
+        // segment), so that the turn's rotation is formed once a step.
         let centre = |k: usize| a[k] + 0.5 * w[k].len as f32;
         let span = centre(w.len() - 1) - centre(0);
         let mut steps = [0.0f32; 32];
+        let mut prev = f32::NAN;
         for (k, o) in steps.iter_mut().enumerate().take(w.len() - 1) {
-            *o = centre(k + 1) - centre(k);
+            let dt = centre(k + 1) - centre(k);
+            if !(libm::fabsf(dt - prev) <= 1e-6 * prev) {
+                prev = dt;
+            }
+            *o = prev;
         }
         // The harmonics' offsets and the tests on them in f32 (sixteen of them a segment; f64
         // is emulated on the Cortex-M4F).
