@@ -344,28 +344,42 @@ fn fit_segments(
             (p, c) = (t, (c - pred).max(0.0));
             break;
         }
+        // A Gauss–Newton step (lightly damped) is accepted as a rule: its end is evaluated with
+        // the Jacobian at once (the same χ², and the next step's normal equations without a
+        // second pass over the windows); a damped one's with χ² alone.
         let mut trial_res = [C32::new(0.0, 0.0); MAX_WINDOWS];
-        let tc = if t.f0 > 0.0 && t.q > 0.5 {
-            evaluate(&pb, &t, false, Some(&mut trial_res)).0 + prior(t.q)
+        let (tc, tn) = if !(t.f0 > 0.0 && t.q > 0.5) {
+            (f64::INFINITY, None)
+        } else if lambda <= 1e-3 {
+            let (tc, tn) = normal(&t, &mut trial_res);
+            (tc, Some(tn))
         } else {
-            f64::INFINITY
+            (
+                evaluate(&pb, &t, false, Some(&mut trial_res)).0 + prior(t.q),
+                None,
+            )
         };
         if tc < c {
             // Converged when χ² no longer falls by a hundredth of one unit (the parameters then
             // move by less than a tenth of their standard uncertainty), or by one unit at a
             // Gauss–Newton step (lightly damped): a step of at most 1 σ, after which the next
             // would move them by about (1 σ)² over the scale of the model's curvature in σ —
-            // the linewidth, hundreds of σ. The normal equations of the last point serve for the
-            // covariance (not formed again: the Jacobian is the evaluation's dearest part); the
-            // residuals are the trial's own.
+            // the linewidth, hundreds of σ. The normal equations of the last point evaluated
+            // with the Jacobian serve for the covariance (not formed again: the Jacobian is the
+            // evaluation's dearest part); the residuals are the trial's own.
             let done = c - tc <= 1e-2 || (c - tc <= 1.0 && lambda <= 1e-3);
             (p, c) = (t, tc);
+            res = trial_res;
+            if let Some(tn) = tn {
+                n = tn;
+            }
             if done {
-                res = trial_res;
                 break;
             }
             lambda = (lambda * 0.3).max(1e-12);
-            (_, n) = normal(&p, &mut res);
+            if tn.is_none() {
+                (_, n) = normal(&p, &mut res);
+            }
         } else {
             lambda *= 10.0;
             if lambda > 1e6 {
