@@ -373,7 +373,8 @@ fn cholesky<T: Real, const N: usize>(
     rd: &mut [T; N],
 ) -> Option<()> {
     for i in 0..N {
-        for j in 0..=i {
+        // (`0..i + 1`: `0..=i` is an out-of-line iterator call at `opt-level = "z"`.)
+        for j in 0..i + 1 {
             let mut s = m[i][j];
             for k in 0..j {
                 s -= l[i][k] * l[j][k];

@@ -229,7 +229,9 @@ pub fn hum(
         // threshold: f32's 1e-7 moves it by nothing the exponential statistic resolves).
         let limit = (HUM_THRESHOLD * 2.0) as f32 * var;
         for fm in MAINS_HZ {
-            for k in 1..=MAINS_HARMONICS {
+            // (`1..N + 1`: an inclusive range is an out-of-line iterator call at
+            // `opt-level = "z"`.)
+            for k in 1..MAINS_HARMONICS + 1 {
                 let d = fm as f32 * k as f32 - f_h;
                 // Within a window's main lobe, and turning at least HUM_TURNS times over the
                 // segment against the transient: a turn closer to the transient's is a change of

@@ -68,7 +68,8 @@ impl Problem<'_> {
             for i in 0..3 {
                 let ci = c[i] * x.wl;
                 b[i] += ci.re * x.y.re + ci.im * x.y.im;
-                for k in 0..=i {
+                // (`0..i + 1`: `0..=i` is an out-of-line iterator call at `opt-level = "z"`.)
+                for k in 0..i + 1 {
                     a[i][k] += ci.re * c[k].re + ci.im * c[k].im;
                 }
             }
