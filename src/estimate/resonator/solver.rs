@@ -365,22 +365,21 @@ fn fit_segments(
             // move by less than a tenth of their standard uncertainty), or by one unit at a
             // Gauss–Newton step (lightly damped): a step of at most 1 σ, after which the next
             // would move them by about (1 σ)² over the scale of the model's curvature in σ —
-            // the linewidth, hundreds of σ. The normal equations of the last point evaluated
-            // with the Jacobian serve for the covariance (not formed again: the Jacobian is the
-            // evaluation's dearest part); the residuals are the trial's own.
+            // the linewidth, hundreds of σ. The normal equations of the point the last step
+            // started from serve for the covariance, however the step's end was evaluated (not
+            // formed again: the Jacobian is the evaluation's dearest part); the residuals are
+            // the trial's own.
             let done = c - tc <= 1e-2 || (c - tc <= 1.0 && lambda <= 1e-3);
             (p, c) = (t, tc);
             res = trial_res;
-            if let Some(tn) = tn {
-                n = tn;
-            }
             if done {
                 break;
             }
             lambda = (lambda * 0.3).max(1e-12);
-            if tn.is_none() {
-                (_, n) = normal(&p, &mut res);
-            }
+            n = match tn {
+                Some(tn) => tn,
+                None => normal(&p, &mut res).1,
+            };
         } else {
             lambda *= 10.0;
             if lambda > 1e6 {
