@@ -364,14 +364,17 @@ real!(
 );
 
 /// The lower Cholesky factor `L` (`m = L Lᵀ`) of a symmetric positive-definite matrix (its lower
-/// triangle is read), and the reciprocals of its diagonal; `None` if `m` is not positive
-/// definite.
+/// triangle is read) into `l`, and the reciprocals of its diagonal into `rd`; `None` if `m` is
+/// not positive definite. (Into the caller's arrays: a returned pair is copied out.)
 #[allow(clippy::needless_range_loop)] // triangular index arithmetic reads best as indices
-fn cholesky<T: Real, const N: usize>(m: &[[T; N]; N]) -> Option<([[T; N]; N], [T; N])> {
-    let mut l = [[T::ZERO; N]; N];
-    let mut rd = [T::ZERO; N];
+fn cholesky<T: Real, const N: usize>(
+    m: &[[T; N]; N],
+    l: &mut [[T; N]; N],
+    rd: &mut [T; N],
+) -> Option<()> {
     for i in 0..N {
-        for j in 0..=i {
+        // (`0..i + 1`: `0..=i` is an out-of-line iterator call at `opt-level = "z"`.)
+        for j in 0..i + 1 {
             let mut s = m[i][j];
             for k in 0..j {
                 s -= l[i][k] * l[j][k];
@@ -387,7 +390,7 @@ fn cholesky<T: Real, const N: usize>(m: &[[T; N]; N]) -> Option<([[T; N]; N], [T
             }
         }
     }
-    Some((l, rd))
+    Some(())
 }
 
 /// `x` with `m x = b` for a symmetric positive-definite `m` (its lower triangle is read), by
@@ -396,7 +399,8 @@ fn cholesky<T: Real, const N: usize>(m: &[[T; N]; N]) -> Option<([[T; N]; N], [T
 /// if `m` is not positive definite.
 #[allow(clippy::needless_range_loop)] // triangular index arithmetic reads best as indices
 pub fn spd_solve<T: Real, const N: usize>(m: &[[T; N]; N], b: &[T; N]) -> Option<[T; N]> {
-    let (l, rd) = cholesky(m)?;
+    let (mut l, mut rd) = ([[T::ZERO; N]; N], [T::ZERO; N]);
+    cholesky(m, &mut l, &mut rd)?;
     // L y = b, then Lᵀ x = y.
     let mut y = [T::ZERO; N];
     for i in 0..N {
@@ -421,7 +425,8 @@ pub fn spd_solve<T: Real, const N: usize>(m: &[[T; N]; N], b: &[T; N]) -> Option
 /// not positive definite.
 #[allow(clippy::needless_range_loop)] // triangular index arithmetic reads best as indices
 pub fn spd_inverse<const N: usize>(m: &[[f64; N]; N]) -> Option<[[f64; N]; N]> {
-    let (l, rd) = cholesky(m)?;
+    let (mut l, mut rd) = ([[0.0; N]; N], [0.0; N]);
+    cholesky(m, &mut l, &mut rd)?;
     // inverse = L^-T L^-1: invert L column by column.
     let mut linv = [[0.0; N]; N];
     for i in 0..N {

@@ -405,12 +405,22 @@ impl ForceLog {
                 .samples
                 .front()
                 .is_some_and(|&(at, _)| to.wrapping_sub(before(at) as u64) <= from);
+        // Newest first, past the entries after `to`, through the window, to the first entry
+        // before it (the log is in time order): the window's entries without a look at the
+        // rest of the log (a stream reading's window holds a tenth of it).
+        let window = to - from;
+        let within = move |&(u, _): &(u32, i32)| u as u64 <= window;
         if reaches_back {
-            let fine = self.samples.iter().map(|&(at, c)| (before(at), c));
-            line_over(fine, to - from, 1)
+            let fine = self.samples.iter().rev().map(|&(at, c)| (before(at), c));
+            line_over(
+                fine.skip_while(move |p| !within(p)).take_while(within),
+                window,
+                1,
+            )
         } else {
-            let coarse = self.blocks.iter().map(|&(at, c)| (before(at), c));
-            line_over(coarse, to - from, FORCE_BLOCK as i64)
+            let coarse = self.blocks.iter().rev().map(|&(at, c)| (before(at), c));
+            let coarse = coarse.skip_while(move |p| !within(p)).take_while(within);
+            line_over(coarse, window, FORCE_BLOCK as i64)
         }
     }
 }

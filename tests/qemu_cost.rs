@@ -366,28 +366,23 @@ fn check_fits(parsed: &[(String, HashMap<String, String>)]) {
 
 /// The continuous tracker's known excess over the budget: (setting, ceiling of the measurement
 /// side's work, % of the core, why). A reading every segment does a resonator fit of the plan's
-/// windows so far (their solves, the tracker's filter and the pipeline besides) — a single
-/// reading's work every 38 ms (default) or 13 ms (fast, whose later segments fit up to 16
-/// windows): measured 2.49 % and 5.78 % on 2026-11-27. A ceiling a tenth above, so that a change
-/// that costs more fails here.
-const STREAM_OVER_BUDGET: &[(&str, f64, &str)] = &[
-    (
-        "default",
-        2.7,
-        "a fit of the segment's windows every 38 ms: 0.16 M instructions a reading",
-    ),
-    (
-        "fast",
-        6.4,
-        "a fit of up to 16 windows every 13 ms: 0.12 M a reading",
-    ),
-];
+/// windows so far (their solves, the tracker's filter and the pipeline besides). The default
+/// setting, a reading every 38 ms, is within the budget; the fast one, a reading every 13 ms
+/// whose later segments fit up to 16 windows, is not: measured 4.37 % on 2026-11-27. A ceiling
+/// a tenth above, so that a change that costs more fails here; a setting that comes within the
+/// budget fails here too until it is struck.
+const STREAM_OVER_BUDGET: &[(&str, f64, &str)] = &[(
+    "fast",
+    4.8,
+    "a fit of up to 16 windows every 13 ms: 0.09 M instructions a reading",
+)];
 
 /// The continuous tracker on the M4 (`stream` lines): the default setting and the fast one
 /// (12 ms × 4) each streamed 1 s on 500 kPa, every tracking reading ok, and the measurement
 /// side's work from the first tracking reading to the last (all but the sample engine's and the
 /// plant's: the tracker, the pipeline and the plan loop) against the budget's 2 % of a 170 MHz
-/// core over that probe time — both over it, held to the ceilings of [`STREAM_OVER_BUDGET`].
+/// core over that probe time — the fast setting over it, held to its ceiling in
+/// [`STREAM_OVER_BUDGET`].
 fn check_streams(parsed: &[(String, HashMap<String, String>)]) {
     let streams = all(parsed, "stream");
     let names: Vec<&str> = streams.iter().map(|f| f["setting"].as_str()).collect();
@@ -407,8 +402,12 @@ fn check_streams(parsed: &[(String, HashMap<String, String>)]) {
         let pct = num(f, "work_pct");
         match STREAM_OVER_BUDGET.iter().find(|k| k.0 == f["setting"]) {
             None => assert!(pct <= BUDGET_PCT, "over budget: {f:?}"),
-            Some((_, ceiling, why)) => {
+            Some((setting, ceiling, why)) => {
                 assert!(pct <= *ceiling, "above its ceiling {ceiling} %: {f:?}");
+                assert!(
+                    pct > BUDGET_PCT,
+                    "{setting} is within budget now ({pct:.2} %): strike it from STREAM_OVER_BUDGET"
+                );
                 println!("known over budget ({pct:.2} % of the core): {why}");
             }
         }

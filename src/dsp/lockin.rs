@@ -282,9 +282,13 @@ pub fn solve_value(ch: &ChannelSums, r: &ReferenceSums) -> Option<(Complex64, f6
     // N × the residual sum of squares; its variance σ² = rss_n / (N (N − 3)).
     let rss_n = (centred(n, ch.xx, ch.x, ch.x) - (ca * u + cb * v)).max(0.0);
     // Each component's variance: half of σ² ((M⁻¹)_aa + (M⁻¹)_bb), the full normal matrix's
-    // `N (C + A) / det` of the centred one (the N's cancel), in the reference's Q15 units.
-    let var = 0.5 * Q15 * Q15 * rss_n / (r.n as f64 - 3.0) * ((a + c) * inv_det);
-    Some((Complex64::new(ca * Q15, -cb * Q15), var.max(0.0)))
+    // `N (C + A) / det` of the centred one (the N's cancel), in the reference's Q15 units. In
+    // `f32` once the residual has cancelled (a product of positive factors: 1e-7 of itself,
+    // where a variance is known to a few percent; `f64` is emulated on the Cortex-M4F).
+    // (`(A + C)/det` itself in `f64`: its factors pass `f32`'s range on long windows.)
+    let q15 = Q15 as f32;
+    let var = 0.5 * q15 * q15 * (rss_n as f32) / (r.n as f32 - 3.0) * ((a + c) * inv_det) as f32;
+    Some((Complex64::new(ca * Q15, -cb * Q15), var.max(0.0) as f64))
 }
 
 /// `N Σpq − Σp Σq` (`N` times a centred sum of products) exactly in integers, then in `f64`:
@@ -358,10 +362,11 @@ mod tests {
         assert!((p.offset - off).abs() < 0.05);
         // Residual is the rounding of the codes: uniform, rms 1/sqrt(12) = 0.289.
         assert!((p.residual_rms - 0.289).abs() < 0.03, "{}", p.residual_rms);
-        // The value-only solve agrees to rounding.
+        // The value-only solve agrees to rounding: the amplitude to `f64`'s, the variance
+        // (formed in `f32` once the residual has cancelled) to `f32`'s.
         let (dv, dvar) = value_solve_error(&sums);
         assert!(dv <= 1e-12 * p.value.norm(), "{dv:e}");
-        assert!(dvar < 1e-9, "{dvar:e}");
+        assert!(dvar < 1e-6, "{dvar:e}");
     }
 
     /// The value-only solve against the full one on `sums`: the amplitude's distance and the

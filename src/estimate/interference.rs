@@ -177,8 +177,12 @@ pub const HUM_THRESHOLD: f64 = 25.0;
 /// resolves turns `1/T` apart). Closer, a tone and a transient the fit missed cannot be told
 /// apart: measured, a first segment of four one-cycle windows at 230 Hz on a 136 Hz resonance
 /// (below the band) projected its misfit on the 100 Hz harmonic 69 times above the noise.
+///
+/// `starts`: each window's start after its segment's first window's, s, in the same order (the
+/// fit's own, in `f32`: under a second, to 6e-8 s).
 pub fn hum(
     segments: &[Segment],
+    starts: &[f32],
     residuals: &[num_complex::Complex32],
     f0: f64,
 ) -> Result<(), Failure> {
@@ -187,33 +191,47 @@ pub fn hum(
     for seg in segments {
         let w = seg.windows;
         let r = residuals.get(at..at + w.len()).unwrap_or(&[]);
+        let a = starts.get(at..at + w.len()).unwrap_or(&[]);
         at += w.len();
-        let (Some(first), true) = (w.first(), r.len() == w.len() && w.len() >= 3) else {
+        let (Some(first), true) = (
+            w.first(),
+            r.len() == w.len() && a.len() == w.len() && w.len() >= 3,
+        ) else {
             continue;
         };
-        let var: f64 = w.iter().map(|x| x.var).sum();
+        // (`f32`: a sum of positive terms for a threshold.)
+        let var: f32 = w.iter().map(|x| x.var as f32).sum();
         if !(var > 0.0) || !var.is_finite() {
             continue;
         }
-        let last = w[w.len() - 1];
-        let span = (last.t0 + 0.5 * last.len) - (first.t0 + 0.5 * first.len);
-        // The steps between consecutive window centres, s (f32: once per segment, not per
-        // harmonic; the windows are gap-free, so two lengths a sample apart give one step).
+        // The centres' span and the steps between consecutive centres, s, from the starts
+        // (f32: once per segment, not per harmonic; the windows are gap-free, so two lengths a
+        // sample apart give one step). A step within 1e-6 of itself of the one before is that
+        // one (the starts' f32 rounding; the turn then moves by under 1e-4 rad over a
+        // segment), so that the turn's rotation is formed once a step.
+        let centre = |k: usize| a[k] + 0.5 * w[k].len as f32;
+        let span = centre(w.len() - 1) - centre(0);
         let mut steps = [0.0f32; 32];
-        for (o, p) in steps.iter_mut().zip(w.windows(2)) {
-            // The starts' difference in f64 (times from the reading's start), the lengths' in f32.
-            *o = (p[1].t0 - p[0].t0) as f32 + 0.5 * (p[1].len as f32 - p[0].len as f32);
+        let mut prev = f32::NAN;
+        for (k, o) in steps.iter_mut().enumerate().take(w.len() - 1) {
+            let dt = centre(k + 1) - centre(k);
+            if !(libm::fabsf(dt - prev) <= 1e-6 * prev) {
+                prev = dt;
+            }
+            *o = prev;
         }
         // The harmonics' offsets and the tests on them in f32 (sixteen of them a segment; f64
         // is emulated on the Cortex-M4F).
-        let (f_h, len, span) = (seg.f_h as f32, first.len as f32, span as f32);
+        let (f_h, len) = (seg.f_h as f32, first.len as f32);
         // The transient's own turn, relative to the drive.
         let own = (f0 - seg.f_h) as f32;
         // `|S|² / (2 Σ var) > HUM_THRESHOLD`, the division taken once, compared in f32 (a
         // threshold: f32's 1e-7 moves it by nothing the exponential statistic resolves).
-        let limit = (HUM_THRESHOLD * 2.0 * var) as f32;
+        let limit = (HUM_THRESHOLD * 2.0) as f32 * var;
         for fm in MAINS_HZ {
-            for k in 1..=MAINS_HARMONICS {
+            // (`1..N + 1`: an inclusive range is an out-of-line iterator call at
+            // `opt-level = "z"`.)
+            for k in 1..MAINS_HARMONICS + 1 {
                 let d = fm as f32 * k as f32 - f_h;
                 // Within a window's main lobe, and turning at least HUM_TURNS times over the
                 // segment against the transient: a turn closer to the transient's is a change of
@@ -455,20 +473,25 @@ mod tests {
         };
         // Held on a 226 Hz resonance.
         let f0 = 226.0;
-        assert_eq!(hum(&[seg], &noise, f0), Ok(()));
+        let starts: [f32; 14] = core::array::from_fn(|k| (windows[k].t0 - windows[0].t0) as f32);
+        assert_eq!(hum(&[seg], &starts, &noise, f0), Ok(()));
         let d = 250.0 - f_h;
         let humming: [C32; 14] = core::array::from_fn(|k| {
             let t = (k as f64 + 0.5) * len;
             let ph = 2.0 * core::f64::consts::PI * d * t;
             noise[k] + C32::new((2.5 * ph.cos()) as f32, (2.5 * ph.sin()) as f32)
         });
-        assert_eq!(hum(&[seg], &humming, f0), Err(Failure::Interference));
+        assert_eq!(
+            hum(&[seg], &starts, &humming, f0),
+            Err(Failure::Interference)
+        );
         // A resonance at 245 Hz: its transient turns 20 Hz off the drive, and the hum's 25 Hz
         // turn lies within the projection's main lobe of it (the 14 windows' centres span 0.116 s:
         // 1.5 turns are 13 Hz): not judged.
-        assert_eq!(hum(&[seg], &humming, 245.0), Ok(()));
+        assert_eq!(hum(&[seg], &starts, &humming, 245.0), Ok(()));
         // Residuals shorter than the windows, or no windows: nothing to judge, no panic.
-        assert_eq!(hum(&[seg], &humming[..3], f0), Ok(()));
+        assert_eq!(hum(&[seg], &starts, &humming[..3], f0), Ok(()));
+        assert_eq!(hum(&[seg], &starts[..3], &humming, f0), Ok(()));
     }
 
     /// The windows of stream segments on phantom C under the catalogue's knocks (variances

@@ -1,5 +1,5 @@
-//! What a continuous tracker carries from segment to segment: a Kalman filter in information
-//! form over the resonance and the quality factor `(f0, Q)`, fed with each segment's fit
+//! What a continuous tracker carries from segment to segment: a Kalman filter over the
+//! resonance and the quality factor `(f0, Q)`, fed with each segment's fit
 //! (its estimate and the `(JᵀWJ)⁻¹` covariance of `f0` and `Q`,
 //! [`crate::estimate::resonator::HoldFit`]) as the measurement.
 //!
@@ -20,9 +20,13 @@
 //! gate**: when the measurement lies further than [`Process::gate`] (χ² of two degrees of
 //! freedom) from the prediction, the filter restarts from the measurement alone.
 //!
-//! The state is `Y = P⁻¹` and `y = Y x`; with no information (`Y = 0`) the first measurement is
-//! taken as it is. Every operation is a fixed number of `f64` operations on 2 × 2 matrices; no
-//! input panics (a singular or non-finite matrix restarts the filter or is refused).
+//! The state is the estimate `x` and its covariance `P`; an empty filter takes the first
+//! measurement as it is. The measurement is the state itself (`H = I`), so one update needs one
+//! inverse, of the innovation's covariance `S = P + R`: the gate `νᵀ S⁻¹ ν`, the gain
+//! `K = P S⁻¹`, `x + K ν`, and the new covariance `P S⁻¹ R` — `(P⁻¹ + R⁻¹)⁻¹` without its
+//! three inverses and without the cancellation of `P − K P`. Every operation is a fixed number of
+//! `f64` operations on 2 × 2 matrices; no input panics (a singular or non-finite matrix restarts
+//! the filter or is refused).
 
 /// A 2 × 2 symmetric matrix `[[a, b], [b, c]]` over `(f0, Q)`.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -46,6 +50,12 @@ impl Sym2 {
             c: self.a / det,
         })
         .filter(|m| m.a.is_finite() && m.b.is_finite() && m.c.is_finite())
+    }
+
+    /// True for a finite positive-definite matrix.
+    pub fn is_positive_definite(&self) -> bool {
+        let det = self.a * self.c - self.b * self.b;
+        self.a > 0.0 && self.c > 0.0 && det > 0.0 && det.is_finite() && self.b.is_finite()
     }
 
     fn add(&self, o: &Self) -> Self {
@@ -105,12 +115,14 @@ pub enum Update {
     Refused,
 }
 
-/// The filter's state: information matrix `Y` and vector `y = Y x` over `(f0, Q)`, the time of
-/// the last measurement.
+/// The filter's state: the estimate `x` over `(f0, Q)` and its covariance `P` (when it has one),
+/// the time of the last measurement.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Track {
-    info: Sym2,
-    y: [f64; 2],
+    x: [f64; 2],
+    p: Sym2,
+    /// False while the filter knows nothing (`x`, `P` unset).
+    known: bool,
     t: f64,
     /// The last update's gain on the resonance's own innovation (`K[f0][f0]`, 0–1; 1 after a
     /// restart) and the time it stepped over, s.
@@ -132,12 +144,13 @@ pub struct Estimate2 {
 impl Track {
     /// A filter that knows nothing.
     pub const EMPTY: Self = Self {
-        info: Sym2 {
+        x: [0.0, 0.0],
+        p: Sym2 {
             a: 0.0,
             b: 0.0,
             c: 0.0,
         },
-        y: [0.0, 0.0],
+        known: false,
         t: 0.0,
         gain: 1.0,
         dt: 0.0,
@@ -150,12 +163,10 @@ impl Track {
 
     /// The estimate, when the filter has one.
     pub fn estimate(&self) -> Option<Estimate2> {
-        let cov = self.info.inverse()?;
-        let x = cov.mul(self.y);
-        (x[0].is_finite() && x[1].is_finite()).then_some(Estimate2 {
-            f0: x[0],
-            q: x[1],
-            cov,
+        self.known.then_some(Estimate2 {
+            f0: self.x[0],
+            q: self.x[1],
+            cov: self.p,
         })
     }
 
@@ -193,37 +204,51 @@ impl Track {
     /// from it).
     pub fn update(&mut self, m: &Measurement, process: &Process) -> Update {
         let finite = m.f0.is_finite() && m.q.is_finite() && m.t.is_finite();
-        let Some(r_inv) = m.cov.inverse().filter(|_| finite) else {
+        let r = m.cov;
+        if !finite || !r.is_positive_definite() {
             return Update::Refused;
-        };
+        }
         let z = [m.f0, m.q];
         let restart = |s: &mut Self| {
-            s.info = r_inv;
-            s.y = r_inv.mul(z);
-            s.t = m.t;
-            s.gain = 1.0;
-            s.dt = 0.0;
+            *s = Self {
+                x: z,
+                p: r,
+                known: true,
+                t: m.t,
+                gain: 1.0,
+                dt: 0.0,
+            };
             Update::Restarted
         };
         let Some(pred) = self.predicted(m.t, process) else {
             return restart(self);
         };
         let nu = [z[0] - pred.f0, z[1] - pred.q];
-        let s_inv = pred.cov.add(&m.cov).inverse();
+        let s_inv = pred.cov.add(&r).inverse();
         let d2 = s_inv.map(|s| s.quad(nu));
         let Some(s_inv) = s_inv.filter(|_| d2.is_some_and(|d| d <= process.gate)) else {
             return restart(self);
         };
-        // K = P S⁻¹; its (f0, f0) element.
-        self.gain = pred.cov.a * s_inv.a + pred.cov.b * s_inv.b;
-        self.dt = (m.t - self.t).max(0.0);
-        let Some(info) = pred.cov.inverse() else {
-            return restart(self);
+        // K = P S⁻¹ (not symmetric), by rows.
+        let (p, s) = (pred.cov, s_inv);
+        let k = [s.mul([p.a, p.b]), s.mul([p.b, p.c])];
+        // x + K ν and P S⁻¹ R = K R (symmetric: its upper triangle).
+        let cov = Sym2 {
+            a: k[0][0] * r.a + k[0][1] * r.b,
+            b: k[0][0] * r.b + k[0][1] * r.c,
+            c: k[1][0] * r.b + k[1][1] * r.c,
         };
-        let y = info.mul([pred.f0, pred.q]);
-        let rz = r_inv.mul(z);
-        self.info = info.add(&r_inv);
-        self.y = [y[0] + rz[0], y[1] + rz[1]];
+        let x = [
+            pred.f0 + k[0][0] * nu[0] + k[0][1] * nu[1],
+            pred.q + k[1][0] * nu[0] + k[1][1] * nu[1],
+        ];
+        if !(x[0].is_finite() && x[1].is_finite() && cov.is_positive_definite()) {
+            return restart(self);
+        }
+        self.gain = k[0][0];
+        self.dt = (m.t - self.t).max(0.0);
+        self.x = x;
+        self.p = cov;
         self.t = m.t;
         Update::Pooled
     }
@@ -241,7 +266,7 @@ mod tests {
     };
 
     /// An f64 reference Kalman filter in covariance form (`P`, `x`; `K = P Hᵀ (H P Hᵀ + R)⁻¹`
-    /// with `H = I`, Joseph's form for `P`): written apart from the information form under test.
+    /// with `H = I`, Joseph's form for `P`): written apart from the filter under test.
     struct Reference {
         x: [f64; 2],
         p: [[f64; 2]; 2],
@@ -301,7 +326,7 @@ mod tests {
         [l00 * u, l10 * u + l11 * v]
     }
 
-    /// The information form against the covariance-form reference, measurement by measurement
+    /// The filter against the covariance-form reference (Joseph's form), measurement by measurement
     /// over 200 correlated measurements (the correlation's sign alternating, as the tracker's
     /// offset drive makes it): the same estimate and covariance to 1e-9.
     #[test]

@@ -182,9 +182,11 @@ impl Modulus {
     ) -> Self {
         let var_repeat = de_df * de_df * sigma_hz * sigma_hz;
         let mut var = var_repeat + de_df * de_df * model_sigma_hz * model_sigma_hz;
+        // gᵀ C g: the diagonal's terms and each pair's once.
         for i in 0..3 {
-            for j in 0..3 {
-                var += g[i] * cov[i][j] * g[j];
+            var += g[i] * g[i] * cov[i][i];
+            for j in 0..i {
+                var += g[i] * g[j] * (cov[i][j] + cov[j][i]);
             }
         }
         Modulus {

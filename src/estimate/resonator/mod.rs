@@ -77,14 +77,16 @@ pub(crate) fn current_window(raw: &PointRaw, scale: &FrontEndScale, fs: f64) -> 
     let s = &raw.sums;
     let (value, variance) = solve_value(&s.current, &s.reference)?;
     let ai = scale.amps_per_code as f64;
-    let len = s.reference.n as f64 / fs;
+    // Times from whole sample counts (one division, not two and a difference).
+    let dt = 1.0 / fs;
+    let n = s.reference.n as u64;
     // The window's span in the windows' time base (each sample the period centred on it)
     // starts half a phase step before its first sample's phase and ends `n` steps later.
     let ftw = raw.plan.ftw;
     let start = raw.start_phase.wrapping_sub(ftw / 2);
     Some(HoldWindow {
-        t0: raw.end_sample as f64 / fs - len,
-        len,
+        t0: raw.end_sample.saturating_sub(n) as f64 * dt,
+        len: n as f64 * dt,
         y: value * ai,
         var: variance * ai * ai,
         phase: [start, start.wrapping_add(ftw.wrapping_mul(s.reference.n))],
@@ -97,8 +99,10 @@ pub(crate) fn current_window(raw: &PointRaw, scale: &FrontEndScale, fs: f64) -> 
 /// and `1/|V|²` formed once, each window's in f32 (emulated f64 is dear on the Cortex-M4F; f32's
 /// 1e-7 is far below any window's noise, 1e-3 of |Y| and more).
 pub(crate) fn to_admittance(windows: &mut [HoldWindow], v: C64, var_v: f64) {
-    let inv_v = C64::new(1.0, 0.0) / v;
-    let (inv_v32, inv_n) = (c32(inv_v), inv_v.norm_sqr() as f32);
+    // 1/V = V̄/|V|², 1/|V|² once.
+    let inv_n64 = 1.0 / v.norm_sqr();
+    let inv_v = v.conj() * inv_n64;
+    let (inv_v32, inv_n) = (c32(inv_v), inv_n64 as f32);
     let var_v = var_v as f32;
     for x in windows {
         let y = c32(x.y) * inv_v32;
@@ -173,9 +177,12 @@ pub struct Segment<'a> {
 /// ([`HoldWindow::phase`]) sees the transient through its sine fit's normal equations
 /// (`model::SineFit`).
 pub fn mirror(v: C64) -> C64 {
-    let n = v.norm_sqr();
+    // `v̄² / |v|²` from the squares of its parts, once each.
+    let (rr, ii) = (v.re * v.re, v.im * v.im);
+    let n = rr + ii;
     if n > 0.0 && n.is_finite() {
-        v.conj() * v.conj() / n
+        let inv = 1.0 / n;
+        C64::new((rr - ii) * inv, -2.0 * (v.re * v.im) * inv)
     } else {
         C64::new(1.0, 0.0)
     }

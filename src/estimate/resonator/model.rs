@@ -155,43 +155,47 @@ impl Rates {
     }
 }
 
-/// The segments' windows in `f32` (less their static admittance), the scale of their
-/// admittances and the mean window length (s).
-pub(super) fn prepare(segs: &[Segment]) -> (heapless::Vec<Win32, MAX_WINDOWS>, f32, f64) {
+/// The segments' windows in `f32` (less their static admittance) and the scale of their
+/// admittances.
+///
+/// Only the starts' difference from the segment's first is taken in `f64` (times from the
+/// reading's start, seconds of probe time): the rest in `f32` (`f64` is emulated on the
+/// Cortex-M4F). The admittances come from [`super::to_admittance`] in `f32` already, so `y − y_s`
+/// rounds once, to 6e-8 of itself, far below any window's noise; a start relative to its
+/// segment (under a second) is held to 6e-8 s, a gap of a sample (1e-4 s) stands out of that.
+pub(super) fn prepare(segs: &[Segment]) -> (heapless::Vec<Win32, MAX_WINDOWS>, f32) {
     let mut out = heapless::Vec::new();
     let mut big = 0.0f32;
     let all = || segs.iter().flat_map(|s| s.windows.iter());
     let n = all().count();
-    let total: f64 = all().map(|x| x.len).sum();
-    let mean_len = if n > 0 && total > 0.0 {
-        total / n as f64
+    let total: f32 = all().map(|x| x.len as f32).sum();
+    let mean32 = if n > 0 && total > 0.0 {
+        total / n as f32
     } else {
         1.0
     };
-    // The differences in f64 (times from the reading's start, the admittance less its static
-    // part), the rest in f32 (f64 is emulated on the Cortex-M4F).
-    let mean32 = mean_len as f32;
     for (s, seg) in segs.iter().enumerate() {
         let t0 = seg.windows.first().map_or(0.0, |x| x.t0);
-        let mut next = 0.0f64;
+        let y_s = c32(seg.y_s);
+        let mut next = 0.0f32;
         for (k, x) in seg.windows.iter().enumerate() {
-            let a = x.t0 - t0;
-            let y = c32(x.y - seg.y_s);
+            let a = (x.t0 - t0) as f32;
+            let y = c32(x.y) - y_s;
             big = big.max(y.norm_sqr());
             let len = x.len as f32;
             let _ = out.push(Win32 {
-                a: a as f32,
+                a,
                 len,
                 y,
-                gap: k == 0 || libm::fabs(a - next) > 1e-6,
+                gap: k == 0 || libm::fabsf(a - next) > 1e-6,
                 seg: s as u8,
                 wl: len / mean32,
                 fit: SineFit::new(x.phase[0], x.phase[1], seg.f_h, x.len),
             });
-            next = a + x.len;
+            next = a + len;
         }
     }
-    (out, crate::dsp::trig::sqrtf(big).max(1e-30), mean_len)
+    (out, crate::dsp::trig::sqrtf(big).max(1e-30))
 }
 
 /// The model's parameters: resonance, quality factor, motional peak conductance, and the state
@@ -414,22 +418,23 @@ impl SegModel {
     }
 }
 
-/// The segments' models at `p`: the first starts from `p.z`; the second (with `carry`) from
-/// the first's state carried to the switch and on under the second's drive to its first window
-/// (the drive's phase at each segment's origin from its first window in `w`).
+/// The segments' models at `p` into `out` (the caller's: a returned list is copied out): the
+/// first starts from `p.z`; the second (with `carry`) from the first's state carried to the
+/// switch and on under the second's drive to its first window (the drive's phase at each
+/// segment's origin from its first window in `w`).
 fn seg_models(
     p: &Params,
     segs: &[(f64, f64, C32)],
     carry: Option<&Carry>,
     w: &[Win32],
-) -> heapless::Vec<SegModel, MAX_SEGMENTS> {
+    out: &mut heapless::Vec<SegModel, MAX_SEGMENTS>,
+) {
     let zero = C32::new(0.0, 0.0);
     let one = C32::new(1.0, 0.0);
     let j = C32::new(0.0, 1.0);
     let g = p.g as f32;
-    let mut out = heapless::Vec::new();
     let Some(&(f_first, t_first, mirror0)) = segs.first() else {
-        return out;
+        return;
     };
     let m0 = DriveModel::new(p, f_first);
     let z0 = c32(p.z);
@@ -480,7 +485,6 @@ fn seg_models(
             mirror1,
         ));
     }
-    out
 }
 
 /// χ² of `p` against the windows (`y` already without the static part) of segments driven at
@@ -503,19 +507,20 @@ pub(super) fn evaluate(
     let (segs, carry) = (&pb.segs[..], pb.carry);
     let one = C32::new(1.0, 0.0);
     let (f0, q) = (p.f0, p.q);
-    let models = seg_models(p, segs, carry, w);
+    let mut models = heapless::Vec::new();
+    seg_models(p, segs, carry, w, &mut models);
     // The normal equations' sums (at most 16 products each) in f32, each column scaled to about
     // unit size first ([`Normal`]); f32's relative precision (1e-7) is far finer than what the
-    // steps and the covariance need.
-    let scale: [f32; 5] = [
-        1.0 / (gs * (q / f0) as f32),
-        1.0 / (gs / q as f32),
-        1.0,
-        1.0,
-        1.0,
-    ];
-    let mut jtj32 = [[0.0f32; 5]; 5];
-    let mut jtr32 = [0.0f32; 5];
+    // steps and the covariance need. (Any scale serves: it is undone by the same numbers.)
+    let (q32, f32_0) = (q as f32, f0 as f32);
+    let scale: [f32; 5] = [1.0 / (gs * (q32 / f32_0)), 1.0 / (gs / q32), 1.0, 1.0, 1.0];
+    // Summed in place (a finished pair of arrays would be copied into the result).
+    let mut normal = Normal {
+        jtj: [[0.0f32; 5]; 5],
+        jtr: [0.0f32; 5],
+        scale,
+    };
+    let (jtj32, jtr32) = (&mut normal.jtj, &mut normal.jtr);
     let mut seg = u8::MAX;
     // exp(λ a) carried from window to window (they are gap-free), exp(λ len) cached per window
     // length (they differ by at most a sample): no transcendental per window.
@@ -578,7 +583,7 @@ pub(super) fn evaluate(
                 linear(m.dz[3]),
                 linear(m.dz[4]),
             ];
-            add_row(&mut jtj32, &mut jtr32, &cols, r, x.wl);
+            add_row(jtj32, jtr32, &cols, r, x.wl);
         }
         ea = eb;
     }
@@ -586,14 +591,9 @@ pub(super) fn evaluate(
         let (r, cols) = rest.residual(p, jac, &scale);
         chi2 += rest.w * r.norm_sqr();
         if jac {
-            add_row(&mut jtj32, &mut jtr32, &cols, r, rest.w);
+            add_row(jtj32, jtr32, &cols, r, rest.w);
         }
     }
-    let normal = Normal {
-        jtj: jtj32,
-        jtr: jtr32,
-        scale,
-    };
     (chi2 as f64 * wt, normal)
 }
 
@@ -630,22 +630,25 @@ pub(super) struct Normal {
 
 impl Normal {
     /// The variances of `f0` and `Q` and their covariance (the upper-left 2 × 2 block of
-    /// `(JᵀWJ)⁻¹`: `[var f0, var Q, cov(f0, Q)]`) for weight `wt`, in `f64`: the linear
-    /// parameters `(g, Re z, Im z)` eliminated from the scaled matrix (the first three pivots of
-    /// its `L D Lᵀ`, no square roots), which leaves the Schur complement `S` of `(f0, Q)`, whose
-    /// inverse is that block; unscaled by `scale_i scale_j / wt`. `None` when the matrix is
-    /// not positive definite.
+    /// `(JᵀWJ)⁻¹`: `[var f0, var Q, cov(f0, Q)]`) for weight `wt`: the linear parameters
+    /// `(g, Re z, Im z)` eliminated from the scaled matrix (the first three pivots of its
+    /// `L D Lᵀ`, no square roots, in `f32` like the sums they start from), which leaves the
+    /// Schur complement `S` of `(f0, Q)`, whose inverse is that block; its determinant (where
+    /// `f0` and `Q` correlate it cancels) and the unscaling by `scale_i scale_j / wt` in `f64`.
+    /// `None` when the matrix is not positive definite. (`gradcheck` holds it to the `f64`
+    /// inverse over the tracker's and the holds' windows.)
     #[allow(clippy::needless_range_loop)] // triangular index arithmetic reads best as indices
     pub(super) fn variances(&self, wt: f64) -> Option<[f64; 3]> {
         const N: usize = 5;
         // The linear parameters first, then (f0, Q).
         const ORDER: [usize; N] = [2, 3, 4, 0, 1];
-        let mut m: [[f64; N]; N] = core::array::from_fn(|i| {
-            core::array::from_fn(|j| {
+        let mut m = [[0.0f32; N]; N];
+        for i in 0..N {
+            for j in 0..i + 1 {
                 let (a, b) = (ORDER[i], ORDER[j]);
-                self.jtj[a.max(b)][a.min(b)] as f64
-            })
-        });
+                m[i][j] = self.jtj[a.max(b)][a.min(b)];
+            }
+        }
         // Lower triangle: m[i][j], j ≤ i.
         for k in 0..3 {
             let d = m[k][k];
@@ -655,12 +658,12 @@ impl Normal {
             let inv = 1.0 / d;
             for i in k + 1..N {
                 let l = m[i][k] * inv;
-                for j in k + 1..=i {
+                for j in k + 1..i + 1 {
                     m[i][j] -= l * m[j][k];
                 }
             }
         }
-        let (a, b, c) = (m[3][3], m[4][3], m[4][4]);
+        let (a, b, c) = (m[3][3] as f64, m[4][3] as f64, m[4][4] as f64);
         let det = a * c - b * b;
         if !(a > 0.0) || !(det > 0.0) || !det.is_finite() {
             return None;
@@ -800,6 +803,162 @@ mod gradcheck {
     use super::*;
     use crate::estimate::resonator::fixtures::synthetic;
     use crate::estimate::resonator::mirror;
+    use crate::estimate::resonator::{HoldWindow, MAX_WINDOWS};
+
+    /// How far [`Normal::variances`] (`f32` elimination) may lie from the `f64` inverse of the
+    /// same normal equations: var `f0` and var `Q` relative to themselves, their covariance
+    /// relative to `sqrt(var f0 var Q)` — one and a half times the worst measured over
+    /// [`variances_agree_with_the_f64_inverse`]'s windows (where `f0` or `Q` correlates with
+    /// the linear parameters, the elimination cancels a thousandfold; the `f32` sums it starts
+    /// from carry the same 1e-7 rounding through the same cancellation), and far below what a
+    /// variance is known to (its χ² scatter, tens of percent for the tracker's 14 numbers).
+    const VARIANCE_TOL: f64 = 1e-4;
+
+    /// [`Normal::variances`] against the `f64` inverse of the unscaled normal equations
+    /// (`linalg::spd_inverse`), at the point of every window layout the tracker and the holds
+    /// fit: the resonance, `Q` and motional peak of phantoms A–E and of lossy tissue (490 kPa at
+    /// loss tangent 0.3, 2000 kPa at 0.5; `hal-sim`'s scenes), driven on the resonance and 0.25,
+    /// 1 and 3 half-linewidths either side, 2–16 windows of one and of four cycles, from rest and
+    /// from a ringing state — the Jacobian's products depend on the windows' times and the
+    /// point, not on the data. Four windows and more (the fit's fewest without a search; fewer
+    /// leave the matrix singular to rounding).
+    #[test]
+    fn variances_agree_with_the_f64_inverse() {
+        use hal_sim::{phantoms, Scene};
+        let mut scenes: std::vec::Vec<Scene> = [
+            phantoms::A,
+            phantoms::B,
+            phantoms::C,
+            phantoms::D,
+            phantoms::E,
+        ]
+        .iter()
+        .map(Scene::on_phantom)
+        .collect();
+        scenes.push(Scene::on_modulus_kpa(490.0).with_loss_tangent(0.3));
+        scenes.push(Scene::on_modulus_kpa(2000.0).with_loss_tangent(0.5));
+        let (mut worst, mut worst_cov, mut cases) = (0.0f64, 0.0f64, 0);
+        for scene in &scenes {
+            let (f0, q) = (scene.resonance_hz(), scene.q());
+            let g = scene.pzt.motional_peak_s(&scene.kelvin());
+            for offset in [-3.0, -1.0, -0.25, 0.0, 0.25, 1.0, 3.0] {
+                let f_h = f0 * (1.0 + offset / (2.0 * q));
+                for cycles in [1.0, 4.0] {
+                    let len = cycles / f_h;
+                    for n in 4..=MAX_WINDOWS {
+                        for z in [C64::new(0.0, 0.0), C64::new(0.3 * g, -0.4 * g)] {
+                            let w: std::vec::Vec<HoldWindow> = (0..n)
+                                .map(|k| HoldWindow {
+                                    t0: 3.0 + k as f64 * len,
+                                    len,
+                                    y: C64::new(g, 0.0),
+                                    var: 1e-20,
+                                    phase: [0, 0],
+                                })
+                                .collect();
+                            let seg = Segment {
+                                windows: &w,
+                                f_h,
+                                y_s: C64::new(0.0, 0.0),
+                                mirror: mirror(C64::new(0.6, 0.8)),
+                            };
+                            let (w32, gs) = prepare(&[seg]);
+                            let pb = Problem {
+                                w: w32,
+                                gs,
+                                segs: [(f_h, 3.0, c32(seg.mirror))].into_iter().collect(),
+                                carry: None,
+                                wt: 1e20,
+                                rest: None,
+                            };
+                            let p = Params { f0, q, g, z };
+                            let n = evaluate(&pb, &p, true, None).1;
+                            let (jtj, _) = n.unscaled(pb.wt);
+                            // Fewer windows than parameters leave the matrix singular: both
+                            // refuse it or neither.
+                            let Some(inv) = crate::linalg::spd_inverse(&jtj) else {
+                                continue;
+                            };
+                            let ok = [inv[0][0], inv[1][1]].iter().all(|v| *v > 0.0);
+                            let Some(v) = n.variances(pb.wt).filter(|_| ok) else {
+                                continue;
+                            };
+                            cases += 1;
+                            worst = worst
+                                .max((v[0] / inv[0][0] - 1.0).abs())
+                                .max((v[1] / inv[1][1] - 1.0).abs());
+                            let sd = (inv[0][0] * inv[1][1]).sqrt();
+                            worst_cov = worst_cov.max((v[2] - inv[0][1]).abs() / sd);
+                        }
+                    }
+                }
+            }
+        }
+        std::eprintln!("{cases} layouts: variances within {worst:e}, covariance {worst_cov:e}");
+        assert!(cases > 1000, "{cases}");
+        assert!(worst < VARIANCE_TOL, "{worst:e}");
+        assert!(worst_cov < VARIANCE_TOL, "{worst_cov:e}");
+    }
+
+    /// [`prepare`]'s `f32` against the `f64` differences it stands for, over segments of 4–16
+    /// windows of one to four cycles at 170–290 Hz starting anywhere in the first 1000 s of
+    /// probe time (sample-aligned at 10 kHz, a gap of one sample now and then), admittances of
+    /// 1e-8–1e-6 S (from `f32`, as [`super::super::to_admittance`] leaves them) and a static
+    /// part up to three times theirs: each start within 1e-7 s of its segment's (sample
+    /// boundaries are 1e-4 s apart), `y − y_s` within 2e-7 of `|y| + |y_s|`, every gap found and
+    /// no other.
+    #[test]
+    fn prepare_agrees_with_the_f64_differences() {
+        let mut rng = probe_rng::Rng::new(5);
+        let fs = 10_000.0;
+        let (mut worst_a, mut worst_y) = (0.0f64, 0.0f64);
+        for _ in 0..2000 {
+            let f_h = 170.0 + 120.0 * rng.uniform();
+            let cycles = 1.0 + (4.0 * rng.uniform()).floor();
+            let n = 4 + (13.0 * rng.uniform()) as usize;
+            let mag = 1e-8 * 100f64.powf(rng.uniform());
+            let polar = |r: f64, a: f64| C64::new(r * a.cos(), r * a.sin());
+            let y_s = polar(3.0 * mag * rng.uniform(), 6.3 * rng.uniform());
+            let mut sample = (1e7 * rng.uniform()).floor();
+            let mut gaps = [false; MAX_WINDOWS];
+            let w: std::vec::Vec<HoldWindow> = (0..n)
+                .map(|k| {
+                    let len_samples = (cycles * fs / f_h).round() + (k % 2) as f64;
+                    let gap = k > 0 && rng.uniform() < 0.1;
+                    gaps[k] = gap;
+                    sample += gap as u8 as f64;
+                    let y = polar(mag * (0.5 + rng.uniform()), 6.3 * rng.uniform());
+                    let y = C64::new(y.re as f32 as f64, y.im as f32 as f64);
+                    let x = HoldWindow {
+                        t0: (sample + len_samples) / fs - len_samples / fs,
+                        len: len_samples / fs,
+                        y,
+                        var: 1e-20,
+                        phase: [0, 0],
+                    };
+                    sample += len_samples;
+                    x
+                })
+                .collect();
+            let seg = Segment {
+                windows: &w,
+                f_h,
+                y_s,
+                mirror: C64::new(1.0, 0.0),
+            };
+            let (p, _) = prepare(&[seg]);
+            for (k, (x, o)) in w.iter().zip(p.iter()).enumerate() {
+                worst_a = worst_a.max((o.a as f64 - (x.t0 - w[0].t0)).abs());
+                let want = x.y - y_s;
+                let got = C64::new(o.y.re as f64, o.y.im as f64);
+                worst_y = worst_y.max((got - want).norm() / (x.y.norm() + y_s.norm()));
+                assert_eq!(o.gap, k == 0 || gaps[k], "window {k}");
+            }
+        }
+        std::eprintln!("worst: start {worst_a:e} s, y {worst_y:e}");
+        assert!(worst_a < 1e-7, "{worst_a:e}");
+        assert!(worst_y < 2e-7, "{worst_y:e}");
+    }
 
     /// The analytic gradient of χ² over all five parameters, the mirror image's terms
     /// included (a rotated drive, a transient far from the fit's point, windows off their
@@ -828,7 +987,7 @@ mod gradcheck {
                 y_s,
                 mirror: m,
             };
-            let (w, gs, _) = prepare(&[seg]);
+            let (w, gs) = prepare(&[seg]);
             let pb = Problem {
                 w,
                 gs,
@@ -845,7 +1004,7 @@ mod gradcheck {
             let v = n.variances(pb.wt).unwrap();
             for (k, (i, j)) in [(0, 0), (1, 1), (0, 1)].into_iter().enumerate() {
                 assert!(
-                    (v[k] / inv[i][j] - 1.0).abs() < 1e-9,
+                    (v[k] / inv[i][j] - 1.0).abs() < VARIANCE_TOL,
                     "{i}{j}: {} vs {}",
                     v[k],
                     inv[i][j]
@@ -922,7 +1081,7 @@ mod gradcheck {
             rho: C64::new(0.9, 0.1),
             filters: Filters::of(&crate::hal::FrontEndScale::PROBE),
         };
-        let (w, gs, _) = prepare(&segs);
+        let (w, gs) = prepare(&segs);
         let pb = Problem {
             w,
             gs,

@@ -72,7 +72,8 @@ impl Problem<'_> {
             for i in 0..3 {
                 let ci = c[i] * x.wl;
                 b[i] += ci.re * x.y.re + ci.im * x.y.im;
-                for k in 0..=i {
+                // (`0..i + 1`: `0..=i` is an out-of-line iterator call at `opt-level = "z"`.)
+                for k in 0..i + 1 {
                     a[i][k] += ci.re * c[k].re + ci.im * c[k].im;
                 }
             }
@@ -125,10 +126,12 @@ impl Problem<'_> {
 }
 
 /// Noise variance per component common to all windows: the mean of the second half's own
-/// residual variances (earlier windows' residuals also hold the transient).
+/// residual variances (earlier windows' residuals also hold the transient). Summed in `f32`
+/// (a few positive terms, 1e-7 of the mean; any window's variance, 1e-30 S² and more, lies
+/// within its range).
 fn noise_variance(w: &[HoldWindow]) -> f64 {
     let tail = &w[w.len() / 2..];
-    tail.iter().map(|x| x.var).sum::<f64>() / tail.len().max(1) as f64
+    (tail.iter().map(|x| x.var as f32).sum::<f32>() / tail.len().max(1) as f32) as f64
 }
 
 /// The least-squares fit of the switched-on response ([`super`]) to one segment's
@@ -291,9 +294,12 @@ fn fit_with(
     }
     // The noise from the last segment, where the transients have gone furthest, as the variance
     // of a window of the mean length.
-    let (w, gs, mean_len) = prepare(segs);
-    let last_len = last.windows.iter().map(|x| x.len).sum::<f64>() / last.windows.len() as f64;
-    let var = noise_variance(last.windows) * last_len / mean_len;
+    let (w, gs) = prepare(segs);
+    // Its windows' mean length over all windows': the mean of their weights (`f32`, a ratio
+    // near 1).
+    let tail = &w[w.len().saturating_sub(last.windows.len())..];
+    let rel = tail.iter().map(|x| x.wl).sum::<f32>() / tail.len().max(1) as f32;
+    let var = noise_variance(last.windows) * rel as f64;
     if !(var > 0.0) || !var.is_finite() || !f_start.is_finite() || !(f_start > 0.0) {
         return Err(Failure::NoResonance);
     }
@@ -379,12 +385,13 @@ fn fit_with(
     let mut res = [C32::new(0.0, 0.0); MAX_WINDOWS];
     // The start's χ² comes with them (the same sum a χ²-only evaluation makes).
     // The prior in the normal equations' units ([`Normal`]).
-    let q_w_scaled = q_w / pb.wt;
+    // (`f32`, as the sums it joins.)
+    let q_w_scaled = (q_w / pb.wt) as f32;
     let normal = |p: &Params, res: &mut [C32]| {
         let (chi2, mut n) = evaluate(&pb, p, true, Some(res));
-        let s1 = n.scale[1] as f64;
-        n.jtj[1][1] += (q_w_scaled * s1 * s1) as f32;
-        n.jtr[1] += ((q_start - p.q) * q_w_scaled * s1) as f32;
+        let s1 = n.scale[1];
+        n.jtj[1][1] += q_w_scaled * s1 * s1;
+        n.jtr[1] += (q_start - p.q) as f32 * q_w_scaled * s1;
         (chi2 + prior(p.q), n)
     };
     let (mut c, mut n) = normal(&p, &mut res);
@@ -407,31 +414,54 @@ fn fit_with(
         if pred <= 1e-2 && lambda <= 1.0 {
             break;
         }
-        let t = p.stepped(&core::array::from_fn(|i| {
-            step[i] as f64 * n.scale[i] as f64
-        }));
+        // The step in the parameters' units, in `f32` as it was solved.
+        let t = p.stepped(&core::array::from_fn(|i| (step[i] * n.scale[i]) as f64));
+        // A Gauss–Newton step (lightly damped) that the quadratic model says lowers χ² by at
+        // most one unit moves the parameters by at most 1 σ, where the model holds to (1 σ)²
+        // over the scale of its curvature (the linewidth, hundreds of σ): it is the fit's last,
+        // as an accepted step of that size would be, taken without evaluating every window at
+        // its end — χ² there is the model's `c − pred`, and the residuals the hum test judges
+        // are those of the point it starts from (the step changes them by at most one unit of
+        // χ², half a unit of the test's statistic).
+        if pred <= 1.0 && lambda <= 1e-3 && t.f0 > 0.0 && t.q > 0.5 {
+            (p, c) = (t, (c - pred).max(0.0));
+            break;
+        }
+        // A Gauss–Newton step (lightly damped) is accepted as a rule: its end is evaluated with
+        // the Jacobian at once (the same χ², and the next step's normal equations without a
+        // second pass over the windows); a damped one's with χ² alone.
         let mut trial_res = [C32::new(0.0, 0.0); MAX_WINDOWS];
-        let tc = if t.f0 > 0.0 && t.q > 0.5 {
-            evaluate(&pb, &t, false, Some(&mut trial_res)).0 + prior(t.q)
+        let (tc, tn) = if !(t.f0 > 0.0 && t.q > 0.5) {
+            (f64::INFINITY, None)
+        } else if lambda <= 1e-3 {
+            let (tc, tn) = normal(&t, &mut trial_res);
+            (tc, Some(tn))
         } else {
-            f64::INFINITY
+            (
+                evaluate(&pb, &t, false, Some(&mut trial_res)).0 + prior(t.q),
+                None,
+            )
         };
         if tc < c {
             // Converged when χ² no longer falls by a hundredth of one unit (the parameters then
             // move by less than a tenth of their standard uncertainty), or by one unit at a
             // Gauss–Newton step (lightly damped): a step of at most 1 σ, after which the next
             // would move them by about (1 σ)² over the scale of the model's curvature in σ —
-            // the linewidth, hundreds of σ. The normal equations of the last point serve for the
-            // covariance (not formed again: the Jacobian is the evaluation's dearest part); the
-            // residuals are the trial's own.
+            // the linewidth, hundreds of σ. The normal equations of the point the last step
+            // started from serve for the covariance, however the step's end was evaluated (not
+            // formed again: the Jacobian is the evaluation's dearest part); the residuals are
+            // the trial's own.
             let done = c - tc <= 1e-2 || (c - tc <= 1.0 && lambda <= 1e-3);
             (p, c) = (t, tc);
+            res = trial_res;
             if done {
-                res = trial_res;
                 break;
             }
             lambda = (lambda * 0.3).max(1e-12);
-            (_, n) = normal(&p, &mut res);
+            n = match tn {
+                Some(tn) => tn,
+                None => normal(&p, &mut res).1,
+            };
         } else {
             lambda *= 10.0;
             if lambda > 1e6 {
@@ -449,7 +479,8 @@ fn fit_with(
         }
     }
     // Mains hum near the drive turns in the residuals at its offset: no reading.
-    crate::estimate::interference::hum(segs, &res, p.f0)?;
+    let starts: [f32; MAX_WINDOWS] = core::array::from_fn(|i| pb.w.get(i).map_or(0.0, |x| x.a));
+    crate::estimate::interference::hum(segs, &starts[..pb.w.len()], &res, p.f0)?;
     let cov = n.variances(pb.wt).ok_or(Failure::NoResonance)?;
     let dof = (2 * pb.w.len() + 1).saturating_sub(5).max(1) as f64;
     let red = c / dof;

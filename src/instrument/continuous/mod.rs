@@ -637,14 +637,12 @@ impl Tracker {
         let (value, variance) = solve_value(m, r).ok_or(Failure::DriveFault)?;
         let drive = Drive::from_value(value, variance, scale).ok_or(Failure::DriveFault)?;
         // The plan's windows so far, as admittances with the drive phasor measured so far.
-        let mut w = [HoldWindow::default(); MAX_WINDOWS];
-        let n = self.windows.len().min(MAX_WINDOWS);
-        w[..n].copy_from_slice(&self.windows[..n]);
-        resonator::to_admittance(&mut w[..n], drive.v, drive.var_v);
+        let mut w = self.windows.clone();
+        resonator::to_admittance(&mut w, drive.v, drive.var_v);
         let y_s = C64::new(self.static_g, 2.0 * PI * self.f_h * self.static_c);
         let (f_start, q_start, q_sd) = self.plan_prior;
         let seg = resonator::Segment {
-            windows: &w[..n],
+            windows: &w,
             f_h: self.f_h,
             y_s,
             mirror: resonator::mirror(drive.v),
