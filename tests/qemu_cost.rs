@@ -374,12 +374,12 @@ fn check_fits(parsed: &[(String, HashMap<String, String>)]) {
 const STREAM_OVER_BUDGET: &[(&str, f64, &str)] = &[
     (
         "default",
-        2.3,
+        2.2,
         "a fit of 7 windows, each window's sine fit of the transient, every 38 ms: 0.13 M instructions a reading",
     ),
     (
         "fast",
-        5.3,
+        5.05,
         "a fit of up to 16 windows every 13 ms: 0.10 M instructions a reading",
     ),
 ];

@@ -260,6 +260,17 @@ pub fn solve(ch: &ChannelSums, r: &ReferenceSums) -> Option<Phasor> {
 /// centred reference is singular to working precision (`det ≤ 10⁻¹³` of its diagonal's
 /// product: the reference does not span a sine) or there are fewer than 4 samples.
 pub fn solve_value(ch: &ChannelSums, r: &ReferenceSums) -> Option<(Complex64, f64)> {
+    solve_value_scaled(ch, r, 1.0)
+}
+
+/// [`solve_value`] in units of `scale` codes (the amplitude times `scale`, its variance times
+/// `scale²`; `scale` finite, nonzero and within `f32`'s range, as a front end's amperes per
+/// code): the scale folded into the Cramer solve's `1/det` (no products of the results).
+pub fn solve_value_scaled(
+    ch: &ChannelSums,
+    r: &ReferenceSums,
+    scale: f64,
+) -> Option<(Complex64, f64)> {
     if r.n < 4 {
         return None;
     }
@@ -276,19 +287,21 @@ pub fn solve_value(ch: &ChannelSums, r: &ReferenceSums) -> Option<(Complex64, f6
     }
     let u = centred(n, ch.xc, ch.x, r.c);
     let v = centred(n, ch.xs, ch.x, r.s);
-    let inv_det = 1.0 / det;
-    let ca = (c * u - b * v) * inv_det;
-    let cb = (a * v - b * u) * inv_det;
-    // N × the residual sum of squares; its variance σ² = rss_n / (N (N − 3)).
-    let rss_n = (centred(n, ch.xx, ch.x, ch.x) - (ca * u + cb * v)).max(0.0);
+    // `k` the reference's Q15 units times `scale`: the coefficients `(ca, cb)` come out times
+    // `k`, and so does the residual below.
+    let k = Q15 * scale;
+    let k_det = k / det;
+    let ca = (c * u - b * v) * k_det;
+    let cb = (a * v - b * u) * k_det;
+    // `k` × N × the residual sum of squares; its variance σ² = rss_n / (N (N − 3)).
+    let rss_nk = (k * centred(n, ch.xx, ch.x, ch.x) - (ca * u + cb * v)).max(0.0);
     // Each component's variance: half of σ² ((M⁻¹)_aa + (M⁻¹)_bb), the full normal matrix's
-    // `N (C + A) / det` of the centred one (the N's cancel), in the reference's Q15 units. In
-    // `f32` once the residual has cancelled (a product of positive factors: 1e-7 of itself,
-    // where a variance is known to a few percent; `f64` is emulated on the Cortex-M4F).
-    // (`(A + C)/det` itself in `f64`: its factors pass `f32`'s range on long windows.)
-    let q15 = Q15 as f32;
-    let var = 0.5 * q15 * q15 * (rss_n as f32) / (r.n as f32 - 3.0) * ((a + c) * inv_det) as f32;
-    Some((Complex64::new(ca * Q15, -cb * Q15), var.max(0.0) as f64))
+    // `N (C + A) / det` of the centred one (the N's cancel), times `k²`. In `f32` once the
+    // residual has cancelled (a product of positive factors: 1e-7 of itself, where a variance
+    // is known to a few percent; `f64` is emulated on the Cortex-M4F).
+    // (`k (A + C)/det` itself in `f64`: its factors pass `f32`'s range on long windows.)
+    let var = 0.5 * (rss_nk as f32) / (r.n as f32 - 3.0) * ((a + c) * k_det) as f32;
+    Some((Complex64::new(ca, -cb), var.max(0.0) as f64))
 }
 
 /// `N Σpq − Σp Σq` (`N` times a centred sum of products) exactly in integers, then in `f64`:
@@ -411,9 +424,10 @@ mod tests {
 
     /// The value-only solve against the full one (its 3×3 `f64` inverse) on random windows:
     /// 5 to 20 000 samples, 0.5 Hz to 4.9 kHz at 10 kHz (one cycle to thousands), amplitudes of
-    /// 1 to 2 000 codes on offsets of ±2 000 with noise of 0 to 50 codes. The amplitude within
-    /// 1e-9 of its standard uncertainty plus 1e-12 of itself, the variance within 1e-6 of
-    /// itself: rounding (the full solve's own, on the worst-conditioned windows).
+    /// 1 to 2 000 codes on offsets of ±2 000 with noise of 0 to 50 codes; and scaled
+    /// ([`solve_value_scaled`], 1e-12 to 1 of a code) against the full one's times the scale.
+    /// The amplitude within 1e-9 of its standard uncertainty plus 1e-12 of itself, the variance
+    /// within 1e-6 of itself: rounding (the full solve's own, on the worst-conditioned windows).
     #[test]
     fn value_only_solve_agrees_with_the_full_one_on_random_windows() {
         let mut rng = probe_rng::Rng::new(1057);
@@ -440,21 +454,26 @@ mod tests {
             }
             let full = solve(&sums.current, &sums.reference);
             let fast = solve_value(&sums.current, &sums.reference);
-            match (full, fast) {
-                (Some(p), Some((v, var))) => {
-                    solved += 1;
-                    let dv = (v - p.value).norm() / (p.variance.sqrt() + 1e-12 * p.value.norm());
-                    worst_v = worst_v.max(dv);
-                    if p.variance > 0.0 {
-                        worst_var = worst_var.max((var / p.variance - 1.0).abs());
+            let scale = 10f64.powf(-12.0 * rng.uniform());
+            let scaled = solve_value_scaled(&sums.current, &sums.reference, scale);
+            for (k, fast) in [(1.0, fast), (scale, scaled)] {
+                match (full, fast) {
+                    (Some(p), Some((v, var))) => {
+                        solved += 1;
+                        let sd = p.variance.sqrt() + 1e-12 * p.value.norm();
+                        let dv = (v - p.value * k).norm() / (k * sd);
+                        worst_v = worst_v.max(dv);
+                        if p.variance > 0.0 {
+                            worst_var = worst_var.max((var / (p.variance * k * k) - 1.0).abs());
+                        }
                     }
+                    (None, None) => {}
+                    (a, b) => panic!("f {f} n {n} scale {k:e}: {a:?} vs {b:?}"),
                 }
-                (None, None) => {}
-                (a, b) => panic!("f {f} n {n}: {a:?} vs {b:?}"),
             }
         }
         std::eprintln!("{solved} solved; worst: value {worst_v:e} (of σ), variance {worst_var:e}");
-        assert!(solved > 1200, "{solved}");
+        assert!(solved > 2400, "{solved}");
         assert!(worst_v < 1e-9, "{worst_v:e}");
         assert!(worst_var < 1e-6, "{worst_var:e}");
     }

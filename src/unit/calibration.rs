@@ -191,8 +191,8 @@ impl Modulus {
         }
         Modulus {
             value: KPa(e_kpa as f32),
-            sigma: KPa(libm::sqrt(var.max(0.0)) as f32),
-            sigma_repeat: KPa(libm::sqrt(var_repeat) as f32),
+            sigma: KPa(crate::dsp::trig::sqrt32(var.max(0.0))),
+            sigma_repeat: KPa(crate::dsp::trig::sqrt32(var_repeat)),
         }
     }
 }

@@ -245,7 +245,7 @@ impl UnitProfile {
             q_sigma / (q * q),
             model.scatter(self.contact.as_ref()) / q_cal,
         );
-        let sigma = libm::sqrt(d_q * d_q + d_cal * d_cal) / share;
+        let sigma = crate::dsp::trig::sqrt32(d_q * d_q + d_cal * d_cal) as f64 / share;
         (eta.is_finite() && sigma.is_finite()).then_some((eta, sigma))
     }
 

@@ -31,7 +31,7 @@ pub(crate) use model::rest_state;
 pub use solver::{fit, fit_searched, fit_two};
 
 use super::Estimate;
-use crate::dsp::lockin::{solve_value, ChannelSums, ReferenceSums};
+use crate::dsp::lockin::{solve_value_scaled, ChannelSums, ReferenceSums};
 use crate::engine::PointRaw;
 use crate::hal::FrontEndScale;
 use model::c32;
@@ -71,12 +71,11 @@ pub(crate) fn add_sums(acc: &mut (ChannelSums, ReferenceSums), m: &ChannelSums, 
 
 /// A finished window's current phasor (A) and its variance per component, its start and length
 /// (s) from the engine's sample count at `fs` Hz; `None` when its sums do not solve. The
-/// amplitude and its variance alone ([`solve_value`]): a window's offset and residual are not
+/// amplitude and its variance alone ([`solve_value_scaled`] in amperes): a window's offset and residual are not
 /// the fit's.
 pub(crate) fn current_window(raw: &PointRaw, scale: &FrontEndScale, fs: f64) -> Option<HoldWindow> {
     let s = &raw.sums;
-    let (value, variance) = solve_value(&s.current, &s.reference)?;
-    let ai = scale.amps_per_code as f64;
+    let (y, var) = solve_value_scaled(&s.current, &s.reference, scale.amps_per_code as f64)?;
     // Times from whole sample counts (one division, not two and a difference).
     let dt = 1.0 / fs;
     let n = s.reference.n as u64;
@@ -87,8 +86,8 @@ pub(crate) fn current_window(raw: &PointRaw, scale: &FrontEndScale, fs: f64) -> 
     Some(HoldWindow {
         t0: raw.end_sample.saturating_sub(n) as f64 * dt,
         len: n as f64 * dt,
-        y: value * ai,
-        var: variance * ai * ai,
+        y,
+        var,
         phase: [start, start.wrapping_add(ftw.wrapping_mul(s.reference.n))],
     })
 }

@@ -59,8 +59,9 @@ impl Win32 {
 }
 
 impl SineFit {
-    /// The fit of a window of `len` s at `f_h` Hz from phase `pa` to `pb` (2³² a turn).
-    fn new(pa: u32, pb: u32, f_h: f64, len: f64) -> Self {
+    /// The fit of a window of `len` s at `w_h` rad/s ([`omega`]) from phase `pa` to `pb` (2³² a
+    /// turn).
+    fn new(pa: u32, pb: u32, w_h: f32, len: f32) -> Self {
         let turn = |phi: u32| {
             // The phase in (−π, π]: the full turn's bits kept in f32's 24.
             let x = (phi as i32 as f32) * (core::f32::consts::TAU / 4_294_967_296.0);
@@ -69,7 +70,7 @@ impl SineFit {
         };
         let (u1, ub) = (turn(pa), turn(pb));
         // ⟨e^{−jkφ}⟩ = (e^{−jkφ_b} − e^{−jkφ_a}) / (−jkωL) = (…) · j/(kωL).
-        let wl = (2.0 * core::f64::consts::PI * f_h * len) as f32;
+        let wl = w_h * len;
         let mean = |k: f32, a: C32, b: C32| (b - a) * C32::new(0.0, 1.0 / (k * wl));
         let m1 = mean(1.0, u1.conj(), ub.conj());
         let m2 = mean(2.0, (u1 * u1).conj(), (ub * ub).conj());
@@ -134,6 +135,13 @@ impl SineFit {
     }
 }
 
+/// The drive's angular frequency `2π f_h` (rad/s) for [`SineFit::new`], in `f32` (its 6e-8 and
+/// a window's length's set the means `m1`, `m2` to 2e-7 of themselves, which are below
+/// `1/(π × cycles)` of the window).
+fn omega(f_h: f64) -> f32 {
+    (core::f64::consts::TAU * f_h) as f32
+}
+
 /// A segment's rates for [`SineFit::transient`]: `1/λ`, `1/μ` ([`DriveModel::mu`]) and
 /// `1/(λ + jω)`.
 #[derive(Clone, Copy, Debug)]
@@ -177,6 +185,7 @@ pub(super) fn prepare(segs: &[Segment]) -> (heapless::Vec<Win32, MAX_WINDOWS>, f
     for (s, seg) in segs.iter().enumerate() {
         let t0 = seg.windows.first().map_or(0.0, |x| x.t0);
         let y_s = c32(seg.y_s);
+        let w_h = omega(seg.f_h);
         let mut next = 0.0f32;
         for (k, x) in seg.windows.iter().enumerate() {
             let a = (x.t0 - t0) as f32;
@@ -190,7 +199,7 @@ pub(super) fn prepare(segs: &[Segment]) -> (heapless::Vec<Win32, MAX_WINDOWS>, f
                 gap: k == 0 || libm::fabsf(a - next) > 1e-6,
                 seg: s as u8,
                 wl: len / mean32,
-                fit: SineFit::new(x.phase[0], x.phase[1], seg.f_h, x.len),
+                fit: SineFit::new(x.phase[0], x.phase[1], w_h, len),
             });
             next = a + len;
         }
@@ -775,7 +784,7 @@ pub(crate) fn rest_state(
     mirror: C64,
     filters: &Filters,
 ) -> C64 {
-    let fit = SineFit::new(first.phase[0], first.phase[1], f_h, first.len);
+    let fit = SineFit::new(first.phase[0], first.phase[1], omega(f_h), first.len as f32);
     let r = RestPrior {
         f_h,
         d: d as f32,
@@ -1190,8 +1199,8 @@ mod sine_fit {
                                 let v = a * tr + b * tr.conj();
                                 C64::new(v.re as f64, v.im as f64)
                             };
-                            let exact = got(SineFit::new(pa, pb, f_h, len));
-                            let whole = got(SineFit::new(0, 0, f_h, len));
+                            let exact = got(SineFit::new(pa, pb, omega(f_h), len as f32));
+                            let whole = got(SineFit::new(0, 0, omega(f_h), len as f32));
                             worst = worst.max((exact - want).norm());
                             worst_whole = worst_whole.max((whole - want).norm());
                         }

@@ -485,8 +485,9 @@ fn fit_with(
     let dof = (2 * pb.w.len() + 1).saturating_sub(5).max(1) as f64;
     let red = c / dof;
     let scale = crate::estimate::gross_scale(red);
-    let sigma = libm::sqrt((cov[0] * scale).max(0.0));
-    let sigma_q = libm::sqrt((cov[1] * scale).max(0.0));
+    // Standard uncertainties at `f32`'s precision (the estimate keeps them in `f32`).
+    let sigma = crate::dsp::trig::sqrt32((cov[0] * scale).max(0.0)) as f64;
+    let sigma_q = crate::dsp::trig::sqrt32((cov[1] * scale).max(0.0)) as f64;
     let cov_f0_q = cov[2] * scale;
     let (f0, q) = (p.f0, p.q);
     if !(p.g > 0.0) || !f0.is_finite() || !q.is_finite() || !sigma.is_finite() {

@@ -720,9 +720,9 @@ impl Tracker {
         let lag = self.track.drift_lag(self.cfg.drift as f64);
         Ok(Estimate {
             resonance: Hz(p.f0 as f32),
-            sigma: Hz(libm::sqrt(p.cov.a.max(0.0) + lag * lag) as f32),
+            sigma: Hz(crate::dsp::trig::sqrt32(p.cov.a.max(0.0) + lag * lag)),
             q: Some(p.q as f32),
-            q_sigma: Some(libm::sqrt(p.cov.c.max(0.0)) as f32),
+            q_sigma: Some(crate::dsp::trig::sqrt32(p.cov.c.max(0.0))),
             ..e
         })
     }

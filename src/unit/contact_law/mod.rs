@@ -562,7 +562,9 @@ impl ContactLaw {
             // ∂f/∂ln F through A and B.
             let df_dlnf = (FORCE_EXPONENT_A as f32 * r.at.df_dp[1]
                 + FORCE_EXPONENT_B as f32 * r.at.df_dp[2]) as f64;
-            let sf = libm::sqrt(sf * sf + (df_dlnf * sigma_ln_f) * (df_dlnf * sigma_ln_f));
+            let sf =
+                crate::dsp::trig::sqrt32(sf * sf + (df_dlnf * sigma_ln_f) * (df_dlnf * sigma_ln_f))
+                    as f64;
             let (misfit, cov) = (self.model_sigma_hz, &self.cov);
             Modulus::propagated(r.e as f64, de_df, sf, misfit, &g, cov)
         });
