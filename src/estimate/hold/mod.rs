@@ -120,6 +120,8 @@ enum Phase {
 pub struct Hold {
     s: HoldSettings,
     fs: f64,
+    /// The sample period, s (`1/fs`, formed once).
+    dt: f64,
     amplitude: u16,
     /// The seed ring-down (`None`: no seed, see [`HoldSettings::seed_burst`]).
     seed: Option<Ringdown<SEED_WINDOWS>>,
@@ -302,7 +304,7 @@ impl Hold {
                 }
                 self.clipped |= s.current_rail_hits > 0;
                 add_sums(&mut self.monitor, &s.monitor, &s.reference);
-                match current_window(raw, scale, self.fs) {
+                match current_window(raw, scale, self.dt) {
                     Some(w) => {
                         let _ = self.windows.push(w);
                     }
@@ -360,7 +362,7 @@ impl Hold {
             return;
         }
         self.clipped |= raw.sums.current_rail_hits > 0;
-        let Some(mut w) = current_window(raw, scale, self.fs) else {
+        let Some(mut w) = current_window(raw, scale, self.dt) else {
             return;
         };
         to_admittance(

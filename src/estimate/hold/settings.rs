@@ -150,6 +150,7 @@ impl HoldSettings {
         Ok(Hold {
             s: *self,
             fs,
+            dt: 1.0 / fs,
             amplitude,
             phase: if seed.is_some() {
                 Phase::Seed

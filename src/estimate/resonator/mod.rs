@@ -70,14 +70,14 @@ pub(crate) fn add_sums(acc: &mut (ChannelSums, ReferenceSums), m: &ChannelSums, 
 }
 
 /// A finished window's current phasor (A) and its variance per component, its start and length
-/// (s) from the engine's sample count at `fs` Hz; `None` when its sums do not solve. The
+/// (s) from the engine's sample count at the sample period `dt` (s); `None` when its sums do not
+/// solve. The
 /// amplitude and its variance alone ([`solve_value_scaled`] in amperes): a window's offset and residual are not
 /// the fit's.
-pub(crate) fn current_window(raw: &PointRaw, scale: &FrontEndScale, fs: f64) -> Option<HoldWindow> {
+pub(crate) fn current_window(raw: &PointRaw, scale: &FrontEndScale, dt: f64) -> Option<HoldWindow> {
     let s = &raw.sums;
     let (y, var) = solve_value_scaled(&s.current, &s.reference, scale.amps_per_code as f64)?;
-    // Times from whole sample counts (one division, not two and a difference).
-    let dt = 1.0 / fs;
+    // Times from whole sample counts (no division, no difference of two times).
     let n = s.reference.n as u64;
     // The window's span in the windows' time base (each sample the period centred on it)
     // starts half a phase step before its first sample's phase and ends `n` steps later.

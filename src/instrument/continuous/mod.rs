@@ -222,6 +222,7 @@ impl TrackerConfig {
         Ok(Tracker {
             cfg: *self,
             fs,
+            dt: 1.0 / fs,
             amplitude,
             static_g: acquisition.static_conductance.0 as f64,
             static_c: acquisition.static_capacitance.0 as f64,
@@ -294,6 +295,8 @@ const TRACK_TAG: u16 = 0x5700;
 pub struct Tracker {
     cfg: TrackerConfig,
     fs: f64,
+    /// The sample period, s (`1/fs`, formed once).
+    dt: f64,
     amplitude: u16,
     static_g: f64,
     static_c: f64,
@@ -516,7 +519,7 @@ impl Tracker {
                 let s = &raw.sums;
                 self.clipped |= s.current_rail_hits > 0;
                 resonator::add_sums(&mut self.monitor, &s.monitor, &s.reference);
-                if let Some(w) = resonator::current_window(raw, scale, self.fs) {
+                if let Some(w) = resonator::current_window(raw, scale, self.dt) {
                     let _ = self.windows.push(w);
                 }
                 let done = raw.window + 1;
