@@ -487,15 +487,15 @@ impl Hold {
         )
     }
 
-    /// The switch-on before a seedless first segment: the resonator at rest, up to what the
-    /// drive's history may have left ringing — a drive off for `quiet` seconds leaves at most
-    /// `e^{−quiet/τ}` of a steady state at most as large as this one (the methods drive at
-    /// their default 5 V), `τ` the longest ring in the band ([`RING_Q`] at its bottom).
     /// The longest ring in the band, s: [`RING_Q`] at its bottom.
     fn ring_tau(&self) -> f32 {
         RING_Q / (core::f32::consts::PI * self.s.band_start.0.max(1.0))
     }
 
+    /// The switch-on before a seedless first segment: the resonator at rest, up to what the
+    /// drive's history may have left ringing — a drive off for `quiet` seconds leaves at most
+    /// `e^{−quiet/τ}` of a steady state at most as large as this one (the methods drive at
+    /// their default 5 V), `τ` the longest ring in the band ([`Self::ring_tau`]).
     fn switch_on(&self) -> Option<SwitchOn> {
         if self.seed.is_some() {
             return None;

@@ -84,7 +84,7 @@ impl Problem<'_> {
         if let Some((k, w)) = k {
             for row in [[k.re, -1.0, 0.0], [k.im, 0.0, -1.0]] {
                 for i in 0..3 {
-                    for m in 0..=i {
+                    for m in 0..i + 1 {
                         a[i][m] += w * row[i] * row[m];
                     }
                 }
