@@ -457,8 +457,8 @@ impl Tracker {
                         self.q_est = bounded(e.q.map_or(10.0, |q| q as f64), 2.0, 200.0);
                         // The filter starts from the acquisition (its `Q`'s σ, when it has one).
                         self.track.clear();
-                        let sq = e.q_sigma.map_or(0.0, |s| s as f64);
-                        let sf = e.sigma.0 as f64;
+                        let sq = e.q_sigma.unwrap_or(0.0);
+                        let sf = e.sigma.0;
                         self.track.update(
                             &Measurement {
                                 f0: self.f_est,
@@ -671,14 +671,14 @@ impl Tracker {
             self.track.clear();
             return Err(Failure::NotLocked);
         }
-        let sf = e.sigma.0 as f64;
+        let (sf, sq) = (e.sigma.0, h.sigma_q as f32);
         let fit = Measurement {
             f0,
             q,
             cov: Sym2 {
                 a: sf * sf,
-                b: h.cov_f0_q,
-                c: h.sigma_q * h.sigma_q,
+                b: h.cov_f0_q as f32,
+                c: sq * sq,
             },
             t: t_end,
         };
@@ -723,18 +723,23 @@ impl Tracker {
         let lag = self.track.drift_lag(self.cfg.drift as f64);
         Ok(Estimate {
             resonance: Hz(p.f0 as f32),
-            sigma: Hz(crate::dsp::trig::sqrt32(p.cov.a.max(0.0) + lag * lag)),
+            sigma: Hz(crate::dsp::trig::sqrtf(
+                p.cov.a.max(0.0) + (lag * lag) as f32,
+            )),
             q: Some(p.q as f32),
-            q_sigma: Some(crate::dsp::trig::sqrt32(p.cov.c.max(0.0))),
+            q_sigma: Some(crate::dsp::trig::sqrtf(p.cov.c.max(0.0))),
             ..e
         })
     }
 }
 
 /// What `now` (a fit of a plan's windows so far) knows beyond `before` (the fit of fewer of
-/// them), as a measurement: the difference of their information matrices over `(f0, Q)` and of
-/// their information vectors; `None` when the difference is not positive definite (nothing
-/// added that the linearised fits can tell apart).
+/// them), as a measurement: the difference of their information matrices over `(f0, Q)`,
+/// `A − B`, and of their information vectors, `A x_now − B x_before`, whose solve is
+/// `x_before + (A − B)⁻¹ A (x_now − x_before)` — the form taken here, with the difference of
+/// the estimates (a few σ) in `f32` like the matrices (the information vectors themselves
+/// cancel to a part in 10⁸ of the resonance). `None` when the difference is not positive
+/// definite (nothing added that the linearised fits can tell apart).
 fn added_information(now: &Measurement, before: &Measurement) -> Option<Measurement> {
     let (a, b) = (now.cov.inverse()?, before.cov.inverse()?);
     let info = Sym2 {
@@ -743,13 +748,11 @@ fn added_information(now: &Measurement, before: &Measurement) -> Option<Measurem
         c: a.c - b.c,
     };
     let cov = info.inverse()?;
-    let y = [
-        a.a * now.f0 + a.b * now.q - (b.a * before.f0 + b.b * before.q),
-        a.b * now.f0 + a.c * now.q - (b.b * before.f0 + b.c * before.q),
-    ];
+    let d = [(now.f0 - before.f0) as f32, (now.q - before.q) as f32];
+    let x = cov.mul(a.mul(d));
     Some(Measurement {
-        f0: cov.a * y[0] + cov.b * y[1],
-        q: cov.b * y[0] + cov.c * y[1],
+        f0: before.f0 + x[0] as f64,
+        q: before.q + x[1] as f64,
         cov,
         t: now.t,
     })
