@@ -6,7 +6,7 @@
 //! frequency at or above the asymptote `a`, or one that maps outside the calibrated span, is
 //! reported as above or below range — never extrapolated into a number.
 
-use crate::linalg::inverse3;
+use crate::linalg::{inverse3, Real};
 use crate::status::Failure;
 use crate::units::{Hz, KPa};
 
@@ -172,27 +172,35 @@ impl Modulus {
     /// resonance's standard uncertainty `sigma_hz` and the curve's misfit `model_sigma_hz`
     /// through the slope `de_df` (kPa/Hz), and the curve's parameter covariance `cov` through
     /// the gradient `g` of the modulus in its parameters.
-    pub fn propagated(
-        e_kpa: f64,
-        de_df: f64,
-        sigma_hz: f64,
-        model_sigma_hz: f64,
-        g: &[f64; 3],
+    ///
+    /// In the caller's precision `T` ([`Real`]): `f64` where the gradient is (the power law's),
+    /// `f32` where the inputs are no better (the contact law's root and slopes are found in
+    /// `f32`, [`crate::unit::contact_law::ContactLaw::invert`]); the sum `gᵀ C g` then holds
+    /// `T`'s relative precision of its largest term, which its inputs already limit
+    /// (`propagated_f32_holds_f32s_precision_of_its_terms`).
+    pub fn propagated<T: Real>(
+        e_kpa: T,
+        de_df: T,
+        sigma_hz: T,
+        model_sigma_hz: T,
+        g: &[T; 3],
         cov: &[[f64; 3]; 3],
     ) -> Self {
-        let var_repeat = de_df * de_df * sigma_hz * sigma_hz;
-        let mut var = var_repeat + de_df * de_df * model_sigma_hz * model_sigma_hz;
+        let slope2 = de_df * de_df;
+        let var_repeat = slope2 * sigma_hz * sigma_hz;
+        let mut var = var_repeat + slope2 * model_sigma_hz * model_sigma_hz;
         // gᵀ C g: the diagonal's terms and each pair's once.
         for i in 0..3 {
-            var += g[i] * g[i] * cov[i][i];
+            var = var + g[i] * g[i] * T::of(cov[i][i]);
             for j in 0..i {
-                var += g[i] * g[j] * (cov[i][j] + cov[j][i]);
+                var = var + g[i] * g[j] * T::of(cov[i][j] + cov[j][i]);
             }
         }
+        let root = |v: T| crate::dsp::trig::sqrt32(if v > T::ZERO { v.wide() } else { 0.0 });
         Modulus {
-            value: KPa(e_kpa as f32),
-            sigma: KPa(crate::dsp::trig::sqrt32(var.max(0.0))),
-            sigma_repeat: KPa(crate::dsp::trig::sqrt32(var_repeat)),
+            value: KPa(e_kpa.wide() as f32),
+            sigma: KPa(root(var)),
+            sigma_repeat: KPa(root(var_repeat)),
         }
     }
 }
@@ -753,6 +761,64 @@ fn residual_misfit(data: &[RefPoint], law: &PowerLaw) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// [`Modulus::propagated`] in `f32` against the sum written out in `f64` (every term of
+    /// `gᵀ C g` over the full matrix), over inputs wider than any calibration's: moduli
+    /// 10–5000 kPa, slopes 1–1000 kPa/Hz, σ 1e-4–10 Hz, misfits 0–1 Hz, gradients up to 1e4 kPa
+    /// of either sign, and covariances of parameter σ 1e-3–0.3 correlated up to 0.9999 (where
+    /// `gᵀ C g` may cancel to a small part of its terms). The variance is held to 2e-6 of the
+    /// sum of its terms' magnitudes — a few of `f32`'s roundings of the largest term, the
+    /// measured worst case with a margin of four — and the repeatability σ, a product, to 1e-6
+    /// of itself.
+    #[test]
+    fn propagated_f32_holds_f32s_precision_of_its_terms() {
+        let mut rng = probe_rng::Rng::new(5);
+        let mut u = |lo: f64, hi: f64| lo * (hi / lo).powf(rng.uniform());
+        for k in 0..20_000 {
+            let e = u(10.0, 5000.0);
+            let de_df = -u(1.0, 1000.0);
+            let (sf, misfit) = (u(1e-4, 10.0), if k % 5 == 0 { 0.0 } else { u(1e-3, 1.0) });
+            let sign = |k: usize, i: usize| if (k >> i) & 1 == 0 { 1.0 } else { -1.0 };
+            let g: [f64; 3] = core::array::from_fn(|i| sign(k, i) * u(1.0, 1e4));
+            let sd: [f64; 3] = core::array::from_fn(|_| u(1e-3, 0.3));
+            let rho = [
+                sign(k, 3) * (1.0 - u(1e-4, 1.0)),
+                sign(k, 4) * (1.0 - u(1e-4, 1.0)),
+            ];
+            // A positive semi-definite correlation: rows of unit vectors' dot products.
+            let v = [
+                [1.0, 0.0],
+                [rho[0], (1.0 - rho[0] * rho[0]).sqrt()],
+                [rho[1], (1.0 - rho[1] * rho[1]).sqrt()],
+            ];
+            let cov: [[f64; 3]; 3] = core::array::from_fn(|i| {
+                core::array::from_fn(|j| sd[i] * sd[j] * (v[i][0] * v[j][0] + v[i][1] * v[j][1]))
+            });
+            let mut terms = [
+                de_df * de_df * sf * sf,
+                de_df * de_df * misfit * misfit,
+                0.0,
+            ];
+            let mut gcg = 0.0;
+            for i in 0..3 {
+                for j in 0..3 {
+                    let t = g[i] * g[j] * cov[i][j];
+                    gcg += t;
+                    terms[2] += t.abs();
+                }
+            }
+            let var = terms[0] + terms[1] + gcg;
+            let scale: f64 = terms.iter().sum();
+            let g32 = g.map(|x| x as f32);
+            let m =
+                Modulus::propagated(e as f32, de_df as f32, sf as f32, misfit as f32, &g32, &cov);
+            let err = ((m.sigma.0 as f64).powi(2) - var.max(0.0)).abs() / scale;
+            assert!(err < 2e-6, "{k}: {} vs {}", m.sigma.0, var.sqrt());
+            let rep = de_df.abs() * sf;
+            assert!((m.sigma_repeat.0 as f64 / rep - 1.0).abs() < 1e-6, "{k}");
+            assert_eq!(m.value.0, e as f32);
+        }
+    }
 
     #[test]
     fn published_values() {

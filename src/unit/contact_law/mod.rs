@@ -521,7 +521,7 @@ impl ContactLaw {
     /// force's propagated: as [`crate::unit::calibration::PowerLaw::invert`] (the same failures for
     /// the same cases). The force's uncertainty counts as the resonance's (`∂f/∂F σ_F` added
     /// in quadrature): a force read anew each reading scatters with it. The root and its slopes
-    /// are found in `f32` (a bracketed Newton search), the uncertainty propagated in `f64`.
+    /// are found in `f32` (a bracketed Newton search), and the uncertainty propagated in it.
     pub fn invert(&self, f: Hz, sigma: Hz, force: Option<(f64, f64)>) -> Result<Modulus, Failure> {
         self.invert_moved(f, sigma, force, 0.0).0
     }
@@ -556,17 +556,17 @@ impl ContactLaw {
             self.root(&k_moved, f, near).map(|r| KPa(r.e))
         });
         let m = root.map(|r| {
+            // In `f32`, as the root and its slopes (the propagation's precision, its own).
             // dE/df = 3 y² / (dF/dy); dE/dp = −(∂F/∂p)(dE/df).
-            let de_df = (3.0 * r.y * r.y / r.at.df_dy) as f64;
-            let g = r.at.df_dp.map(|d| -(d as f64) * de_df);
+            let de_df = 3.0 * r.y * r.y / r.at.df_dy;
+            let g = r.at.df_dp.map(|d| -d * de_df);
             // ∂f/∂ln F through A and B.
-            let df_dlnf = (FORCE_EXPONENT_A as f32 * r.at.df_dp[1]
-                + FORCE_EXPONENT_B as f32 * r.at.df_dp[2]) as f64;
-            let sf =
-                crate::dsp::trig::sqrt32(sf * sf + (df_dlnf * sigma_ln_f) * (df_dlnf * sigma_ln_f))
-                    as f64;
-            let (misfit, cov) = (self.model_sigma_hz, &self.cov);
-            Modulus::propagated(r.e as f64, de_df, sf, misfit, &g, cov)
+            let df_dlnf =
+                FORCE_EXPONENT_A as f32 * r.at.df_dp[1] + FORCE_EXPONENT_B as f32 * r.at.df_dp[2];
+            let (sf, sl) = (sf as f32, df_dlnf * sigma_ln_f as f32);
+            let sf = crate::dsp::trig::sqrtf(sf * sf + sl * sl);
+            let (misfit, cov) = (self.model_sigma_hz as f32, &self.cov);
+            Modulus::propagated(r.e, de_df, sf, misfit, &g, cov)
         });
         (m, moved)
     }
