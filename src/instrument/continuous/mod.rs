@@ -737,9 +737,10 @@ impl Tracker {
 /// them), as a measurement: the difference of their information matrices over `(f0, Q)`,
 /// `A − B`, and of their information vectors, `A x_now − B x_before`, whose solve is
 /// `x_before + (A − B)⁻¹ A (x_now − x_before)` — the form taken here, with the difference of
-/// the estimates (a few σ) in `f32` like the matrices (the information vectors themselves
-/// cancel to a part in 10⁸ of the resonance). `None` when the difference is not positive
-/// definite (nothing added that the linearised fits can tell apart).
+/// the estimates (a few σ) in `f32` like the matrices (formed directly, the information vectors
+/// `A x` of a resonance of hundreds of Hz would cancel to that difference beyond `f32`'s
+/// digits). `None` when the difference is not positive definite (nothing added that the
+/// linearised fits can tell apart).
 fn added_information(now: &Measurement, before: &Measurement) -> Option<Measurement> {
     let (a, b) = (now.cov.inverse()?, before.cov.inverse()?);
     let info = Sym2 {
