@@ -66,6 +66,12 @@ pub struct PointPlan {
     /// to the DAC's pipeline: the windows that close while the next plan is on its way are
     /// data of this plan's drive (a cut-off last one is dropped with the switch).
     pub open: bool,
+    /// Aligned: when the drive was off before this plan (from quiet), it comes on at the phase
+    /// that puts a cycle boundary at the end of `settle_samples`, so that the first window
+    /// starts with no wait for a boundary (up to a cycle otherwise). The resonator is then at
+    /// rest and the drive's phase at switch-on is free (the windows report their phase,
+    /// [`PointRaw::start_phase`]); after a drive a plan keeps the phase (phase-continuous).
+    pub aligned: bool,
     /// Caller's tag, echoed in the result (must differ from the previous plan's).
     pub tag: u16,
 }
@@ -280,6 +286,13 @@ impl SampleEngine {
             self.loads = self.loads.wrapping_add(1);
             match p {
                 Some(p) => {
+                    if p.aligned && self.amplitude == 0 {
+                        // From quiet: sample `k` of the plan plays `phase + k ftw`, so sample
+                        // `settle` (the first after the settle) wraps and the window starts at
+                        // sample `settle + 1`, phase 0.
+                        let first = p.settle_samples.wrapping_add(1);
+                        self.dds.phase = 0u32.wrapping_sub(p.ftw.wrapping_mul(first));
+                    }
                     self.dds.ftw = p.ftw;
                     self.amplitude = p.amplitude_codes.min(2047) as i32;
                 }
@@ -477,6 +490,7 @@ mod tests {
             cycles,
             windows,
             open: false,
+            aligned: false,
             tag,
         });
         e
@@ -522,6 +536,56 @@ mod tests {
         // settle (123) + wait for boundary (< 43) + window
         assert!(p.end_sample as f64 <= 123.0 + 43.0 + n + 1.0);
         assert!(!e.busy());
+    }
+
+    /// An aligned plan from quiet starts its first window one sample after its settle (the
+    /// earliest: the first sample after the settle is the one that wraps), at phase 0, whatever phase the
+    /// engine's accumulator held (samples counted from the plan's first); the same plan after a drive
+    /// keeps the phase and waits for the boundary as any plan does.
+    #[test]
+    fn an_aligned_plan_from_quiet_starts_its_window_after_the_settle() {
+        let plan = |settle: u32, aligned: bool, tag: u16| PointPlan {
+            ftw: tuning_word(229.6, 10_000.0),
+            amplitude_codes: 900,
+            settle_samples: settle,
+            cycles: 1,
+            windows: 1,
+            open: false,
+            aligned,
+            tag,
+        };
+        let first_window = |e: &mut SampleEngine| {
+            let start = e.samples();
+            (0..20)
+                .find_map(|_| loopback_batch(e).first().copied())
+                .map(|w| (w.end_sample - w.sums.reference.n as u64 - start, w))
+                .expect("a window closes")
+        };
+        for (k, phase) in [0u32, 1 << 30, 0x9E37_79B9, u32::MAX]
+            .into_iter()
+            .enumerate()
+        {
+            for settle in [0u32, 20, 37] {
+                let mut e = SampleEngine::new();
+                e.set_phase(phase);
+                e.load(plan(settle, true, k as u16 + 1));
+                let (first, w) = first_window(&mut e);
+                assert_eq!(
+                    first,
+                    settle as u64 + 1,
+                    "phase {phase:#x}, settle {settle}"
+                );
+                assert_eq!(w.start_phase, 0);
+            }
+        }
+        // After a drive: phase-continuous, the window at the next boundary after the settle.
+        let mut e = SampleEngine::new();
+        e.load(plan(0, false, 1));
+        let _ = first_window(&mut e);
+        let ftw = tuning_word(229.6, 10_000.0);
+        e.load(plan(20, true, 2));
+        let (first, w) = first_window(&mut e);
+        assert!(first > 20 && w.start_phase < ftw, "{first} {w:?}");
     }
 
     /// Consecutive windows follow each other without a gap, each starting at the first sample
@@ -651,6 +715,7 @@ mod tests {
                         cycles: below(&mut rng, 5) as u32,
                         windows: below(&mut rng, 5) as u16,
                         open: below(&mut rng, 2) == 0,
+                        aligned: below(&mut rng, 2) == 0,
                         tag: below(&mut rng, 4) as u16,
                     };
                     if below(&mut rng, 8) == 0 {
@@ -710,6 +775,7 @@ mod tests {
             cycles: 1,
             windows: 3,
             open: true,
+            aligned: false,
             tag: 7,
         };
         e.load(plan);
@@ -736,6 +802,7 @@ mod tests {
         e.load(PointPlan {
             tag: 8,
             open: false,
+            aligned: false,
             windows: 1,
             ..plan
         });
