@@ -66,11 +66,13 @@ pub struct PointPlan {
     /// to the DAC's pipeline: the windows that close while the next plan is on its way are
     /// data of this plan's drive (a cut-off last one is dropped with the switch).
     pub open: bool,
-    /// Aligned: when the drive was off before this plan (from quiet), it comes on at the phase
-    /// that puts a cycle boundary at the end of `settle_samples`, so that the first window
-    /// starts with no wait for a boundary (up to a cycle otherwise). The resonator is then at
-    /// rest and the drive's phase at switch-on is free (the windows report their phase,
-    /// [`PointRaw::start_phase`]); after a drive a plan keeps the phase (phase-continuous).
+    /// Aligned: when the drive was off before this plan (from quiet), it comes on at a zero
+    /// crossing of its sine (phase 0 or half a turn: no step in the DAC's output, which would
+    /// ring every mode and filter), the one after which a cycle boundary comes within half a
+    /// cycle of the end of `settle_samples` (up to a cycle otherwise), so that the first window
+    /// starts sooner. The resonator is then at rest and the drive's phase at switch-on is free
+    /// (the windows report their phase, [`PointRaw::start_phase`]); after a drive a plan keeps
+    /// the phase (phase-continuous).
     pub aligned: bool,
     /// Caller's tag, echoed in the result (must differ from the previous plan's).
     pub tag: u16,
@@ -287,11 +289,12 @@ impl SampleEngine {
             match p {
                 Some(p) => {
                     if p.aligned && self.amplitude == 0 {
-                        // From quiet: sample `k` of the plan plays `phase + k ftw`, so sample
-                        // `settle` (the first after the settle) wraps and the window starts at
-                        // sample `settle + 1`, phase 0.
-                        let first = p.settle_samples.wrapping_add(1);
-                        self.dds.phase = 0u32.wrapping_sub(p.ftw.wrapping_mul(first));
+                        // From quiet: sample `k` of the plan plays `phase + k ftw`. Of the two
+                        // zero crossings (no step in the DAC's output at the switch-on), the one
+                        // that leaves the phase after the settle in its last half-turn, so that
+                        // the boundary comes within half a cycle of the settle's end.
+                        let after = p.ftw.wrapping_mul(p.settle_samples);
+                        self.dds.phase = if after >= 1 << 31 { 0 } else { 1 << 31 };
                     }
                     self.dds.ftw = p.ftw;
                     self.amplitude = p.amplitude_codes.min(2047) as i32;
@@ -538,14 +541,17 @@ mod tests {
         assert!(!e.busy());
     }
 
-    /// An aligned plan from quiet starts its first window one sample after its settle (the
-    /// earliest: the first sample after the settle is the one that wraps), at phase 0, whatever phase the
-    /// engine's accumulator held (samples counted from the plan's first); the same plan after a drive
-    /// keeps the phase and waits for the boundary as any plan does.
+    /// An aligned plan from quiet comes on at a zero crossing (the window's start phase less its
+    /// samples' steps is 0 or half a turn), whatever phase the engine's accumulator held, and
+    /// its first window starts at the earlier of the two crossings' first boundaries after the
+    /// settle (found by stepping the phase sample by sample: the first sample at or after the
+    /// settle's end whose phase lies within one step past a wrap), within half a cycle of the
+    /// settle's end; the same plan after a drive keeps the phase.
     #[test]
-    fn an_aligned_plan_from_quiet_starts_its_window_after_the_settle() {
+    fn an_aligned_plan_from_quiet_starts_at_a_zero_crossing_near_the_settle() {
+        let ftw = tuning_word(229.6, 10_000.0);
         let plan = |settle: u32, aligned: bool, tag: u16| PointPlan {
-            ftw: tuning_word(229.6, 10_000.0),
+            ftw,
             amplitude_codes: 900,
             settle_samples: settle,
             cycles: 1,
@@ -561,31 +567,45 @@ mod tests {
                 .map(|w| (w.end_sample - w.sums.reference.n as u64 - start, w))
                 .expect("a window closes")
         };
+        // The first window's first sample from a switch-on at `phase0`: the first sample after
+        // the settle whose phase is within one step past a wrap.
+        let stepped = |phase0: u32, settle: u32| {
+            (settle as u64 + 1..)
+                .find(|&k| phase0.wrapping_add((k as u32).wrapping_mul(ftw)) < ftw)
+                .unwrap()
+        };
+        let half_cycle = (10_000.0 / 229.6 / 2.0) as u64 + 2;
         for (k, phase) in [0u32, 1 << 30, 0x9E37_79B9, u32::MAX]
             .into_iter()
             .enumerate()
         {
-            for settle in [0u32, 20, 37] {
+            for settle in [0u32, 20, 37, 60] {
                 let mut e = SampleEngine::new();
                 e.set_phase(phase);
                 e.load(plan(settle, true, k as u16 + 1));
                 let (first, w) = first_window(&mut e);
-                assert_eq!(
-                    first,
-                    settle as u64 + 1,
-                    "phase {phase:#x}, settle {settle}"
+                let on = w.start_phase.wrapping_sub((first as u32).wrapping_mul(ftw));
+                assert!(on == 0 || on == 1 << 31, "switched on at {on:#x}");
+                let best = stepped(0, settle).min(stepped(1 << 31, settle));
+                assert_eq!(first, best, "phase {phase:#x}, settle {settle}");
+                assert!(
+                    first - settle as u64 <= half_cycle,
+                    "{first} after {settle}"
                 );
-                assert_eq!(w.start_phase, 0);
             }
         }
-        // After a drive: phase-continuous, the window at the next boundary after the settle.
+        // After a drive: phase-continuous, whatever the window's start.
         let mut e = SampleEngine::new();
         e.load(plan(0, false, 1));
-        let _ = first_window(&mut e);
-        let ftw = tuning_word(229.6, 10_000.0);
+        let (a, wa) = first_window(&mut e);
         e.load(plan(20, true, 2));
-        let (first, w) = first_window(&mut e);
-        assert!(first > 20 && w.start_phase < ftw, "{first} {w:?}");
+        let start = e.samples();
+        let (b, wb) = first_window(&mut e);
+        let steps = (start + b - a) as u32;
+        assert_eq!(
+            wb.start_phase,
+            wa.start_phase.wrapping_add(steps.wrapping_mul(ftw))
+        );
     }
 
     /// Consecutive windows follow each other without a gap, each starting at the first sample

@@ -232,26 +232,14 @@ impl Hold {
                     let extra = libm::floor(wait as f64 / window) as u8;
                     self.first_cap = (self.n_windows as u8).saturating_add(extra);
                 }
-                // A seedless first segment comes on aligned (`PointPlan::aligned`): from rest its
-                // windows start one sample after the settle at phase 0 and close at sample
-                // `settle + W`, `W = ⌈n · cycles · 2³² / ftw⌉`, with no wait for a boundary.
-                // Its settle is stretched so that they close in the last sample of a batch: the
-                // second plan is chosen at the end of the batch they close in whatever the
-                // settle, so the switch comes no later (every millisecond off the resonance
-                // costs the bound), and the windows see more of the ring-up (the placement's
-                // noise falls with it).
+                // A seedless first segment from rest comes on aligned (`PointPlan::aligned`): its
+                // first window starts within half a cycle of the settle's end, not up to a cycle
+                // (every millisecond off the resonance costs the bound).
                 let aligned = self.seed.is_none() && self.segment == 0;
-                let mut settle_samples = (settle * self.fs) as u32;
-                if aligned {
-                    let w = ((n as u64 * cycles as u64) << 32).div_ceil(self.ftw.max(1) as u64);
-                    let b = crate::engine::BATCH as u64;
-                    let end = (settle_samples as u64 + w + 1).div_ceil(b) * b;
-                    settle_samples = end.saturating_sub(w + 1).min(u32::MAX as u64) as u32;
-                }
                 self.plan = PointPlan {
                     ftw: self.ftw,
                     amplitude_codes: self.amplitude,
-                    settle_samples,
+                    settle_samples: (settle * self.fs) as u32,
                     cycles: cycles as u32,
                     windows: self.n_windows,
                     open,
