@@ -66,13 +66,11 @@ pub struct PointPlan {
     /// to the DAC's pipeline: the windows that close while the next plan is on its way are
     /// data of this plan's drive (a cut-off last one is dropped with the switch).
     pub open: bool,
-    /// Aligned: when the drive was off before this plan (from quiet), it comes on at a zero
-    /// crossing of its sine (phase 0 or half a turn: no step in the DAC's output, which would
-    /// ring every mode and filter), the one after which a cycle boundary comes within half a
-    /// cycle of the end of `settle_samples` (up to a cycle otherwise), so that the first window
-    /// starts sooner. The resonator is then at rest and the drive's phase at switch-on is free
-    /// (the windows report their phase, [`PointRaw::start_phase`]); after a drive a plan keeps
-    /// the phase (phase-continuous).
+    /// Aligned: when the drive was off before this plan (from quiet), it comes on at phase 0,
+    /// a zero crossing of its sine (no step in the DAC's output, which would ring every mode
+    /// and filter), whatever phase the previous plans left; its first window starts at the
+    /// first cycle boundary after `settle_samples`. After a drive a plan keeps the phase
+    /// (phase-continuous), aligned or not.
     pub aligned: bool,
     /// Caller's tag, echoed in the result (must differ from the previous plan's).
     pub tag: u16,
@@ -289,12 +287,8 @@ impl SampleEngine {
             match p {
                 Some(p) => {
                     if p.aligned && self.amplitude == 0 {
-                        // From quiet: sample `k` of the plan plays `phase + k ftw`. Of the two
-                        // zero crossings (no step in the DAC's output at the switch-on), the one
-                        // that leaves the phase after the settle in its last half-turn, so that
-                        // the boundary comes within half a cycle of the settle's end.
-                        let after = p.ftw.wrapping_mul(p.settle_samples);
-                        self.dds.phase = if after >= 1 << 31 { 0 } else { 1 << 31 };
+                        // From quiet: sample `k` of the plan plays `k ftw`, from a zero crossing.
+                        self.dds.phase = 0;
                     }
                     self.dds.ftw = p.ftw;
                     self.amplitude = p.amplitude_codes.min(2047) as i32;
@@ -541,14 +535,13 @@ mod tests {
         assert!(!e.busy());
     }
 
-    /// An aligned plan from quiet comes on at a zero crossing (the window's start phase less its
-    /// samples' steps is 0 or half a turn), whatever phase the engine's accumulator held, and
-    /// its first window starts at the earlier of the two crossings' first boundaries after the
-    /// settle (found by stepping the phase sample by sample: the first sample at or after the
-    /// settle's end whose phase lies within one step past a wrap), within half a cycle of the
-    /// settle's end; the same plan after a drive keeps the phase.
+    /// An aligned plan from quiet comes on at phase 0 (the window's start phase less its
+    /// samples' steps), whatever phase the engine's accumulator held, and its first window
+    /// starts at the first boundary after the settle (found by stepping the phase sample by
+    /// sample: the first sample after the settle's end whose phase lies within one step past a
+    /// wrap), within a cycle of the settle's end; the same plan after a drive keeps the phase.
     #[test]
-    fn an_aligned_plan_from_quiet_starts_at_a_zero_crossing_near_the_settle() {
+    fn an_aligned_plan_from_quiet_starts_at_a_zero_crossing() {
         let ftw = tuning_word(229.6, 10_000.0);
         let plan = |settle: u32, aligned: bool, tag: u16| PointPlan {
             ftw,
@@ -574,7 +567,7 @@ mod tests {
                 .find(|&k| phase0.wrapping_add((k as u32).wrapping_mul(ftw)) < ftw)
                 .unwrap()
         };
-        let half_cycle = (10_000.0 / 229.6 / 2.0) as u64 + 2;
+        let cycle = (10_000.0 / 229.6) as u64 + 2;
         for (k, phase) in [0u32, 1 << 30, 0x9E37_79B9, u32::MAX]
             .into_iter()
             .enumerate()
@@ -585,13 +578,9 @@ mod tests {
                 e.load(plan(settle, true, k as u16 + 1));
                 let (first, w) = first_window(&mut e);
                 let on = w.start_phase.wrapping_sub((first as u32).wrapping_mul(ftw));
-                assert!(on == 0 || on == 1 << 31, "switched on at {on:#x}");
-                let best = stepped(0, settle).min(stepped(1 << 31, settle));
-                assert_eq!(first, best, "phase {phase:#x}, settle {settle}");
-                assert!(
-                    first - settle as u64 <= half_cycle,
-                    "{first} after {settle}"
-                );
+                assert_eq!(on, 0, "switched on at {on:#x}");
+                assert_eq!(first, stepped(0, settle), "phase {phase:#x}, settle {settle}");
+                assert!(first - settle as u64 <= cycle, "{first} after {settle}");
             }
         }
         // After a drive: phase-continuous, whatever the window's start.

@@ -232,9 +232,9 @@ impl Hold {
                     let extra = libm::floor(wait as f64 / window) as u8;
                     self.first_cap = (self.n_windows as u8).saturating_add(extra);
                 }
-                // A seedless first segment from rest comes on aligned (`PointPlan::aligned`): its
-                // first window starts within half a cycle of the settle's end, not up to a cycle
-                // (every millisecond off the resonance costs the bound).
+                // A seedless first segment from rest comes on aligned (`PointPlan::aligned`): at
+                // a zero crossing, whatever phase earlier plans left, so that no step in the
+                // DAC's output rings another mode into its windows.
                 let aligned = self.seed.is_none() && self.segment == 0;
                 self.plan = PointPlan {
                     ftw: self.ftw,
