@@ -50,12 +50,12 @@ fn paper(settle_ms: f32, integrate_ms: f32) -> Config {
 
 /// Efficiency (issues 13, 28): the default method takes at most 10 τ at 500 kPa and its error
 /// from noise is within 1.12× the Cramér–Rao bound at the same probe time (its first segment's
-/// start state the resonator's response from rest, its switch-on aligned); hold's longer
+/// start state the resonator's response from rest, switched on at a zero crossing); hold's longer
 /// settings within 1.3× and 1.25× at about 27 and 92 τ (bench scene, 500 kPa, 300 readings each
 /// on these seeds). Every probe time is the firmware's: each plan waits two batches in the DAC's
 /// pipeline (`reading::PIPELINE_BATCHES`), and the first segment's open plan fills the wait for
-/// the second. Measured here 1.09× at 9.0 τ (1.12× on average over eight blocks of 1000
-/// readings, 1.09–1.20× from block to block, `docs/methods.md`), 1.19× at 26.9 τ, 1.19× at
+/// the second. Measured here 1.06× at 9.2 τ (1.15× on average over eight blocks of 1000
+/// readings, 1.12–1.18× from block to block, `docs/methods.md`), 1.19× at 26.9 τ, 1.19× at
 /// 92.1 τ. 300 readings know an RMS to about ±4 %, and the long hold's
 /// ratio also carries the sample correlation of the frequency's noise with the load cell's
 /// (it inverts at the force it measured; 300 readings know a correlation to ±0.06, which moves

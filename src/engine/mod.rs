@@ -579,7 +579,11 @@ mod tests {
                 let (first, w) = first_window(&mut e);
                 let on = w.start_phase.wrapping_sub((first as u32).wrapping_mul(ftw));
                 assert_eq!(on, 0, "switched on at {on:#x}");
-                assert_eq!(first, stepped(0, settle), "phase {phase:#x}, settle {settle}");
+                assert_eq!(
+                    first,
+                    stepped(0, settle),
+                    "phase {phase:#x}, settle {settle}"
+                );
                 assert!(first - settle as u64 <= cycle, "{first} after {settle}");
             }
         }
