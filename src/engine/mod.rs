@@ -66,6 +66,12 @@ pub struct PointPlan {
     /// to the DAC's pipeline: the windows that close while the next plan is on its way are
     /// data of this plan's drive (a cut-off last one is dropped with the switch).
     pub open: bool,
+    /// Aligned: when the drive was off before this plan (from quiet), it comes on at phase 0,
+    /// a zero crossing of its sine (no step in the DAC's output, which would ring every mode
+    /// and filter), whatever phase the previous plans left; its first window starts at the
+    /// first cycle boundary after `settle_samples`. After a drive a plan keeps the phase
+    /// (phase-continuous), aligned or not.
+    pub aligned: bool,
     /// Caller's tag, echoed in the result (must differ from the previous plan's).
     pub tag: u16,
 }
@@ -280,6 +286,10 @@ impl SampleEngine {
             self.loads = self.loads.wrapping_add(1);
             match p {
                 Some(p) => {
+                    if p.aligned && self.amplitude == 0 {
+                        // From quiet: sample `k` of the plan plays `k ftw`, from a zero crossing.
+                        self.dds.phase = 0;
+                    }
                     self.dds.ftw = p.ftw;
                     self.amplitude = p.amplitude_codes.min(2047) as i32;
                 }
@@ -477,6 +487,7 @@ mod tests {
             cycles,
             windows,
             open: false,
+            aligned: false,
             tag,
         });
         e
@@ -522,6 +533,72 @@ mod tests {
         // settle (123) + wait for boundary (< 43) + window
         assert!(p.end_sample as f64 <= 123.0 + 43.0 + n + 1.0);
         assert!(!e.busy());
+    }
+
+    /// An aligned plan from quiet comes on at phase 0 (the window's start phase less its
+    /// samples' steps), whatever phase the engine's accumulator held, and its first window
+    /// starts at the first boundary after the settle (found by stepping the phase sample by
+    /// sample: the first sample after the settle's end whose phase lies within one step past a
+    /// wrap), within a cycle of the settle's end; the same plan after a drive keeps the phase.
+    #[test]
+    fn an_aligned_plan_from_quiet_starts_at_a_zero_crossing() {
+        let ftw = tuning_word(229.6, 10_000.0);
+        let plan = |settle: u32, aligned: bool, tag: u16| PointPlan {
+            ftw,
+            amplitude_codes: 900,
+            settle_samples: settle,
+            cycles: 1,
+            windows: 1,
+            open: false,
+            aligned,
+            tag,
+        };
+        let first_window = |e: &mut SampleEngine| {
+            let start = e.samples();
+            (0..20)
+                .find_map(|_| loopback_batch(e).first().copied())
+                .map(|w| (w.end_sample - w.sums.reference.n as u64 - start, w))
+                .expect("a window closes")
+        };
+        // The first window's first sample from a switch-on at `phase0`: the first sample after
+        // the settle whose phase is within one step past a wrap.
+        let stepped = |phase0: u32, settle: u32| {
+            (settle as u64 + 1..)
+                .find(|&k| phase0.wrapping_add((k as u32).wrapping_mul(ftw)) < ftw)
+                .unwrap()
+        };
+        let cycle = (10_000.0 / 229.6) as u64 + 2;
+        for (k, phase) in [0u32, 1 << 30, 0x9E37_79B9, u32::MAX]
+            .into_iter()
+            .enumerate()
+        {
+            for settle in [0u32, 20, 37, 60] {
+                let mut e = SampleEngine::new();
+                e.set_phase(phase);
+                e.load(plan(settle, true, k as u16 + 1));
+                let (first, w) = first_window(&mut e);
+                let on = w.start_phase.wrapping_sub((first as u32).wrapping_mul(ftw));
+                assert_eq!(on, 0, "switched on at {on:#x}");
+                assert_eq!(
+                    first,
+                    stepped(0, settle),
+                    "phase {phase:#x}, settle {settle}"
+                );
+                assert!(first - settle as u64 <= cycle, "{first} after {settle}");
+            }
+        }
+        // After a drive: phase-continuous, whatever the window's start.
+        let mut e = SampleEngine::new();
+        e.load(plan(0, false, 1));
+        let (a, wa) = first_window(&mut e);
+        e.load(plan(20, true, 2));
+        let start = e.samples();
+        let (b, wb) = first_window(&mut e);
+        let steps = (start + b - a) as u32;
+        assert_eq!(
+            wb.start_phase,
+            wa.start_phase.wrapping_add(steps.wrapping_mul(ftw))
+        );
     }
 
     /// Consecutive windows follow each other without a gap, each starting at the first sample
@@ -651,6 +728,7 @@ mod tests {
                         cycles: below(&mut rng, 5) as u32,
                         windows: below(&mut rng, 5) as u16,
                         open: below(&mut rng, 2) == 0,
+                        aligned: below(&mut rng, 2) == 0,
                         tag: below(&mut rng, 4) as u16,
                     };
                     if below(&mut rng, 8) == 0 {
@@ -710,6 +788,7 @@ mod tests {
             cycles: 1,
             windows: 3,
             open: true,
+            aligned: false,
             tag: 7,
         };
         e.load(plan);
@@ -736,6 +815,7 @@ mod tests {
         e.load(PointPlan {
             tag: 8,
             open: false,
+            aligned: false,
             windows: 1,
             ..plan
         });

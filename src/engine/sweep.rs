@@ -225,6 +225,7 @@ impl Sweep {
             cycles,
             windows: 1,
             open: false,
+            aligned: false,
             tag,
         }
     }

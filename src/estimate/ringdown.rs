@@ -173,6 +173,7 @@ impl<const W: usize> Ringdown<W> {
                 cycles: 1,
                 windows: 1,
                 open: false,
+                aligned: false,
                 tag: self.tag,
             },
             _ => {
@@ -187,6 +188,7 @@ impl<const W: usize> Ringdown<W> {
                     cycles: self.s.window_cycles as u32,
                     windows: self.n_windows,
                     open: false,
+                    aligned: false,
                     tag: self.tag,
                 }
             }

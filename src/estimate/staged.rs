@@ -142,6 +142,7 @@ impl Staged {
             cycles,
             windows: 1,
             open: false,
+            aligned: false,
             tag: self.tag,
         })
     }

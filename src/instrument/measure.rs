@@ -367,6 +367,7 @@ mod tests {
             cycles: 4,
             windows: 1,
             open: false,
+            aligned: false,
             tag,
         }
     }

@@ -290,6 +290,7 @@ impl SelfTest {
                 cycles: WINDOW_CYCLES,
                 windows: WINDOWS as u16,
                 open: false,
+                aligned: false,
                 tag: TAG,
             },
             issued: false,

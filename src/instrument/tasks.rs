@@ -462,6 +462,7 @@ mod tests {
             cycles: 1,
             windows: 4,
             open: false,
+            aligned: false,
             tag: 9,
         };
         let mut engine = SampleEngine::new();

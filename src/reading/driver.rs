@@ -485,11 +485,13 @@ mod tests {
             cycles: 1,
             windows: 2,
             open: true,
+            aligned: false,
             tag: 1,
         };
         let b = PointPlan {
             tag: 2,
             open: false,
+            aligned: false,
             ..a
         };
         let mut m = TwoPlans {

@@ -50,6 +50,11 @@ pub struct ParetoArgs {
     /// Focused run: the default method (auto) at its default settings.
     #[arg(long)]
     pub auto: bool,
+    /// Focused run: a seedless `--hold-knobs` hold's first segment drives at the scene's own
+    /// resonance instead of the band's centre (the schedule with nothing to find: what the first
+    /// segment's placement costs, docs/methods.md).
+    #[arg(long)]
+    pub seed_at_resonance: bool,
     /// Moduli of a focused run, kPa.
     #[arg(long, value_delimiter = ',', default_value = "500")]
     pub moduli: Vec<f64>,
@@ -68,7 +73,7 @@ pub struct ParetoArgs {
 fn focused(a: &ParetoArgs) -> Result<()> {
     use pzt_probe::estimate::hold::HoldSettings;
     use pzt_probe::reading::{Method, Settings};
-    use pzt_probe::Seconds;
+    use pzt_probe::{Hz, Seconds};
     let mut cfgs = Vec::new();
     if a.auto {
         cfgs.push(Config::new(
@@ -103,6 +108,18 @@ fn focused(a: &ParetoArgs) -> Result<()> {
     for c in &cfgs {
         let cal = calibrate(c, a.cal_repeats, noise).ok_or_else(|| anyhow!("calibration"))?;
         for (k, e) in a.moduli.iter().enumerate() {
+            let at_resonance;
+            let c = match c.settings {
+                Settings::Hold(h) if a.seed_at_resonance && h.seed_burst.0 == 0.0 => {
+                    let seed = Hz(Scene::on_modulus_kpa(*e).resonance_hz() as f32);
+                    at_resonance = Config {
+                        settings: Settings::Hold(HoldSettings { seed, ..h }),
+                        ..c.clone()
+                    };
+                    &at_resonance
+                }
+                _ => c,
+            };
             let cell = evaluate(c, &cal, *e, noise, a.seeds, a.seed0 * (k as u64 + 1));
             let crb = crb_pct(&cal.calibration, *e, noise, 5.0, cell.time_ms * 1e-3);
             println!(

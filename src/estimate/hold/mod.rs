@@ -232,6 +232,10 @@ impl Hold {
                     let extra = libm::floor(wait as f64 / window) as u8;
                     self.first_cap = (self.n_windows as u8).saturating_add(extra);
                 }
+                // A seedless first segment from rest comes on aligned (`PointPlan::aligned`): at
+                // a zero crossing, whatever phase earlier plans left, so that no step in the
+                // DAC's output rings another mode into its windows.
+                let aligned = self.seed.is_none() && self.segment == 0;
                 self.plan = PointPlan {
                     ftw: self.ftw,
                     amplitude_codes: self.amplitude,
@@ -239,6 +243,7 @@ impl Hold {
                     cycles: cycles as u32,
                     windows: self.n_windows,
                     open,
+                    aligned,
                     tag: HOLD_TAG + self.segment as u16,
                 };
                 Some(self.plan)
@@ -580,21 +585,28 @@ mod tests {
     /// The fast hold run to its end on the simulated probe in `scene` (noise seed `seed`).
     #[cfg(feature = "sim")]
     fn run_fast(scene: hal_sim::Scene, seed: u64) -> Hold {
-        run_fast_at(scene, seed, 0)
+        run_fast_after(scene, seed, None, 0)
     }
+    /// The fast hold with the drive coming on at `phase` (the engine's accumulator; the first
+    /// plan not [aligned](PointPlan::aligned), so that the drive's phase at switch-on is the
+    /// test's).
     #[cfg(feature = "sim")]
     fn run_fast_at(scene: hal_sim::Scene, seed: u64, phase: u32) -> Hold {
-        run_fast_after(scene, seed, phase, 0)
+        run_fast_after(scene, seed, Some(phase), 0)
     }
-    /// [`run_fast_at`] after `before` fast holds on the same probe and engine, one after the
-    /// other (the drive off for a batch or two between them).
+    /// [`run_fast`] (`phase` None) or [`run_fast_at`] after `before` fast holds on the same
+    /// probe and engine, one after the other (the drive off for a batch or two between them).
     #[cfg(feature = "sim")]
-    fn run_fast_after(scene: hal_sim::Scene, seed: u64, phase: u32, before: usize) -> Hold {
+    fn run_fast_after(scene: hal_sim::Scene, seed: u64, phase: Option<u32>, before: usize) -> Hold {
         use crate::reading::driver::{block_on, run_plans, Plans, SyncSource};
-        struct P(Hold, FrontEndScale);
+        struct P(Hold, FrontEndScale, bool);
         impl Plans for P {
             fn next_plan(&mut self) -> Option<PointPlan> {
-                self.0.next_plan()
+                let aligned = self.2;
+                self.0.next_plan().map(|p| PointPlan {
+                    aligned: p.aligned && aligned,
+                    ..p
+                })
             }
             fn accept(&mut self, raw: &PointRaw) -> Option<crate::engine::sweep::SweepPoint> {
                 self.0.accept(raw, &self.1);
@@ -607,10 +619,11 @@ mod tests {
         let mut board = crate::board::sim::SimBoard::new(hal_sim::SimProbe::new(scene, seed));
         let scale = crate::hal::SampleStream::scale(&board);
         let mut engine = crate::engine::SampleEngine::new();
-        engine.set_phase(phase);
+        engine.set_phase(phase.unwrap_or(0));
         let mut src = SyncSource::new(&mut board, &mut engine);
         let mut run = || {
-            let mut m = P(HoldSettings::FAST.validate(&scale).unwrap(), scale);
+            let fast = HoldSettings::FAST.validate(&scale).unwrap();
+            let mut m = P(fast, scale, phase.is_none());
             assert!(block_on(run_plans(&mut src, &mut m, |_, _| {})).is_ok());
             m.0
         };
@@ -656,7 +669,7 @@ mod tests {
 
     /// The joint fit against `hal_sim`'s exactly integrated chain (zero-order hold, both
     /// filters, the resonator) on the quiet scene, the static admittance exact (the settings'
-    /// 210 pF is the simulated plate's), the drive coming on at eight phases: with the frequency
+    /// 210 pF is the simulated plate's), the drive coming on at eight phases and aligned (the product's first plan): with the frequency
     /// switch carried by its full response ([`super::super::resonator`]'s `switch_on`, the
     /// windows' half-sample origin) and each window's sine fit of the transient from where
     /// its phase starts and ends (`HoldWindow::phase`), the fast hold's `Q` is within 0.1 % of
@@ -672,8 +685,13 @@ mod tests {
                 .with_noise(hal_sim::NoiseScene::Quiet)
                 .with_loss_tangent(eta);
             let mut sum = 0.0;
-            for k in 0..8u32 {
-                let r = run_fast_at(scene, 3, k << 29).estimate().unwrap();
+            for k in 0..9u32 {
+                // Eight phases, then the drive aligned as the product's (`run_fast`).
+                let h = match k {
+                    8 => run_fast(scene, 3),
+                    _ => run_fast_at(scene, 3, k << 29),
+                };
+                let r = h.estimate().unwrap();
                 let df = r.resonance.0 as f64 - scene.resonance_hz();
                 let dq = r.q.unwrap() as f64 / scene.q() - 1.0;
                 std::eprintln!(
@@ -687,7 +705,7 @@ mod tests {
                 );
                 sum += dq;
             }
-            let mean = sum / 8.0;
+            let mean = sum / 9.0;
             std::eprintln!("{e} kPa, tan δ {eta}: mean Q {:+.3} %", mean * 100.0);
             assert!(mean.abs() < 1e-3, "{e} kPa, tan δ {eta}: mean Q {mean:+e}");
         }
@@ -696,7 +714,7 @@ mod tests {
     /// The start state from rest against the simulated probe's exact chain (`hal_sim::plant`:
     /// the zero-order hold, the filters and the resonator integrated exactly): the fast hold on
     /// the quiet scene at 170–2500 kPa, lossless and lossy (tan δ up to 0.5), the drive coming
-    /// on at eight phases; its joint fit made with the state free gives the state at the first
+    /// on at eight phases and aligned; its joint fit made with the state free gives the state at the first
     /// window. The resonator's response from rest to the drive switched on at `t_on`
     /// (`rest_state`) is within [`REST_WIDTH`] of `g` of it at every one, at most half of it on
     /// average; without the front end's filters more than 0.02 off on average (the test can
@@ -710,8 +728,11 @@ mod tests {
             let scene = hal_sim::Scene::on_modulus_kpa(e)
                 .with_noise(hal_sim::NoiseScene::Quiet)
                 .with_loss_tangent(eta);
-            for k in 0..8u32 {
-                let h = run_fast_at(scene, 3, k << 29);
+            for k in 0..9u32 {
+                let h = match k {
+                    8 => run_fast(scene, 3),
+                    _ => run_fast_at(scene, 3, k << 29),
+                };
                 assert_eq!(h.quiet, f32::INFINITY);
                 let (first, second) = h.windows.split_at(h.first_len as usize);
                 let seg = |w, f_h, v| Segment {
@@ -762,6 +783,29 @@ mod tests {
         assert!(unfiltered > 0.02, "unfiltered {unfiltered}");
     }
 
+    /// The switch-on's step rings a second mode: on the stability catalogue's `second-mode` scene
+    /// (300 kPa, a 295 Hz mode of `Q` 40 at half the first's peak conductance, bench noise) the
+    /// fast hold switched on a quarter turn past a zero crossing (the DAC's full step) reads
+    /// `interference` in several of ten readings; aligned (a zero crossing, no step) in none.
+    #[cfg(feature = "sim")]
+    #[test]
+    fn an_aligned_switch_on_does_not_ring_a_second_mode_into_interference() {
+        let case = hal_sim::catalogue::catalogue(hal_sim::NoiseScene::Bench)
+            .into_iter()
+            .find(|c| c.name == "second-mode")
+            .expect("the catalogue's second-mode scene");
+        let hum = |h: Hold| h.estimate() == Err(Failure::Interference);
+        let stepped = (0..10)
+            .filter(|&k| hum(run_fast_at(case.scene, 5000 + k, 1 << 30)))
+            .count();
+        let aligned = (0..10)
+            .filter(|&k| hum(run_fast(case.scene, 5000 + k)))
+            .count();
+        std::eprintln!("interference: {stepped}/10 stepped, {aligned}/10 aligned");
+        assert!(stepped >= 3, "{stepped}");
+        assert_eq!(aligned, 0);
+    }
+
     /// A fast hold right after another (the drive off for a batch or two, as after a power-on
     /// self-test): its start from rest is not known, so its first segment takes
     /// [`FREE_FIRST_WINDOWS`] windows, continued by a second plan at the same drive, and reads
@@ -773,7 +817,7 @@ mod tests {
         for e in [170.0, 500.0, 2500.0, 6000.0] {
             let scene = hal_sim::Scene::on_modulus_kpa(e).with_noise(hal_sim::NoiseScene::Bench);
             for seed in 0..4 {
-                let h = run_fast_after(scene, seed, 0, 1);
+                let h = run_fast_after(scene, seed, None, 1);
                 assert!(h.quiet < 0.01, "{e} kPa: quiet {} s", h.quiet);
                 assert!(h.continued, "{e} kPa, seed {seed}");
                 assert!(h.first_len as u16 >= FREE_FIRST_WINDOWS, "{}", h.first_len);
@@ -783,7 +827,7 @@ mod tests {
                     (f - truth).abs() < 0.05,
                     "{e} kPa, seed {seed}: {f} vs {truth}"
                 );
-                let rested = run_fast_at(scene, seed, 0);
+                let rested = run_fast(scene, seed);
                 assert!(!rested.continued && rested.at_rest, "{e} kPa, seed {seed}");
             }
         }

@@ -61,7 +61,8 @@ impl HoldSettings {
     };
 
     /// The fast hold, auto's first stage (`measure::auto_hold`): no seed ring-down; an 11.5 ms
-    /// first segment at `seed` (the band centre): the filters' settle and two one-cycle windows,
+    /// first segment at `seed` (the band centre), switched on at a zero crossing (`PointPlan::aligned`):
+    /// the filters' settle and two one-cycle windows,
     /// whose searched fit — the start state the resonator's response from rest — places the
     /// second; its plan stays open, so that its windows go on while the second's plan passes the
     /// DAC's pipeline; the rest of 120 ms on that estimate; both segments in one fit

@@ -412,6 +412,7 @@ impl Tracker {
                     cycles: cycles as u32,
                     windows: first + later * n,
                     open: false,
+                    aligned: false,
                     tag: TRACK_TAG | (self.tag & 0xff),
                 };
                 self.plan = Some(plan);
