@@ -139,14 +139,18 @@ fn noise_variance(w: &[HoldWindow]) -> f64 {
 /// `Q = q_prior.0 ± q_prior.1` (a hold at one frequency measures the phase well and `Q` poorly;
 /// the prior — the seed's `Q` — keeps a noisy hold from trading one for the other).
 pub fn fit(seg: Segment, f_start: f64, q_prior: (f64, f64)) -> Result<HoldFit, Failure> {
-    fit_segments(
-        &[seg],
-        None,
-        (f_start, q_prior.0),
-        q_prior,
-        Start::Linear,
-        None,
-    )
+    fit_one(seg, f_start, q_prior, None)
+}
+
+/// [`fit`], its normal equations into `keep` when given ([`fit_linearised`]).
+fn fit_one(
+    seg: Segment,
+    f_start: f64,
+    q_prior: (f64, f64),
+    keep: Option<&mut Linearised>,
+) -> Result<HoldFit, Failure> {
+    let start = (f_start, q_prior.0);
+    fit_with(&[seg], None, start, q_prior, Start::Linear, None, keep).map(|(h, _)| h)
 }
 
 /// The joint fit of two consecutive segments: one `f0`, `Q`, `g`, and the first segment's
@@ -595,15 +599,7 @@ pub fn fit_linearised(
         windows: 0,
         last_var: 0.0,
     };
-    let (h, _) = fit_with(
-        &[seg],
-        None,
-        (f_start, q_prior.0),
-        q_prior,
-        Start::Linear,
-        None,
-        Some(&mut k),
-    )?;
+    let h = fit_one(seg, f_start, q_prior, Some(&mut k))?;
     Ok((h, k))
 }
 
