@@ -40,7 +40,9 @@
 //! detuning through `Q`); the pooled `Q` takes that part out. An innovation past the gate (a
 //! step, a new contact) restarts the filter from the segment. A plan may hold several segments
 //! ([`TrackerConfig::plan_segments`]): the later ones are fitted with the plan's windows so far
-//! and give the filter what they add.
+//! — as an update of the plan's first fit with their new windows alone
+//! ([`resonator::Linearised`]), refitted when the update's step is too long for it — and give
+//! the filter what they add.
 //!
 //! **Lock**: a segment whose fit fails, leaves the band, or moves the resonance by more than one
 //! linewidth `f0/Q` from the estimate it was driven from is not locked (its reading fails
