@@ -1087,5 +1087,38 @@ mod tests {
         let mut bad = seg(&w);
         bad.mirror = C64::new(f64::NAN, f64::INFINITY);
         assert!(fit(bad, 230.0, (10.0, 1.0)).is_err());
+        // An update with garbage, another drive, or more windows than a plan holds: a failure,
+        // and the kept fit unchanged.
+        let y_s = C64::new(0.0, 0.0);
+        let good = synthetic(241.3, 10.4, 1.5e-7, 241.0, C64::new(0.0, 0.0), y_s, 16);
+        let at = |n: core::ops::Range<usize>, f_h: f64| Segment {
+            windows: &good[n],
+            f_h,
+            y_s,
+            mirror: C64::new(1.0, 0.0),
+        };
+        let (_, mut k) = fit_linearised(at(0..4, 241.0), 241.0, (10.0, 5.0)).unwrap();
+        let kept = k.windows();
+        assert!(k.update(at(4..6, 240.0)).is_err());
+        assert!(k.update(at(4..4, 241.0)).is_err());
+        let mut nan = good;
+        nan[5].y = C64::new(f64::NAN, 0.0);
+        let nan_seg = Segment {
+            windows: &nan[4..6],
+            ..at(4..6, 241.0)
+        };
+        assert!(k.update(nan_seg).is_err());
+        let mut many = [good[4]; MAX_WINDOWS];
+        for (i, x) in many.iter_mut().enumerate() {
+            x.t0 += i as f64 * x.len;
+        }
+        let too_many = Segment {
+            windows: &many,
+            ..at(4..6, 241.0)
+        };
+        assert!(k.update(too_many).is_err());
+        assert_eq!(k.windows(), kept);
+        assert!(matches!(k.update(at(4..6, 241.0)), Ok(Some(_))));
+        assert_eq!(k.windows(), 6);
     }
 }
