@@ -28,7 +28,7 @@ mod fixtures;
 
 #[cfg(test)]
 pub(crate) use model::rest_state;
-pub use solver::{fit, fit_searched, fit_two};
+pub use solver::{fit, fit_linearised, fit_searched, fit_two, Linearised};
 
 use super::Estimate;
 use crate::dsp::lockin::{solve_value_scaled, ChannelSums, ReferenceSums};

@@ -40,7 +40,9 @@
 //! detuning through `Q`); the pooled `Q` takes that part out. An innovation past the gate (a
 //! step, a new contact) restarts the filter from the segment. A plan may hold several segments
 //! ([`TrackerConfig::plan_segments`]): the later ones are fitted with the plan's windows so far
-//! and give the filter what they add.
+//! — as an update of the plan's first fit with their new windows alone
+//! ([`resonator::Linearised`]), refitted when the update's step is too long for it — and give
+//! the filter what they add.
 //!
 //! **Lock**: a segment whose fit fails, leaves the band, or moves the resonance by more than one
 //! linewidth `f0/Q` from the estimate it was driven from is not locked (its reading fails
@@ -245,6 +247,7 @@ impl TrackerConfig {
             per_segment: 0,
             plan_prior: (0.0, 0.0, 0.0),
             plan_fit: None,
+            plan_state: None,
         })
     }
 }
@@ -324,6 +327,9 @@ pub struct Tracker {
     plan_prior: (f64, f64, f64),
     /// The last fit of the plan in progress (of all its windows until then).
     plan_fit: Option<Measurement>,
+    /// That fit's normal equations, which the plan's next segment updates
+    /// ([`resonator::Linearised`]).
+    plan_state: Option<resonator::Linearised>,
 }
 
 /// The one place a stream's estimate becomes a reading: the pipeline with the unit's profile
@@ -418,6 +424,7 @@ impl Tracker {
                 self.plan = Some(plan);
                 self.plan_prior = (self.f_est, self.q_est, self.cfg.q_prior as f64 * self.q_est);
                 self.plan_fit = None;
+                self.plan_state = None;
                 self.windows.clear();
                 self.monitor = Default::default();
                 self.clipped = false;
@@ -640,18 +647,48 @@ impl Tracker {
         let (m, r) = &self.monitor;
         let (value, variance) = solve_value(m, r).ok_or(Failure::DriveFault)?;
         let drive = Drive::from_value(value, variance, scale).ok_or(Failure::DriveFault)?;
-        // The plan's windows so far, as admittances with the drive phasor measured so far.
-        let mut w = self.windows.clone();
-        resonator::to_admittance(&mut w, drive.v, drive.var_v);
         let y_s = C64::new(self.static_g, 2.0 * PI * self.f_h * self.static_c);
-        let (f_start, q_start, q_sd) = self.plan_prior;
-        let seg = resonator::Segment {
-            windows: &w,
-            f_h: self.f_h,
-            y_s,
-            mirror: resonator::mirror(drive.v),
+        let mirror = resonator::mirror(drive.v);
+        // A later segment of a plan whose fit so far stands: that fit updated with the new
+        // windows alone, as admittances with the drive phasor measured so far (`None`: no
+        // update, or one declined as too long a step for the kept linearisation).
+        let updated = match &mut self.plan_state {
+            Some(k) if self.plan_fit.is_some() => {
+                let mut w: heapless::Vec<HoldWindow, MAX_WINDOWS> =
+                    self.windows.iter().skip(k.windows()).copied().collect();
+                resonator::to_admittance(&mut w, drive.v, drive.var_v);
+                k.update(resonator::Segment {
+                    windows: &w,
+                    f_h: self.f_h,
+                    y_s,
+                    mirror,
+                })?
+            }
+            _ => None,
         };
-        let h = resonator::fit(seg, f_start, (q_start, q_sd))?;
+        let h = match updated {
+            Some(h) => h,
+            // The fit of the plan's windows so far: its first segment, or the first that fits.
+            None => {
+                let mut w = self.windows.clone();
+                resonator::to_admittance(&mut w, drive.v, drive.var_v);
+                let (f_start, q_start, q_sd) = self.plan_prior;
+                let seg = resonator::Segment {
+                    windows: &w,
+                    f_h: self.f_h,
+                    y_s,
+                    mirror,
+                };
+                // Its normal equations kept only when later segments will update them.
+                if self.plan.is_some() {
+                    let (h, k) = resonator::fit_linearised(seg, f_start, (q_start, q_sd))?;
+                    self.plan_state = Some(k);
+                    h
+                } else {
+                    resonator::fit(seg, f_start, (q_start, q_sd))?
+                }
+            }
+        };
         // A segment the resonator's model does not explain (a knock, a tone) is no reading,
         // and the drive does not follow it: the next segment (30 ms on by default) will be clean.
         if h.reduced_chi2 > GROSS_CHI2 {
