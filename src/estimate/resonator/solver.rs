@@ -487,22 +487,8 @@ fn fit_with(
             return Err(Failure::OutOfBand);
         }
     }
-    // Mains hum near the drive turns in the residuals at its offset: no reading.
-    let starts: [f32; MAX_WINDOWS] = core::array::from_fn(|i| pb.w.get(i).map_or(0.0, |x| x.a));
-    crate::estimate::interference::hum(segs, &starts[..pb.w.len()], &res, p.f0)?;
-    let cov = n.variances(pb.wt).ok_or(Failure::NoResonance)?;
     let dof = (2 * pb.w.len() + 1).saturating_sub(5).max(1) as f64;
-    let red = c / dof;
-    let scale = crate::estimate::gross_scale(red);
-    // Standard uncertainties at `f32`'s precision (the estimate keeps them in `f32`).
-    let sigma = crate::dsp::trig::sqrt32((cov[0] * scale).max(0.0)) as f64;
-    let sigma_q = crate::dsp::trig::sqrt32((cov[1] * scale).max(0.0)) as f64;
-    let cov_f0_q = cov[2] * scale;
-    let (f0, q) = (p.f0, p.q);
-    if !(p.g > 0.0) || !f0.is_finite() || !q.is_finite() || !sigma.is_finite() {
-        return Err(Failure::NoResonance);
-    }
-    crate::estimate::resolved(sigma, f0 / q)?;
+    let h = concluded(&pb, segs, &res, &p, &n, c / dof, pb.w.len())?;
     if let (Some(k), [seg]) = (keep, segs) {
         let n_w = seg.windows.len();
         *k = Linearised {
@@ -523,23 +509,47 @@ fn fit_with(
     let misfit = pb.rest.map_or(0.0, |r| {
         (r.w * r.residual(&p, false, &[1.0; 5]).0.norm_sqr()) as f64 * pb.wt
     });
-    Ok((
-        HoldFit {
-            estimate: Estimate {
-                resonance: Hz(f0 as f32),
-                sigma: Hz(sigma as f32),
-                q: Some(q as f32),
-                q_sigma: Some(sigma_q as f32),
-                points_used: pb.w.len() as u16,
-            },
-            sigma_q,
-            cov_f0_q,
-            reduced_chi2: red,
-            linear: (p.g, p.z),
-            at_rest: pb.rest.is_some(),
+    Ok((h, misfit))
+}
+
+/// A fit's result at its final point `p`: mains hum near the drive turns in the residuals `res`
+/// of `pb`'s windows at its offset (no reading); the covariance of the normal equations `n`
+/// (unit weight `pb.wt`) scaled by the gross misfit of `red`, the reduced χ²; a resonance that
+/// its uncertainty resolves ([`crate::estimate::resolved`]); `points` windows behind it.
+fn concluded(
+    pb: &Problem,
+    segs: &[Segment],
+    res: &[C32],
+    p: &Params,
+    n: &Normal,
+    red: f64,
+    points: usize,
+) -> Result<HoldFit, Failure> {
+    let starts: [f32; MAX_WINDOWS] = core::array::from_fn(|i| pb.w.get(i).map_or(0.0, |x| x.a));
+    crate::estimate::interference::hum(segs, &starts[..pb.w.len()], res, p.f0)?;
+    let cov = n.variances(pb.wt).ok_or(Failure::NoResonance)?;
+    let scale = crate::estimate::gross_scale(red);
+    // Standard uncertainties at `f32`'s precision (the estimate keeps them in `f32`).
+    let sigma = crate::dsp::trig::sqrt32((cov[0] * scale).max(0.0)) as f64;
+    let sigma_q = crate::dsp::trig::sqrt32((cov[1] * scale).max(0.0)) as f64;
+    if !(p.g > 0.0) || !p.f0.is_finite() || !p.q.is_finite() || !sigma.is_finite() {
+        return Err(Failure::NoResonance);
+    }
+    crate::estimate::resolved(sigma, p.f0 / p.q)?;
+    Ok(HoldFit {
+        estimate: Estimate {
+            resonance: Hz(p.f0 as f32),
+            sigma: Hz(sigma as f32),
+            q: Some(p.q as f32),
+            q_sigma: Some(sigma_q as f32),
+            points_used: points as u16,
         },
-        misfit,
-    ))
+        sigma_q,
+        cov_f0_q: cov[2] * scale,
+        reduced_chi2: red,
+        linear: (p.g, p.z),
+        at_rest: pb.rest.is_some(),
+    })
 }
 
 /// A one-segment fit's normal equations (the prior on `Q` in them) at the point they were
@@ -699,18 +709,9 @@ impl Linearised {
         if !after.is_finite() {
             return Err(Failure::NoResonance);
         }
+        // The hum test on the new windows' residuals, the whole problem's covariance.
         let red = after / (2 * new.len()) as f64;
-        // Mains hum near the drive turns in the new windows' residuals.
-        let starts: [f32; MAX_WINDOWS] = core::array::from_fn(|i| pb.w.get(i).map_or(0.0, |x| x.a));
-        crate::estimate::interference::hum(&[seg], &starts[..new.len()], &res, p.f0)?;
-        let cov = n.variances(pb.wt).ok_or(Failure::NoResonance)?;
-        let scale = crate::estimate::gross_scale(red);
-        let sigma = crate::dsp::trig::sqrt32((cov[0] * scale).max(0.0)) as f64;
-        let sigma_q = crate::dsp::trig::sqrt32((cov[1] * scale).max(0.0)) as f64;
-        if !(p.g > 0.0) || !p.f0.is_finite() || !p.q.is_finite() || !sigma.is_finite() {
-            return Err(Failure::NoResonance);
-        }
-        crate::estimate::resolved(sigma, p.f0 / p.q)?;
+        let h = concluded(&pb, &[seg], &res, &p, &n, red, total)?;
         *self = Self {
             n,
             pooled: self.pooled + new.len() as u16,
@@ -719,20 +720,7 @@ impl Linearised {
             var: pooled,
             ..*self
         };
-        Ok(Some(HoldFit {
-            estimate: Estimate {
-                resonance: Hz(p.f0 as f32),
-                sigma: Hz(sigma as f32),
-                q: Some(p.q as f32),
-                q_sigma: Some(sigma_q as f32),
-                points_used: total as u16,
-            },
-            sigma_q,
-            cov_f0_q: cov[2] * scale,
-            reduced_chi2: red,
-            linear: (p.g, p.z),
-            at_rest: false,
-        }))
+        Ok(Some(h))
     }
 }
 
